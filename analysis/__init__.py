@@ -1,0 +1,1 @@
+"""Analysis of measurements: FRFs, resonance fitting, video tracking, comparison and reports."""

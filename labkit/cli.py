@@ -1,0 +1,133 @@
+"""The ``labkit`` command line: one entry point, subcommands discovered in :mod:`labkit.commands`.
+
+Contract (``shared/docs/architecture.md``): every subcommand accepts ``--json``
+(then the last line of standard output is one JSON object), ``--quiet`` (no
+progress bar), and exits 0 on success, 2 on bad input, 3 on an instrument or
+transport fault, 130 when interrupted (SIGINT or SIGTERM), always with a one-
+line message on standard error.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import pkgutil
+import signal
+import sys
+from types import ModuleType
+from typing import Any, Sequence
+
+from labkit import __version__
+from labkit.errors import EXIT_INTERRUPTED, InputError, Interrupted, LabkitError
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors are one line and exit 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def common_parser() -> argparse.ArgumentParser:
+    """The options every subcommand (and nested subcommand) takes."""
+    common = _Parser(add_help=False)
+    common.add_argument("--json", action="store_true",
+                        help="print one JSON summary object as the last line of stdout")
+    common.add_argument("--quiet", action="store_true", help="no progress bar")
+    return common
+
+
+def _command_modules() -> list[ModuleType]:
+    import labkit.commands as pkg
+
+    mods = []
+    for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda i: i.name):
+        if info.name.startswith("_"):
+            continue
+        mod = importlib.import_module(f"labkit.commands.{info.name}")
+        if hasattr(mod, "NAME") and hasattr(mod, "run"):
+            mods.append(mod)
+    return mods
+
+
+def build_parser() -> argparse.ArgumentParser:
+    common = common_parser()
+    parser = _Parser(prog="labkit", description="Vibration-lab toolkit for PZT microrobots.")
+    parser.add_argument("--version", action="version", version=f"labkit {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for mod in _command_modules():
+        p = sub.add_parser(mod.NAME, help=getattr(mod, "HELP", ""), parents=[common],
+                           description=getattr(mod, "HELP", None))
+        mod.add_arguments(p, common)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    raise Interrupted("SIGTERM")
+
+
+def emit_json(summary: dict[str, Any]) -> None:
+    """Print the summary as one JSON line (NaN becomes null so any parser reads it)."""
+    print(json.dumps(_finite(summary), sort_keys=False, default=str), flush=True)
+
+
+def _finite(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if obj == obj and abs(obj) != float("inf") else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if hasattr(obj, "item") and callable(obj.item) and getattr(obj, "ndim", 1) == 0:
+        return _finite(obj.item())
+    if hasattr(obj, "tolist"):
+        return _finite(obj.tolist())
+    return obj
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``labkit``; returns (and exits with) the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        summary = args._run(args)
+    except LabkitError as exc:
+        _fail(args, str(exc), exc.exit_code)
+        return _exit(exc.exit_code, argv)
+    except (KeyboardInterrupt, Interrupted) as exc:
+        name = exc.signame if isinstance(exc, Interrupted) else "SIGINT"
+        _fail(args, f"interrupted by {name}; outputs were turned off", EXIT_INTERRUPTED)
+        return _exit(EXIT_INTERRUPTED, argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    if args.json:
+        emit_json(summary if isinstance(summary, dict) else {"result": summary})
+    return _exit(0, argv)
+
+
+def _fail(args: argparse.Namespace, message: str, code: int) -> None:
+    print(f"labkit {args.command}: error: {message}", file=sys.stderr, flush=True)
+    if getattr(args, "json", False):
+        emit_json({"ok": False, "exit_code": code, "error": message})
+
+
+def _exit(code: int, argv: Sequence[str] | None) -> int:
+    if argv is None:  # called as the console script
+        sys.exit(code)
+    return code
+
+
+def require_file(path: str, what: str = "file") -> str:
+    """Fail with exit 2 when an input file is missing (before any work starts)."""
+    from pathlib import Path
+
+    if not Path(path).is_file():
+        raise InputError(f"no such {what}", file=path)
+    return path
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
