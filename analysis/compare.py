@@ -1,0 +1,319 @@
+"""Model against measurement: plain functions over arrays, each result with its provenance.
+
+Three comparisons, as in the paper's section 5:
+
+* :func:`speed_agreement` — average robot speed against shaker frequency,
+  measured (with its confidence interval) against simulated (Monte Carlo mean
+  and band) (paper Fig. 8);
+* :func:`pattern_agreement` — the leg-motion pattern (``firm_contact``,
+  ``partial_contact``, ``jumping``) observed against simulated (Fig. 9-11);
+* :func:`knee_motion_agreement` — the knee's vertical velocity measured by the
+  vibrometer against the simulated one at the same drive: amplitude and phase
+  of the fundamental, and the correlation of one drive period (Fig. 10/11).
+
+Every function returns a JSON-able dict holding the numbers *and* a
+``provenance`` entry (which files, which parameters, which method), so a
+report can say where each number came from. Inputs are plain numpy arrays;
+reading files is :mod:`analysis.report_inputs`' job.
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+#: Pattern labels, as the simulator writes them (SimResult.patterns).
+PATTERNS = ("firm_contact", "partial_contact", "jumping")
+
+
+def _f(x: Any) -> float | None:
+    """A float for JSON, or None for NaN/inf (JSON has no NaN)."""
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    """Pearson correlation; NaN when undefined (fewer than 3 points or a constant series)."""
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    if a.size < 3 or np.std(a) == 0 or np.std(b) == 0:
+        return float("nan")
+    return float(np.corrcoef(a, b)[0, 1])
+
+
+# --------------------------------------------------------------------------- speed vs frequency
+
+def speed_agreement(meas_freq_hz: Sequence[float], meas_speed_mm_s: Sequence[float],
+                    meas_lo_mm_s: Sequence[float] | None, meas_hi_mm_s: Sequence[float] | None,
+                    sim_freq_hz: Sequence[float], sim_mean_mm_s: Sequence[float],
+                    sim_lo_mm_s: Sequence[float], sim_hi_mm_s: Sequence[float], *,
+                    min_speed_mm_s: float = 0.1,
+                    provenance: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Error metrics of simulated against measured speed over frequency.
+
+    The simulated curve (mean and band) is linearly interpolated at the
+    measured frequencies; measured points outside the simulated frequency
+    range are left out (and counted), never extrapolated.
+
+    Parameters
+    ----------
+    meas_freq_hz, meas_speed_mm_s:
+        Measured points (any order; repeated frequencies allowed).
+    meas_lo_mm_s, meas_hi_mm_s:
+        Their confidence interval (or None).
+    sim_freq_hz, sim_mean_mm_s, sim_lo_mm_s, sim_hi_mm_s:
+        The simulated sweep: Monte Carlo mean and band at every frequency.
+    min_speed_mm_s:
+        Relative errors are taken only where the measured speed is at least
+        this (a relative error of a robot standing still means nothing).
+    provenance:
+        Where the inputs came from; copied into the result.
+
+    Returns
+    -------
+    dict
+        ``n_points``, ``n_outside_range``, ``rms_error_mm_s``,
+        ``mean_error_mm_s`` (bias, simulated minus measured),
+        ``relative_rms_error`` (RMS error over RMS measured speed),
+        ``median_relative_error`` (over points >= ``min_speed_mm_s``),
+        ``correlation`` (Pearson, measured vs simulated mean),
+        ``fraction_inside_band`` (measured value inside the simulated band),
+        ``fraction_ci_overlaps_band``, ``points`` and ``provenance``.
+    """
+    mf = np.asarray(meas_freq_hz, float)
+    ms = np.asarray(meas_speed_mm_s, float)
+    mlo = ms if meas_lo_mm_s is None else np.asarray(meas_lo_mm_s, float)
+    mhi = ms if meas_hi_mm_s is None else np.asarray(meas_hi_mm_s, float)
+    order = np.argsort(np.asarray(sim_freq_hz, float))
+    sf = np.asarray(sim_freq_hz, float)[order]
+    smean = np.asarray(sim_mean_mm_s, float)[order]
+    slo = np.asarray(sim_lo_mm_s, float)[order]
+    shi = np.asarray(sim_hi_mm_s, float)[order]
+    if not (mf.shape == ms.shape == mlo.shape == mhi.shape):
+        raise ValueError("measured frequency, speed and interval arrays differ in length")
+    if sf.size == 0:
+        raise ValueError("the simulated sweep has no points")
+    inside_range = (mf >= sf[0] - 1e-9) & (mf <= sf[-1] + 1e-9)
+    f, m, lo, hi = mf[inside_range], ms[inside_range], mlo[inside_range], mhi[inside_range]
+    sim = np.interp(f, sf, smean)
+    band_lo = np.interp(f, sf, slo)
+    band_hi = np.interp(f, sf, shi)
+    err = sim - m
+    in_band = (m >= band_lo) & (m <= band_hi)
+    overlaps = (hi >= band_lo) & (lo <= band_hi)
+    moving = np.abs(m) >= min_speed_mm_s
+    n = int(f.size)
+    rms_meas = float(np.sqrt(np.mean(m ** 2))) if n else float("nan")
+    rms_err = float(np.sqrt(np.mean(err ** 2))) if n else float("nan")
+    points = [{"freq_hz": _f(a), "measured_mm_s": _f(b), "measured_lo_mm_s": _f(c), "measured_hi_mm_s": _f(d),
+               "simulated_mm_s": _f(e), "band_lo_mm_s": _f(g), "band_hi_mm_s": _f(h),
+               "error_mm_s": _f(e - b), "inside_band": bool(i)}
+              for a, b, c, d, e, g, h, i in zip(f, m, lo, hi, sim, band_lo, band_hi, in_band)]
+    return {
+        "n_points": n,
+        "n_outside_range": int((~inside_range).sum()),
+        "rms_error_mm_s": _f(rms_err),
+        "mean_error_mm_s": _f(err.mean()) if n else None,
+        "relative_rms_error": _f(rms_err / rms_meas) if n and rms_meas > 0 else None,
+        "median_relative_error": (_f(np.median(np.abs(err[moving]) / np.abs(m[moving])))
+                                  if moving.any() else None),
+        "min_speed_mm_s": float(min_speed_mm_s),
+        "correlation": _f(_corr(m, sim)),
+        "fraction_inside_band": _f(in_band.mean()) if n else None,
+        "fraction_ci_overlaps_band": _f(overlaps.mean()) if n else None,
+        "points": points,
+        "method": "simulated mean and band linearly interpolated at measured frequencies; "
+                  "error = simulated - measured",
+        "provenance": dict(provenance or {}),
+    }
+
+
+def band_from_draws(speeds_mm_s: np.ndarray, *, k: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Monte Carlo mean and band ``mean +- k * std`` (ddof=1) from a (points, draws) array.
+
+    With one draw the band collapses to the curve itself. ``k = 2`` is about a
+    95 % band for a normal spread, the paper's error-bar convention being
+    unstated.
+    """
+    s = np.asarray(speeds_mm_s, float)
+    if s.ndim == 1:
+        s = s[:, None]
+    mean = s.mean(axis=1)
+    std = s.std(axis=1, ddof=1) if s.shape[1] > 1 else np.zeros(s.shape[0])
+    return mean, mean - k * std, mean + k * std
+
+
+# --------------------------------------------------------------------------- leg patterns
+
+def pattern_agreement(measured: Sequence[str], simulated: Sequence[str], *,
+                      keys: Sequence[Any] | None = None,
+                      provenance: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Agreement of observed and simulated leg-motion patterns, one label per condition.
+
+    Parameters
+    ----------
+    measured, simulated:
+        Labels from :data:`PATTERNS`, paired by position (one per drive
+        condition; for a simulation with many feet and draws pass the
+        dominant one, see :func:`dominant_pattern`).
+    keys:
+        What each pair is (a frequency, a drive voltage), for the table.
+
+    Returns
+    -------
+    dict
+        ``n``, ``fraction_agree``, ``confusion`` (measured -> simulated ->
+        count), ``pairs`` and ``provenance``.
+    """
+    meas = [str(m) for m in measured]
+    sim = [str(s) for s in simulated]
+    if len(meas) != len(sim):
+        raise ValueError(f"{len(meas)} measured patterns but {len(sim)} simulated")
+    for label in meas + sim:
+        if label not in PATTERNS:
+            raise ValueError(f"unknown pattern label {label!r} (expected one of {', '.join(PATTERNS)})")
+    keys = list(range(len(meas))) if keys is None else list(keys)
+    confusion = {a: {b: 0 for b in PATTERNS} for a in PATTERNS}
+    for a, b in zip(meas, sim):
+        confusion[a][b] += 1
+    agree = [a == b for a, b in zip(meas, sim)]
+    return {"n": len(meas), "fraction_agree": _f(np.mean(agree)) if agree else None,
+            "confusion": confusion,
+            "pairs": [{"key": k if isinstance(k, str) else _f(k), "measured": a, "simulated": b, "agree": bool(c)}
+                      for k, a, b, c in zip(keys, meas, sim, agree)],
+            "provenance": dict(provenance or {})}
+
+
+def dominant_pattern(labels: Sequence[str] | np.ndarray) -> str:
+    """The most frequent label (ties go to the first in :data:`PATTERNS`)."""
+    flat = [str(x) for x in np.asarray(labels).ravel()]
+    return max(PATTERNS, key=lambda p: flat.count(p))
+
+
+def classify_knee_pattern(t_s: np.ndarray, knee_vz_mm_s: np.ndarray, tray_vz_mm_s: np.ndarray,
+                          freq_hz: float, *, follow_tol: float = 0.25,
+                          firm_fraction: float = 0.95) -> dict[str, Any]:
+    """Label a measured knee velocity record as firm contact, partial contact or jumping.
+
+    The paper's definitions (section 5.2), made operational (**choice**):
+    the knee *follows* the tray while ``|v_knee - v_tray|`` stays within
+    ``follow_tol`` times the tray's velocity amplitude. Firm contact: it
+    follows for at least ``firm_fraction`` of the record. Jumping: some
+    excursion from the tray lasts longer than one drive period ("in the air
+    for more than one actuation period"). Otherwise partial contact.
+
+    Returns
+    -------
+    dict
+        ``pattern``, ``follow_fraction``, ``longest_air_periods``, ``method``.
+    """
+    t = np.asarray(t_s, float)
+    rel = np.asarray(knee_vz_mm_s, float) - np.asarray(tray_vz_mm_s, float)
+    amp = fundamental(t, tray_vz_mm_s, freq_hz)["amplitude"]
+    if not amp > 0:
+        amp = float(np.max(np.abs(tray_vz_mm_s))) or 1.0
+    follows = np.abs(rel) <= follow_tol * amp
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    longest = 0
+    run = 0
+    for ok in follows:
+        run = 0 if ok else run + 1
+        longest = max(longest, run)
+    longest_periods = longest * dt * freq_hz
+    frac = float(follows.mean()) if follows.size else float("nan")
+    if frac >= firm_fraction:
+        label = "firm_contact"
+    elif longest_periods > 1.0:
+        label = "jumping"
+    else:
+        label = "partial_contact"
+    return {"pattern": label, "follow_fraction": _f(frac), "longest_air_periods": _f(longest_periods),
+            "method": f"|v_knee - v_tray| <= {follow_tol:g} x tray velocity amplitude counts as following; "
+                      f"firm if following >= {firm_fraction:g} of the time, jumping if an excursion "
+                      "lasts > 1 drive period, else partial"}
+
+
+# --------------------------------------------------------------------------- knee vertical motion
+
+def fundamental(t_s: np.ndarray, x: np.ndarray, freq_hz: float) -> dict[str, float]:
+    """Amplitude and phase of the drive-frequency component, by linear least squares.
+
+    Fits ``x ~ A sin(2 pi f t + phi) + c`` (the tray moves as ``sin``, so a
+    signal in phase with the tray's displacement has ``phi = 0``).
+    """
+    t = np.asarray(t_s, float)
+    x = np.asarray(x, float)
+    w = 2 * np.pi * float(freq_hz) * t
+    design = np.column_stack([np.sin(w), np.cos(w), np.ones_like(w)])
+    (a, b, c), *_ = np.linalg.lstsq(design, x, rcond=None)
+    return {"amplitude": float(np.hypot(a, b)), "phase_rad": float(np.arctan2(b, a)), "offset": float(c)}
+
+
+def fold_period(t_s: np.ndarray, x: np.ndarray, freq_hz: float, *, bins: int = 64,
+                phase_rad: float = 0.0) -> np.ndarray:
+    """Average ``x`` over drive periods into ``bins`` phase bins (phase measured from ``phase_rad``).
+
+    Empty bins are filled by circular interpolation.
+    """
+    t = np.asarray(t_s, float)
+    x = np.asarray(x, float)
+    phase = np.mod(2 * np.pi * freq_hz * t + phase_rad, 2 * np.pi) / (2 * np.pi)
+    idx = np.minimum((phase * bins).astype(int), bins - 1)
+    sums = np.bincount(idx, weights=x, minlength=bins)
+    counts = np.bincount(idx, minlength=bins)
+    out = np.full(bins, np.nan)
+    ok = counts > 0
+    out[ok] = sums[ok] / counts[ok]
+    if not ok.all() and ok.any():
+        centres = (np.arange(bins) + 0.5) / bins
+        out[~ok] = np.interp(centres[~ok], centres[ok], out[ok], period=1.0)
+    return out
+
+
+def knee_motion_agreement(t_meas_s: np.ndarray, vz_meas_mm_s: np.ndarray,
+                          t_sim_s: np.ndarray, vz_sim_mm_s: np.ndarray, freq_hz: float, *,
+                          ref_meas: np.ndarray | None = None, ref_sim: np.ndarray | None = None,
+                          bins: int = 64, provenance: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Compare measured and simulated knee vertical velocity at one drive.
+
+    Phases are taken relative to a reference signal recorded with each (the
+    tray's velocity or displacement: ``ref_meas``, ``ref_sim``), so the
+    arbitrary start times of the two records do not matter; without a
+    reference, ``t = 0`` is taken as the tray's phase zero (true for the
+    simulator, whose tray moves as ``A sin(2 pi f t)``).
+
+    Returns
+    -------
+    dict
+        ``freq_hz``, ``amplitude_meas_mm_s``, ``amplitude_sim_mm_s``,
+        ``amplitude_ratio`` (sim / meas), ``phase_meas_deg``,
+        ``phase_sim_deg``, ``phase_diff_deg`` (sim - meas, wrapped to
+        +-180), ``correlation`` (one drive period, phase-folded, both aligned
+        to their reference), ``rms_diff_mm_s`` and ``provenance``.
+    """
+    fm = fundamental(t_meas_s, vz_meas_mm_s, freq_hz)
+    fs = fundamental(t_sim_s, vz_sim_mm_s, freq_hz)
+    ref_m = fundamental(t_meas_s, ref_meas, freq_hz)["phase_rad"] if ref_meas is not None else 0.0
+    ref_s = fundamental(t_sim_s, ref_sim, freq_hz)["phase_rad"] if ref_sim is not None else 0.0
+    phase_m = fm["phase_rad"] - ref_m
+    phase_s = fs["phase_rad"] - ref_s
+    diff = np.angle(np.exp(1j * (phase_s - phase_m)))
+    # Fold both onto the tray's phase: bin 0 is where each reference crosses zero upward.
+    cyc_m = fold_period(t_meas_s, vz_meas_mm_s, freq_hz, bins=bins, phase_rad=ref_m)
+    cyc_s = fold_period(t_sim_s, vz_sim_mm_s, freq_hz, bins=bins, phase_rad=ref_s)
+    return {
+        "freq_hz": float(freq_hz),
+        "amplitude_meas_mm_s": _f(fm["amplitude"]),
+        "amplitude_sim_mm_s": _f(fs["amplitude"]),
+        "amplitude_ratio": _f(fs["amplitude"] / fm["amplitude"]) if fm["amplitude"] > 0 else None,
+        "phase_meas_deg": _f(np.degrees(np.angle(np.exp(1j * phase_m)))),
+        "phase_sim_deg": _f(np.degrees(np.angle(np.exp(1j * phase_s)))),
+        "phase_diff_deg": _f(np.degrees(diff)),
+        "correlation": _f(_corr(cyc_m, cyc_s)),
+        "rms_diff_mm_s": _f(np.sqrt(np.nanmean((cyc_s - cyc_m) ** 2))),
+        "method": f"fundamental by least squares at the drive frequency; correlation of one period "
+                  f"folded into {bins} phase bins, each aligned to its tray reference",
+        "cycle_meas_mm_s": [_f(v) for v in cyc_m],
+        "cycle_sim_mm_s": [_f(v) for v in cyc_s],
+        "provenance": dict(provenance or {}),
+    }

@@ -1,0 +1,202 @@
+"""Poles by the least-squares complex-frequency (LSCF) method, and the stabilisation diagram.
+
+Common-denominator model for every channel ``o`` (location):
+``H_o(w) = N_o(z) / D(z)``, ``z = exp(j w dt)``, ``dt = 1 / (2 f_max)``, with real
+polynomial coefficients (so the model respects ``H(-w) = conj H(w)``).  The
+linearised equations ``N_o(z_k) - H_o(w_k) D(z_k) = 0`` are reduced to the
+denominator alone (Guillaume, Verboven, Vanlanduit et al., "A poly-reference
+implementation of the least-squares complex frequency-domain estimator",
+IMAC 2003; the single-reference case here).  The normal-equation blocks for
+the highest order hold those of every lower order as leading sub-matrices, so
+the whole stabilisation diagram costs one pass over the data.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["Stabilisation", "lscf_poles", "stabilisation", "pole_to_modal", "modal_to_pole"]
+
+#: A pole is "stable" at an order when one of the previous order lies within these.
+FREQ_TOL = 0.01
+DAMP_TOL = 0.05
+
+
+def pole_to_modal(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(freq_hz, damping_ratio)`` of poles ``lam = -zeta wn + j wn sqrt(1 - zeta^2)``."""
+    lam = np.asarray(lam, dtype=complex)
+    wn = np.abs(lam)
+    return wn / (2 * np.pi), -lam.real / np.where(wn > 0, wn, 1.0)
+
+
+def modal_to_pole(freq_hz: np.ndarray, damping_ratio: np.ndarray) -> np.ndarray:
+    """The upper-half-plane pole of a mode (inverse of :func:`pole_to_modal`)."""
+    wn = 2 * np.pi * np.asarray(freq_hz, dtype=float)
+    z = np.asarray(damping_ratio, dtype=float)
+    return wn * (-z + 1j * np.sqrt(np.clip(1 - z ** 2, 0.0, None)))
+
+
+@dataclass
+class Stabilisation:
+    """A stabilisation diagram, as data.
+
+    Attributes (one entry per pole, poles of all orders flattened)
+    ----------
+    order:
+        Model (denominator polynomial) order the pole came from.
+    freq_hz, damping_ratio:
+        The pole's modal values.
+    status:
+        0 new, 1 frequency stable (within ``FREQ_TOL`` of a pole of the previous
+        order), 2 frequency and damping stable (also within ``DAMP_TOL``).
+    orders:
+        The orders computed.
+    chosen_hz:
+        Frequencies of the poles chosen from the diagram (filled by the fit).
+    """
+
+    order: np.ndarray
+    freq_hz: np.ndarray
+    damping_ratio: np.ndarray
+    status: np.ndarray
+    orders: np.ndarray
+    chosen_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    poles_by_order: dict = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict:
+        return {"orders": self.orders.tolist(), "n_poles": int(self.order.size),
+                "n_stable": int(np.sum(self.status == 2)), "chosen_hz": self.chosen_hz.tolist()}
+
+
+def _blocks(channels: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], n_max: int, dt: float):
+    """Reduced normal matrix pieces R_o, S_o, T_o for order ``n_max``."""
+    out = []
+    powers = np.arange(n_max + 1)
+    for w, H, wt in channels:
+        X = np.exp(1j * np.outer(w * dt, powers)) * wt[:, None]        # (N, n+1)
+        Y = -(H * wt)[:, None] * np.exp(1j * np.outer(w * dt, powers))
+        R = (X.conj().T @ X).real
+        S = (X.conj().T @ Y).real
+        T = (Y.conj().T @ Y).real
+        out.append((R, S, T))
+    return out
+
+
+def _poles_for_order(blocks, n: int, dt: float) -> np.ndarray:
+    m = n + 1
+    M = np.zeros((m, m))
+    for R, S, T in blocks:
+        Rn, Sn, Tn = R[:m, :m], S[:m, :m], T[:m, :m]
+        try:
+            M += Tn - Sn.T @ np.linalg.solve(Rn, Sn)
+        except np.linalg.LinAlgError:
+            M += Tn - Sn.T @ np.linalg.lstsq(Rn, Sn, rcond=None)[0]
+    # Constraint: highest coefficient = 1.
+    alpha = np.ones(m)
+    alpha[:n] = np.linalg.lstsq(M[:n, :n], -M[:n, n], rcond=None)[0]
+    roots = np.roots(alpha[::-1])
+    roots = roots[np.abs(roots) > 0]
+    return np.log(roots) / dt
+
+
+def _physical(lam: np.ndarray, band_w: tuple[float, float], max_damping: float) -> np.ndarray:
+    f, z = pole_to_modal(lam)
+    w = 2 * np.pi * f
+    keep = (lam.imag > 0) & (lam.real < 0) & (w >= band_w[0]) & (w <= band_w[1]) & (z < max_damping)
+    return lam[keep]
+
+
+def lscf_poles(channels, n: int, band_hz: tuple[float, float], *, max_damping: float = 0.9) -> np.ndarray:
+    """Physical poles (upper half plane, stable, in band) of an order-``n`` LSCF model.
+
+    ``channels`` is a sequence of ``(omega_rad_s, frf, weight)`` triples.
+    """
+    w_max = max(float(np.max(c[0])) for c in channels)
+    dt = np.pi / w_max
+    blocks = _blocks(channels, n, dt)
+    return _physical(_poles_for_order(blocks, n, dt), (2 * np.pi * band_hz[0], 2 * np.pi * band_hz[1]),
+                     max_damping)
+
+
+def stabilisation(channels, n_max: int, band_hz: tuple[float, float], *, n_min: int = 2, step: int = 2,
+                  max_damping: float = 0.9, freq_tol: float = FREQ_TOL, damp_tol: float = DAMP_TOL
+                  ) -> Stabilisation:
+    """Poles for every order ``n_min, n_min + step, ..., n_max`` and their stability status."""
+    w_max = max(float(np.max(c[0])) for c in channels)
+    dt = np.pi / w_max
+    blocks = _blocks(channels, n_max, dt)
+    band_w = (2 * np.pi * band_hz[0], 2 * np.pi * band_hz[1])
+    orders = np.arange(n_min, n_max + 1, step)
+    rec_o, rec_f, rec_z, rec_s = [], [], [], []
+    by_order: dict[int, np.ndarray] = {}
+    prev_f = prev_z = None
+    for n in orders:
+        lam = _physical(_poles_for_order(blocks, int(n), dt), band_w, max_damping)
+        f, z = pole_to_modal(lam)
+        order_ix = np.argsort(f)
+        lam, f, z = lam[order_ix], f[order_ix], z[order_ix]
+        by_order[int(n)] = lam
+        status = np.zeros(f.size, dtype=np.int8)
+        if prev_f is not None and prev_f.size and f.size:
+            k = np.argmin(np.abs(f[:, None] - prev_f[None, :]), axis=1)
+            df = np.abs(f - prev_f[k]) / f
+            dz = np.abs(z - prev_z[k]) / np.maximum(z, 1e-12)
+            status[df < freq_tol] = 1
+            status[(df < freq_tol) & (dz < damp_tol)] = 2
+        rec_o.append(np.full(f.size, n))
+        rec_f.append(f)
+        rec_z.append(z)
+        rec_s.append(status)
+        prev_f, prev_z = f, z
+    cat = (lambda xs, dt_: np.concatenate(xs).astype(dt_) if xs else np.zeros(0, dt_))
+    return Stabilisation(cat(rec_o, int), cat(rec_f, float), cat(rec_z, float), cat(rec_s, np.int8),
+                         orders, poles_by_order=by_order)
+
+
+def choose_poles(stab: Stabilisation, n_modes: int | None, *, min_fraction: float = 0.3,
+                 cluster_tol: float = 0.005) -> np.ndarray:
+    """Pick physical poles from a stabilisation diagram.
+
+    Poles that are frequency-stable are clustered in frequency (relative
+    tolerance ``cluster_tol``, at most one pole per order in a cluster); a
+    cluster's weight is the number of orders it spans.  With ``n_modes`` the
+    ``n_modes`` heaviest clusters are taken, otherwise every cluster seen in at
+    least ``min_fraction`` of the orders (and at least 3).  Returns the clusters'
+    median poles, sorted by frequency.
+    """
+    keep = stab.status >= 1
+    f, z, o = stab.freq_hz[keep], stab.damping_ratio[keep], stab.order[keep]
+    ix = np.argsort(f)
+    f, z, o = f[ix], z[ix], o[ix]
+    clusters: list[list[int]] = []
+    for i in range(f.size):
+        if clusters:
+            c = clusters[-1]
+            fc = np.median(f[c])
+            if abs(f[i] - fc) / fc < max(cluster_tol, 0.25 * np.median(z[c])) and o[i] not in o[c]:
+                c.append(i)
+                continue
+        clusters.append([i])
+    n_orders = max(len(stab.orders), 1)
+    counts = np.array([len(c) for c in clusters])
+    cand = [(counts[k], k) for k in range(len(clusters))]
+    if n_modes is None:
+        thresh = max(3, int(np.ceil(min_fraction * n_orders)))
+        picked = [k for cnt, k in cand if cnt >= thresh]
+    else:
+        picked = [k for _, k in sorted(cand, key=lambda t: -t[0])[:n_modes]]
+    fz = [(float(np.median(f[clusters[k]])), float(np.median(z[clusters[k]]))) for k in picked]
+    fz = _merge(sorted(fz))
+    return modal_to_pole(np.array([a for a, _ in fz]), np.array([b for _, b in fz]))
+
+
+def _merge(fz: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Merge picks closer than a quarter of their damping (a heavily damped mode that wandered)."""
+    out: list[tuple[float, float]] = []
+    for f, z in fz:
+        if out and abs(f - out[-1][0]) / f < min(0.03, 0.5 * min(z, out[-1][1])):
+            continue
+        out.append((f, z))
+    return out

@@ -1,0 +1,397 @@
+"""Readers for everything a report or a calibration consumes, into plain dicts of arrays.
+
+One reader per file kind (``run_inchip``, ``run_shaker``, ``track``,
+``modal_fit``, ``sim_sweep``, ``sim_result``) plus a CSV/HDF5 speed table.
+Each raises :class:`labkit.errors.InputError` naming the file (and key) when
+a file cannot be read or lacks what is needed, so the CLI exits 2 with one
+line. Layouts follow ``interfaces.md``; where a producer's layout allows
+alternatives (a dataset at the root or under ``points/``) the readers accept
+both, and they never guess a number that is not in the file.
+"""
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labkit.errors import InputError
+
+LOCATIONS = ("body", "hip", "knee")
+
+
+def _s(v: Any) -> str:
+    return v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
+
+
+def file_kind(path: str | Path) -> str:
+    """The ``kind`` root attribute of a labkit HDF5 file (InputError if unreadable)."""
+    from labkit.h5io import open_h5
+
+    with open_h5(path) as f:
+        kind = f.attrs.get("kind")
+    if kind is None:
+        raise InputError("not a labkit file: no 'kind' attribute", file=path, key="kind")
+    return _s(kind)
+
+
+def _find(f: Any, name: str, groups: tuple[str, ...] = ("", "points", "data")) -> Any:
+    for g in groups:
+        key = f"{g}/{name}" if g else name
+        if key in f:
+            return f[key]
+    return None
+
+
+def _need(f: Any, name: str, path: Path, groups: tuple[str, ...] = ("", "points", "data")) -> np.ndarray:
+    ds = _find(f, name, groups)
+    if ds is None:
+        raise InputError("missing dataset", file=path, key=name, expected=f"a '{name}' dataset")
+    return ds[()]
+
+
+# --------------------------------------------------------------------------- in-chip runs
+
+def load_inchip_run(path: str | Path) -> dict[str, Any]:
+    """FRFs per location of a ``run_inchip`` file: ``{"file", "status", "locations": {loc: {...}}}``."""
+    from labkit.h5io import open_h5
+
+    path = Path(path)
+    out: dict[str, Any] = {"file": str(path), "kind": "run_inchip", "locations": {}}
+    with open_h5(path, kind="run_inchip") as f:
+        out["status"] = _s(f.attrs.get("status", "?"))
+        out["method"] = _s(f.attrs.get("method", "?"))
+        if "locations" not in f:
+            raise InputError("no measured locations", file=path, key="locations",
+                             expected="groups /locations/<body|hip|knee>")
+        for loc, g in f["locations"].items():
+            if "freq_hz" not in g or "frf" not in g:
+                raise InputError("missing freq_hz or frf", file=path, key=f"locations/{loc}")
+            entry = {"freq_hz": g["freq_hz"][()].astype(float), "frf": g["frf"][()].astype(complex)}
+            if "coherence" in g:
+                entry["coherence"] = g["coherence"][()]
+            out["locations"][loc] = entry
+    return out
+
+
+# --------------------------------------------------------------------------- shaker runs and tracks
+
+def load_shaker_run(path: str | Path) -> dict[str, Any]:
+    """Per-point data of a ``run_shaker`` file (layout: :mod:`labkit.experiments.runfile`).
+
+    Only points with status ``ok`` are kept. Returns ``freq_hz``,
+    ``tray_amp_um`` (measured), ``videos`` (absolute paths; "" without video),
+    ``index`` (plan indices), optional ``patterns`` (a ``pattern`` label per
+    point, if a producer adds one) and ``knee``: the vibrometer records of
+    points taken with the laser on the knee (root attribute ``robot_spot``),
+    as dicts with ``t_s``, ``knee_vz_mm_s``, ``tray_vz_mm_s``, ``freq_hz``,
+    ``tray_amp_um``, ``point``.
+    """
+    from labkit.h5io import open_h5
+
+    path = Path(path)
+    with open_h5(path, kind="run_shaker") as f:
+        out: dict[str, Any] = {"file": str(path), "kind": "run_shaker", "status": _s(f.attrs.get("status", "?")),
+                               "robot_spot": _s(f.attrs.get("robot_spot", "?"))}
+        freq = np.asarray(_need(f, "freq_hz", path), float)
+        n = freq.size
+        index = np.asarray(_find(f, "index")[()] if _find(f, "index") is not None else np.arange(1, n + 1))
+        n = min(n, index.size)          # rows beyond the index are a point cut short: not complete
+        status = _find(f, "status")
+        ok = (np.array([_s(v) == "ok" for v in status[:n]]) if status is not None else np.ones(n, bool))
+        out["freq_hz"] = freq[:n][ok]
+        out["index"] = index[:n][ok].astype(int)
+        amp = _find(f, "tray_amp_um")
+        out["tray_amp_um"] = np.asarray(amp[:n], float)[ok] if amp is not None else np.full(int(ok.sum()), np.nan)
+        videos = _find(f, "video")
+        out["videos"] = ([str((path.parent / _s(v)).resolve()) if _s(v) else "" for v in videos[:n][ok]]
+                         if videos is not None else [""] * int(ok.sum()))
+        for name in ("speed_mm_s", "speed_lo_mm_s", "speed_hi_mm_s", "speed_std_mm_s"):
+            ds = _find(f, name)
+            if ds is not None:
+                out[name] = np.asarray(ds[:n], float)[ok]
+        ds = _find(f, "pattern")
+        if ds is not None:
+            out["patterns"] = [_s(v) for v in ds[:n][ok]]
+        out["knee"] = _knee_records(f, out) if out["robot_spot"] == "knee" else []
+    return out
+
+
+def _knee_records(f: Any, run: dict[str, Any]) -> list[dict[str, Any]]:
+    """Velocity records of a knee-spot shaker run: ``/records/p<index>/`` with ``dt_s``."""
+    records = []
+    if "records" not in f:
+        return records
+    row_of = {int(i): k for k, i in enumerate(run["index"])}
+    for name in sorted(f["records"]):
+        g = f["records"][name]
+        try:
+            index = int(str(name).lstrip("p"))
+        except ValueError:
+            continue
+        if index not in row_of or "robot_velocity_mm_s" not in g or "dt_s" not in g.attrs:
+            continue
+        k = row_of[index]
+        knee = np.asarray(g["robot_velocity_mm_s"][()], float)
+        tray = np.asarray(g["tray_velocity_mm_s"][()], float) if "tray_velocity_mm_s" in g else None
+        records.append({"point": index, "t_s": np.arange(knee.size) * float(g.attrs["dt_s"]),
+                        "knee_vz_mm_s": knee, "tray_vz_mm_s": tray, "freq_hz": float(run["freq_hz"][k]),
+                        "tray_amp_um": float(run["tray_amp_um"][k]), "spot": "knee"})
+    return records
+
+
+def load_track(path: str | Path) -> dict[str, Any]:
+    """Speed of a ``track`` file: ``mean_speed_mm_s``, ``speed_ci_mm_s`` (lo, hi), and
+    ``freq_hz``/``video`` when the track records them."""
+    from labkit.h5io import open_h5
+
+    path = Path(path)
+    with open_h5(path, kind="track") as f:
+        if "mean_speed_mm_s" not in f.attrs:
+            raise InputError("missing root attribute", file=path, key="mean_speed_mm_s")
+        speed = float(f.attrs["mean_speed_mm_s"])
+        ci = np.asarray(f.attrs.get("speed_ci_mm_s", [speed, speed]), float).ravel()
+        if ci.size != 2:
+            raise InputError("expected two values", file=path, key="speed_ci_mm_s", expected="[lo, hi] in mm/s")
+        out = {"file": str(path), "kind": "track", "mean_speed_mm_s": speed, "speed_ci_mm_s": ci,
+               "ci_level": float(f.attrs.get("speed_ci_level", 0.95))}
+        for key in ("freq_hz", "shaker_freq_hz"):
+            if key in f.attrs:
+                out["freq_hz"] = float(f.attrs[key])
+        for key in ("video", "source", "source_video", "video_path"):
+            if key in f.attrs:
+                v = _s(f.attrs[key])
+                out["video"] = str((path.parent / v).resolve()) if v else ""
+                break
+    return out
+
+
+def measured_speeds(shaker_runs: list[dict[str, Any]], tracks: list[dict[str, Any]]) -> dict[str, Any]:
+    """Measured speed against frequency from shaker runs and tracks.
+
+    A track gets its frequency from its own ``freq_hz`` attribute, or from the
+    shaker run point whose video it tracked. Speeds stored in a run file
+    itself are used for points no track covers. The standard deviation is
+    recovered from the confidence interval assuming a normal spread.
+
+    Returns
+    -------
+    dict
+        ``freq_hz``, ``speed_mm_s``, ``lo_mm_s``, ``hi_mm_s``,
+        ``std_mm_s`` (arrays sorted by frequency), ``sources`` (file per
+        point), ``unmatched`` (tracks with no frequency).
+    """
+    from scipy.stats import norm
+
+    by_video: dict[str, tuple[float, str]] = {}
+    for run in shaker_runs:
+        for fz, video in zip(run["freq_hz"], run["videos"]):
+            if video:
+                by_video[str(Path(video).resolve())] = (float(fz), run["file"])
+    rows: list[tuple[float, float, float, float, float, str]] = []
+    covered: set[str] = set()
+    unmatched = []
+    for tr in tracks:
+        freq = tr.get("freq_hz")
+        src = tr["file"]
+        if freq is None and tr.get("video"):
+            hit = by_video.get(str(Path(tr["video"]).resolve()))
+            if hit:
+                freq = hit[0]
+                src = f"{tr['file']} (video of {hit[1]})"
+                covered.add(str(Path(tr["video"]).resolve()))
+        if freq is None:
+            unmatched.append(tr["file"])
+            continue
+        lo, hi = tr["speed_ci_mm_s"]
+        z = norm.ppf(0.5 + tr.get("ci_level", 0.95) / 2)
+        rows.append((float(freq), tr["mean_speed_mm_s"], lo, hi, (hi - lo) / (2 * z), src))
+    for run in shaker_runs:
+        if "speed_mm_s" not in run:
+            continue
+        for i, fz in enumerate(run["freq_hz"]):
+            video = run["videos"][i] if i < len(run["videos"]) else ""
+            if video and str(Path(video).resolve()) in covered:
+                continue
+            s = float(run["speed_mm_s"][i])
+            if not np.isfinite(s):
+                continue
+            if "speed_std_mm_s" in run:
+                std = float(run["speed_std_mm_s"][i])
+                lo, hi = s - 1.96 * std, s + 1.96 * std
+            else:
+                lo = float(run.get("speed_lo_mm_s", [s] * (i + 1))[i])
+                hi = float(run.get("speed_hi_mm_s", [s] * (i + 1))[i])
+                std = (hi - lo) / (2 * 1.96)
+            rows.append((float(fz), s, lo, hi, std, f"{run['file']} (point {i})"))
+    rows.sort(key=lambda r: r[0])
+    cols = list(zip(*rows)) if rows else [[]] * 6
+    return {"freq_hz": np.asarray(cols[0], float), "speed_mm_s": np.asarray(cols[1], float),
+            "lo_mm_s": np.asarray(cols[2], float), "hi_mm_s": np.asarray(cols[3], float),
+            "std_mm_s": np.asarray(cols[4], float), "sources": list(cols[5]), "unmatched": unmatched}
+
+
+def load_speed_table(path: str | Path) -> dict[str, Any]:
+    """A table of measured speeds: CSV with header ``freq_hz,speed_mm_s[,speed_std_mm_s][,pattern]``
+    or an HDF5 file with those datasets (any ``kind``).
+
+    ``speed_std`` is accepted as an alias of ``speed_std_mm_s``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such file", file=path)
+    cols: dict[str, list] = {}
+    if path.suffix.lower() in (".csv", ".txt"):
+        try:
+            with path.open(newline="", encoding="utf-8") as fh:
+                reader = csv.DictReader(line for line in fh if not line.lstrip().startswith("#"))
+                for row in reader:
+                    for k, v in row.items():
+                        cols.setdefault((k or "").strip(), []).append((v or "").strip())
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise InputError(f"cannot read CSV: {exc}", file=path) from None
+    else:
+        import h5py
+
+        try:
+            with h5py.File(path, "r") as f:
+                for k in ("freq_hz", "speed_mm_s", "speed_std_mm_s", "speed_std", "pattern"):
+                    ds = _find(f, k)
+                    if ds is not None:
+                        cols[k] = [_s(v) if isinstance(v, bytes) else v for v in ds[()]]
+        except OSError as exc:
+            raise InputError(f"not a readable HDF5 or CSV file ({exc})", file=path) from None
+    if "speed_std" in cols and "speed_std_mm_s" not in cols:
+        cols["speed_std_mm_s"] = cols.pop("speed_std")
+    out: dict[str, Any] = {"file": str(path)}
+    for key in ("freq_hz", "speed_mm_s", "speed_std_mm_s"):
+        if key not in cols:
+            if key == "speed_std_mm_s":
+                continue
+            raise InputError("missing column", file=path, key=key,
+                             expected="columns freq_hz, speed_mm_s[, speed_std_mm_s][, pattern]")
+        try:
+            out[key] = np.asarray([float(v) for v in cols[key]], float)
+        except ValueError as exc:
+            raise InputError(f"not a number: {exc}", file=path, key=key) from None
+    if out["freq_hz"].size == 0:
+        raise InputError("no rows", file=path, expected="at least one measured speed")
+    if "pattern" in cols and any(cols["pattern"]):
+        out["pattern"] = [str(v) for v in cols["pattern"]]
+    return out
+
+
+# --------------------------------------------------------------------------- fits and simulations
+
+def load_fit(path: str | Path) -> dict[str, Any]:
+    """A ``modal_fit`` file: per-location measured FRF and fitted model, modes, stabilisation.
+
+    Returns ``{"file", "locations": {loc: {"freq_hz", "frf", "model_frf"?, "model_freq_hz"?}},
+    "modes": [{"freq_hz", "damping_ratio", "freq_std_hz"?, "damping_std"?}], "stabilisation": {...}|None,
+    "attrs": {...}}``.
+    """
+    from labkit.h5io import open_h5
+
+    path = Path(path)
+    out: dict[str, Any] = {"file": str(path), "kind": "modal_fit", "locations": {}, "modes": [],
+                           "stabilisation": None}
+    with open_h5(path, kind="modal_fit") as f:
+        out["attrs"] = {k: _s(v) if isinstance(v, (bytes, str)) else np.asarray(v).tolist()
+                        for k, v in f.attrs.items() if len(str(v)) < 300}
+        locs = f["locations"] if "locations" in f else {}
+        for loc, g in locs.items():
+            entry: dict[str, Any] = {}
+            for src, dst in (("freq_hz", "freq_hz"), ("frf", "frf"), ("measured_frf", "frf"),
+                             ("frf_measured", "frf"), ("model_frf", "model_frf"), ("fit_frf", "model_frf"),
+                             ("frf_model", "model_frf"), ("fitted_frf", "model_frf"),
+                             ("model_freq_hz", "model_freq_hz")):
+                if src in g and dst not in entry:
+                    entry[dst] = g[src][()]
+            if "freq_hz" in entry and "frf" in entry:
+                out["locations"][loc] = entry
+        out["modes"] = _read_modes(f)
+        out["stabilisation"] = _read_stabilisation(f)
+    return out
+
+
+def _read_modes(f: Any) -> list[dict[str, float]]:
+    g = f.get("modes")
+    if g is None:
+        return []
+    cols = {k: np.asarray(g[k][()]).ravel() for k in g if hasattr(g[k], "shape")}
+    fkey = next((k for k in ("freq_hz", "natural_freq_hz") if k in cols), None)
+    if fkey is None:
+        return []
+    modes = []
+    for i, fz in enumerate(cols[fkey]):
+        m = {"freq_hz": float(fz)}
+        for k, v in cols.items():
+            if k != fkey and v.size == cols[fkey].size and np.issubdtype(v.dtype, np.number):
+                m[k] = float(v[i])
+            elif k != fkey and v.size == cols[fkey].size:
+                m[k] = _s(v[i])
+        modes.append(m)
+    return modes
+
+
+def _read_stabilisation(f: Any) -> dict[str, np.ndarray] | None:
+    g = f.get("stabilisation") or f.get("stabilization")
+    if g is None:
+        return None
+    cols = {k: np.asarray(g[k][()]) for k in g if hasattr(g[k], "shape")}
+    if "freq_hz" not in cols or "order" not in cols:
+        return None
+    return cols
+
+
+def load_sim(path: str | Path) -> dict[str, Any]:
+    """A simulation file: ``sim_sweep`` (SweepResult) or ``sim_result`` (one run's time series)."""
+    path = Path(path)
+    kind = file_kind(path)
+    if kind == "sim_sweep":
+        from labkit.sim.sweep import SweepResult
+
+        try:
+            s = SweepResult.from_h5(path)
+        except KeyError as exc:
+            raise InputError(f"incomplete sweep file: {exc}", file=path) from None
+        return {"file": str(path), "kind": kind, "sweep": s}
+    if kind == "sim_result":
+        return {"file": str(path), "kind": kind, **_load_sim_result(path)}
+    raise InputError(f"this file holds {kind!r}", file=path, key="kind",
+                     expected="a 'sim_sweep' or 'sim_result' file")
+
+
+def _load_sim_result(path: Path) -> dict[str, Any]:
+    from labkit.h5io import get_json, open_h5
+
+    with open_h5(path, kind="sim_result") as f:
+        out = {"t_s": np.asarray(_need(f, "t_s", path, ("", "series", "data")), float),
+               "knee_vz_mm_s": np.asarray(_need(f, "knee_vz_mm_s", path, ("", "series", "data")), float),
+               "ground_z_um": np.asarray(_need(f, "ground_z_um", path, ("", "series", "data")), float),
+               "contact": np.asarray(_need(f, "contact", path, ("", "series", "data"))),
+               "scenario": get_json(f, "scenario_json", {}) or {}}
+        for k in ("patterns",):
+            ds = _find(f, k, ("", "series", "data", "summary"))
+            if ds is not None:
+                out["patterns"] = [_s(v) for v in ds[()]]
+            elif k in f.attrs:       # SimResult.to_h5 stores the six labels as a JSON list
+                raw = f.attrs[k]
+                text = _s(raw) if isinstance(raw, (str, bytes)) else ""
+                out["patterns"] = ([str(v) for v in json.loads(text)] if text.startswith("[")
+                                   else [_s(v) for v in np.atleast_1d(raw)])
+        summary = get_json(f, "summary_json", None)
+        if summary:
+            out["summary"] = summary
+    return out
+
+
+def classify_inputs(paths: list[str]) -> dict[str, list[str]]:
+    """Sort files by their ``kind`` (unknown kinds -> InputError naming the file)."""
+    groups: dict[str, list[str]] = {}
+    for p in paths:
+        kind = file_kind(p)
+        groups.setdefault(kind, []).append(p)
+    return groups

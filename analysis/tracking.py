@@ -1,0 +1,592 @@
+"""Track the robot in top-view video: sub-pixel centroid and heading from image moments.
+
+Method, per frame (see ``docs`` in the functions for the why):
+
+1. A window around the predicted position (the whole region of interest when
+   the robot is not yet found or was lost) is split into dark and light by
+   Otsu's threshold computed on that frame's window alone, so a slow lighting
+   drift never needs a fixed threshold. A dark/light contrast check rejects a
+   window holding only Teflon.
+2. The dark connected component of the robot's size nearest the prediction is
+   the robot. Static dark structure (the tray's rim beyond its edge, seen dark
+   in every frame) is found beforehand from frames spread over the video and
+   excluded, so a robot touching the edge does not merge with it.
+3. Around that component (a band of ``margin_px``) each pixel gets a weight =
+   its darkness relative to a plane fitted to the surrounding background,
+   divided by the robot's own darkness: for an anti-aliased or blurred edge
+   this is the pixel's area coverage, so the weighted moments give the
+   centroid to a small fraction of a pixel (a binary mask would quantise it).
+4. Orientation from the second central moments (``0.5 atan2(2 mu11, mu20 -
+   mu02)``; never ``minAreaRect``, whose angle convention changed in OpenCV 5).
+   The axis is defined modulo 180 degrees: it is unwrapped by continuity and
+   the robot's front chosen, per stretch between losses, as the end it moves
+   towards.
+
+Conventions are those of :mod:`labkit.lab.render`: image ``u`` right, ``v``
+down, pixel centres at integers; world ``x_mm`` right, ``y_mm`` up, measured
+from the frame's bottom-left corner; ``heading_rad`` 0 = front towards +y,
+counter-clockwise positive.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from labkit.errors import InputError
+
+QUALITY_OK = 0        # robot fully seen: position and heading trusted
+QUALITY_DEGRADED = 1  # seen but cut by the frame/ROI border or of an unexpected area: biased
+QUALITY_LOST = 2      # not found (occluded, out of view): position is NaN
+QUALITY_LABELS = "0 ok, 1 degraded (partly out of view or odd area), 2 lost"
+
+ROBOT_LENGTH_MM = 5.0
+
+
+@dataclass
+class Scale:
+    """Image scale and its standard uncertainty, with how it was obtained."""
+
+    mm_per_px: float
+    mm_per_px_std: float
+    method: str
+    detail: dict = field(default_factory=dict)
+
+
+@dataclass
+class Track:
+    """Per-frame robot pose. ``u_px``/``v_px`` are full-frame image coordinates."""
+
+    t_s: np.ndarray
+    u_px: np.ndarray
+    v_px: np.ndarray
+    heading_rad: np.ndarray
+    quality: np.ndarray
+    area_px: np.ndarray
+    frame_size: tuple[int, int]
+    roi: tuple[int, int, int, int]
+    scale: Scale | None = None
+    source: str = ""
+    timestamps_source: str = "container"
+    heading_sense: str = "motion"
+    length_px: float = float("nan")
+    length_px_std: float = float("nan")
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def frames(self) -> int:
+        return int(self.t_s.size)
+
+    @property
+    def lost_frames(self) -> int:
+        return int(np.sum(self.quality == QUALITY_LOST))
+
+    @property
+    def mm_per_px(self) -> float:
+        return float("nan") if self.scale is None else self.scale.mm_per_px
+
+    @property
+    def x_mm(self) -> np.ndarray:
+        """World x (mm) from the frame's left edge."""
+        return (self.u_px + 0.5) * self.mm_per_px
+
+    @property
+    def y_mm(self) -> np.ndarray:
+        """World y (mm, up) from the frame's bottom edge."""
+        return (self.frame_size[1] - 0.5 - self.v_px) * self.mm_per_px
+
+
+# ----------------------------------------------------------------------------- scale
+def scale_given(mm_per_px: float, mm_per_px_std: float = 0.0) -> Scale:
+    """A scale the user knows (calibration slide): recorded as given."""
+    if not (mm_per_px > 0 and np.isfinite(mm_per_px)):
+        raise InputError(f"bad scale {mm_per_px!r}", key="mm_per_px", expected="a number > 0")
+    return Scale(float(mm_per_px), float(mm_per_px_std), "given")
+
+
+def scale_from_bar(x1: float, y1: float, x2: float, y2: float, distance_mm: float,
+                   click_std_px: float = 0.5) -> Scale:
+    """Two points on a scale bar ``distance_mm`` apart; each point uncertain by ``click_std_px``."""
+    d_px = float(np.hypot(x2 - x1, y2 - y1))
+    if d_px < 5 or not distance_mm > 0:
+        raise InputError(f"scale bar points {d_px:.1f} px apart, {distance_mm} mm", key="scale_bar",
+                         expected="two points >= 5 px apart and a distance > 0 mm")
+    s = distance_mm / d_px
+    # the distance between two clicked points has std sqrt(2) * click_std
+    return Scale(s, s * np.sqrt(2) * click_std_px / d_px, "scale_bar",
+                 {"points_px": [x1, y1, x2, y2], "distance_mm": distance_mm, "click_std_px": click_std_px})
+
+
+def scale_from_robot_length(track: Track, length_mm: float = ROBOT_LENGTH_MM,
+                            length_std_mm: float = 0.05) -> Scale:
+    """Scale from the robot's known body length and its length measured in the image."""
+    if not np.isfinite(track.length_px) or track.length_px <= 0:
+        raise InputError("cannot measure the robot's length in the image (too few clear frames)",
+                         file=track.source, expected="a scale: --mm-per-px or --scale-bar")
+    s = length_mm / track.length_px
+    rel = np.hypot(length_std_mm / length_mm, track.length_px_std / track.length_px)
+    return Scale(s, s * rel, "robot_length", {"length_mm": length_mm, "length_std_mm": length_std_mm,
+                                              "length_px": track.length_px, "length_px_std": track.length_px_std})
+
+
+# ----------------------------------------------------------------------------- per-frame measurement
+def _otsu(hist: np.ndarray) -> tuple[int, float, float]:
+    """Otsu threshold of a 256-bin histogram; returns (threshold, dark mean, light mean)."""
+    p = hist.astype(np.float64).ravel()
+    tot = p.sum()
+    omega = np.cumsum(p)
+    mu = np.cumsum(p * np.arange(256))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sb = (mu[-1] * omega - mu * tot) ** 2 / (omega * (tot - omega))
+    sb[~np.isfinite(sb)] = -1
+    k = int(np.argmax(sb))
+    if sb[k] <= 0:
+        return k, float("nan"), float("nan")
+    return k, mu[k] / omega[k], (mu[-1] - mu[k]) / (tot - omega[k])
+
+
+_KERNELS: dict[int, np.ndarray] = {}
+
+
+def _square(r: int) -> np.ndarray:
+    """A (2r+1)^2 square structuring element (separable, so dilation is cheap)."""
+    if r not in _KERNELS:
+        _KERNELS[r] = np.ones((2 * r + 1, 2 * r + 1), np.uint8)
+    return _KERNELS[r]
+
+
+@dataclass
+class _Blob:
+    u: float
+    v: float
+    theta: float          # image axis angle (rad), from +u towards +v, modulo pi
+    area: float           # area of the dark component's outline (px)
+    coverage: float       # weighted area (px)
+    major_px: float       # sqrt(12 * variance along the axis): a rectangle's length
+    minor_px: float
+    border: bool          # cut by the ROI border
+    weights: np.ndarray | None = None
+    origin: tuple[int, int] = (0, 0)
+
+
+class _Finder:
+    """Find and measure the robot in one (ROI-cropped) grey frame."""
+
+    def __init__(self, valid: np.ndarray | None, margin_px: int, min_contrast: float, min_area_px: int,
+                 flat: np.ndarray | None = None):
+        self.valid = None if valid is None else valid.astype(np.uint8)  # 0 = never the robot
+        self.flat = flat  # background reflectance (float32, ~1), ROI-sized, or None
+        self.margin = margin_px
+        self.min_contrast = min_contrast
+        self.min_area = min_area_px
+
+    def find(self, img: np.ndarray, x0: int, y0: int, x1: int, y1: int, *, pred: tuple[float, float] | None,
+             area_ref: float | None, keep_weights: bool = False) -> tuple[_Blob | None, bool]:
+        """Search the window [x0:x1, y0:y1]; returns (blob or None, touched the window's edge)."""
+        import cv2
+
+        win = img[y0:y1, x0:x1]
+        vmask = None if self.valid is None else self.valid[y0:y1, x0:x1]
+        # Otsu on every other pixel: the histogram's shape, at a quarter of the cost
+        sub = win[::2, ::2]
+        hist = np.bincount(sub[vmask[::2, ::2] > 0] if vmask is not None else sub.ravel(), minlength=256)
+        thr, dark, light = _otsu(hist)
+        if not np.isfinite(dark) or (light - dark) < self.min_contrast * light:
+            return None, False
+        binary = (win <= thr).astype(np.uint8)
+        if vmask is not None:
+            binary &= vmask
+        contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        cands = []
+        for c in contours:
+            if len(c) < 4:
+                continue
+            a = cv2.contourArea(c)
+            if a < self.min_area or (area_ref and not 0.45 * area_ref < a < 1.7 * area_ref):
+                continue
+            bx, by, bw, bh = cv2.boundingRect(c)
+            cands.append((a, bx + bw / 2, by + bh / 2, c, (bx, by, bw, bh)))
+        if not cands:
+            return None, False
+        if pred is not None:
+            score = [np.hypot(cx + x0 - pred[0], cy + y0 - pred[1])
+                     + (20.0 * abs(np.log(a / area_ref)) if area_ref else 0.0) for a, cx, cy, _, _ in cands]
+        elif area_ref:
+            score = [abs(np.log(a / area_ref)) for a, *_ in cands]
+        else:
+            score = [-a for a, *_ in cands]
+        area, _, _, contour, (bx, by, bw, bh) = cands[int(np.argmin(score))]
+        h, w = win.shape
+        touched = bx == 0 or by == 0 or bx + bw == w or by + bh == h
+        H, W = img.shape
+        border = bx + x0 == 0 or by + y0 == 0 or bx + bw + x0 == W or by + bh + y0 == H
+        # measure in the component's box grown by the band and the background ring
+        g = self.margin + 4
+        cx0, cy0 = max(bx - g, 0), max(by - g, 0)
+        cx1, cy1 = min(bx + bw + g, w), min(by + bh + g, h)
+        comp = np.zeros((cy1 - cy0, cx1 - cx0), np.uint8)
+        cv2.drawContours(comp, [contour], -1, 1, thickness=-1, offset=(-cx0, -cy0))
+        flat = None if self.flat is None else self.flat[y0 + cy0:y0 + cy1, x0 + cx0:x0 + cx1]
+        blob = self._measure(win[cy0:cy1, cx0:cx1], comp, binary[cy0:cy1, cx0:cx1],
+                             None if vmask is None else vmask[cy0:cy1, cx0:cx1], keep_weights, flat)
+        if blob is None:
+            return None, bool(touched)
+        ox, oy = x0 + cx0, y0 + cy0
+        blob.u += ox
+        blob.v += oy
+        blob.origin = (ox, oy)
+        blob.area = float(area)
+        blob.border = bool(border)
+        return blob, bool(touched and not border)
+
+    def _measure(self, win: np.ndarray, comp: np.ndarray, binary: np.ndarray, vmask: np.ndarray | None,
+                 keep_weights: bool, flat: np.ndarray | None = None) -> _Blob | None:
+        import cv2
+
+        m = self.margin
+        band = cv2.dilate(comp, _square(m))
+        outer = cv2.dilate(comp, _square(m + 3))
+        others = binary & (1 - comp)
+        if others.any():
+            band &= 1 - others
+            ring = outer & (1 - band) & (1 - cv2.dilate(others, _square(m)))
+        else:
+            ring = outer & (1 - band)
+        if vmask is not None:
+            band &= vmask
+            ring &= vmask
+        f = win.astype(np.float32)
+        if flat is not None:
+            f /= flat   # flat-field: divides out the Teflon's texture
+        # background under the robot: least-squares plane through the ring around it
+        # (lighting gradients), from the ring's moments: no pixel lists needed
+        mr = cv2.moments(ring, binaryImage=True)
+        if mr["m00"] < 12:
+            return None
+        mf = cv2.moments(f * ring)
+        n, su, sv = mr["m00"], mr["m10"], mr["m01"]
+        ata = np.array([[n, su, sv], [su, mr["m20"], mr["m11"]], [sv, mr["m11"], mr["m02"]]])
+        atb = np.array([mf["m00"], mf["m10"], mf["m01"]])
+        try:
+            coef = np.linalg.solve(ata, atb)
+        except np.linalg.LinAlgError:
+            coef = np.array([mf["m00"] / n, 0.0, 0.0])
+        hh, ww = win.shape
+        uu = np.arange(ww, dtype=np.float32)
+        vv = np.arange(hh, dtype=np.float32)
+        bg = np.float32(coef[0]) + np.float32(coef[1]) * uu[None, :] + np.float32(coef[2]) * vv[:, None]
+        ratio = f / np.maximum(bg, np.float32(1.0))
+        inner = cv2.erode(comp, _square(2))
+        if cv2.countNonZero(inner) < 5:
+            inner = comp
+        rho = float(cv2.mean(ratio, mask=inner)[0])
+        if rho > 0.9:
+            return None
+        # weight = darkness / the robot's darkness = area coverage of each pixel (1 inside)
+        w = np.clip((1.0 - ratio) * np.float32(1.0 / (1.0 - rho)), -0.5, 1.5)
+        w *= band
+        mo = cv2.moments(w)
+        if mo["m00"] <= 0:
+            return None
+        cu, cv_ = mo["m10"] / mo["m00"], mo["m01"] / mo["m00"]
+        a, b, c = mo["mu20"] / mo["m00"], mo["mu02"] / mo["m00"], mo["mu11"] / mo["m00"]
+        theta = 0.5 * np.arctan2(2 * c, a - b)
+        common = np.sqrt(((a - b) / 2) ** 2 + c ** 2)
+        lam1, lam2 = (a + b) / 2 + common, max((a + b) / 2 - common, 0.0)
+        return _Blob(cu, cv_, theta, 0.0, mo["m00"], float(np.sqrt(12 * lam1)), float(np.sqrt(12 * lam2)),
+                     False, w if keep_weights else None)
+
+
+def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> float:
+    """The body's end-to-end length (px) from its darkness profile along the long axis.
+
+    The weights are projected onto the axis; the ends are where the profile falls
+    to half its level near the ends (a symmetric blur leaves that crossing in
+    place). The leg stubs stick out of the long sides, not the ends, so they do not
+    move it.
+    """
+    vv, uu = np.nonzero(weights != 0)
+    wt = weights[vv, uu].astype(np.float64)
+    s = (uu - cu) * np.cos(theta) + (vv - cv_) * np.sin(theta)
+    binw = 0.5
+    lo = np.floor(s.min() / binw) - 2
+    idx = (np.floor(s / binw) - lo).astype(int)
+    prof = np.bincount(idx, wt, minlength=idx.max() + 3) / binw
+    prof = np.convolve(prof, np.ones(3) / 3, mode="same")
+    centres = (np.arange(prof.size) + lo + 0.5) * binw
+    half_len = 0.5 * float(np.ptp(centres[prof > 0.5 * prof.max()]))
+    ends = []
+    for sign in (1, -1):
+        # just inside the end, clear of the leg stubs (at 0.68 of the half length)
+        sel = (sign * centres > 0.76 * half_len) & (sign * centres < 0.9 * half_len)
+        if sel.sum() < 3:
+            return float("nan")
+        level = np.median(prof[sel])
+        order = np.argsort(sign * centres)
+        c_sorted, p_sorted = sign * centres[order], prof[order]
+        beyond = np.flatnonzero((c_sorted > 0.9 * half_len) & (p_sorted < 0.5 * level))
+        if beyond.size == 0:
+            return float("nan")
+        j = beyond[0]
+        # linear interpolation of the half-level crossing between bins j-1 and j
+        p0, p1 = p_sorted[j - 1], p_sorted[j]
+        frac = (p0 - 0.5 * level) / (p0 - p1) if p0 != p1 else 0.5
+        ends.append(c_sorted[j - 1] + frac * (c_sorted[j] - c_sorted[j - 1]))
+    return float(ends[0] + ends[1])
+
+
+# ----------------------------------------------------------------------------- static structure
+def background_model(samples: list[np.ndarray], dark_ratio: float = 0.6, grow_px: int = 8
+                     ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Static structure from frames spread over the video: ``(rim mask, flat field)``.
+
+    Each frame is normalised by its median (lighting drift). The per-pixel
+    maximum removes the moving (dark) robot: dark structure left in it that
+    reaches the frame's border is the tray's rim, returned as a mask (only
+    border-connected structure, so a robot that sits still is never masked
+    away). The flat field is the Teflon's own reflectance (texture, scratches,
+    vignetting), which the tracker divides out: the per-pixel mean over the
+    samples of the pixels that are not dark nor within ``grow_px`` of dark
+    (the robot and its blurred edge); where every sample is dark there, 1 (no
+    correction).
+    """
+    import cv2
+
+    if len(samples) < 5:
+        return None, None
+    h, w = samples[0].shape
+    peak = np.zeros((h, w), np.float32)
+    total = np.zeros((h, w), np.float32)
+    count = np.zeros((h, w), np.float32)
+    grow = _square(grow_px)
+    for s in samples:
+        norm = s.astype(np.float32) * np.float32(1.0 / max(float(np.median(s)), 1.0))
+        np.maximum(peak, norm, out=peak)
+        clear = 1 - cv2.dilate((norm < dark_ratio).view(np.uint8), grow)
+        total += norm * clear
+        count += clear
+    flat = np.ones((h, w), np.float32)
+    np.divide(total, count, out=flat, where=count > 0)
+    dark = (peak < dark_ratio).astype(np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(dark, connectivity=8)
+    rim = np.zeros((h, w), bool)
+    for i in range(1, n):
+        x, y, bw, bh, _a = stats[i]
+        if x == 0 or y == 0 or x + bw == w or y + bh == h:
+            rim |= labels == i
+    flat[rim | (flat < dark_ratio)] = 1.0
+    # grow the rim by 1 px so its own anti-aliased edge is not mistaken for robot
+    rim_mask = cv2.dilate(rim.view(np.uint8), _square(1)).astype(bool) if rim.any() else None
+    return rim_mask, flat
+
+
+# ----------------------------------------------------------------------------- the tracker
+def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[int, int], *,
+                 roi: tuple[int, int, int, int] | None = None, valid: np.ndarray | None = None,
+                 flat: np.ndarray | None = None,
+                 margin_px: int = 4, min_contrast: float = 0.3, min_area_px: int = 20,
+                 expected_area_px: float | None = None, progress: Any = None) -> dict:
+    """Track over ``(grey frame, t_s)`` pairs (full frames); returns raw per-frame arrays.
+
+    ``valid`` (bool, full frame) marks where the robot may be. See
+    :func:`track_video` for the public entry point.
+    """
+    W, H = frame_size
+    rx, ry, rw, rh = roi or (0, 0, W, H)
+    vroi = None if valid is None else np.ascontiguousarray(valid[ry:ry + rh, rx:rx + rw])
+    froi = None if flat is None else np.ascontiguousarray(flat[ry:ry + rh, rx:rx + rw])
+    finder = _Finder(vroi, margin_px, min_contrast, min_area_px, froi)
+    ts, us, vs, ths, qs, areas, lengths = [], [], [], [], [], [], []
+    area_hist: list[float] = []
+    area_ref = expected_area_px
+    major = None
+    last: tuple[float, float, float] | None = None   # u, v, t of the last good frame (ROI coords)
+    vel = (0.0, 0.0)
+    for k, (frame, t) in enumerate(frames):
+        img = frame[ry:ry + rh, rx:rx + rw] if roi else frame
+        blob = None
+        pred = None
+        if last is not None and major is not None:
+            dt = t - last[2]
+            pred = (last[0] + vel[0] * dt, last[1] + vel[1] * dt)
+            half = int(0.65 * major + 3 * margin_px + 10 + 1.5 * np.hypot(vel[0] * dt, vel[1] * dt))
+            for grow in (1, 2):
+                hw = half * grow
+                x0, y0 = max(int(pred[0]) - hw, 0), max(int(pred[1]) - hw, 0)
+                x1, y1 = min(int(pred[0]) + hw + 1, rw), min(int(pred[1]) + hw + 1, rh)
+                if x1 - x0 < 8 or y1 - y0 < 8:
+                    break
+                blob, touched = finder.find(img, x0, y0, x1, y1, pred=pred, area_ref=area_ref,
+                                            keep_weights=len(lengths) < 100 and k % 3 == 0)
+                if blob is None or not touched:
+                    break
+        if blob is None:
+            # acquisition or re-acquisition over the whole region of interest
+            blob, _ = finder.find(img, 0, 0, rw, rh, pred=pred, area_ref=area_ref, keep_weights=True)
+        ts.append(t)
+        if blob is None:
+            us.append(np.nan); vs.append(np.nan); ths.append(np.nan); areas.append(np.nan)
+            qs.append(QUALITY_LOST)
+            if last is not None and t - last[2] > 1.0:
+                vel = (0.0, 0.0)
+        else:
+            q = QUALITY_OK
+            if blob.border or (area_ref and not 0.8 < blob.area / area_ref < 1.25):
+                q = QUALITY_DEGRADED
+            us.append(blob.u + rx); vs.append(blob.v + ry); ths.append(blob.theta); areas.append(blob.coverage)
+            qs.append(q)
+            if q == QUALITY_OK:
+                if last is not None and 0 < t - last[2] < 0.5:
+                    a = 0.5  # light smoothing of the velocity used only for the prediction
+                    nv = ((blob.u - last[0]) / (t - last[2]), (blob.v - last[1]) / (t - last[2]))
+                    vel = (a * nv[0] + (1 - a) * vel[0], a * nv[1] + (1 - a) * vel[1])
+                last = (blob.u, blob.v, t)
+                area_hist.append(blob.area)
+                if len(area_hist) <= 25 or len(area_hist) % 10 == 0:
+                    area_ref = float(np.median(area_hist[-25:]))
+                major = blob.major_px if major is None else 0.9 * major + 0.1 * blob.major_px
+                if blob.weights is not None:
+                    lengths.append(body_length_px(blob.weights, blob.u - blob.origin[0], blob.v - blob.origin[1],
+                                                  blob.theta))
+            elif last is None:
+                major = blob.major_px
+                last = (blob.u, blob.v, t)
+        if progress is not None:
+            progress.update(1)
+    lengths_a = np.asarray(lengths, float)
+    lengths_a = lengths_a[np.isfinite(lengths_a)]
+    return dict(t_s=np.asarray(ts, float), u_px=np.asarray(us, float), v_px=np.asarray(vs, float),
+                theta=np.asarray(ths, float), quality=np.asarray(qs, np.int8), area_px=np.asarray(areas, float),
+                length_px=float(np.median(lengths_a)) if lengths_a.size else float("nan"),
+                length_px_std=(float(1.2533 * np.std(lengths_a) / np.sqrt(lengths_a.size))
+                               if lengths_a.size > 1 else float("nan")),
+                n_length=int(lengths_a.size))
+
+
+def resolve_heading(t_s: np.ndarray, u_px: np.ndarray, v_px: np.ndarray, theta: np.ndarray,
+                    quality: np.ndarray, min_travel_px: float = 3.0) -> tuple[np.ndarray, str]:
+    """Turn image axis angles (mod pi) into a continuous heading (world convention, rad).
+
+    Within each stretch of found frames the axis is unwrapped by continuity;
+    the stretch's front is the end the robot moves towards (summed over the
+    stretch), or, when it hardly moves, the one closest to the previous
+    stretch's heading. Returns the heading and ``"motion"``, ``"continuity"``
+    or ``"unknown"`` (how the front of the first stretch was decided).
+    """
+    n = theta.size
+    heading = np.full(n, np.nan)
+    found = np.isfinite(theta)
+    # image axis angle -> world heading modulo pi (front (-sin h, cos h); image v is -y)
+    h_mod = np.mod(-theta - np.pi / 2, np.pi)
+    idx = np.flatnonzero(found)
+    if idx.size == 0:
+        return heading, "unknown"
+    # stretches: split where frames were lost
+    breaks = np.flatnonzero(np.diff(idx) > 1) + 1
+    sense = "unknown"
+    prev_end: float | None = None
+    for seg_i, seg in enumerate(np.split(idx, breaks)):
+        h = np.empty(seg.size)
+        h[0] = h_mod[seg[0]]
+        if prev_end is not None:
+            h[0] += np.pi * np.round((prev_end - h[0]) / np.pi)
+        for j in range(1, seg.size):
+            x = h_mod[seg[j]]
+            h[j] = x + np.pi * np.round((h[j - 1] - x) / np.pi)
+        # direction of travel in world coordinates (x right, y up)
+        dx = np.diff(u_px[seg])
+        dy = -np.diff(v_px[seg])
+        fwd = np.array([-np.sin(h[:-1]), np.cos(h[:-1])])
+        score = float(np.sum(fwd[0] * dx + fwd[1] * dy))
+        travel = float(np.hypot(u_px[seg[-1]] - u_px[seg[0]], v_px[seg[-1]] - v_px[seg[0]]))
+        if travel >= min_travel_px and abs(score) > 0.3 * travel:
+            if score < 0:
+                h += np.pi
+            if seg_i == 0:
+                sense = "motion"
+        elif prev_end is not None:
+            if seg_i == 0:
+                sense = "continuity"
+        heading[seg] = h
+        prev_end = float(h[-1])
+    # start in (-pi, pi]; later values stay continuous (they may leave that range)
+    heading -= 2 * np.pi * np.round(heading[idx[0]] / (2 * np.pi))
+    return heading, sense
+
+
+def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | None = None,
+                mask: Any = None, scale: Scale | None = None, mm_per_px: float | None = None,
+                robot_length_mm: float = ROBOT_LENGTH_MM, robot_length_std_mm: float = 0.05,
+                margin_px: int = 4, min_contrast: float = 0.3, static_mask: bool = True,
+                quiet: bool = True) -> Track:
+    """Track the robot through a video file.
+
+    Parameters
+    ----------
+    source:
+        Video path (anything OpenCV's FFmpeg backend reads).
+    roi:
+        ``(x, y, w, h)`` or ``"x,y,w,h"`` in pixels: search only there.
+    mask:
+        Bool/uint8 image or PNG path of the frame's size; non-zero = the robot may be there.
+    scale, mm_per_px:
+        The image scale; without either, it is measured from the robot's known
+        ``robot_length_mm`` (uncertain by ``robot_length_std_mm``).
+    margin_px:
+        Width of the band around the dark component whose pixels weigh in the
+        moments: at least the blur's half-length.
+    min_contrast:
+        Minimum (light - dark) / light of the window for a robot to be there.
+    static_mask:
+        Model the static scene from frames spread over the video: exclude dark
+        structure present throughout (the tray's rim) and divide out the
+        Teflon's texture (see :func:`background_model`).
+
+    Returns
+    -------
+    Track
+        Raises :class:`InputError` if the file is missing, unreadable, empty, or the robot is never found.
+    """
+    from analysis.track_video_io import (check_timestamps, iter_frames, load_mask, open_video, parse_roi,
+                                         read_sample_frames)
+    from labkit.progress import progress as bar
+
+    cap, info = open_video(source)
+    try:
+        if info.width <= 0 or info.height <= 0:
+            raise InputError("the video holds no frames", file=source)
+        W, H = info.width, info.height
+        roi_t = parse_roi(roi, W, H)
+        valid = load_mask(mask, W, H)
+        static = flat = None
+        if static_mask:
+            static, flat = background_model(read_sample_frames(cap, info, 15))
+            if static is not None:
+                valid = ~static if valid is None else valid & ~static
+        expected = None
+        if scale is None and mm_per_px is not None:
+            scale = scale_given(mm_per_px)
+        with bar(info.frame_count or None, "track", quiet=quiet, unit="frame") as pb:
+            raw = track_frames(iter_frames(cap, info), (W, H), roi=roi_t if roi is not None else None,
+                               valid=valid, flat=flat, margin_px=margin_px, min_contrast=min_contrast,
+                               expected_area_px=expected, progress=pb)
+    finally:
+        cap.release()
+    if raw["t_s"].size == 0:
+        raise InputError("the video holds no frames", file=source)
+    t_s, ts_source = check_timestamps(raw["t_s"], info.fps_nominal, str(source))
+    if np.all(raw["quality"] == QUALITY_LOST):
+        raise InputError(f"no robot found in any of {t_s.size} frames", file=source,
+                         expected="a dark chip on a light background (check --roi/--mask)")
+    heading, sense = resolve_heading(t_s, raw["u_px"], raw["v_px"], raw["theta"], raw["quality"])
+    track = Track(t_s=t_s, u_px=raw["u_px"], v_px=raw["v_px"], heading_rad=heading, quality=raw["quality"],
+                  area_px=raw["area_px"], frame_size=(W, H), roi=roi_t, source=str(source),
+                  timestamps_source=ts_source, heading_sense=sense, length_px=raw["length_px"],
+                  length_px_std=raw["length_px_std"],
+                  meta={"fps_nominal": info.fps_nominal, "fourcc": info.fourcc, "static_mask_px":
+                        int(static.sum()) if static is not None else 0, "length_samples": raw["n_length"]})
+    track.scale = scale if scale is not None else scale_from_robot_length(track, robot_length_mm,
+                                                                          robot_length_std_mm)
+    return track

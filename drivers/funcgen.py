@@ -1,0 +1,284 @@
+"""Function generators: Keysight/Agilent 33220A, Keysight 33500B, Rigol DG1000Z.
+
+They drive the PZT in-chip (through no amplifier: the volts at the output are
+the volts at the film) or the shaker amplifier's input. Both loads are high
+impedance, so every amplitude is preceded by ``OUTP:LOAD INF``: with the
+factory 50 ohm setting a Keysight would put twice the programmed voltage on
+the PZT.
+
+Limits are declared settings checked BEFORE anything is sent:
+
+``max_amp_vpp``
+    the largest peak-to-peak amplitude allowed (the PZT's rating, or the
+    amplifier's input cap, see :attr:`drivers.shaker.Amplifier2718.max_input_vpp`).
+``max_v``
+    the largest absolute voltage at the output, ``|offset| + amp/2``.
+``max_freq_hz``
+    the highest frequency allowed (optional).
+
+Every setting method checks the error queue afterwards (``SYST:ERR?`` until
+``+0,"No error"``); a non-zero entry raises InstrumentError carrying its text.
+"""
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+from labkit.errors import InstrumentError, LimitError
+
+from drivers.base import ScpiInstrument, check_choice, check_range
+
+def _num(x: float) -> str:
+    """SCPI number: shortest exact-enough text (``1000``, ``0.5``, ``1e-05``)."""
+    return format(float(x), ".10g")
+
+
+class FunctionGenerator(ScpiInstrument):
+    """Common driver for SCPI function generators; subclasses give the command prefixes.
+
+    Parameters
+    ----------
+    channel:
+        Output channel (1 for single-channel models).
+    max_amp_vpp, max_v, max_freq_hz:
+        Declared limits (see the module docstring); None = only the model's range.
+    check_errors:
+        Query the error queue after every setting (default True; see
+        :class:`drivers.base.ScpiInstrument`).
+    """
+
+    model = "funcgen"
+    #: Channels the model has; safe_off turns every one of them off.
+    channels: ClassVar[tuple[int, ...]] = (1,)
+    #: Output range into a high-impedance load (all three models: +-10 V, 20 Vpp).
+    model_max_v: ClassVar[float] = 10.0
+
+    def __init__(self, transport, *, name: str | None = None, channel: int = 1,
+                 max_amp_vpp: float | None = None, max_v: float | None = None,
+                 max_freq_hz: float | None = None, **settings: Any) -> None:
+        super().__init__(transport, name=name, **settings)
+        if channel not in self.channels:
+            from labkit.errors import ConfigError
+            raise ConfigError(f"{self.model} has no channel {channel!r}", key="channel",
+                              expected=f"one of {list(self.channels)}")
+        self.channel = int(channel)
+        self.max_amp_vpp = None if max_amp_vpp is None else check_range(
+            "max_amp_vpp", max_amp_vpp, 0.0, 2 * self.model_max_v, "Vpp")
+        self.max_v = None if max_v is None else check_range("max_v", max_v, 0.0, self.model_max_v,
+                                                            "V")
+        self.max_freq_hz = None if max_freq_hz is None else float(max_freq_hz)
+        self.state = {"output_on": None, "load": None}
+        self._amp_checked = False
+
+    # -- command spelling, per model ----------------------------------------------------------
+    def _src(self, cmd: str) -> str:
+        return cmd
+
+    def _outp(self, suffix: str = "", channel: int | None = None) -> str:
+        return "OUTP" + suffix
+
+    def _trig_source(self, source: str, mode: str) -> str:
+        return f"TRIG:SOUR {source}"
+
+    def _burst_state(self, on: bool) -> str:
+        return self._src(f"BURS:STAT {'ON' if on else 'OFF'}")
+
+    # -- helpers ------------------------------------------------------------------------------
+    def settings(self) -> dict[str, Any]:
+        return {**super().settings(), "channel": self.channel, "max_amp_vpp": self.max_amp_vpp,
+                "max_v": self.max_v, "max_freq_hz": self.max_freq_hz}
+
+    def _check_freq(self, limit: str, freq_hz: float) -> float:
+        f = check_range(limit, freq_hz, 1e-6, None, "Hz")
+        return check_range("max_freq_hz", f, None, self.max_freq_hz, "Hz")
+
+    def _check_amplitude(self, amp_vpp: float, offset_v: float) -> tuple[float, float]:
+        amp = check_range("amp_vpp > 0", amp_vpp, 1e-3, None, "Vpp")
+        if self.max_amp_vpp is not None:
+            check_range("max_amp_vpp", amp, None, self.max_amp_vpp, "Vpp")
+        off = check_range("offset_v", offset_v, -self.model_max_v, self.model_max_v, "V")
+        peak = abs(off) + amp / 2
+        if self.max_v is not None and peak > self.max_v:
+            raise LimitError(f"|offset| + amplitude/2 = {peak:g} V exceeds the limit max_v = "
+                             f"{self.max_v:g} V; nothing was sent", limit="max_v")
+        if peak > self.model_max_v:
+            raise LimitError(f"|offset| + amplitude/2 = {peak:g} V exceeds the model output range "
+                             f"of the {self.model} (+-{self.model_max_v:g} V into high-Z); "
+                             "nothing was sent",
+                             limit="model output range")
+        return amp, off
+
+    # -- settings -----------------------------------------------------------------------------
+    def set_load_high_z(self) -> None:
+        """Declare a high-impedance load (``OUTP:LOAD INF``) so volts programmed = volts out."""
+        self._send_all([self._outp(":LOAD INF")])
+        self.state["load"] = "INF"
+
+    def set_sine(self, freq_hz: float, amp_vpp: float, offset_v: float = 0.0) -> None:
+        """Sine of ``amp_vpp`` volts peak-to-peak at ``freq_hz`` around ``offset_v``.
+
+        Limits are checked first; then the load is set to high impedance, then
+        function, unit, frequency, amplitude and offset; then the error queue.
+        """
+        f = self._check_freq("freq_hz > 0", freq_hz)
+        amp, off = self._check_amplitude(amp_vpp, offset_v)
+        self._send_all([self._outp(":LOAD INF"), self._src("FUNC SIN"), self._src("VOLT:UNIT VPP"),
+                        self._src(f"FREQ {_num(f)}"), self._src(f"VOLT {_num(amp)}"),
+                        self._src(f"VOLT:OFFS {_num(off)}")])
+        self.state.update(load="INF", function="SIN", freq_hz=f, amp_vpp=amp, offset_v=off)
+        self._amp_checked = True
+
+    def set_frequency(self, freq_hz: float) -> None:
+        """Change only the frequency (stepped sweeps); amplitude and offset stay."""
+        f = self._check_freq("freq_hz > 0", freq_hz)
+        self._send_all([self._src(f"FREQ {_num(f)}")])
+        self.state["freq_hz"] = f
+
+    def set_amplitude(self, amp_vpp: float) -> None:
+        """Change only the amplitude (load set to high-Z first), within the limits."""
+        amp, _ = self._check_amplitude(amp_vpp, self.state.get("offset_v", 0.0) or 0.0)
+        self._send_all([self._outp(":LOAD INF"), self._src("VOLT:UNIT VPP"),
+                        self._src(f"VOLT {_num(amp)}")])
+        self.state.update(load="INF", amp_vpp=amp)
+        self._amp_checked = True
+
+    def output(self, on: bool) -> None:
+        """Turn the output on or off.
+
+        Turning on is refused (LimitError ``amplitude not set``) until an
+        amplitude was set through this driver: the generator may still hold an
+        unchecked amplitude from an earlier session.
+        """
+        if on and not self._amp_checked:
+            raise LimitError("amplitude not set: refusing to turn the output on before "
+                             "set_sine()/set_amplitude() "
+                             "has set a checked amplitude; nothing was sent",
+                             limit="amplitude not set")
+        if on:   # limits may have been lowered since the amplitude was set
+            self._check_amplitude(self.state["amp_vpp"], self.state.get("offset_v") or 0.0)
+        self._send_all([self._outp(" ON" if on else " OFF")])
+        self.state["output_on"] = bool(on)
+
+    @property
+    def output_on(self) -> bool:
+        """The output state as the instrument reports it (``OUTP?``)."""
+        cmd = self._outp("?")
+        reply = self.query(cmd)
+        if reply.upper() in ("1", "ON", "+1"):
+            return True
+        if reply.upper() in ("0", "OFF", "+0"):
+            return False
+        raise InstrumentError(f"garbled reply {reply[:40]!r} (expected 0/1/ON/OFF)",
+                              instrument=self.name, command=cmd)
+
+    def max_sweep_time_s(self) -> float:
+        """The model's longest sweep time (``SWE:TIME? MAX``), asked once and cached."""
+        if "max_sweep_time_s" not in self.state:
+            self.state["max_sweep_time_s"] = self.query_float(self._src("SWE:TIME? MAX"))
+        return self.state["max_sweep_time_s"]
+
+    def set_sweep(self, start_hz: float, stop_hz: float, time_s: float, spacing: str = "LIN",
+                  trigger_source: str = "IMM") -> None:
+        """Frequency sweep ``start_hz`` -> ``stop_hz`` in ``time_s`` (LIN or LOG), and enable it.
+
+        Set the sine's amplitude first (:meth:`set_sine`). ``time_s`` is checked
+        against the instrument's own ``SWE:TIME? MAX``. ``trigger_source``:
+        IMM (free-running), EXT or BUS (:meth:`trigger`).
+        """
+        a = self._check_freq("start_hz > 0", start_hz)
+        b = self._check_freq("stop_hz > 0", stop_hz)
+        sp = check_choice("spacing", spacing, ("LIN", "LOG"))
+        src = check_choice("trigger_source", trigger_source, ("IMM", "EXT", "BUS"))
+        if not self._amp_checked:
+            raise LimitError("amplitude not set: set_sweep() needs set_sine() first "
+                             "(a checked amplitude); "
+                             "nothing was sent", limit="amplitude not set")
+        check_range("sweep time_s", time_s, 1e-3, None, "s")
+        tmax = self.max_sweep_time_s()
+        t = check_range("sweep time (SWE:TIME? MAX)", time_s, 1e-3, tmax, "s")
+        self._send_all([self._src(f"FREQ:STAR {_num(a)}"), self._src(f"FREQ:STOP {_num(b)}"),
+                        self._src(f"SWE:SPAC {sp}"), self._src(f"SWE:TIME {_num(t)}"),
+                        self._trig_source(src, "SWE"), self._src("SWE:STAT ON")])
+        self.state["sweep"] = {"start_hz": a, "stop_hz": b, "time_s": t, "spacing": sp,
+                               "trigger_source": src, "on": True}
+
+    def sweep_off(self) -> None:
+        """Disable the sweep (back to a fixed-frequency sine)."""
+        self._send_all([self._src("SWE:STAT OFF")])
+        self.state.setdefault("sweep", {})["on"] = False
+
+    def burst(self, ncycles: int, trigger_source: str = "BUS") -> None:
+        """Triggered burst of ``ncycles`` cycles of the current waveform, and enable it."""
+        n = int(check_range("burst ncycles", ncycles, 1, 1e8, "cycles"))
+        src = check_choice("trigger_source", trigger_source, ("IMM", "EXT", "BUS"))
+        if not self._amp_checked:
+            raise LimitError("amplitude not set: burst() needs set_sine() first "
+                             "(a checked amplitude); "
+                             "nothing was sent", limit="amplitude not set")
+        self._send_all([self._src("BURS:MODE TRIG"), self._src(f"BURS:NCYC {n}"),
+                        self._trig_source(src, "BURS"), self._burst_state(True)])
+        self.state["burst"] = {"ncycles": n, "trigger_source": src, "on": True}
+
+    def burst_off(self) -> None:
+        """Disable burst mode."""
+        self._send_all([self._burst_state(False)])
+        self.state.setdefault("burst", {})["on"] = False
+
+    def trigger(self) -> None:
+        """Software trigger (``*TRG``) for a BUS-triggered sweep or burst."""
+        self._send_all(["*TRG"])
+
+    def safe_off(self) -> None:
+        """Turn every output of the instrument off, then confirm with ``*OPC?``.
+
+        The confirmation makes sure the generator has processed the OFF commands
+        before the link is closed (no error-queue check: this must be quick).
+        """
+        for ch in self.channels:
+            self.write(self._outp(" OFF", channel=ch))
+        self.state["output_on"] = False
+        if self.query_int("*OPC?") != 1:
+            raise InstrumentError("*OPC? did not confirm the outputs off", instrument=self.name,
+                                  command="*OPC?")
+
+
+class Agilent33220A(FunctionGenerator):
+    """Keysight/Agilent 33220A (one channel, commands without prefixes)."""
+
+    model = "33220A"
+
+
+class Keysight33500B(FunctionGenerator):
+    """Keysight 33500B series (33521B/33522B...): ``SOURn:``, ``OUTPn``, ``TRIGn:`` prefixes."""
+
+    model = "33500B"
+    channels = (1, 2)
+
+    def _src(self, cmd: str) -> str:
+        return f"SOUR{self.channel}:{cmd}"
+
+    def _outp(self, suffix: str = "", channel: int | None = None) -> str:
+        return f"OUTP{channel or self.channel}{suffix}"
+
+    def _trig_source(self, source: str, mode: str) -> str:
+        return f"TRIG{self.channel}:SOUR {source}"
+
+
+class RigolDG1000Z(FunctionGenerator):
+    """Rigol DG1000Z (DG1022Z, DG1062Z): ``:SOURn:``, ``:OUTPn``; ``0,"No error"``."""
+
+    model = "DG1000Z"
+    channels = (1, 2)
+    err_command = ":SYST:ERR?"
+    _TRIG = {"IMM": "INT", "EXT": "EXT", "BUS": "MAN"}
+
+    def _src(self, cmd: str) -> str:
+        return f":SOUR{self.channel}:{cmd}"
+
+    def _outp(self, suffix: str = "", channel: int | None = None) -> str:
+        return f":OUTP{channel or self.channel}{suffix}"
+
+    def _trig_source(self, source: str, mode: str) -> str:
+        return self._src(f"{mode}:TRIG:SOUR {self._TRIG[source]}")
+
+    def _burst_state(self, on: bool) -> str:
+        return self._src(f"BURS {'ON' if on else 'OFF'}")

@@ -1,0 +1,279 @@
+"""Oscilloscopes: Keysight InfiniiVision and Rigol DS1000Z.
+
+They digitise the vibrometer's analog velocity output and the drive signal.
+Waveforms come as IEEE 488.2 definite-length blocks, BYTE (``'B'``) or WORD
+(``'H'``: big-endian on InfiniiVision after ``:WAV:BYT MSBF``, little-endian
+on the Rigol), parsed by pyvisa's ``query_binary_values`` into numpy arrays,
+then scaled from the ten-field preamble
+``format, type, points, count, xinc, xorig, xref, yinc, yorig, yref``:
+
+============  ===================================  ==========================
+model         volts                                seconds
+============  ===================================  ==========================
+InfiniiVision ``(d - yref) * yinc + yorig``        ``(i - xref) * xinc + xorig``
+DS1000Z       ``(d - yorig - yref) * yinc``        ``(i - xref) * xinc + xorig``
+============  ===================================  ==========================
+
+The Rigol returns at most 250 000 bytes per ``:WAV:DATA?``, so long records
+are read in chunks with ``:WAV:STAR``/``:WAV:STOP`` (1-based, inclusive);
+its RAW mode (the whole memory, not the screen) needs ``:STOP`` first.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from labkit.errors import InstrumentError
+
+from drivers.base import ScpiInstrument, check_choice, check_range
+
+
+@dataclass
+class Waveform:
+    """One channel's record, scaled to SI units."""
+
+    t_s: np.ndarray
+    volts: np.ndarray
+    xinc_s: float
+    channel: int
+    preamble: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def fs_hz(self) -> float:
+        """Sample rate."""
+        return 1.0 / self.xinc_s
+
+
+_PRE_FIELDS = ("format", "type", "points", "count", "xinc", "xorig", "xref", "yinc", "yorig",
+               "yref")
+
+
+class Oscilloscope(ScpiInstrument):
+    """Common driver; subclasses give the model's commands, formats and scaling.
+
+    Parameters
+    ----------
+    channels:
+        Number of analog inputs (for validating ``ch``).
+    max_volts_per_div:
+        Refuse vertical scales above this (the scope's own range, default 10 V/div).
+    """
+
+    model = "scope"
+    err_command = ":SYST:ERR?"
+    #: horizontal divisions on screen
+    divisions: ClassVar[int] = 10
+    #: ``:WAV:PRE?`` format code per format name
+    format_codes: ClassVar[dict[str, int]] = {"BYTE": 0, "WORD": 1}
+    poll_s: ClassVar[float] = 0.02
+
+    def __init__(self, transport, *, name: str | None = None, channels: int = 4,
+                 max_volts_per_div: float = 10.0, **settings: Any) -> None:
+        super().__init__(transport, name=name, **settings)
+        self.n_channels = int(channels)
+        self.max_volts_per_div = float(max_volts_per_div)
+        self.state = {"channels": {}}
+
+    def settings(self) -> dict[str, Any]:
+        return {**super().settings(), "channels": self.n_channels,
+                "max_volts_per_div": self.max_volts_per_div}
+
+    def _ch(self, ch: int) -> int:
+        return int(check_range("scope channel", ch, 1, self.n_channels))
+
+    def setup_channel(self, ch: int, volts_per_div: float, offset_v: float = 0.0,
+                      coupling: str = "DC") -> None:
+        """Display channel ``ch`` with ``volts_per_div``, ``offset_v`` and ``coupling`` (DC/AC)."""
+        c = self._ch(ch)
+        vdiv = check_range("volts_per_div", volts_per_div, 1e-4, self.max_volts_per_div, "V/div")
+        off = check_range("offset_v", offset_v, -1e3, 1e3, "V")
+        cp = check_choice("coupling", coupling, ("DC", "AC"))
+        self._send_all([f":CHAN{c}:DISP 1", f":CHAN{c}:COUP {cp}", f":CHAN{c}:SCAL {vdiv:.6g}",
+                        f":CHAN{c}:OFFS {off:.6g}"])
+        self.state["channels"][str(c)] = {"volts_per_div": vdiv, "offset_v": off, "coupling": cp}
+
+    def _timebase_command(self, scale_s: float) -> str:
+        return f":TIM:SCAL {scale_s:.6g}"
+
+    def set_timebase(self, record_s: float) -> None:
+        """Show ``record_s`` seconds across the screen (``divisions`` divisions)."""
+        rec = check_range("record_s", record_s, 1e-9, 5e4, "s")
+        scale = rec / self.divisions
+        self._send_all([self._timebase_command(scale)])
+        self.state.update(record_s=rec, time_per_div_s=scale)
+
+    def set_trigger(self, source: str = "CHAN1", level_v: float = 0.0, slope: str = "POS") -> None:
+        """Edge trigger on ``source`` (CHANn, EXT) at ``level_v``, slope POS/NEG."""
+        src = str(source).upper()
+        if not (src == "EXT" or (src.startswith("CHAN") and src[4:].isdigit())):
+            check_choice("trigger source", src, ("CHAN1", "CHAN2", "CHAN3", "CHAN4", "EXT"))
+        lev = check_range("trigger level_v", level_v, -1e3, 1e3, "V")
+        sl = check_choice("trigger slope", slope, ("POS", "NEG"))
+        self._send_all([":TRIG:MODE EDGE", f":TRIG:EDGE:SOUR {src}", f":TRIG:EDGE:LEV {lev:.6g}",
+                        f":TRIG:EDGE:SLOP {sl}"])
+        self.state["trigger"] = {"source": src, "level_v": lev, "slope": sl}
+
+    def single(self) -> None:
+        """Arm one acquisition (``:SING``)."""
+        self.write(":SING")
+
+    def run(self) -> None:
+        """Free-running acquisition (``:RUN``)."""
+        self.write(":RUN")
+
+    def stop(self) -> None:
+        """Stop acquiring (``:STOP``)."""
+        self.write(":STOP")
+
+    def _done(self) -> bool:
+        raise NotImplementedError
+
+    def wait_done(self, timeout_s: float = 10.0) -> None:
+        """Poll until the acquisition is complete; InstrumentError after ``timeout_s``."""
+        deadline = time.monotonic() + float(timeout_s)
+        while True:
+            if self._done():
+                return
+            if time.monotonic() > deadline:
+                raise InstrumentError(f"acquisition not complete within {timeout_s:g} s "
+                                      "(no trigger?)",
+                                      instrument=self.name, command=self._done_command)
+            time.sleep(self.poll_s)
+
+    def preamble(self) -> dict[str, float]:
+        """``:WAV:PRE?`` as a dict of the ten fields (garbled -> InstrumentError)."""
+        reply = self.query(":WAV:PRE?")
+        parts = reply.split(",")
+        try:
+            if len(parts) != 10:
+                raise ValueError(f"{len(parts)} fields")
+            vals = [float(p) for p in parts]
+        except ValueError as exc:
+            raise InstrumentError(f"garbled preamble {reply[:80]!r} ({exc}; expected 10 numbers)",
+                                  instrument=self.name, command=":WAV:PRE?") from None
+        pre = dict(zip(_PRE_FIELDS, vals))
+        for k in ("format", "type", "points", "count"):
+            pre[k] = int(pre[k])
+        if pre["points"] <= 0 or not pre["xinc"] > 0 or not pre["yinc"] > 0:
+            raise InstrumentError(f"implausible preamble {reply[:80]!r} (points, xinc, yinc > 0)",
+                                  instrument=self.name, command=":WAV:PRE?")
+        return pre
+
+    def _check_format(self, pre: dict[str, float], fmt: str) -> None:
+        if pre["format"] != self.format_codes[fmt]:
+            raise InstrumentError(f"preamble format {pre['format']} is not {fmt} "
+                                  f"({self.format_codes[fmt]})", instrument=self.name,
+                                  command=":WAV:PRE?")
+
+    def read_waveform(self, ch: int, fmt: str = "WORD") -> Waveform:
+        """Transfer channel ``ch`` (BYTE or WORD) and scale it to volts and seconds."""
+        raise NotImplementedError
+
+    @staticmethod
+    def _times(pre: dict[str, float], first: int, n: int) -> np.ndarray:
+        i = np.arange(first, first + n, dtype=np.float64)
+        return (i - pre["xref"]) * pre["xinc"] + pre["xorig"]
+
+
+class InfiniiVision(Oscilloscope):
+    """Keysight InfiniiVision (2000X/3000T/4000X); WORD is big-endian unsigned (``:WAV:BYT MSBF``).
+
+    Parameters
+    ----------
+    points:
+        ``:WAV:POIN`` value: ``"MAX"`` (default) or a number of points.
+    """
+
+    model = "InfiniiVision"
+    _done_command = ":OPER:COND?"
+
+    def __init__(self, transport, *, name: str | None = None, points: int | str = "MAX",
+                 **settings: Any) -> None:
+        super().__init__(transport, name=name, **settings)
+        self.points = points if str(points).upper() == "MAX" else int(
+            check_range("points", points, 100, 8e6))
+
+    def settings(self) -> dict[str, Any]:
+        return {**super().settings(), "points": self.points}
+
+    def _done(self) -> bool:
+        # bit 3 (value 8) of the operation status condition register: "Run" (acquiring)
+        return not (self.query_int(self._done_command) & 8)
+
+    def read_waveform(self, ch: int, fmt: str = "WORD") -> Waveform:
+        c = self._ch(ch)
+        f = check_choice("waveform format", fmt, ("BYTE", "WORD"))
+        cmds = [f":WAV:SOUR CHAN{c}", f":WAV:FORM {f}"]
+        if f == "WORD":
+            cmds += [":WAV:BYT MSBF", ":WAV:UNS 1"]
+        cmds += [":WAV:POIN:MODE RAW", f":WAV:POIN {self.points}"]
+        self._send_all(cmds)
+        pre = self.preamble()
+        self._check_format(pre, f)
+        data = self.query_binary(":WAV:DATA?", "H" if f == "WORD" else "B", big_endian=True)
+        if data.size != pre["points"]:
+            raise InstrumentError(f"block holds {data.size} points, preamble says {pre['points']}",
+                                  instrument=self.name, command=":WAV:DATA?")
+        volts = (data.astype(np.float64) - pre["yref"]) * pre["yinc"] + pre["yorig"]
+        return Waveform(self._times(pre, 0, data.size), volts, pre["xinc"], c, pre)
+
+
+class RigolDS1000Z(Oscilloscope):
+    """Rigol DS1000Z (DS1054Z, DS1104Z...): 12 divisions, RAW chunked reads.
+
+    Parameters
+    ----------
+    max_block_bytes:
+        Largest ``:WAV:DATA?`` block the scope sends (250 000).
+    """
+
+    model = "DS1000Z"
+    divisions = 12
+    format_codes = {"WORD": 0, "BYTE": 1}   # Rigol's own codes: 0 WORD, 1 BYTE, 2 ASC
+    _done_command = ":TRIG:STAT?"
+
+    def __init__(self, transport, *, name: str | None = None, max_block_bytes: int = 250_000,
+                 **settings: Any) -> None:
+        super().__init__(transport, name=name, **settings)
+        self.max_block_bytes = int(check_range("max_block_bytes", max_block_bytes, 2, 250_000))
+
+    def settings(self) -> dict[str, Any]:
+        return {**super().settings(), "max_block_bytes": self.max_block_bytes}
+
+    def _timebase_command(self, scale_s: float) -> str:
+        return f":TIM:MAIN:SCAL {scale_s:.6g}"
+
+    def _done(self) -> bool:
+        return self.query(self._done_command).upper() == "STOP"
+
+    def read_waveform(self, ch: int, fmt: str = "WORD") -> Waveform:
+        c = self._ch(ch)
+        f = check_choice("waveform format", fmt, ("BYTE", "WORD"))
+        self.write(":STOP")      # RAW mode reads the memory, which must not change under us
+        self._send_all([f":WAV:SOUR CHAN{c}", ":WAV:MODE RAW", f":WAV:FORM {f}"])
+        pre = self.preamble()
+        self._check_format(pre, f)
+        width = 2 if f == "WORD" else 1
+        per_read = self.max_block_bytes // width
+        n = pre["points"]
+        parts = []
+        start = 1
+        while start <= n:
+            stop = min(start + per_read - 1, n)
+            self.write(f":WAV:STAR {start}")
+            self.write(f":WAV:STOP {stop}")
+            chunk = self.query_binary(":WAV:DATA?", "H" if width == 2 else "B", big_endian=False)
+            if chunk.size != stop - start + 1:
+                raise InstrumentError(f"block holds {chunk.size} points, asked for "
+                                      f"{start}..{stop} ({stop - start + 1})", instrument=self.name,
+                                      command=":WAV:DATA?")
+            parts.append(chunk)
+            start = stop + 1
+        data = np.concatenate(parts)
+        if width == 2:
+            data = data & 0xFF      # WORD: only the low byte carries the 8-bit sample
+        volts = (data.astype(np.float64) - pre["yorig"] - pre["yref"]) * pre["yinc"]
+        return Waveform(self._times(pre, 0, data.size), volts, pre["xinc"], c, pre)

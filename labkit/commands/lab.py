@@ -1,0 +1,51 @@
+"""``labkit lab serve``: run the virtual lab until interrupted.
+
+Prints the instruments' resource strings as one JSON object on standard
+output (flushed at once, so a parent process can read it and connect), then
+serves until SIGINT or SIGTERM; the lab is shut down (generator outputs off,
+sockets and the pseudo-terminal closed) in every case.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+from typing import Any
+
+NAME = "lab"
+HELP = "the virtual lab: simulated instruments over real transports (lab serve)"
+
+
+def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="lab_command", metavar="ACTION")
+    sub.required = True
+    serve = sub.add_parser("serve", parents=[common], help="start the lab and serve until interrupted",
+                           description="Start a simulated Keysight 33500B and InfiniiVision (raw SCPI "
+                                       "sockets on 127.0.0.1) and an OFV-5000 (pseudo-terminal); print "
+                                       "their resource strings as one JSON object; serve until Ctrl-C.")
+    serve.add_argument("--robot", metavar="FILE", help="robot parameter file (TOML); default: the paper's")
+    serve.add_argument("--seed", type=int, default=0, help="seed of the lab's noise (default 0)")
+    serve.add_argument("--setup", choices=("inchip", "shaker"), default="inchip", help="initial set-up")
+    serve.add_argument("--spot", choices=("body", "hip", "knee", "tray"), default="knee",
+                       help="initial laser spot")
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from labkit.cli import emit_json, require_file
+    from labkit.lab import VirtualLab
+
+    robot = require_file(args.robot, "robot parameter file") if args.robot else None
+    lab = VirtualLab(robot=robot, seed=args.seed)
+    lab.set_setup(args.setup)
+    lab.set_spot(args.spot)
+    stop = threading.Event()
+    try:
+        lab.start()
+        emit_json(lab.resources)   # always: this line is how clients find the lab
+        if not args.json:
+            print("virtual lab serving; Ctrl-C to stop", file=sys.stderr, flush=True)
+        while not stop.wait(0.5):
+            pass
+    finally:
+        lab.close()
+    return {}  # pragma: no cover - only reached if the wait ends without a signal

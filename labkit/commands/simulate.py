@@ -1,0 +1,301 @@
+"""``labkit simulate``: run the bundled hybrid simulator (single runs, sweeps, named scenarios).
+
+Examples
+--------
+::
+
+    labkit simulate shaker --freq-hz 240 --amp-um 25 --duration-s 2 --json
+    labkit simulate pzt --freq-hz 1800 --voltage-v 20 --mass-mg 1.0
+    labkit simulate sweep shaker --freq-hz 150:2000:40 --amp-um 25 --draws 10 --out f8.h5
+    labkit simulate sweep pzt --mass-mg 0.33:2.5:10 --freq-hz 1800 --voltage-v 20
+    labkit simulate scenario shaker-speed --out results/
+
+A range is ``start:stop:count`` (``count`` evenly spaced values, both ends
+included) or a comma list ``a,b,c``; exactly one option of a sweep is a range.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+from labkit.errors import InputError
+
+NAME = "simulate"
+HELP = "run the hybrid microrobot simulator: shaker or PZT runs, sweeps with Monte Carlo, named scenarios"
+
+#: Options that may be swept, per scenario type: (option, scenario field, unit text).
+SWEEPABLE = {
+    "shaker": [("--freq-hz", "freq_hz", "Hz"), ("--amp-um", "amp_um", "um"), ("--mass-mg", "mass_mg", "mg")],
+    "pzt": [("--freq-hz", "freq_hz", "Hz"), ("--voltage-v", "voltage_v", "V"), ("--mass-mg", "mass_mg", "mg")],
+}
+DEFAULTS = {"shaker": {"freq_hz": 240.0, "amp_um": 25.0}, "pzt": {"freq_hz": 1800.0, "voltage_v": 20.0}}
+ABLATIONS = ("none", "no_adhesion", "no_squeeze_film")
+#: The named scenarios (labkit.sim.scenarios.SCENARIOS; listed here so that
+#: ``labkit --help`` does not import the simulator). A test keeps them equal.
+SCENARIO_NAMES = {
+    "shaker-speed": "speed vs shaker frequency at 25 um (paper Fig. 8)",
+    "leg-patterns": "foot patterns as the shaker amplitude grows (Fig. 9-11)",
+    "ablations": "full model vs no adhesion vs no squeeze film (Fig. 12)",
+    "pzt-payload": "speed vs total mass, PZT 1.8 kHz tripod (Fig. 13)",
+    "pzt-frequency": "speed vs PZT frequency near 438 Hz at 20 V (Fig. 14)",
+    "adhesion": "speed vs the adhesion magnitude (what the shaker behaviour hinges on)",
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
+    pclass = type(parser)  # keep the CLI's one-line, exit-2 usage errors in nested parsers
+    sub = parser.add_subparsers(dest="sim_command", metavar="WHAT", parser_class=pclass)
+    sub.required = True
+
+    run_opts = pclass(add_help=False)
+    run_opts.add_argument("--params", metavar="FILE", help="robot parameter file (TOML); default: the paper's")
+    run_opts.add_argument("--duration-s", default="2.0", metavar="S", help="simulated time per run, s (default 2)")
+    run_opts.add_argument("--seed", default="0", metavar="N", help="random seed (default 0)")
+    run_opts.add_argument("--ablate", choices=ABLATIONS, default="none",
+                          help="switch a small-scale force off (paper Fig. 12)")
+    run_opts.add_argument("--out", metavar="FILE.h5", help="write the result as HDF5")
+
+    shaker = sub.add_parser("shaker", parents=[common, run_opts], help="one run on a vertically vibrating tray")
+    shaker.add_argument("--freq-hz", default="240", metavar="HZ", help="tray frequency, Hz (default 240)")
+    shaker.add_argument("--amp-um", default="25", metavar="UM", help="tray amplitude, um (default 25)")
+
+    pzt = sub.add_parser("pzt", parents=[common, run_opts], help="one run driven by the on-board PZT (tripod gait)")
+    pzt.add_argument("--freq-hz", default="1800", metavar="HZ", help="drive frequency, Hz (default 1800)")
+    pzt.add_argument("--voltage-v", default="20", metavar="V", help="square-wave amplitude, V (default 20)")
+    pzt.add_argument("--mass-mg", default=None, metavar="MG", help="total robot mass with payload, mg")
+
+    sw = sub.add_parser("sweep", parents=[common], help="sweep one quantity, with Monte Carlo draws")
+    swsub = sw.add_subparsers(dest="sweep_kind", metavar="KIND", parser_class=pclass)
+    swsub.required = True
+    sweep_opts = pclass(add_help=False)
+    sweep_opts.add_argument("--draws", default="0", metavar="N",
+                            help="Monte Carlo draws per point (0: nominal robot only; n: nominal + n-1 drawn)")
+    sweep_opts.add_argument("--scheduler", default=None, metavar="URL",
+                            help="Dask scheduler tcp://HOST:PORT (default: local processes)")
+    sweep_opts.add_argument("--workers", default=None, metavar="N", help="local worker processes (default: one per core)")
+    for kind, opts in SWEEPABLE.items():
+        p = swsub.add_parser(kind, parents=[common, run_opts, sweep_opts],
+                             help=f"sweep a {kind} run over one of {', '.join(o for o, _, _ in opts)}")
+        for opt, field, unit in opts:
+            default = DEFAULTS[kind].get(field)
+            p.add_argument(opt, default=None if default is None else str(default), metavar="X|A:B:N",
+                           help=f"{field} in {unit}: a value or a range start:stop:count"
+                                + (f" (default {default:g})" if default is not None else ""))
+
+    sc = sub.add_parser("scenario", parents=[common], help="run a named scenario of the paper (makes a figure)")
+    sc.add_argument("name", choices=list(SCENARIO_NAMES),
+                    help="; ".join(f"{k}: {v}" for k, v in SCENARIO_NAMES.items()))
+    sc.add_argument("--out", default=".", metavar="DIR", help="folder for the figure and data (default .)")
+    sc.add_argument("--params", metavar="FILE", help="robot parameter file (TOML)")
+    sc.add_argument("--quick", action="store_true", help="few points, short runs (a smoke test, not the result)")
+    sc.add_argument("--draws", default=None, metavar="N", help="override the scenario's Monte Carlo draws")
+    sc.add_argument("--duration-s", default=None, metavar="S", help="override the scenario's run duration")
+    sc.add_argument("--seed", default="0", metavar="N", help="random seed (default 0)")
+    sc.add_argument("--scheduler", default=None, metavar="URL", help="Dask scheduler tcp://HOST:PORT")
+    sc.add_argument("--workers", default=None, metavar="N", help="local worker processes")
+
+
+# --------------------------------------------------------------------------- parsing helpers
+
+def number(text: str | None, option: str, *, positive: bool = False, minimum: float | None = None) -> float:
+    """A finite float from an option's text, or InputError naming the option."""
+    try:
+        value = float(text)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise InputError(f"not a number: {text!r}", key=option, expected="a number") from None
+    if not math.isfinite(value):
+        raise InputError(f"not a finite number: {text!r}", key=option, expected="a finite number")
+    if positive and not value > 0:
+        raise InputError(f"must be > 0, got {text}", key=option, expected="a number > 0")
+    if minimum is not None and value < minimum:
+        raise InputError(f"must be >= {minimum:g}, got {text}", key=option, expected=f"a number >= {minimum:g}")
+    return value
+
+
+def integer(text: str | None, option: str, minimum: int = 0) -> int:
+    """An integer >= minimum, or InputError naming the option."""
+    try:
+        value = int(str(text))
+    except ValueError:
+        raise InputError(f"not an integer: {text!r}", key=option, expected=f"an integer >= {minimum}") from None
+    if value < minimum:
+        raise InputError(f"must be >= {minimum}, got {value}", key=option, expected=f"an integer >= {minimum}")
+    return value
+
+
+def is_range(text: str | None) -> bool:
+    return text is not None and (":" in text or "," in text)
+
+
+def parse_range(text: str, option: str) -> list[float]:
+    """``start:stop:count`` (evenly spaced, ends included) or ``a,b,c``; all values > 0."""
+    import numpy as np
+
+    expected = "start:stop:count (e.g. 150:2000:40) or a comma list, values > 0"
+    if "," in text:
+        values = [number(t, option, positive=True) for t in text.split(",") if t.strip()]
+        if not values:
+            raise InputError(f"empty list {text!r}", key=option, expected=expected)
+        return values
+    parts = text.split(":")
+    if len(parts) != 3:
+        raise InputError(f"bad range {text!r}", key=option, expected=expected)
+    try:
+        start, stop = float(parts[0]), float(parts[1])
+        count = int(parts[2])
+    except ValueError:
+        raise InputError(f"bad range {text!r}", key=option, expected=expected) from None
+    if not (math.isfinite(start) and math.isfinite(stop)) or start <= 0 or stop <= 0 or count < 1:
+        raise InputError(f"bad range {text!r}", key=option, expected=expected)
+    if count == 1 and start != stop:
+        raise InputError(f"bad range {text!r}: one point needs start == stop", key=option, expected=expected)
+    return [float(v) for v in np.linspace(start, stop, count)]
+
+
+def load_params(path: str | None):
+    """The robot parameters: the file's (ConfigError names file and key) or the defaults."""
+    from labkit.sim import RobotParams
+
+    if path is None:
+        return RobotParams()
+    if not Path(path).is_file():
+        raise InputError("no such parameter file", file=path)
+    return RobotParams.from_toml(path)
+
+
+# --------------------------------------------------------------------------- run
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    if args.sim_command in ("shaker", "pzt"):
+        return _run_single(args)
+    if args.sim_command == "sweep":
+        return _run_sweep(args)
+    return _run_scenario(args)
+
+
+def _scenario_from(kind: str, values: dict[str, float]):
+    from labkit.sim import PZT, Shaker
+
+    if kind == "shaker":
+        return Shaker(freq_hz=values["freq_hz"], amp_um=values["amp_um"])
+    return PZT(freq_hz=values["freq_hz"], voltage_v=values["voltage_v"], mass_mg=values.get("mass_mg"))
+
+
+def _run_single(args: argparse.Namespace) -> dict[str, Any]:
+    from labkit.sim import simulate
+    from labkit.sim.scenarios import ablate
+
+    kind = args.sim_command
+    values = {"freq_hz": number(args.freq_hz, "--freq-hz", positive=True)}
+    if kind == "shaker":
+        values["amp_um"] = number(args.amp_um, "--amp-um", minimum=0.0)
+    else:
+        values["voltage_v"] = number(args.voltage_v, "--voltage-v", minimum=0.0)
+        if args.mass_mg is not None:
+            values["mass_mg"] = number(args.mass_mg, "--mass-mg", positive=True)
+    duration_s = number(args.duration_s, "--duration-s", positive=True)
+    seed = integer(args.seed, "--seed")
+    params = ablate(load_params(args.params), args.ablate)
+    r = simulate(params, _scenario_from(kind, values), duration_s=duration_s, seed=seed)
+    summary: dict[str, Any] = {"kind": kind, **values, "duration_s": duration_s, "ablate": args.ablate,
+                               "seed": seed}
+    for key, value in _result_summary(r).items():
+        summary.setdefault(key, value)
+    if args.out:
+        summary["out"] = str(r.to_h5(args.out) or args.out)
+    if not args.json:
+        _print_single(summary)
+    return summary
+
+
+def _result_summary(r: Any) -> dict[str, Any]:
+    """mean speed, contact fractions, patterns and impacts of one SimResult."""
+    base = r.summary() if hasattr(r, "summary") else {}
+    out = {"mean_speed_mm_s": float(r.mean_speed_mm_s),
+           "contact_fraction": r.contact_fraction,
+           "patterns": [str(p) for p in r.patterns],
+           "impacts": [int(i) for i in r.impacts]}
+    for key, value in base.items():
+        out.setdefault(key, value)
+    return out
+
+
+def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
+    from labkit.sim import sweep
+    from labkit.sim.scenarios import ablate
+
+    kind = args.sweep_kind
+    ranged = [(opt, field) for opt, field, _ in SWEEPABLE[kind] if is_range(getattr(args, field))]
+    if len(ranged) != 1:
+        names = ", ".join(o for o, _, _ in SWEEPABLE[kind])
+        raise InputError(f"a sweep needs exactly one range option, got {len(ranged)}",
+                         key=ranged[1][0] if len(ranged) > 1 else names, expected=f"one of {names} as start:stop:count")
+    opt, quantity = ranged[0]
+    values = parse_range(getattr(args, quantity), opt)
+    fixed: dict[str, float] = {}
+    for o, field, _ in SWEEPABLE[kind]:
+        text = getattr(args, field)
+        if field == quantity or text is None:
+            continue
+        fixed[field] = number(text, o, positive=field in ("freq_hz", "mass_mg"), minimum=0.0)
+    base = {**fixed, quantity: values[0]}
+    if kind == "shaker":
+        base.pop("mass_mg", None)
+    params = ablate(load_params(args.params), args.ablate)
+    if kind == "shaker" and "mass_mg" in fixed:
+        from labkit.sim.sweep import apply_value
+
+        params, _ = apply_value(params, _scenario_from(kind, base), "mass_mg", fixed["mass_mg"])
+    draws = integer(args.draws, "--draws")
+    workers = None if args.workers is None else integer(args.workers, "--workers", minimum=1)
+    s = sweep(params, _scenario_from(kind, base), quantity=quantity, values=values, draws=draws,
+              duration_s=number(args.duration_s, "--duration-s", positive=True), scheduler=args.scheduler,
+              workers=workers, seed=integer(args.seed, "--seed"), quiet=args.quiet)
+    summary = s.summary()
+    summary["ablate"] = args.ablate
+    if args.out:
+        summary["out"] = str(s.to_h5(args.out))
+    if not args.json:
+        _print_sweep(summary)
+    return summary
+
+
+def _run_scenario(args: argparse.Namespace) -> dict[str, Any]:
+    from labkit.sim.scenarios import run_scenario
+
+    params = load_params(args.params)
+    summary = run_scenario(
+        args.name, params=params, out_dir=args.out, quick=args.quick,
+        draws=None if args.draws is None else integer(args.draws, "--draws"),
+        duration_s=None if args.duration_s is None else number(args.duration_s, "--duration-s", positive=True),
+        seed=integer(args.seed, "--seed"), scheduler=args.scheduler,
+        workers=None if args.workers is None else integer(args.workers, "--workers", minimum=1),
+        quiet=args.quiet)
+    if not args.json:
+        print(f"{args.name}: {summary.get('finding', '')}")
+        for key in ("figure", "data"):
+            if key in summary:
+                print(f"  {key}: {summary[key]}")
+    return summary
+
+
+# --------------------------------------------------------------------------- text output
+
+def _print_single(s: dict[str, Any]) -> None:
+    print(f"{s['kind']} run, {s['duration_s']:g} s: mean speed {s['mean_speed_mm_s']:.3f} mm/s")
+    print("  patterns: " + ", ".join(s["patterns"]))
+    print("  impacts:  " + ", ".join(str(i) for i in s["impacts"]))
+    if "out" in s:
+        print(f"  wrote {s['out']}")
+
+
+def _print_sweep(s: dict[str, Any]) -> None:
+    q = s["quantity"]
+    print(f"sweep of {q} [{s['units']}], {s['draws']} draw(s) per point")
+    print(f"  {q:>12}  mean mm/s   std mm/s  pattern")
+    for p in s["points"]:
+        print(f"  {p[q]:12.4g}  {p['mean_speed_mm_s']:9.3f}  {p['std_speed_mm_s']:9.3f}  {p['dominant_pattern']}")
+    if "out" in s:
+        print(f"  wrote {s['out']}")

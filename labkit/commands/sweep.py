@@ -1,0 +1,51 @@
+"""``labkit sweep inchip CONFIG --out FILE``: the in-chip swept-sine test of a tethered robot.
+
+The generator drives the robot's PZT (no amplifier), the vibrometer reads the
+velocity at each location (body, hip, knee by default; the person is asked
+to move the laser, or the virtual lab is told), the scope records drive and
+velocity, and each frequency point is demodulated into an FRF, appended and
+flushed to the run file. ``--resume FILE`` continues an interrupted run.
+"""
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+NAME = "sweep"
+HELP = "in-chip swept-sine test (stepped sine or chirp) into an HDF5 run file"
+
+
+def add_experiment_arguments(p: argparse.ArgumentParser) -> None:
+    """The options ``sweep inchip`` and ``shaker`` share."""
+    p.add_argument("config", help="experiment config (TOML)")
+    p.add_argument("--out", help="run file to write (HDF5; must not exist)")
+    p.add_argument("--lab", action="store_true",
+                   help="start the virtual lab in-process and point the config's instruments at it")
+    p.add_argument("--resume", metavar="FILE",
+                   help="continue this interrupted run file after its last complete point")
+    p.add_argument("--seed", type=int, default=0, help="virtual lab noise seed (with --lab)")
+
+
+def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="experiment", metavar="EXPERIMENT", parser_class=type(parser))
+    sub.required = True
+    p = sub.add_parser("inchip", parents=[common], help="in-chip sweep of the tethered robot",
+                       description=__doc__.split("\n\n")[1] if __doc__ else None)
+    add_experiment_arguments(p)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from labkit.experiments.session import run_session
+
+    summary = run_session("inchip", args.config, args.out, lab=args.lab, resume=args.resume,
+                          quiet=args.quiet, seed=args.seed)
+    if not args.json:
+        print_summary(summary)
+    return summary
+
+
+def print_summary(s: dict[str, Any]) -> None:
+    print(f"{s['file']}: {s['status']}, {s['points_ok']} of {s['points_planned']} points measured"
+          + (f", {s['points_interlocked']} stopped by an interlock" if s.get("points_interlocked") else ""))
+    for il in s.get("interlocks", []):
+        print(f"  interlock at point {il['index']}: {il['reason']}")

@@ -1,0 +1,393 @@
+"""Experiment configs (TOML): the in-chip swept-sine test and the out-of-chip shaker run.
+
+Both are validated completely before any instrument is opened; every error is
+a :class:`labkit.errors.ConfigError` naming the file, the key and what was
+expected (CLI exit 2). See ``sample_data/inchip.toml`` and
+``sample_data/shaker.toml`` for annotated examples.
+
+Common tables
+-------------
+``[instruments.<role>]``
+    ``model`` (a driver name, see :mod:`drivers.registry`), ``resource`` (a VISA
+    resource string or device path); any other key is a driver setting
+    (``channel``, ``timeout_s`` ...). Roles: ``funcgen``, ``scope``,
+    ``vibrometer``, optional ``control`` (a virtual-lab control channel: the run
+    then moves the laser spot itself instead of asking the person), and for
+    shaker runs ``camera``.
+``[scope]``
+    ``drive_channel``, ``velocity_channel`` (1-4), optional
+    ``drive_volts_per_div`` / ``velocity_volts_per_div`` (else chosen from
+    the drive amplitude and the vibrometer's analog range).
+``[vibrometer]``
+    ``scale_mm_s_per_v`` (the velocity decoder range).
+``[method]``
+    ``kind = "stepped"``: ``settle_s`` or ``settle_cycles`` (one of them),
+    ``dwell_cycles``, ``keep_raw``; ``kind = "chirp"`` (in-chip only):
+    ``length_s``, ``averages``.
+``[run]``
+    ``on_interlock = "skip" | "end"``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labkit.experiments.tomlcheck import Table
+from labkit.tomlio import load_toml
+
+LOCATIONS = ("body", "hip", "knee")
+SPOTS = ("body", "hip", "knee", "tray")
+ON_INTERLOCK = ("skip", "end")
+DEFAULT_PZT_MAX_V = 20.0
+#: overridable fields of the shaker envelope (drivers.shaker.Shaker4809Envelope)
+ENVELOPE_KEYS = ("freq_min_hz", "freq_max_hz", "force_peak_n", "stroke_peak_mm", "velocity_peak_m_s",
+                 "moving_mass_kg")
+# Analog output of the vibrometer controllers spans +-10 V (OFV-3001/5000 manuals).
+VIB_OUTPUT_MAX_V = 10.0
+
+
+@dataclass(frozen=True)
+class InstrumentSpec:
+    """One instrument: driver model, resource and extra driver settings."""
+
+    role: str
+    model: str
+    resource: str
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    def with_resource(self, resource: str) -> "InstrumentSpec":
+        return InstrumentSpec(self.role, self.model, resource, dict(self.settings))
+
+
+@dataclass(frozen=True)
+class Method:
+    """How each frequency is measured."""
+
+    kind: str                       # "stepped" | "chirp"
+    settle_s: float | None = None   # fixed settling time, or ...
+    settle_cycles: float | None = None  # ... a number of drive periods
+    dwell_cycles: float = 20.0      # periods recorded per point
+    keep_raw: bool = False
+    length_s: float = 1.0           # chirp length
+    averages: int = 1               # chirps averaged into H1
+
+    def settle_time_s(self, freq_hz: float) -> float:
+        if self.settle_s is not None:
+            return self.settle_s
+        return (self.settle_cycles or 0.0) / freq_hz
+
+    def dwell_time_s(self, freq_hz: float) -> float:
+        return self.dwell_cycles / freq_hz
+
+
+@dataclass(frozen=True)
+class ScopeSetup:
+    drive_channel: int
+    velocity_channel: int
+    drive_volts_per_div: float | None = None
+    velocity_volts_per_div: float | None = None
+    trigger_source: str = "EXT"        # the generator's sync into EXT, or CHAN<n>
+    samples_per_cycle: float = 100.0   # record points per drive period (stepped sine)
+    max_points: int = 100_000          # cap on record points
+
+
+@dataclass(frozen=True)
+class InchipConfig:
+    """A validated in-chip sweep config (see module docstring and ``sample_data/inchip.toml``)."""
+
+    path: str
+    text: str
+    instruments: dict[str, InstrumentSpec]
+    amp_vpp: float
+    offset_v: float
+    pzt_max_v: float
+    freqs_hz: tuple[float, ...]
+    method: Method
+    locations: tuple[str, ...]
+    scope: ScopeSetup
+    scale_mm_s_per_v: float
+    on_interlock: str
+
+    kind = "inchip"
+
+    def with_resources(self, resources: dict[str, str]) -> "InchipConfig":
+        return _with_resources(self, resources)
+
+
+@dataclass(frozen=True)
+class TrayControl:
+    """Reaching a tray displacement: iterate the drive until the measured amplitude is close."""
+
+    tolerance: float = 0.02     # relative
+    max_iterations: int = 8
+    start_vpp: float = 0.05     # first try at a new frequency (small: safe)
+    max_step_ratio: float = 4.0  # never raise the drive by more than this per step
+
+
+@dataclass(frozen=True)
+class ShakerConfig:
+    """A validated shaker-run config (see ``sample_data/shaker.toml``)."""
+
+    path: str
+    text: str
+    instruments: dict[str, InstrumentSpec]
+    gain_db: float
+    attenuator_db: float
+    current_limit_a: float
+    max_input_vrms: float | None
+    payload_kg: float
+    envelope: dict[str, float]
+    freqs_hz: tuple[float, ...]
+    amplitude_kind: str             # "tray_amp_um" | "drive_vpp"
+    amplitudes: tuple[float, ...]
+    control: TrayControl
+    method: Method
+    robot_spot: str
+    video_s: float
+    scope: ScopeSetup
+    scale_mm_s_per_v: float
+    tray_max_um: float
+    on_interlock: str
+
+    kind = "shaker"
+
+    def with_resources(self, resources: dict[str, str]) -> "ShakerConfig":
+        return _with_resources(self, resources)
+
+
+def _with_resources(cfg: Any, resources: dict[str, str]) -> Any:
+    """A copy whose instruments point at ``resources`` (role -> resource); new roles are added."""
+    import dataclasses
+
+    inst = dict(cfg.instruments)
+    for role, resource in resources.items():
+        if role in inst:
+            inst[role] = inst[role].with_resource(resource)
+    return dataclasses.replace(cfg, instruments=inst)
+
+
+# ----------------------------------------------------------------------------- loading
+
+def load_inchip(path: str | Path) -> InchipConfig:
+    """Read and validate an in-chip sweep config.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, the key and what was expected.
+    """
+    data, text = load_toml(path)
+    root = Table(data, path)
+    root.only(("run", "instruments", "drive", "frequencies", "method", "scope", "vibrometer"))
+    instruments = _instruments(root.table("instruments"), required=("funcgen", "scope", "vibrometer"),
+                               optional=("control",))
+    run = root.table("run", required=False)
+    run.only(("locations", "on_interlock"))
+    locations = run.strings("locations", choices=LOCATIONS, default=LOCATIONS)
+    on_interlock = run.string("on_interlock", choices=ON_INTERLOCK, default="skip", lower=True)
+
+    drive = root.table("drive")
+    drive.only(("amp_vpp", "offset_v", "pzt_max_v"))
+    pzt_max_v = drive.number("pzt_max_v", default=DEFAULT_PZT_MAX_V, unit="V", minimum=0,
+                             exclusive_minimum=True)
+    amp_vpp = drive.number("amp_vpp", unit="Vpp", minimum=0, exclusive_minimum=True)
+    offset_v = drive.number("offset_v", default=0.0, unit="V")
+    peak = abs(offset_v) + amp_vpp / 2
+    if peak > pzt_max_v:
+        raise drive.error("amp_vpp", f"drive peak |offset_v| + amp_vpp/2 = {peak:g} V exceeds the PZT "
+                                     f"limit drive.pzt_max_v = {pzt_max_v:g} V",
+                          f"|offset_v| + amp_vpp/2 <= {pzt_max_v:g} V")
+
+    freqs = _frequencies(root.table("frequencies"))
+    method = _method(root.table("method"), allow_chirp=True)
+    if method.kind == "chirp":
+        f = root.table("frequencies")
+        if "list_hz" in f:
+            raise f.error("list_hz", "a chirp sweeps a band", "start_hz/stop_hz (and count) for method.kind = 'chirp'")
+        span = max(freqs) / min(freqs)
+        if span <= 1:
+            raise f.error("stop_hz", "empty band", "stop_hz > start_hz for a chirp")
+    scope = _scope(root.table("scope"))
+    vib = root.table("vibrometer")
+    vib.only(("scale_mm_s_per_v",))
+    scale = vib.number("scale_mm_s_per_v", unit="mm/s/V", minimum=0, exclusive_minimum=True)
+    return InchipConfig(str(path), text, instruments, amp_vpp, offset_v, pzt_max_v, freqs, method,
+                        locations, scope, scale, on_interlock)
+
+
+def load_shaker(path: str | Path) -> ShakerConfig:
+    """Read and validate a shaker-run config (errors as :func:`load_inchip`)."""
+    data, text = load_toml(path)
+    root = Table(data, path)
+    root.only(("run", "instruments", "amplifier", "shaker", "grid", "tray_control", "method", "scope",
+               "vibrometer", "interlock"))
+    instruments = _instruments(root.table("instruments"), required=("funcgen", "scope", "vibrometer"),
+                               optional=("control", "camera"))
+    run = root.table("run", required=False)
+    run.only(("robot_spot", "video_s", "on_interlock"))
+    robot_spot = run.string("robot_spot", choices=LOCATIONS, default="knee", lower=True)
+    video_s = run.number("video_s", default=0.0, unit="s", minimum=0)
+    on_interlock = run.string("on_interlock", choices=ON_INTERLOCK, default="skip", lower=True)
+    if video_s > 0 and "camera" not in instruments and "control" not in instruments:
+        raise root.table("instruments").error("camera", "run.video_s > 0 needs a camera",
+                                              "an [instruments.camera] table (or an [instruments.control] "
+                                              "virtual-lab channel)")
+
+    amp = root.table("amplifier")
+    amp.only(("model", "gain_db", "attenuator_db", "current_limit_a", "max_input_vrms"))
+    gain_db = amp.number("gain_db", unit="dB")
+    if gain_db not in (20.0, 40.0):
+        raise amp.error("gain_db", f"unsupported gain {gain_db:g} dB", "20 or 40 (the 2718's gain switch)")
+    attenuator_db = amp.number("attenuator_db", unit="dB", minimum=0)
+    current_limit_a = amp.number("current_limit_a", unit="A", minimum=0, exclusive_minimum=True)
+    max_input_vrms = amp.number("max_input_vrms", default=None, unit="V rms", minimum=0, exclusive_minimum=True)
+
+    shaker = root.table("shaker", required=False)
+    shaker.only(("model", "payload_kg") + ENVELOPE_KEYS)
+    payload_kg = shaker.number("payload_kg", default=0.0, unit="kg", minimum=0)
+    envelope = {k: shaker.number(k, minimum=0, exclusive_minimum=True) for k in ENVELOPE_KEYS if k in shaker}
+
+    grid = root.table("grid")
+    grid.only(("freq_hz", "tray_amp_um", "drive_vpp"))
+    freqs = grid.numbers("freq_hz", unit="Hz", minimum=0, exclusive_minimum=True)
+    if ("tray_amp_um" in grid) == ("drive_vpp" in grid):
+        raise grid.error("tray_amp_um", "give the amplitudes one way",
+                         "exactly one of grid.tray_amp_um (tray displacement, um) or grid.drive_vpp")
+    kind = "tray_amp_um" if "tray_amp_um" in grid else "drive_vpp"
+    amps = grid.numbers(kind, unit="um" if kind == "tray_amp_um" else "Vpp", minimum=0, exclusive_minimum=True)
+
+    tc = root.table("tray_control", required=False)
+    tc.only(("tolerance", "max_iterations", "start_vpp", "max_step_ratio"))
+    control = TrayControl(
+        tolerance=tc.number("tolerance", default=0.02, minimum=0, maximum=0.5, exclusive_minimum=True),
+        max_iterations=tc.integer("max_iterations", default=8, minimum=1, maximum=50),
+        start_vpp=tc.number("start_vpp", default=0.05, unit="Vpp", minimum=0, exclusive_minimum=True),
+        max_step_ratio=tc.number("max_step_ratio", default=4.0, minimum=1, exclusive_minimum=True))
+
+    method = _method(root.table("method"), allow_chirp=False)
+    scope = _scope(root.table("scope"))
+    vib = root.table("vibrometer")
+    vib.only(("scale_mm_s_per_v",))
+    scale = vib.number("scale_mm_s_per_v", unit="mm/s/V", minimum=0, exclusive_minimum=True)
+    il = root.table("interlock")
+    il.only(("tray_max_um",))
+    tray_max_um = il.number("tray_max_um", unit="um", minimum=0, exclusive_minimum=True)
+    if kind == "tray_amp_um" and max(amps) > tray_max_um:
+        raise grid.error("tray_amp_um", f"request {max(amps):g} um is above interlock.tray_max_um "
+                                        f"= {tray_max_um:g} um", f"amplitudes <= {tray_max_um:g} um")
+    return ShakerConfig(str(path), text, instruments, gain_db, attenuator_db, current_limit_a, max_input_vrms,
+                        payload_kg, envelope, freqs, kind, amps, control, method, robot_spot, video_s, scope,
+                        scale, tray_max_um, on_interlock)
+
+
+# ----------------------------------------------------------------------------- pieces
+
+def _instruments(t: Table, required: tuple[str, ...], optional: tuple[str, ...]) -> dict[str, InstrumentSpec]:
+    t.only(required + optional)
+    out = {}
+    for role in required + optional:
+        if role not in t and role not in required:
+            continue
+        spec = t.table(role)
+        model = spec.string("model")
+        if role == "camera" and model in ("OpenCVCamera", "FileCamera"):
+            resource = str(spec.data.get("resource", ""))
+        else:
+            resource = spec.string("resource")
+        settings = {k: v for k, v in spec.data.items() if k not in ("model", "resource")}
+        if role in ("funcgen", "scope", "vibrometer"):
+            _check_driver(spec, model, settings)
+        out[role] = InstrumentSpec(role, model, resource, settings)
+    return out
+
+
+def _check_driver(spec: Table, model: str, settings: dict[str, Any]) -> None:
+    """The model must have a driver, and every extra key must be one of its settings."""
+    from drivers.registry import driver_class, model_names
+    from labkit.errors import ConfigError
+
+    try:
+        cls = driver_class(model)
+    except ConfigError:
+        raise spec.error("model", f"unknown instrument model {model!r}",
+                         "one of " + ", ".join(model_names())) from None
+    allowed = cls.setting_names() - {"name"}
+    for key in settings:
+        if key not in allowed:
+            raise spec.error(key, f"not a setting of the {cls.model} driver", "one of " + ", ".join(sorted(allowed)))
+
+
+def _frequencies(t: Table) -> tuple[float, ...]:
+    t.only(("list_hz", "start_hz", "stop_hz", "count", "spacing"))
+    if "list_hz" in t:
+        for k in ("start_hz", "stop_hz", "count", "spacing"):
+            if k in t:
+                raise t.error(k, "given together with list_hz", "either list_hz or start_hz/stop_hz/count")
+        return t.numbers("list_hz", unit="Hz", minimum=0, exclusive_minimum=True)
+    start = t.number("start_hz", unit="Hz", minimum=0, exclusive_minimum=True)
+    stop = t.number("stop_hz", unit="Hz", minimum=start)
+    count = t.integer("count", minimum=1, maximum=100_000)
+    spacing = t.string("spacing", choices=("lin", "log"), default="log", lower=True)
+    if count == 1:
+        return (start,)
+    values = np.geomspace(start, stop, count) if spacing == "log" else np.linspace(start, stop, count)
+    return tuple(float(v) for v in values)
+
+
+def _method(t: Table, *, allow_chirp: bool) -> Method:
+    kinds = ("stepped", "chirp") if allow_chirp else ("stepped",)
+    kind = t.string("kind", choices=kinds, default="stepped", lower=True)
+    if kind == "chirp":
+        t.only(("kind", "length_s", "averages", "keep_raw"))
+        return Method(kind, length_s=t.number("length_s", unit="s", minimum=0, exclusive_minimum=True),
+                      averages=t.integer("averages", default=1, minimum=1, maximum=1000),
+                      keep_raw=t.boolean("keep_raw", default=False))
+    t.only(("kind", "settle_s", "settle_cycles", "dwell_cycles", "keep_raw"))
+    if "settle_s" in t and "settle_cycles" in t:
+        raise t.error("settle_s", "given together with settle_cycles", "one of settle_s or settle_cycles")
+    if "settle_s" not in t and "settle_cycles" not in t:
+        raise t.error("settle_cycles", "missing", "settle_s (s) or settle_cycles (drive periods)")
+    settle_s = t.number("settle_s", default=None, unit="s", minimum=0)
+    settle_cycles = t.number("settle_cycles", default=None, minimum=0)
+    dwell = t.number("dwell_cycles", minimum=1)
+    if not math.isfinite(dwell):
+        raise t.error("dwell_cycles", "not finite", "a number >= 1")
+    return Method(kind, settle_s=settle_s, settle_cycles=settle_cycles, dwell_cycles=dwell,
+                  keep_raw=t.boolean("keep_raw", default=False))
+
+
+def _scope(t: Table) -> ScopeSetup:
+    t.only(("drive_channel", "velocity_channel", "drive_volts_per_div", "velocity_volts_per_div",
+            "trigger_source", "samples_per_cycle", "max_points"))
+    d = t.integer("drive_channel", minimum=1, maximum=4)
+    v = t.integer("velocity_channel", minimum=1, maximum=4)
+    if d == v:
+        raise t.error("velocity_channel", f"same channel as drive_channel ({d})", "a different scope channel")
+    trig = t.string("trigger_source", default="EXT", choices=("EXT", "CHAN1", "CHAN2", "CHAN3", "CHAN4"))
+    return ScopeSetup(d, v,
+                      t.number("drive_volts_per_div", default=None, unit="V/div", minimum=0, exclusive_minimum=True),
+                      t.number("velocity_volts_per_div", default=None, unit="V/div", minimum=0,
+                               exclusive_minimum=True),
+                      trig,
+                      t.number("samples_per_cycle", default=100.0, minimum=8),
+                      t.integer("max_points", default=100_000, minimum=100, maximum=8_000_000))
+
+
+def comparable(cfg: InchipConfig | ShakerConfig) -> dict[str, Any]:
+    """The config as a dict with resources left out, for matching a resumed run's config.
+
+    Resources may change between sessions (a virtual lab's ports, a renumbered
+    serial port); what was measured and how may not.
+    """
+    import dataclasses
+
+    d = dataclasses.asdict(cfg)
+    d.pop("path")
+    d.pop("text")
+    d["instruments"] = {role: {"model": s["model"], "settings": s["settings"]}
+                        for role, s in d["instruments"].items() if role != "control"}
+    return d

@@ -1,0 +1,107 @@
+"""One acquisition and its reduction: scope records -> phasors, FRF and quality.
+
+The runner calls these with the rig's drivers; they never change an output.
+Demodulation and spectral estimates come from :mod:`analysis.frf` (shared
+with the fitting code).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from labkit.errors import InstrumentError
+
+
+@dataclass
+class Records:
+    """Drive and velocity-output records of one acquisition (volts, common time base)."""
+
+    drive_v: np.ndarray
+    velocity_v: np.ndarray
+    dt_s: float
+
+    @property
+    def fs_hz(self) -> float:
+        return 1.0 / self.dt_s
+
+
+@dataclass
+class SinePhasors:
+    """Complex amplitudes (peak) at the drive frequency, and the fit quality."""
+
+    drive_v: complex
+    velocity_mm_s: complex
+    quality: float
+
+    @property
+    def frf(self) -> complex:
+        """Velocity over drive, (mm/s)/V."""
+        return self.velocity_mm_s / self.drive_v if self.drive_v != 0 else complex("nan")
+
+    @property
+    def velocity_re_drive(self) -> complex:
+        """The velocity phasor with its phase referred to the drive's (mm/s)."""
+        if self.drive_v == 0:
+            return complex("nan")
+        return self.velocity_mm_s * abs(self.drive_v) / self.drive_v
+
+
+def acquire(scope: Any, drive_channel: int, velocity_channel: int, record_s: float,
+            timeout_s: float) -> Records:
+    """One single-shot acquisition of both channels (timebase already set for ``record_s``)."""
+    scope.single()
+    # The record cannot be complete before it has been acquired: sleep through it, then poll.
+    time.sleep(record_s)
+    scope.wait_done(timeout_s)
+    wd = scope.read_waveform(drive_channel)
+    wv = scope.read_waveform(velocity_channel)
+    d = np.asarray(wd.volts, dtype=float)
+    v = np.asarray(wv.volts, dtype=float)
+    if d.shape != v.shape or d.size < 16:
+        raise InstrumentError(f"records of {d.size} and {v.size} samples", instrument="scope",
+                              command=":WAV:DATA?")
+    return Records(d, v, float(wd.xinc_s))
+
+
+def sine_phasors(rec: Records, freq_hz: float, scale_mm_s_per_v: float) -> SinePhasors:
+    """Least-squares sine fit of both channels at ``freq_hz`` (:func:`analysis.frf.demodulate`)."""
+    from analysis.frf import demodulate
+
+    dem = demodulate(np.vstack([rec.drive_v, rec.velocity_v]), rec.fs_hz, freq_hz)
+    return SinePhasors(complex(dem.amplitude[0]), complex(dem.amplitude[1]) * scale_mm_s_per_v,
+                       float(np.min(dem.quality)))
+
+
+def chirp_h1(records: list[Records], scale_mm_s_per_v: float, f_lo_hz: float, f_hi_hz: float
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """H1 and coherence from chirp records (one Welch segment per record, rectangular window).
+
+    A chirp fills its record, so each record is one segment (no taper that
+    would weight some frequencies less); averaging is over the records.
+    Returns ``(freq_hz, frf (mm/s)/V, coherence)`` inside ``[f_lo_hz, f_hi_hz]``.
+    """
+    from analysis.frf import estimate_frf
+
+    n = min(r.drive_v.size for r in records)
+    x = np.concatenate([r.drive_v[:n] for r in records])
+    y = np.concatenate([r.velocity_v[:n] for r in records]) * scale_mm_s_per_v
+    est = estimate_frf(x, y, records[0].fs_hz, nperseg=n, noverlap=0, window="boxcar")
+    keep = (est.freq_hz >= f_lo_hz) & (est.freq_hz <= f_hi_hz)
+    coh = np.nan_to_num(est.coherence[keep], nan=0.0)
+    return est.freq_hz[keep], est.h1[keep], coh
+
+
+def displacement_um(velocity_mm_s: complex, freq_hz: float) -> float:
+    """Displacement amplitude of a sine from its velocity amplitude: ``x = v / (2 pi f)``."""
+    return abs(velocity_mm_s) / (2 * math.pi * freq_hz) * 1e3
+
+
+def clipped(volts: np.ndarray, full_scale_v: float | None, margin: float = 0.98) -> bool:
+    """True when a record touches the screen's edge (its peak is not trustworthy)."""
+    if full_scale_v is None:
+        return False
+    return bool(np.max(np.abs(volts)) >= margin * full_scale_v)

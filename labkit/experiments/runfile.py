@@ -1,0 +1,373 @@
+"""Run files: one self-describing HDF5 file per run, appended and flushed point by point.
+
+Every dataset carries a ``units`` attribute. Rows are appended to resizable
+(chunked, unlimited) datasets and the file is flushed after every point, so a
+run killed with SIGKILL leaves a file that opens and holds every completed
+point; at most the point in progress is lost. Within a table the ``index``
+dataset is always written last: its length is the number of complete rows,
+and reopening for ``--resume`` trims any longer sibling back to it.
+
+Common layout (both kinds)
+--------------------------
+root attributes
+    ``kind``, ``schema_version``, ``software``, ``created_utc`` (see
+    :func:`labkit.h5io.stamp`); ``config_toml`` (the config file's text),
+    ``config_path``, ``config_json`` (the validated config without resources,
+    used to match a resumed run), ``versions_json`` (python, numpy, scipy, h5py,
+    pyvisa, labkit), ``started_utc``, ``ended_utc``, ``status`` (``"running"``,
+    ``"complete"``, ``"interrupted: SIGINT"``, ``"aborted: <why>"``),
+    ``points_planned``, ``resumed_utc_json`` (list of resume times).
+``/instruments/<role>``
+    attributes ``model``, ``resource``, ``snapshot_json`` (identity and settings).
+``/points``
+    one row per finished point, in the order measured (also skipped ones):
+    ``index`` (plan index, 1), ``status`` (label: ``ok`` | ``interlock``),
+    ``reason`` (text), ``time_unix_s`` (s, end of point), ``duration_s`` (s),
+    ``location`` (label) and ``freq_hz`` (Hz), and for shaker runs the data
+    below.
+``/events``
+    ``time_unix_s`` (s), ``text`` (text): safety events (drive on/off, interlocks,
+    spot moves, interruptions).
+``/virtual_lab`` (runs against the virtual lab only)
+    ``output_timeline``: ``t_s`` (s, the lab's clock), ``time_unix_s`` (s),
+    ``instrument``, ``channel`` (label), ``on`` (1); attributes ``truth_json``
+    and ``t0_monotonic_s`` (the lab clock's zero on ``time.monotonic()``).
+
+In-chip sweep (``kind = "run_inchip"``)
+---------------------------------------
+root attribute ``method`` (``"stepped"`` | ``"chirp"``), ``drive_amp_vpp``,
+``drive_offset_v``. Per location ``/locations/<loc>/`` (loc in body, hip,
+knee), rows appended per point (a chirp appends all its frequency lines at
+once): ``freq_hz`` (Hz), ``frf`` (complex128, ``(mm/s)/V``: vibrometer
+velocity over drive voltage), ``quality`` (1: smaller sine-fit R^2 of the two
+channels; for chirps the coherence), ``point_index`` (1); stepped sine adds
+``drive_v`` (complex, V) and ``velocity_mm_s`` (complex, mm/s), the complex
+amplitudes (peak) of the two channels; chirps add ``coherence`` (1).
+With ``keep_raw``: ``/raw/p<index>/`` holding ``drive_v`` and ``velocity_v``
+(V, the scope records) with attribute ``dt_s``.
+
+Shaker run (``kind = "run_shaker"``)
+------------------------------------
+root attributes ``robot_spot`` (knee | hip | body), ``amplitude_kind``
+(``tray_amp_um`` | ``drive_vpp``), ``amplifier_json`` (declared gain_db,
+attenuator_db, current_limit_a, max_input_vrms), ``shaker_json``
+(payload_kg, envelope). ``/points`` adds per point:
+``tray_amp_request_um`` (um; NaN when the grid gives drive voltages),
+``drive_request_vpp`` (Vpp; NaN in tray mode), ``drive_vpp`` (Vpp, the drive
+finally applied), ``iterations`` (1, drive adjustments to reach the tray
+amplitude), ``tray_amp_um`` (um, measured: tray velocity / (2 pi f)),
+``tray_velocity_mm_s`` and ``robot_velocity_mm_s`` (complex, mm/s, phase
+referred to the drive), ``transmissibility`` (complex, 1: robot velocity over
+tray velocity), ``quality`` (1), ``video`` (text: the point's video path,
+relative to the run file's folder; empty without video), ``video_frames`` (1).
+``/records/p<index>/`` keeps the tray's and the robot's velocity records:
+``tray_velocity_mm_s``, ``robot_velocity_mm_s`` (mm/s), ``tray_drive_v``,
+``robot_drive_v`` (V), attribute ``dt_s``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from labkit.errors import InputError
+from labkit.h5io import get_json, open_h5, put_json, stamp, utc_now
+
+SCHEMA_VERSION = 1
+_STR = "str"
+
+#: name -> (dtype, units). ``index`` is last on purpose: it is written last.
+POINT_FIELDS: dict[str, tuple[str, str]] = {
+    "location": (_STR, "label"), "freq_hz": ("f8", "Hz"), "status": (_STR, "label"),
+    "reason": (_STR, "text"), "time_unix_s": ("f8", "s"), "duration_s": ("f8", "s"),
+}
+SHAKER_FIELDS: dict[str, tuple[str, str]] = {
+    "tray_amp_request_um": ("f8", "um"), "drive_request_vpp": ("f8", "Vpp"), "drive_vpp": ("f8", "Vpp"),
+    "iterations": ("i8", "1"), "tray_amp_um": ("f8", "um"), "tray_velocity_mm_s": ("c16", "mm/s"),
+    "robot_velocity_mm_s": ("c16", "mm/s"), "transmissibility": ("c16", "1"), "quality": ("f8", "1"),
+    "video": (_STR, "path"), "video_frames": ("i8", "1"),
+}
+STEPPED_FIELDS: dict[str, tuple[str, str]] = {
+    "freq_hz": ("f8", "Hz"), "frf": ("c16", "(mm/s)/V"), "quality": ("f8", "1"),
+    "drive_v": ("c16", "V"), "velocity_mm_s": ("c16", "mm/s"), "point_index": ("i8", "1"),
+}
+CHIRP_FIELDS: dict[str, tuple[str, str]] = {
+    "freq_hz": ("f8", "Hz"), "frf": ("c16", "(mm/s)/V"), "quality": ("f8", "1"),
+    "coherence": ("f8", "1"), "point_index": ("i8", "1"),
+}
+EVENT_FIELDS = {"time_unix_s": ("f8", "s"), "text": (_STR, "text")}
+
+
+def versions() -> dict[str, str]:
+    """Versions of the software that wrote a run (for the file's ``versions_json``)."""
+    import h5py
+    import scipy
+
+    from labkit import __version__
+
+    out = {"labkit": __version__, "python": platform.python_version(), "numpy": np.__version__,
+           "scipy": scipy.__version__, "h5py": h5py.version.version, "hdf5": h5py.version.hdf5_version}
+    try:
+        import pyvisa
+        out["pyvisa"] = pyvisa.__version__
+    except Exception:  # pragma: no cover - optional at read time
+        pass
+    return out
+
+
+def _dtype(code: str):
+    import h5py
+
+    return h5py.string_dtype() if code == _STR else np.dtype(code)
+
+
+def _make_table(group: Any, fields: dict[str, tuple[str, str]], with_index: bool = True) -> None:
+    items = list(fields.items()) + ([("index", ("i8", "1"))] if with_index else [])
+    for name, (code, units) in items:
+        if name in group:
+            continue
+        ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=_dtype(code), chunks=(256,))
+        ds.attrs["units"] = units
+
+
+def _append(group: Any, rows: dict[str, Any], order: Iterable[str]) -> None:
+    """Append equal-length columns; ``order`` fixes the write order (index last)."""
+    for name in order:
+        if name not in rows:
+            continue
+        ds = group[name]
+        value = rows[name]
+        arr = np.atleast_1d(np.asarray(value, dtype=object if ds.dtype.kind == "O" else ds.dtype))
+        n = ds.shape[0]
+        ds.resize((n + arr.shape[0],))
+        ds[n:] = arr
+
+
+def _trim(group: Any, n: int) -> None:
+    import h5py
+
+    for ds in group.values():
+        if isinstance(ds, h5py.Dataset) and ds.maxshape[0] is None and ds.shape[0] > n:
+            ds.resize((n,))
+
+
+class RunFile:
+    """Writer of one run file (create with :meth:`create`, continue with :meth:`resume`).
+
+    Use as a context manager; :meth:`finish` records the final status.
+    """
+
+    def __init__(self, f: Any, path: Path) -> None:
+        self.f = f
+        self.path = path
+        self.kind = str(f.attrs["kind"])
+        self.done: dict[int, str] = {}       # plan index -> status of finished points
+        idx = f["points/index"][...]
+        st = f["points/status"].asstr()[...] if len(idx) else []
+        for i, s in zip(idx, st):
+            self.done[int(i)] = str(s)
+
+    # -- opening ---------------------------------------------------------------------------
+    @classmethod
+    def create(cls, path: str | Path, cfg: Any, config_json: dict[str, Any], points_planned: int,
+               extra_attrs: dict[str, Any] | None = None) -> "RunFile":
+        """A new run file for ``cfg`` (an InchipConfig or ShakerConfig); refuses to overwrite."""
+        import h5py
+
+        path = Path(path)
+        if path.exists():
+            raise InputError("already exists; use --resume to continue it, or another --out",
+                             file=path, key="--out")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            f = h5py.File(path, "w")
+        except OSError as exc:
+            raise InputError(f"cannot create ({exc})", file=path, key="--out") from None
+        kind = "run_inchip" if cfg.kind == "inchip" else "run_shaker"
+        stamp(f, kind, SCHEMA_VERSION)
+        f.attrs["config_toml"] = cfg.text
+        f.attrs["config_path"] = str(cfg.path)
+        f.attrs["config_json"] = json.dumps(config_json, sort_keys=True)
+        put_json(f, "versions_json", versions())
+        f.attrs["started_utc"] = utc_now()
+        f.attrs["ended_utc"] = ""
+        f.attrs["status"] = "running"
+        f.attrs["points_planned"] = int(points_planned)
+        put_json(f, "resumed_utc_json", [])
+        for k, v in (extra_attrs or {}).items():
+            f.attrs[k] = v
+        f.create_group("instruments")
+        pts = f.create_group("points")
+        _make_table(pts, POINT_FIELDS | (SHAKER_FIELDS if kind == "run_shaker" else {}))
+        _make_table(f.create_group("events"), EVENT_FIELDS, with_index=False)
+        if kind == "run_inchip":
+            fields = CHIRP_FIELDS if cfg.method.kind == "chirp" else STEPPED_FIELDS
+            f.attrs["method"] = cfg.method.kind
+            for loc in cfg.locations:
+                _make_table(f.require_group(f"locations/{loc}"), fields, with_index=False)
+        f.flush()
+        return cls(f, path)
+
+    @classmethod
+    def resume(cls, path: str | Path, cfg: Any, config_json: dict[str, Any]) -> "RunFile":
+        """Reopen a run file to continue it after its last complete point.
+
+        Raises
+        ------
+        InputError
+            Not a run file of this kind, or written for a different config.
+        """
+        import h5py
+
+        path = Path(path)
+        kind = "run_inchip" if cfg.kind == "inchip" else "run_shaker"
+        open_h5(path, "r", kind=kind).close()          # kind and schema checks, clear errors
+        try:
+            f = h5py.File(path, "r+")
+        except OSError as exc:
+            raise InputError(f"cannot open for appending ({exc})", file=path, key="--resume") from None
+        stored = json.loads(f.attrs.get("config_json", "{}"))
+        if stored != json.loads(json.dumps(config_json, sort_keys=True)):
+            diff = sorted(k for k in set(stored) | set(config_json)
+                          if json.dumps(stored.get(k), sort_keys=True) != json.dumps(config_json.get(k), sort_keys=True))
+            f.close()
+            raise InputError("was written with a different config; resume with the run's own config",
+                             file=path, key="--resume",
+                             expected=f"the same settings (differing: {', '.join(diff) or '?'})")
+        # A SIGKILL may have cut a point between its data and its index: trim to the index.
+        n = f["points/index"].shape[0]
+        _trim(f["points"], n)
+        status = f["points/status"].asstr()[...]
+        locs = f["points/location"].asstr()[...]
+        if "locations" in f:
+            for loc, grp in f["locations"].items():
+                ok = {int(i) for i, s, l in zip(f["points/index"][...], status, locs) if s == "ok" and l == loc}
+                keep = int(np.sum(np.isin(grp["point_index"][...], list(ok)))) if ok else 0
+                _trim(grp, keep)
+        for name in ("raw", "records"):
+            if name in f:
+                done = {int(i) for i in f["points/index"][...]}
+                for key in list(f[name]):
+                    if int(key[1:]) not in done:
+                        del f[name][key]
+        f.attrs["status"] = "running"
+        f.attrs["ended_utc"] = ""
+        resumed = get_json(f, "resumed_utc_json", [])
+        put_json(f, "resumed_utc_json", resumed + [utc_now()])
+        f.flush()
+        return cls(f, path)
+
+    # -- writing ---------------------------------------------------------------------------
+    def set_instrument(self, role: str, model: str, resource: str, snapshot: dict[str, Any]) -> None:
+        g = self.f.require_group(f"instruments/{role}")
+        g.attrs["model"] = model
+        g.attrs["resource"] = resource
+        put_json(g, "snapshot_json", snapshot)
+        self.f.flush()
+
+    def set_attrs(self, **attrs: Any) -> None:
+        for k, v in attrs.items():
+            self.f.attrs[k] = v
+
+    def event(self, text: str, t_unix_s: float | None = None) -> None:
+        _append(self.f["events"], {"time_unix_s": time.time() if t_unix_s is None else t_unix_s, "text": text},
+                EVENT_FIELDS)
+        self.f.flush()
+
+    def add_location_rows(self, location: str, rows: dict[str, Any]) -> None:
+        """Append rows to ``/locations/<location>`` (not flushed: :meth:`end_point` flushes)."""
+        g = self.f[f"locations/{location}"]
+        _append(g, rows, list(g.keys()))
+
+    def add_records(self, group: str, index: int, dt_s: float, arrays: dict[str, tuple[np.ndarray, str]]) -> None:
+        """Keep the point's raw records under ``/<group>/p<index>/`` (name -> (data, units))."""
+        g = self.f.require_group(f"{group}/p{index:05d}")
+        g.attrs["dt_s"] = float(dt_s)
+        for name, (data, units) in arrays.items():
+            if name in g:
+                del g[name]
+            ds = g.create_dataset(name, data=np.asarray(data, dtype=np.float32), compression="gzip",
+                                  compression_opts=1, shuffle=True)
+            ds.attrs["units"] = units
+
+    def end_point(self, index: int, row: dict[str, Any]) -> None:
+        """Append the point's row to ``/points`` (index last) and flush: the point is complete."""
+        g = self.f["points"]
+        row = dict(row, index=index)
+        _append(g, row, [k for k in g.keys() if k != "index"] + ["index"])
+        self.f.flush()
+        self.done[int(index)] = str(row.get("status", "ok"))
+
+    def finish(self, status: str) -> None:
+        self.f.attrs["status"] = status
+        self.f.attrs["ended_utc"] = utc_now()
+        self.f.flush()
+
+    def close(self) -> None:
+        try:
+            self.f.close()
+        except Exception:  # pragma: no cover - closing after a failed write
+            pass
+
+    def __enter__(self) -> "RunFile":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def write_lab_record(path: str | Path, timeline: list[tuple], truth: dict[str, Any] | None,
+                     clock_offset_s: float = 0.0, t0_monotonic_s: float | None = None) -> None:
+    """Store the virtual lab's output timeline (and its truth) in a finished run file.
+
+    ``clock_offset_s`` converts the lab's ``t_s`` to Unix time (``time_unix_s = t_s + offset``);
+    ``t0_monotonic_s`` is the lab's zero on ``time.monotonic()`` (system-wide on Linux, so
+    another process can compare its own monotonic times with the timeline).
+    """
+    import h5py
+
+    with h5py.File(path, "r+") as f:
+        g = f.require_group("virtual_lab")
+        for name in list(g):
+            del g[name]
+        tl = g.create_group("output_timeline")
+        t = np.array([float(row[0]) for row in timeline], dtype=float)
+        cols = {"t_s": (t, "s"), "time_unix_s": (t + clock_offset_s, "s"),
+                "instrument": (np.array([str(r[1]) for r in timeline], dtype=object), "label"),
+                "channel": (np.array([str(r[2]) for r in timeline], dtype=object), "label"),
+                "on": (np.array([int(bool(r[3])) for r in timeline], dtype=np.int8), "1")}
+        for name, (data, units) in cols.items():
+            kw = {"dtype": h5py.string_dtype()} if data.dtype == object else {}
+            ds = tl.create_dataset(name, data=data, **kw)
+            ds.attrs["units"] = units
+        if truth is not None:
+            put_json(g, "truth_json", truth)
+        if t0_monotonic_s is not None:
+            g.attrs["t0_monotonic_s"] = float(t0_monotonic_s)
+
+
+def read_points(path: str | Path) -> dict[str, np.ndarray]:
+    """The ``/points`` table of a run file as arrays (strings decoded)."""
+    with open_h5(path, "r", kind="run") as f:
+        g = f["points"]
+        n = g["index"].shape[0]
+        return {k: (g[k].asstr()[:n] if g[k].dtype.kind == "O" else g[k][:n]) for k in g}
+
+
+def summary(path: str | Path) -> dict[str, Any]:
+    """A short JSON-able summary of a run file (for the CLI's ``--json`` line)."""
+    with open_h5(path, "r", kind="run") as f:
+        st = f["points/status"].asstr()[...]
+        out: dict[str, Any] = {
+            "file": os.fspath(path), "kind": str(f.attrs["kind"]), "status": str(f.attrs["status"]),
+            "points_planned": int(f.attrs.get("points_planned", 0)), "points_done": int(len(st)),
+            "points_ok": int(np.sum(st == "ok")), "points_interlocked": int(np.sum(st == "interlock")),
+        }
+        if "locations" in f:
+            out["locations"] = {loc: int(g["freq_hz"].shape[0]) for loc, g in f["locations"].items()}
+        return out

@@ -1,0 +1,357 @@
+"""The one runner: executes a plan's steps on a rig, writes the run file, and shuts down safely.
+
+Guarantees
+----------
+* Every output that drives the PZT or the shaker is off when :meth:`Runner.run`
+  returns or raises, whatever the reason: normal end, exception, Ctrl-C
+  (KeyboardInterrupt), SIGTERM (:class:`labkit.errors.Interrupted`), an
+  interlock, or a lost instrument (the generator is reconnected to send the
+  OFF when its own link was lost). The shutdown runs with SIGINT/SIGTERM held.
+* Each point is written and flushed before the next begins; a point's rows
+  are written with signals held, so an interrupt never leaves them half
+  written.
+* Interlocks (vibrometer over-range, tray displacement above its limit, the
+  shaker envelope) stop the point, turn the drive off, record why (``/points``
+  status ``interlock`` and ``/events``), then skip to the next point or end
+  the run (``run.on_interlock``).
+* The drive is turned off before the laser spot is moved to another in-chip
+  location (the person may touch the setup); within a shaker point the tray and
+  robot measurements are taken with the drive on (the robot keeps its state).
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labkit.errors import InstrumentError, Interrupted, LimitError
+from labkit.experiments import measure
+from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, SinePoint
+from labkit.experiments.runfile import RunFile
+from labkit.experiments.safety import DriveGuard, Interlock, deferred, shielded, sigterm_raises
+from labkit.progress import progress
+
+
+class InterlockEnd(LimitError):
+    """The run ended on an interlock (``on_interlock = "end"``); the file is complete up to it."""
+
+
+class Runner:
+    """Executes plans on a :class:`labkit.experiments.rig.Rig`, writing a :class:`RunFile`.
+
+    Parameters
+    ----------
+    rig:
+        Open instruments and the spot mover.
+    runfile:
+        The run file being written (new or resumed).
+    cfg:
+        The validated config (InchipConfig or ShakerConfig).
+    quiet:
+        No progress bar.
+    """
+
+    def __init__(self, rig: Any, runfile: RunFile, cfg: Any, *, quiet: bool = False) -> None:
+        self.rig = rig
+        self.file = runfile
+        self.cfg = cfg
+        self.quiet = quiet
+        self.guard = DriveGuard(rig.funcgen, reopen=rig.reopen_funcgen, log=self._event)
+        self.spot: str | None = None
+        self.sine_set: tuple[float, float] | None = None   # (amp_vpp, offset_v) programmed
+        self.freq_set: float | None = None
+        self.record_s: float | None = None
+        self.interlocks: list[dict[str, Any]] = []
+        self.gain_um_per_vpp: dict[float, float] = {}       # shaker: tray response per drive volt
+        self.timing: list[dict[str, float]] = []            # per point: total, waited (for the bench)
+
+    # -- events ------------------------------------------------------------------------------
+    def _event(self, text: str) -> None:
+        try:
+            self.file.event(text)
+        except Exception:  # the log must never stop a shutdown
+            pass
+
+    # -- the run -----------------------------------------------------------------------------
+    def run(self, plan: Plan) -> str:
+        """Execute ``plan``; return the final status (``"complete"``).
+
+        Raises whatever stopped the run (KeyboardInterrupt, Interrupted,
+        InstrumentError, InterlockEnd, ...) after the drive is off and the file
+        is finished.
+        """
+        status = "aborted: unexpected error"
+        n_done = plan.points_total - len(plan.points)
+        try:
+            with sigterm_raises(), progress(None, f"{plan.kind}", quiet=self.quiet) as bar:
+                bar.total = plan.est_s
+                bar.bar_format = "{desc} {percentage:3.0f}%|{bar}| {postfix} [{elapsed}<{remaining}]"
+                bar.set_postfix_str(f"point {n_done}/{plan.points_total}", refresh=False)
+                self._event(f"run started: {len(plan.points)} of {plan.points_total} points to measure")
+                m = self.cfg.method
+                if m.kind == "stepped":
+                    self.rig.set_record_points(math.ceil(m.dwell_cycles * self.cfg.scope.samples_per_cycle))
+                for step in plan.steps:
+                    if isinstance(step, MoveSpot):
+                        self._move_spot(step.spot, drive_off=True)
+                        continue
+                    t0 = time.monotonic()
+                    self._point(step)
+                    n_done += 1
+                    bar.set_postfix_str(f"point {n_done}/{plan.points_total}", refresh=False)
+                    bar.update(step.est_s)
+                    self.timing[-1]["total_s"] = time.monotonic() - t0 if self.timing else 0.0
+            status = "complete"
+            return status
+        except InterlockEnd as exc:
+            status = f"aborted: interlock: {exc.message}"
+            raise
+        except KeyboardInterrupt:
+            status = "interrupted: SIGINT"
+            raise
+        except Interrupted as exc:
+            status = f"interrupted: {exc.signame}"
+            raise
+        except BaseException as exc:
+            status = f"aborted: {type(exc).__name__}: {exc}"
+            raise
+        finally:
+            self._shutdown(status)
+
+    def _shutdown(self, status: str) -> None:
+        with shielded() as arrived:
+            try:
+                self.guard.final_off(status)
+            finally:
+                if arrived:
+                    self._event(f"signal(s) {arrived} arrived during shutdown")
+                self._event(f"run ended: {status}")
+                try:
+                    self.file.finish(status)
+                except Exception:
+                    pass
+
+    # -- steps -------------------------------------------------------------------------------
+    def _move_spot(self, spot: str, *, drive_off: bool) -> None:
+        if spot == self.spot:
+            return
+        if drive_off:
+            self.guard.off(f"moving the laser to {spot}")
+        self.rig.move_spot(spot)
+        self.spot = spot
+        self._event(f"laser spot at {spot}")
+
+    def _point(self, p: Any) -> None:
+        t_start = time.time()
+        try:
+            if isinstance(p, SinePoint):
+                rows, loc_rows, records = self._sine_point(p)
+            elif isinstance(p, ChirpPoint):
+                rows, loc_rows, records = self._chirp_point(p)
+            elif isinstance(p, ShakerPoint):
+                rows, loc_rows, records = self._shaker_point(p)
+            else:  # pragma: no cover - plans hold only these
+                raise TypeError(f"unknown step {p!r}")
+            rows.update(status="ok")
+        except Interlock as il:
+            self.guard.off(f"interlock: {il.reason}")
+            self._event(f"interlock at point {p.index}: {il.reason}")
+            self.interlocks.append({"index": p.index, "reason": il.reason})
+            rows = self._empty_row(p)
+            rows.update(status="interlock", reason=il.reason)
+            loc_rows, records = None, None
+            with deferred():
+                self.file.end_point(p.index, rows | {"time_unix_s": time.time(),
+                                                    "duration_s": time.time() - t_start})
+            if self.cfg.on_interlock == "end":
+                raise InterlockEnd(f"{il.reason} at point {p.index}; run ended (run.on_interlock = 'end')",
+                                   limit="interlock") from None
+            self.timing.append({"waited_s": 0.0})
+            return
+        with deferred():      # all of a point's rows, or none
+            if loc_rows is not None:
+                self.file.add_location_rows(loc_rows.pop("location"), loc_rows)
+            if records is not None:
+                group, dt, arrays = records
+                self.file.add_records(group, p.index, dt, arrays)
+            self.file.end_point(p.index, rows | {"time_unix_s": time.time(), "duration_s": time.time() - t_start})
+
+    def _empty_row(self, p: Any) -> dict[str, Any]:
+        row: dict[str, Any] = {"location": getattr(p, "location", getattr(p, "robot_spot", "")),
+                               "freq_hz": getattr(p, "freq_hz", float("nan")), "reason": ""}
+        if isinstance(p, ShakerPoint):
+            nan = float("nan")
+            row.update(tray_amp_request_um=p.tray_amp_um if p.tray_amp_um is not None else nan,
+                       drive_request_vpp=p.drive_vpp if p.drive_vpp is not None else nan, drive_vpp=nan,
+                       iterations=0, tray_amp_um=nan, tray_velocity_mm_s=complex(nan, nan),
+                       robot_velocity_mm_s=complex(nan, nan), transmissibility=complex(nan, nan),
+                       quality=0.0, video="", video_frames=0)
+        return row
+
+    # -- stepped sine ------------------------------------------------------------------------
+    def _set_sine(self, freq_hz: float, amp_vpp: float, offset_v: float) -> None:
+        """Program the generator, sending only what changed (fewer round trips per point)."""
+        fg = self.rig.funcgen = self.guard.funcgen
+        if self.sine_set != (amp_vpp, offset_v):
+            fg.set_sine(freq_hz, amp_vpp, offset_v)
+            self.sine_set = (amp_vpp, offset_v)
+            self.rig.on_drive_amplitude(amp_vpp, offset_v)
+        elif self.freq_set != freq_hz:
+            fg.set_frequency(freq_hz)
+        self.freq_set = freq_hz
+
+    def _settle_and_acquire(self, freq_hz: float, settle_s: float, dwell_s: float,
+                            t_changed: float) -> measure.Records:
+        """Wait out the settling (from ``t_changed``), record ``dwell_s``; interlock on over-range."""
+        rig = self.rig
+        if self.record_s != dwell_s:
+            rig.scope.set_timebase(dwell_s)
+            self.record_s = dwell_s
+        left = settle_s - (time.monotonic() - t_changed)
+        if left > 0:
+            time.sleep(left)
+        waited = max(left, 0.0)
+        for attempt in range(4):
+            t_acq = time.monotonic()
+            rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
+                                  timeout_s=dwell_s * 2 + 2.0)
+            waited += min(dwell_s, time.monotonic() - t_acq)
+            if rig.vibrometer.over_range():
+                raise Interlock("vibrometer over-range")
+            if not rig.velocity_clipped(rec.velocity_v) or not rig.widen_velocity_range():
+                break
+        self._waited = waited
+        return rec
+
+    def _sine_point(self, p: SinePoint) -> tuple[dict, dict, Any]:
+        self._set_sine(p.freq_hz, p.amp_vpp, p.offset_v)
+        t_changed = time.monotonic()
+        self.guard.on()
+        rec = self._settle_and_acquire(p.freq_hz, p.settle_s, p.dwell_s, t_changed)
+        ph = measure.sine_phasors(rec, p.freq_hz, self.rig.scale_mm_s_per_v)
+        self.timing.append({"waited_s": self._waited, "settle_s": p.settle_s, "dwell_s": p.dwell_s})
+        rows = {"location": p.location, "freq_hz": p.freq_hz, "reason": ""}
+        loc = {"location": p.location, "freq_hz": p.freq_hz, "frf": ph.frf, "quality": ph.quality,
+               "drive_v": ph.drive_v, "velocity_mm_s": ph.velocity_mm_s, "point_index": p.index}
+        records = None
+        if self.cfg.method.keep_raw:
+            records = ("raw", rec.dt_s, {"drive_v": (rec.drive_v, "V"), "velocity_v": (rec.velocity_v, "V")})
+        return rows, loc, records
+
+    # -- chirp -------------------------------------------------------------------------------
+    def _chirp_point(self, p: ChirpPoint) -> tuple[dict, dict, Any]:
+        rig = self.rig
+        fg = rig.funcgen = self.guard.funcgen
+        fg.set_sine(p.start_hz, p.amp_vpp, p.offset_v)
+        rig.on_drive_amplitude(p.amp_vpp, p.offset_v)
+        self.sine_set = None
+        fg.set_sweep(p.start_hz, p.stop_hz, p.length_s, spacing=p.spacing, trigger_source="BUS")
+        self.guard.on()
+        rig.scope.set_timebase(p.length_s)
+        rig.set_record_points(math.ceil(p.length_s * p.stop_hz * 10))
+        self.record_s = p.length_s
+        records = []
+        try:
+            for _ in range(p.averages):
+                rig.scope.single()
+                fg.trigger()
+                rig.scope.wait_done(p.length_s * 2 + 2.0)
+                wd = rig.scope.read_waveform(rig.drive_channel)
+                wv = rig.scope.read_waveform(rig.velocity_channel)
+                if rig.vibrometer.over_range():
+                    raise Interlock("vibrometer over-range")
+                records.append(measure.Records(np.asarray(wd.volts, float), np.asarray(wv.volts, float),
+                                               float(wd.xinc_s)))
+        finally:
+            try:
+                fg.sweep_off()
+            except InstrumentError:
+                pass
+        f, h, coh = measure.chirp_h1(records, rig.scale_mm_s_per_v, p.start_hz, p.stop_hz)
+        self.timing.append({"waited_s": p.averages * p.length_s})
+        rows = {"location": p.location, "freq_hz": float("nan"), "reason": ""}
+        loc = {"location": p.location, "freq_hz": f, "frf": h, "quality": coh, "coherence": coh,
+               "point_index": np.full(f.shape, p.index)}
+        raw = None
+        if self.cfg.method.keep_raw:
+            raw = ("raw", records[0].dt_s, {
+                "drive_v": (np.concatenate([r.drive_v for r in records]), "V"),
+                "velocity_v": (np.concatenate([r.velocity_v for r in records]), "V")})
+        return rows, loc, raw
+
+    # -- shaker ------------------------------------------------------------------------------
+    def _shaker_point(self, p: ShakerPoint) -> tuple[dict, None, Any]:
+        cfg, rig = self.cfg, self.rig
+        f = p.freq_hz
+        self._move_spot("tray", drive_off=False)
+        waited = 0.0
+        if p.tray_amp_um is not None:
+            rig.check_envelope(f, p.tray_amp_um)          # LimitError -> Interlock in rig
+            gain = self.gain_um_per_vpp.get(f)
+            vpp = p.tray_amp_um / gain if gain else cfg.control.start_vpp
+        else:
+            vpp = float(p.drive_vpp)
+        iterations = 0
+        while True:
+            rig.check_drive(vpp)
+            self._set_sine(f, vpp, 0.0)
+            t_changed = time.monotonic()
+            self.guard.on()
+            rec = self._settle_and_acquire(f, p.settle_s, p.dwell_s, t_changed)
+            waited += self._waited
+            tray = measure.sine_phasors(rec, f, rig.scale_mm_s_per_v)
+            x_um = measure.displacement_um(tray.velocity_mm_s, f)
+            iterations += 1
+            if x_um > cfg.tray_max_um:
+                raise Interlock(f"tray displacement {x_um:.3g} um above interlock.tray_max_um = "
+                                f"{cfg.tray_max_um:g} um")
+            rig.check_envelope(f, x_um)
+            if x_um > 0:
+                self.gain_um_per_vpp[f] = x_um / vpp
+            if p.tray_amp_um is None or abs(x_um / p.tray_amp_um - 1) <= cfg.control.tolerance:
+                reason = ""
+                break
+            if iterations >= p.max_iterations:
+                reason = (f"tray amplitude {x_um:.4g} um not within {cfg.control.tolerance:.0%} of "
+                          f"{p.tray_amp_um:g} um after {iterations} adjustments")
+                break
+            ratio = p.tray_amp_um / x_um if x_um > 0 else cfg.control.max_step_ratio
+            vpp *= min(max(ratio, 1 / cfg.control.max_step_ratio), cfg.control.max_step_ratio)
+        tray_rec = rec
+        self._move_spot(p.robot_spot, drive_off=False)
+        robot_rec = self._settle_and_acquire(f, p.settle_s, p.dwell_s, time.monotonic())
+        waited += self._waited
+        robot = measure.sine_phasors(robot_rec, f, rig.scale_mm_s_per_v)
+        from analysis.frf import transmissibility
+
+        T, q = transmissibility(robot.velocity_re_drive, tray.velocity_re_drive,
+                                robot_quality=robot.quality, tray_quality=tray.quality)
+        video, frames = "", 0
+        if p.video_s > 0:
+            video, frames = self._video(p)
+            waited += p.video_s
+        self.timing.append({"waited_s": waited})
+        rows = {"location": p.robot_spot, "freq_hz": f, "reason": reason,
+                "tray_amp_request_um": p.tray_amp_um if p.tray_amp_um is not None else math.nan,
+                "drive_request_vpp": p.drive_vpp if p.drive_vpp is not None else math.nan,
+                "drive_vpp": vpp, "iterations": iterations, "tray_amp_um": x_um,
+                "tray_velocity_mm_s": tray.velocity_re_drive, "robot_velocity_mm_s": robot.velocity_re_drive,
+                "transmissibility": complex(T), "quality": float(q), "video": video, "video_frames": frames}
+        records = ("records", tray_rec.dt_s, {
+            "tray_velocity_mm_s": (tray_rec.velocity_v * rig.scale_mm_s_per_v, "mm/s"),
+            "robot_velocity_mm_s": (robot_rec.velocity_v * rig.scale_mm_s_per_v, "mm/s"),
+            "tray_drive_v": (tray_rec.drive_v, "V"), "robot_drive_v": (robot_rec.drive_v, "V")})
+        return rows, None, records
+
+    def _video(self, p: ShakerPoint) -> tuple[str, int]:
+        folder = self.file.path.with_name(self.file.path.stem + "_videos")
+        folder.mkdir(exist_ok=True)
+        path = folder / f"p{p.index:05d}.mp4"
+        info = self.rig.record_video(path, p.video_s)
+        self._event(f"video {path.name}: {info.get('frames', 0)} frames")
+        rel = os.path.relpath(Path(info.get("path", path)), self.file.path.parent)
+        return rel, int(info.get("frames", 0))

@@ -1,0 +1,111 @@
+"""The lab's control channel (resource ``control``): what a person at the bench would do by hand.
+
+A small SCPI-like language on a raw socket, so ``labkit lab serve`` users and
+the experiment runner can move the laser, change the set-up, arm faults and
+film without Python access:
+
+=====================================  =============================================
+``LAB:SPOT BODY|HIP|KNEE|TRAY``        point the laser; ``LAB:SPOT?`` -> ``KNEE``
+``LAB:SETup INCHip|SHAKer``            ``LAB:SETup?`` -> ``INCHIP``
+``LAB:FAULT <inst>,<kind>[,<after>[,"<match>"[,<count>]]]``  arm a fault
+``LAB:FAULT:CLEar [<inst>]``           disarm faults
+``LAB:TRUTh?``                         the lab's truth as one JSON line
+``LAB:OUTPut? <inst>,<ch>``            last output state from the timeline (0/1)
+``CAM:FPS <fps>``                      ``CAM:FPS?``
+``CAM:REC "<path>",<duration_s>``      film the robot; answers ``<frames>`` (0: failed, see SYST:ERR?)
+``CAM:TIMEstamps?``                    the last recording's frame times, s
+=====================================  =============================================
+"""
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING
+
+from labkit import __version__
+from labkit.lab.scpi import Call, ScpiError, ScpiInstrument, fmt_num
+
+if TYPE_CHECKING:  # pragma: no cover
+    from labkit.lab.core import VirtualLab
+
+
+def _unquote(text: str) -> str:
+    text = text.strip()
+    if len(text) >= 2 and text[0] == text[-1] and text[0] in "\"'":
+        return text[1:-1]
+    return text
+
+
+class Control(ScpiInstrument):
+    name = "control"
+    idn = f"labkit,VirtualLab control,0,{__version__}"
+
+    def __init__(self, lab: "VirtualLab") -> None:
+        self.lab = lab
+        super().__init__()
+
+    def build(self) -> None:
+        self.add("LAB:SPOT", set=self._spot, query=lambda c: self.lab.spot.upper())
+        self.add("LAB:SETup", set=self._setup, query=lambda c: self.lab.setup.upper())
+        self.add("LAB:FAULT", set=self._fault)
+        self.add("LAB:FAULT:CLEar", set=lambda c: self.lab.clear_faults(
+            c.params[0].lower() if c.params else None))
+        self.add("LAB:TRUTh", query=lambda c: json.dumps(self.lab.truth, default=str))
+        self.add("LAB:OUTPut", query=self._output)
+        self.add("CAM:FPS", set=lambda c: setattr(self.lab, "camera_fps", self.num(c.one(), "", 1.0, 1000.0)),
+                 query=lambda c: fmt_num(self.lab.camera_fps))
+        self.add("CAM:RECord", set=self._record, query=self._record, answers=True)
+        self.add("CAM:TIMEstamps", query=self._timestamps)
+
+    def _spot(self, c: Call) -> None:
+        try:
+            self.lab.set_spot(c.one().lower())
+        except ValueError:
+            raise ScpiError(-224, "Illegal parameter value;spot is BODY, HIP, KNEE or TRAY") from None
+
+    def _setup(self, c: Call) -> None:
+        word = c.one().strip().upper()
+        setup = "inchip" if word in ("INCH", "INCHIP") else "shaker" if word in ("SHAK", "SHAKER") else None
+        if setup is None:
+            raise ScpiError(-224, "Illegal parameter value;setup is INCHIP or SHAKER")
+        self.lab.set_setup(setup)
+
+    def _fault(self, c: Call) -> None:
+        p = c.params
+        if len(p) < 2:
+            raise ScpiError(-109)
+        if len(p) > 5:
+            raise ScpiError(-108)
+        try:
+            after = int(self.num(p[2], "", 0, 1e9)) if len(p) > 2 else 0
+            match = _unquote(p[3]) or None if len(p) > 3 else None
+            count = int(self.num(p[4], "", 1, 1e9)) if len(p) > 4 else 1
+            self.lab.inject_fault(p[0].strip().lower(), p[1].strip().lower(), after, match, count)
+        except ValueError as exc:
+            raise ScpiError(-224, f"Illegal parameter value;{exc}") from None
+
+    def _output(self, c: Call) -> str:
+        if len(c.params) != 2:
+            raise ScpiError(-109)
+        inst = c.params[0].strip().lower()
+        ch = int(self.num(c.params[1], "", 1, 4))
+        return "1" if self.lab.output_state(inst, ch) else "0"
+
+    def _record(self, c: Call) -> str:
+        if len(c.params) != 2:
+            raise ScpiError(-109)
+        path = _unquote(c.params[0])
+        duration = self.num(c.params[1], "S", 0.05, 600.0)
+        from labkit.lab.camera import record
+        try:
+            info = record(self.lab, path, duration)
+        except (OSError, ValueError) as exc:
+            # always answer (a client waits for the frame count): 0 frames, and the reason queued
+            self.push_error(-230, f"Data corrupt or stale;camera: {exc}"[:200])
+            return "0"
+        return str(info["frames"])
+
+    def _timestamps(self, c: Call) -> str:
+        rec = self.lab.last_recording
+        if rec is None:
+            return ""
+        return ",".join(f"{t:.6f}" for t in rec["timestamps_s"])

@@ -1,0 +1,406 @@
+"""The virtual lab: simulated instruments on real transports, driven by the project's physics.
+
+Wiring (what a person would have cabled on the bench)
+-----------------------------------------------------
+* generator channel 1 -> the robot's PZT (``inchip``) or the amplifier input
+  (``shaker``); its sync output -> the scope's EXT trigger input;
+* scope channel 1 <- generator channel 1 (the drive, volts at the high-Z load);
+* scope channel 2 <- the vibrometer's analog output at the laser spot
+  (velocity / scale factor, clipped at +-10 V);
+* scope channel 3 <- (``shaker``) a reference vibrometer on the tray, same
+  scale factor; in-chip it only carries noise; channel 4: noise.
+
+Time is the wall clock (``time.monotonic``): settings take effect when they
+are received and the scope acquires in real time. After a change of the
+drive (frequency, amplitude, output on, ...) the structure is taken to start
+from rest; responses are computed with their transients until they have
+decayed (12 time constants of the slowest mode), then analytically (sine).
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections import OrderedDict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labkit.errors import ConfigError
+from labkit.lab.funcgen import Drive, Keysight33500B
+from labkit.lab.physics import SPOTS, ShakerChain, TetheredModel, simulate_linear
+from labkit.lab.scope import InfiniiVision
+from labkit.lab.transport import Fault, PtyServer, TcpServer
+from labkit.lab.vibrometer import FULL_SCALE_V, OFV5000
+
+SETUPS = ("inchip", "shaker")
+
+
+def load_robot(robot: Any) -> Any:
+    """``None`` -> default :class:`RobotParams`; a path -> read the TOML; params pass through."""
+    if robot is not None and not isinstance(robot, (str, Path)):
+        return robot
+    try:
+        from labkit.sim import RobotParams
+    except ImportError as exc:  # the simulator package is missing or broken
+        if robot is None:
+            return None
+        raise ConfigError(f"cannot read robot parameters: labkit.sim unavailable ({exc})", file=robot) from None
+    if robot is None:
+        return RobotParams()
+    return RobotParams.from_toml(robot)
+
+
+class VirtualLab:
+    """Start the simulated 33500B, InfiniiVision, OFV-5000 and the control channel.
+
+    Parameters
+    ----------
+    robot:
+        None (default parameters), a parameter-file path, or a ``RobotParams``.
+    seed:
+        Seed of every random draw (noise, garbage faults).
+    tether_hz, tether_damping, knee_hz, knee_damping:
+        The in-chip-only modes (the hip mode comes from the robot parameters).
+    shapes_mm_s_per_v:
+        Peak mobility per spot and mode (see :mod:`labkit.lab.physics`).
+    amplifier_gain_db, shaker_accel_m_s2_per_v:
+        The declared amplifier gain and the shaker's sensitivity.
+    noise_v_rms, noise_mm_s_rms:
+        Scope input noise (volts) and vibrometer noise floor (mm/s).
+    sim_duration_s:
+        Length of each cached shaker simulation.
+    scope_memory_points:
+        The scope's acquisition memory (a record has the requested
+        ``:WAVeform:POINts``, at most this many).
+
+    Examples
+    --------
+    >>> with VirtualLab(seed=1) as lab:            # doctest: +SKIP
+    ...     lab.set_spot("knee")
+    ...     print(lab.resources["scope"])
+    """
+
+    def __init__(self, robot: Any = None, seed: int = 0, *, tether_hz: float = 830.0,
+                 tether_damping: float = 0.02, knee_hz: float = 3400.0, knee_damping: float = 0.015,
+                 shapes_mm_s_per_v: dict[str, tuple[float, float, float]] | None = None,
+                 amplifier_gain_db: float = 20.0, shaker_accel_m_s2_per_v: float = 20.0,
+                 noise_v_rms: float = 5e-4, noise_mm_s_rms: float = 0.01,
+                 sim_duration_s: float = 1.0, scope_memory_points: int = 1_000_000) -> None:
+        self.seed = int(seed)
+        self.params = load_robot(robot)
+        hip_hz, hip_zeta = 438.0, 0.25
+        if self.params is not None:
+            hip_hz = float(self.params.modal_freq_hz[0])
+            hip_zeta = float(self.params.modal_damping_ratio[0])
+        kw = {} if shapes_mm_s_per_v is None else {"shapes_mm_s_per_v": dict(shapes_mm_s_per_v)}
+        self.model = TetheredModel(freq_hz=(hip_hz, float(tether_hz), float(knee_hz)),
+                                   damping_ratio=(hip_zeta, float(tether_damping), float(knee_damping)), **kw)
+        self.chain = ShakerChain(amplifier_gain_db=float(amplifier_gain_db),
+                                 accel_m_s2_per_v=float(shaker_accel_m_s2_per_v))
+        self.noise_v_rms = float(noise_v_rms)
+        self.noise_mm_s_rms = float(noise_mm_s_rms)
+        self.sim_duration_s = float(sim_duration_s)
+        self._spot = "knee"
+        self._setup = "inchip"
+        self._state_lock = threading.Lock()
+        self._sim_cache: OrderedDict[tuple[float, float], Any] = OrderedDict()
+        self._sim_lock = threading.Lock()
+        self.log: list[tuple[float, str, str, str]] = []
+        self.output_timeline: list[tuple[float, str, int, bool]] = []
+        self.t0 = time.monotonic()
+        self.servers: dict[str, TcpServer | PtyServer] = {}
+        self.camera_fps = 30.0
+        self.last_recording: dict[str, Any] | None = None
+
+        self.funcgen = Keysight33500B(on_output=lambda ch, on: self._output("funcgen", ch, on))
+        self.scope = InfiniiVision(self._signals, self._sync, seed=self.seed,
+                                   memory_points=scope_memory_points)
+        self.vibrometer = OFV5000(self.spot_peak_velocity_mm_s)
+        from labkit.lab.control import Control
+        self.control = Control(self)
+        for ch in (1, 2):
+            self.output_timeline.append((0.0, "funcgen", ch, False))
+        self._started = False
+
+    # -- lifecycle ----------------------------------------------------------------------------
+    def start(self) -> "VirtualLab":
+        if self._started:
+            return self
+        self.servers = {
+            "funcgen": TcpServer(self.funcgen, self._log, seed=self.seed + 1),
+            "scope": TcpServer(self.scope, self._log, seed=self.seed + 2),
+            "vibrometer": PtyServer(self.vibrometer, self._log, seed=self.seed + 3),
+            "control": TcpServer(self.control, self._log, seed=self.seed + 4),
+        }
+        for server in self.servers.values():
+            server.start()
+        self._started = True
+        return self
+
+    def close(self) -> None:
+        """Stop every server; outputs are switched off first (logged in the timeline)."""
+        for ch in (1, 2):
+            with self.funcgen.lock:
+                self.funcgen._set_output(ch, False)
+        self.scope.close()
+        for server in self.servers.values():
+            server._stop.set()   # every server winds down at once, then each is joined
+        for server in self.servers.values():
+            server.close()
+        self._started = False
+
+    def __enter__(self) -> "VirtualLab":
+        return self.start()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    @property
+    def resources(self) -> dict[str, str]:
+        """VISA resource strings of the instruments and of the control channel."""
+        return {name: server.resource for name, server in self.servers.items()}
+
+    # -- the person at the bench ----------------------------------------------------------------
+    def set_spot(self, spot: str) -> None:
+        """Point the laser at ``body``, ``hip``, ``knee`` or ``tray``."""
+        spot = str(spot).strip().lower()
+        if spot not in SPOTS:
+            raise ValueError(f"spot must be one of {', '.join(SPOTS)}, not {spot!r}")
+        with self._state_lock:
+            self._spot = spot
+        self._log("lab", "state", f"spot {spot}")
+
+    @property
+    def spot(self) -> str:
+        return self._spot
+
+    def set_setup(self, setup: str) -> None:
+        """``inchip`` (generator -> PZT of the tethered robot) or ``shaker`` (-> amplifier -> shaker)."""
+        setup = str(setup).strip().lower()
+        if setup not in SETUPS:
+            raise ValueError(f"setup must be one of {', '.join(SETUPS)}, not {setup!r}")
+        with self._state_lock:
+            self._setup = setup
+        self._log("lab", "state", f"setup {setup}")
+
+    @property
+    def setup(self) -> str:
+        return self._setup
+
+    def inject_fault(self, instrument: str, kind: str = "drop", after: int = 0, match: str | None = None,
+                     count: int = 1) -> Fault:
+        """Arm a fault on ``instrument``'s replies (see :class:`labkit.lab.transport.Fault`).
+
+        ``after`` replies (to commands containing ``match``, if given) go out
+        normally first; the next ``count`` are dropped mid-transfer, withheld
+        (``stall``) or replaced by ``garbage``.
+        """
+        if instrument not in self.servers:
+            raise ValueError(f"instrument must be one of {', '.join(self.servers)}, not {instrument!r}")
+        fault = Fault(kind, int(after), match, int(count))
+        self.servers[instrument].inject(fault)
+        self._log("lab", "state", f"fault armed on {instrument}: {kind} after {after} (match {match!r})")
+        return fault
+
+    def clear_faults(self, instrument: str | None = None) -> None:
+        for name, server in self.servers.items():
+            if instrument in (None, name):
+                server.clear_faults()
+
+    # -- records --------------------------------------------------------------------------------
+    def now_s(self) -> float:
+        return time.monotonic() - self.t0
+
+    def _log(self, instrument: str, direction: str, text: str) -> None:
+        self.log.append((self.now_s(), instrument, direction, text))
+
+    def _output(self, instrument: str, channel: int, on: bool) -> None:
+        self.output_timeline.append((self.now_s(), instrument, channel, on))
+
+    def output_state(self, instrument: str = "funcgen", channel: int = 1) -> bool:
+        """The latest state of one output in :attr:`output_timeline`."""
+        states = [on for _, inst, ch, on in self.output_timeline if inst == instrument and ch == channel]
+        return states[-1] if states else False
+
+    # -- truth ----------------------------------------------------------------------------------
+    @property
+    def truth(self) -> dict[str, Any]:
+        """What the lab really is: modes, mode shapes, chain, robot parameters."""
+        return {
+            "setup": self._setup,
+            "spot": self._spot,
+            "seed": self.seed,
+            "tethered_modes": {"names": list(self.model.names), "freq_hz": list(self.model.freq_hz),
+                               "damping_ratio": list(self.model.damping_ratio)},
+            "mode_shapes_mm_s_per_v": {k: list(v) for k, v in self.model.shapes_mm_s_per_v.items()},
+            "frf_model": "H(f) = sum_i R_i 2 zeta_i w_i (j w) / (w_i^2 - w^2 + 2 j zeta_i w_i w), (mm/s)/V",
+            "amplifier_gain_db": self.chain.amplifier_gain_db,
+            "shaker_accel_m_s2_per_v": self.chain.accel_m_s2_per_v,
+            "shaker_suspension_hz": self.chain.suspension_hz,
+            "shaker_suspension_damping_ratio": self.chain.suspension_damping_ratio,
+            "generator_source_ohm": 50.0,
+            "vibrometer_full_scale_v": FULL_SCALE_V,
+            "noise_v_rms": self.noise_v_rms,
+            "noise_mm_s_rms": self.noise_mm_s_rms,
+            "scope_channels": {"1": "drive_v (generator channel 1 at the high-Z load)",
+                               "2": "vibrometer output at the spot, V",
+                               "3": "tray reference vibrometer, V (shaker setup)", "4": "noise"},
+            "robot": None if self.params is None else self.params.to_dict(),
+        }
+
+    def frf(self, spot: str, freq_hz: np.ndarray | float) -> np.ndarray:
+        """True in-chip velocity per drive volt at ``spot``, (mm/s)/V."""
+        return self.model.frf(spot, freq_hz)
+
+    # -- physics --------------------------------------------------------------------------------
+    def _linear(self, parts: list, frf: Any, drive: Drive, t_abs: np.ndarray, settle_s: float,
+                f_max: float) -> np.ndarray:
+        t0 = float(t_abs[0])
+        if not drive.on and drive.t_epoch <= t0:
+            return np.zeros(len(t_abs))
+        if drive.is_sine() and drive.t_epoch <= t0 - settle_s:
+            h = complex(np.ravel(frf(drive.freq_hz))[0])
+            phase = 2 * np.pi * drive.freq_hz * (t_abs - drive.t_epoch) + drive.phase_rad
+            return abs(h) * drive.amp_v * np.sin(phase + np.angle(h))
+        t_start = max(drive.t_epoch, t0 - settle_s)
+        f_top = max(f_max, drive.freq_range_hz()[1])
+        return simulate_linear(parts, drive.voltage, t_abs, t_start, f_top)
+
+    def _tray_velocity(self, drive: Drive, t_abs: np.ndarray) -> np.ndarray:
+        return self._linear(self.chain.transfer(), self.chain.tray_velocity_frf, drive, t_abs,
+                            self.chain.settle_s(), 200.0)
+
+    def _spot_velocity(self, spot: str, setup: str, drive: Drive, t_abs: np.ndarray) -> np.ndarray:
+        if setup == "inchip":
+            if spot == "tray":
+                return np.zeros(len(t_abs))
+            return self._linear(self.model.transfer(spot), lambda f: self.model.frf(spot, f), drive,
+                                t_abs, self.model.settle_s(), self.model.max_freq_hz())
+        tray = self._tray_velocity(drive, t_abs)
+        if spot == "tray":
+            return tray
+        return self._robot_velocity(spot, drive, t_abs, tray)
+
+    def _signals(self, t_abs: np.ndarray, rng: np.random.Generator,
+                 channels: tuple[int, ...] = (1, 2, 3, 4)) -> dict[int, np.ndarray]:
+        """The scope channels' volts at absolute times ``t_abs`` (one acquisition)."""
+        with self._state_lock:
+            spot, setup = self._spot, self._setup
+        drive = self.funcgen.drive(1)
+        scale = self.vibrometer.scale_mm_s_per_v
+        n = len(t_abs)
+        out: dict[int, np.ndarray] = {}
+        for ch in channels:
+            if ch == 1:
+                out[1] = drive.voltage(t_abs)
+            elif ch == 2 or (ch == 3 and setup == "shaker"):
+                v = (self._spot_velocity(spot, setup, drive, t_abs) if ch == 2
+                     else self._tray_velocity(drive, t_abs))
+                v = v + rng.normal(0.0, self.noise_mm_s_rms, n)
+                out[ch] = np.clip(v / scale, -FULL_SCALE_V, FULL_SCALE_V)
+            else:
+                out[ch] = np.zeros(n)
+            out[ch] += rng.normal(0.0, self.noise_v_rms, n)
+        return out
+
+    def _sync(self, source: str, t_min: float) -> float | None:
+        """The scope's trigger: generator sync (EXT) or a rising edge of the drive (CHAN1)."""
+        drive = self.funcgen.drive(1)
+        if source == "EXT":
+            return drive.next_sync(t_min)
+        if source == "CHAN1":
+            if drive.is_sine() and drive.amp_v > 0:
+                level = self.scope.get("trig_level")
+                x = (level - drive.offset_v) / drive.amp_v
+                if abs(x) >= 1:
+                    return None
+                slope_neg = self.scope.get("trig_slope") == "NEG"
+                phi = np.pi - np.arcsin(x) if slope_neg else np.arcsin(x)
+                period = 1 / drive.freq_hz
+                t_phi = drive.t_epoch + (phi - drive.phase_rad) / (2 * np.pi * drive.freq_hz)
+                return float(t_phi + np.ceil((t_min - t_phi) / period) * period)
+            return drive.next_sync(t_min)   # sweeps/bursts: taken at their start (documented)
+        return None
+
+    def spot_peak_velocity_mm_s(self) -> float:
+        """Steady-state peak velocity at the spot for the current drive (over-range check)."""
+        drive = self.funcgen.drive(1)
+        if not drive.on:
+            return 0.0
+        lo, hi = drive.freq_range_hz()
+        freqs = np.geomspace(max(lo, 1.0), max(hi, 1.0), 200) if hi > lo else np.array([max(lo, 1e-3)])
+        peak_v = drive.amp_v + abs(drive.offset_v) * 0
+        with self._state_lock:
+            spot, setup = self._spot, self._setup
+        if setup == "inchip":
+            return float(np.max(np.abs(self.model.frf(spot, freqs))) * peak_v)
+        tray = float(np.max(np.abs(self.chain.tray_velocity_frf(freqs))) * peak_v)
+        if spot == "tray" or not drive.is_sine():
+            return tray
+        res = self._simulation(drive.freq_hz, self.chain.tray_amp_um(drive.freq_hz, drive.amp_v))
+        if res is None:
+            return tray
+        _, v = self._sim_velocity(res, spot)
+        return float(np.max(np.abs(v[len(v) // 3:])))
+
+    # -- shaker: the hybrid simulator -----------------------------------------------------------
+    def _simulation(self, freq_hz: float, amp_um: float) -> Any:
+        """A cached ``labkit.sim.simulate`` of the robot on the tray (None without the simulator)."""
+        if self.params is None or amp_um <= 0:
+            return None
+        key = (round(float(freq_hz), 6), round(float(amp_um), 4))
+        with self._sim_lock:
+            if key in self._sim_cache:
+                self._sim_cache.move_to_end(key)
+                return self._sim_cache[key]
+            try:
+                from labkit.sim import Shaker, simulate
+                res = simulate(self.params, Shaker(freq_hz=key[0], amp_um=key[1]),
+                               duration_s=self.sim_duration_s, seed=self.seed,
+                               record_dt_s=1.0 / (key[0] * 64))
+            except Exception as exc:  # the instrument side keeps working; the log says why
+                self._log("lab", "error", f"simulate failed at {key}: {type(exc).__name__}: {exc}")
+                return None
+            self._sim_cache[key] = res
+            while len(self._sim_cache) > 32:
+                self._sim_cache.popitem(last=False)
+            return res
+
+    def _sim_velocity(self, res: Any, spot: str) -> tuple[np.ndarray, np.ndarray]:
+        """(t_s, vertical velocity in mm/s) at a spot of the simulated robot."""
+        t = np.asarray(res.t_s, dtype=float)
+        if spot == "knee":
+            return t, np.asarray(res.knee_vz_mm_s, dtype=float)[:, 0]
+        z = np.asarray(res.body_z_um, dtype=float)
+        if spot == "hip":
+            # leg 1's attachment: x = +half width, y = +pitch (small angles, model.md section 3)
+            ang = np.asarray(res.body_angles_rad, dtype=float)
+            x_um = self.params.leg_half_width_mm * 1e3
+            y_um = self.params.leg_pitch_mm * 1e3
+            z = z + y_um * ang[:, 0] - x_um * ang[:, 1]
+        return t, np.gradient(z, t) * 1e-3
+
+    def _robot_velocity(self, spot: str, drive: Drive, t_abs: np.ndarray, tray: np.ndarray) -> np.ndarray:
+        if not drive.is_sine():
+            # the hybrid simulator is run for sines only; other drives: the robot rides the tray
+            return tray
+        f = drive.freq_hz
+        res = self._simulation(f, self.chain.tray_amp_um(f, drive.amp_v))
+        if res is None:
+            return tray
+        t_sim, v_sim = self._sim_velocity(res, spot)
+        w = 2 * np.pi * f
+        # the simulator's ground phase, measured, so the lab does not depend on its convention
+        g = np.asarray(res.ground_z_um, dtype=float)
+        phi_g = float(np.angle(np.sum(g * np.exp(-1j * w * t_sim)))) + np.pi / 2
+        # the lab's tray displacement phase: drive phase + shaker phase (velocity -> displacement)
+        h = complex(np.ravel(self.chain.tray_velocity_frf(f))[0])
+        phi_lab = drive.phase_rad + np.angle(h) - np.pi / 2
+        tau = (t_abs - drive.t_epoch) + (phi_lab - phi_g) / w
+        # wrap into the simulation's settled part, a whole number of drive periods long
+        start = t_sim[-1] / 3
+        n_per = max(1, int(np.floor((t_sim[-1] - start) * f)))
+        span = n_per / f
+        tau = start + np.mod(tau - start, span)
+        return np.interp(tau, t_sim, v_sim)

@@ -1,0 +1,105 @@
+"""A simulated Polytec OFV-5000 controller (velocity decoder VD-09) on a pseudo-terminal.
+
+Protocol (RS-232, ``\\n``): ``Get,<Dev>,<i>,<Prop>`` answers one line;
+``Set,<Dev>,<i>,<Prop>,<value>`` answers nothing (as the controller);
+``GetDevInfo,<Dev>,<i>,<Prop>`` answers the allowed values, comma-separated.
+Unknown devices, properties or values get no answer at all (a driver times
+out), except ``GetDevInfo`` of an unknown device which answers
+``Not Available``. The velocity decoder is ``VeloDec,1``.
+
+The analog output is velocity / scale factor, at most +-10 V;
+``Get,VeloDec,1,OverRange`` is ``1`` while the velocity at the laser spot
+exceeds the range (a lab choice: the OFV-5000's over-range indicator has no
+documented remote query here).
+"""
+from __future__ import annotations
+
+import threading
+from typing import Callable
+
+RANGES_MM_S_PER_V = (1.0, 5.0, 25.0, 125.0, 1000.0)
+FULL_SCALE_V = 10.0
+
+
+def range_text(scale: float) -> str:
+    return f"{scale:g}mm/s/V"
+
+
+class OFV5000:
+    """The controller's state and line protocol; ``peak_velocity_mm_s()`` comes from the lab."""
+
+    name = "vibrometer"
+
+    def __init__(self, peak_velocity_mm_s: Callable[[], float] = lambda: 0.0) -> None:
+        self.peak_velocity_mm_s = peak_velocity_mm_s
+        self.lock = threading.RLock()
+        self.scale_mm_s_per_v = 125.0
+        self.props: dict[tuple[str, int, str], str] = {
+            ("Controller", 0, "Name"): "OFV-5000",
+            ("Controller", 0, "Version"): "4.1",
+            ("Controller", 0, "Remote"): "Local",
+            ("Controller", 0, "PowerUp"): "Last",
+            ("Interface", 0, "Name"): "RS-232",
+            ("Interface", 0, "BaudRate"): "115200",
+            ("Interface", 0, "Echo"): "Off",
+            ("SensorHead", 0, "Name"): "OFV-505",
+            ("VeloDec", 1, "Name"): "VD-09",
+            ("VeloDec", 1, "MaxFreq"): "1.5MHz",
+            ("VeloDec", 1, "SignalDelay"): "7.6us",
+            ("VeloDec", 1, "Filter"): "Off",
+            ("VeloDec", 1, "Tracking"): "Off",
+        }
+        self.allowed: dict[tuple[str, int, str], tuple[str, ...]] = {
+            ("VeloDec", 1, "Range"): tuple(range_text(r) for r in RANGES_MM_S_PER_V),
+            ("Controller", 0, "Remote"): ("Local", "Remote"),
+            ("Interface", 0, "Echo"): ("Off", "On"),
+            ("VeloDec", 1, "Filter"): ("Off", "20kHz", "100kHz", "1.5MHz"),
+            ("VeloDec", 1, "Tracking"): ("Off", "On"),
+        }
+
+    @property
+    def full_scale_mm_s(self) -> float:
+        return self.scale_mm_s_per_v * FULL_SCALE_V
+
+    def over_range(self) -> bool:
+        return self.peak_velocity_mm_s() > self.full_scale_mm_s
+
+    def handle(self, line: str) -> bytes | None:
+        parts = [p.strip() for p in line.strip().split(",")]
+        with self.lock:
+            reply = self._handle(parts)
+        if reply is None:
+            return None
+        if self.props[("Interface", 0, "Echo")] == "On":
+            return (line + "\n" + reply + "\n").encode("ascii")
+        return (reply + "\n").encode("ascii")
+
+    def _handle(self, parts: list[str]) -> str | None:
+        if len(parts) < 4 or not parts[2].isdigit():
+            return None
+        verb, dev, idx, prop = parts[0], parts[1], int(parts[2]), parts[3]
+        key = (dev, idx, prop)
+        if verb == "Get" and len(parts) == 4:
+            if key == ("VeloDec", 1, "Range"):
+                return range_text(self.scale_mm_s_per_v)
+            if key == ("VeloDec", 1, "OverRange"):
+                return "1" if self.over_range() else "0"
+            return self.props.get(key)
+        if verb == "GetDevInfo" and len(parts) == 4:
+            if key in self.allowed:
+                return ",".join(self.allowed[key])
+            if key in self.props:
+                return self.props[key]
+            return "Not Available"
+        if verb == "Set" and len(parts) == 5:
+            value = parts[4]
+            if key == ("VeloDec", 1, "Range"):
+                for r in RANGES_MM_S_PER_V:
+                    if value.lower() == range_text(r).lower():
+                        self.scale_mm_s_per_v = r
+                return None
+            if key in self.allowed and value not in self.allowed[key]:
+                return None      # invalid settings are ignored silently
+            if key in self.props:
+                self.props[key] = value
+        return None

@@ -1,0 +1,39 @@
+"""labkit.sim — the bundled hybrid simulator of the Qu-Choi-Oldham 2017 hexapod model.
+
+Public API (``docs/model.md`` is the specification)::
+
+    from labkit.sim import RobotParams, Shaker, PZT, simulate, SimResult, sweep, SweepResult
+    r = simulate(RobotParams(), Shaker(freq_hz=240, amp_um=25), duration_s=2.0)
+    r.mean_speed_mm_s, r.contact_fraction, r.patterns, r.summary(), r.to_h5("run.h5")
+
+Modules: :mod:`~labkit.sim.params` (RobotParams, TOML files, validation),
+:mod:`~labkit.sim.excitation` (Shaker, PZT), :mod:`~labkit.sim.model` (SI
+constants, static equilibrium, array layouts), :mod:`~labkit.sim.kernel`
+(numba integrator), :mod:`~labkit.sim.reference` (plain-Python integrator of
+the same scheme), :mod:`~labkit.sim.core` (``simulate``),
+:mod:`~labkit.sim.result` (SimResult); sweeps, Monte Carlo and named
+scenarios are in :mod:`~labkit.sim.sweep`, :mod:`~labkit.sim.uncertainty`,
+:mod:`~labkit.sim.scenarios`.
+
+Switches for ablations and checks (all plain RobotParams fields or
+``simulate`` options, so they pickle and sweep):
+
+* ``simulate(..., ablation="no_adhesion")`` zeroes ``c_ad_n`` and ``c_ad_t_n_s``;
+  ``ablation="no_squeeze_film"`` zeroes ``b_g_body_n_m2_s`` and
+  ``b_g_foot_n_m2_s`` (:data:`labkit.sim.core.ABLATIONS`; the same as
+  ``params.replace(...)`` with those fields at 0);
+* ``cy_sign=(s1, s2, s3)``: the sign of each mode's lateral coupling (flip
+  to reverse the walk; 0 removes lateral coupling);
+* ``mu``: Coulomb friction of a pinned foot (``inf``, the default, = no slip);
+* ``simulate(..., engine="numba" | "reference")``, ``dt_s``, ``record_dt_s``,
+  ``seed`` (small random start of the free modes), ``transient_s``.
+"""
+from labkit.sim.params import RobotParams
+from labkit.sim.excitation import PZT, Shaker
+from labkit.sim.result import SimResult
+from labkit.sim.core import ABLATIONS, simulate
+
+__all__ = ["RobotParams", "Shaker", "PZT", "simulate", "SimResult", "ABLATIONS", "sweep", "SweepResult"]
+
+# Last, to avoid an import cycle (sweep imports from this package).
+from labkit.sim.sweep import SweepResult, sweep  # noqa: E402

@@ -1,0 +1,172 @@
+"""simulate(): run one scenario with the compiled kernel or the Python reference."""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from labkit.errors import InputError
+from labkit.sim import model as M
+from labkit.sim.excitation import PZT, Shaker
+from labkit.sim.params import RobotParams
+from labkit.sim.result import SimResult, classify_pattern
+
+#: Default step: this many steps per period of the fastest of (highest mode, drive).
+STEPS_PER_PERIOD = 50
+#: Default recording interval: at most 1e-4 s, and at least 20 samples per drive period.
+RECORD_DT_MAX_S = 1e-4
+RECORD_PER_PERIOD = 20
+#: Default start-up transient excluded from speed and contact statistics:
+#: min(TRANSIENT_MAX_S, TRANSIENT_FRACTION * duration).
+TRANSIENT_MAX_S = 0.2
+TRANSIENT_FRACTION = 0.25
+#: With a seed, the modes that are free at rest start with this RMS deviation (um).
+JITTER_UM = 0.05
+#: Capacity of the impact log (further impacts are counted, not logged).
+EVENT_LOG_CAP = 200_000
+
+#: Ablations by name (paper Fig. 12): the RobotParams fields they zero.
+ABLATIONS: dict[str, dict[str, float]] = {
+    "none": {},
+    "no_adhesion": {"c_ad_n": 0.0, "c_ad_t_n_s": 0.0},
+    "no_squeeze_film": {"b_g_body_n_m2_s": 0.0, "b_g_foot_n_m2_s": 0.0},
+}
+
+ENGINES = ("numba", "reference")
+
+
+def ablate(params: RobotParams, ablation: str | None) -> RobotParams:
+    """``params`` with the forces of a named ablation (:data:`ABLATIONS`) switched off."""
+    if ablation is None:
+        return params
+    name = ablation.replace("-", "_")
+    if name not in ABLATIONS:
+        raise InputError(f"unknown ablation {ablation!r}", key="ablation", expected=", ".join(ABLATIONS))
+    return params.replace(**ABLATIONS[name]) if ABLATIONS[name] else params
+
+
+def default_dt(params: RobotParams, scenario: Shaker | PZT) -> float:
+    """:data:`STEPS_PER_PERIOD` steps per period of the fastest mode or drive."""
+    f_top = max(max(params.modal_freq_hz), scenario.freq_hz)
+    return 1.0 / (STEPS_PER_PERIOD * f_top)
+
+
+def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.0, dt_s: float | None = None,
+             record_dt_s: float | None = None, seed: int | None = None, *, engine: str = "numba",
+             ablation: str | None = None, transient_s: float | None = None,
+             jitter_um: float = JITTER_UM) -> SimResult:
+    """Simulate the robot under one excitation, starting on its six feet, riding the ground.
+
+    Parameters
+    ----------
+    params:
+        The robot (:class:`RobotParams`).
+    scenario:
+        :class:`Shaker` (ground sine) or :class:`PZT` (on-board square wave, tripod gait).
+    duration_s:
+        Simulated time.
+    dt_s:
+        Fixed step (default :func:`default_dt`).
+    record_dt_s:
+        Sampling interval of the recorded arrays (rounded to a multiple of the step).
+    seed:
+        ``None``: start exactly at rest. An integer: the free modes start with a
+        small random deviation (RMS ``jitter_um``), reproducibly.
+    engine:
+        ``"numba"`` (compiled kernel) or ``"reference"`` (plain Python, slow).
+    ablation:
+        ``None``/``"none"``, ``"no_adhesion"`` or ``"no_squeeze_film"`` (:data:`ABLATIONS`).
+    transient_s:
+        Start-up time excluded from speed and contact statistics (default
+        ``min(0.2 s, duration/4)``).
+    """
+    if not isinstance(params, RobotParams):
+        raise InputError(f"params must be a RobotParams, not {type(params).__name__}", key="params")
+    if not isinstance(scenario, (Shaker, PZT)):
+        raise InputError(f"scenario must be a Shaker or a PZT, not {type(scenario).__name__}", key="scenario")
+    if engine not in ENGINES:
+        raise InputError(f"unknown engine {engine!r}", key="engine", expected=" or ".join(ENGINES))
+    if not (duration_s > 0 and math.isfinite(duration_s)):
+        raise InputError(f"out of range: {duration_s!r}", key="duration_s", expected="a number in s, > 0")
+    p = ablate(params, ablation)
+    dt = default_dt(p, scenario) if dt_s is None else float(dt_s)
+    if not (dt > 0 and dt <= duration_s):
+        raise InputError(f"out of range: {dt_s!r}", key="dt_s", expected=f"a number in s, > 0, <= {duration_s}")
+    if record_dt_s is None:
+        record_dt_s = min(RECORD_DT_MAX_S, 1.0 / (RECORD_PER_PERIOD * scenario.freq_hz))
+    every = max(1, int(round(record_dt_s / dt)))
+    n_steps = int(round(duration_s / dt))
+    if transient_s is None:
+        transient_s = min(TRANSIENT_MAX_S, TRANSIENT_FRACTION * duration_s)
+    n_skip = min(int(round(transient_s / dt)), n_steps - 1)
+    n_rec = n_steps // every + 1
+
+    mdl = M.build_model(p, scenario)
+    state = M.rest_state()
+    # The robot starts riding the tray: resting on its feet and moving with the
+    # ground (z_g' at t = 0), so a shaker run does not begin with a jolt.
+    state[M.S_U + 1] = mdl.amp_m * mdl.omega if mdl.kind == 0 else 0.0
+    mode = np.full(6, M.REST, np.int8)
+    if seed is not None and jitter_um > 0:
+        rng = np.random.default_rng(seed)
+        free = [i for i in range(3) if i not in (mdl.iv, mdl.il)]
+        for j in range(6):
+            for i in free:
+                state[M.S_XI + 3 * j + i] = jitter_um * 1e-6 * rng.standard_normal()
+
+    t0 = time.perf_counter()
+    out = run_model(mdl, state, mode, n_steps, dt, every, n_skip, engine=engine)
+    wall = time.perf_counter() - t0
+    return _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engine, wall, seed, ablation)
+
+
+def run_model(mdl: M.Model, state: np.ndarray, mode: np.ndarray, n_steps: int, dt: float, every: int = 1,
+              n_skip: int = 0, *, engine: str = "numba", ev_cap: int = EVENT_LOG_CAP) -> dict[str, np.ndarray]:
+    """Low level: integrate a built model from any state (layouts in :mod:`labkit.sim.model`).
+
+    Returns the raw output arrays (SI): ``rec`` (samples x :data:`~labkit.sim.model.REC_COLS`),
+    ``rec_contact``, ``frac`` (time per foot and contact mode after ``n_skip`` steps),
+    ``max_air``, ``count``, ``events``, and the final ``state`` and ``mode``.
+    """
+    n_rec = n_steps // every + 1
+    if engine == "numba":
+        from labkit.sim.kernel import run as kernel_run
+
+        return kernel_run(mdl.pack(), state, mode, n_steps, dt, every, n_skip, n_rec, ev_cap)
+    from labkit.sim import reference
+
+    ref = reference.RefOutputs(n_rec, ev_cap)
+    final, fmode = reference.integrate(mdl, state, mode, n_steps, dt, every, n_skip, ref)
+    return {"rec": ref.rec, "rec_contact": ref.rec_contact, "frac": ref.frac, "max_air": ref.max_air,
+            "count": ref.count, "events": ref.events, "state": final, "mode": fmode}
+
+
+def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engine, wall, seed, ablation):
+    rec, cnt = out["rec"], out["count"]
+    t = rec[:, M.REC_T]
+    y = rec[:, M.REC_Y]
+    t_skip = n_skip * dt
+    # Net forward displacement after the transient, from the recorded samples
+    # nearest the transient's end and the run's end.
+    i0 = int(np.searchsorted(t, t_skip - 0.5 * dt))
+    i0 = min(i0, len(t) - 2) if len(t) > 1 else 0
+    span = t[-1] - t[i0]
+    speed = float((y[-1] - y[i0]) / span * 1e3) if span > 0 else 0.0
+    tot = out["frac"].sum(axis=1, keepdims=True)
+    frac = np.divide(out["frac"], tot, out=np.zeros_like(out["frac"]), where=tot > 0)
+    cf = {f"leg{j + 1}": {name: float(frac[j, m]) for m, name in enumerate(M.MODE_NAMES)} for j in range(6)}
+    period = 1.0 / scenario.freq_hz
+    patterns = [classify_pattern(frac[j, M.AIR], float(out["max_air"][j]), period) for j in range(6)]
+    n_ev = int(cnt[M.CNT_EVENTS])
+    return SimResult(
+        params=p, scenario=scenario, duration_s=float(duration_s), dt_s=float(dt), record_dt_s=float(dt * every),
+        transient_s=float(t_skip), engine=engine, t_s=t.copy(), body_y_um=y * 1e6, body_z_um=rec[:, M.REC_Z] * 1e6,
+        body_angles_rad=rec[:, M.REC_PH:M.REC_PH + 3].copy(), foot_z_um=rec[:, M.REC_FZ:M.REC_FZ + 6] * 1e6,
+        foot_y_um=rec[:, M.REC_FY:M.REC_FY + 6] * 1e6, contact=out["rec_contact"].copy(),
+        knee_vz_mm_s=rec[:, M.REC_KV:M.REC_KV + 6] * 1e3, ground_z_um=rec[:, M.REC_ZG] * 1e6,
+        mean_speed_mm_s=speed, contact_fraction=cf, impacts=cnt[:6].astype(int).copy(),
+        body_impacts=int(cnt[M.CNT_BODY]), patterns=patterns, max_flight_s=out["max_air"].copy(),
+        events=out["events"][:n_ev].copy(), n_steps=n_steps, wall_s=wall, seed=seed, ablation=ablation,
+        counters={"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED])})

@@ -1,0 +1,473 @@
+"""The compiled fixed-step integrator (numba, ``cache=True``).
+
+The same scheme as :mod:`labkit.sim.reference` (read that module for the
+physics, step by step), on flat float64 arrays so the loop runs without
+Python objects or allocation: the constants ``P`` (layout
+:data:`labkit.sim.model.IDX`), the state ``S`` (layout ``S_*`` in
+:mod:`labkit.sim.model`), the contact modes, and preallocated outputs. A
+scratch vector ``W`` holds per-step temporaries.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from labkit.sim import model as _m
+
+# numba sees module-level ints as compile-time constants.
+MB, IX, IY, IZ, G, F0, MF = (_m.IDX[k] for k in ("MB", "IX", "IY", "IZ", "G", "F0", "MF"))
+BGF, BGB, AD, HMIN, H0 = (_m.IDX[k] for k in ("BGF", "BGB", "AD", "HMIN", "H0"))
+CAD, CADT, CR, CRB, MU = (_m.IDX[k] for k in ("CAD", "CADT", "CR", "CRB", "MU"))
+KIND, AMP, OMEGA, FREQ, VOLT, IV, IL = (_m.IDX[k] for k in ("KIND", "AMP", "OMEGA", "FREQ", "VOLT", "IV", "IL"))
+K, B, CZ, CY, MM, MIMP, MDIS, R, GACT, KTF = (_m.IDX[k] for k in (
+    "K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF"))
+XJ, YJ, ZJ, PH, YFEQ = (_m.IDX[k] for k in ("XJ", "YJ", "ZJ", "PH", "YFEQ"))
+SQ, SU, SXI, SV, STC, SYP, SSIZE = _m.S_Q, _m.S_U, _m.S_XI, _m.S_V, _m.S_TC, _m.S_YPIN, _m.S_SIZE
+AIR, ADHESION, REST = _m.AIR, _m.ADHESION, _m.REST
+REC_T, REC_Y, REC_Z, REC_PH, REC_ZG, REC_FZ, REC_FY, REC_KV = (
+    _m.REC_T, _m.REC_Y, _m.REC_Z, _m.REC_PH, _m.REC_ZG, _m.REC_FZ, _m.REC_FY, _m.REC_KV)
+CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED = _m.CNT_BODY, _m.CNT_EVENTS, _m.CNT_LOST, _m.CNT_FORCED
+MAXEV = _m.MAX_EVENTS_PER_STEP
+GAP_TOL = _m.GAP_TOL_M
+# Scratch layout (W).
+W_PROP = 0      # 3 x 4 propagator of the full step
+W_PP = 12       # 3 x 4 propagator of a partial step
+W_FY = 24       # 6 leg forces y
+W_FZ = 30       # 6 leg forces z
+W_REL = 36      # 6 contact time of feet released this step (-1 otherwise)
+W_AZ = 42       # 6 attachment heights at the start of an advance
+W_SIZE = 48
+
+
+@njit(cache=True)
+def _ground(P, t):
+    if P[KIND] != 0.0:
+        return 0.0, 0.0, 0.0
+    w = P[OMEGA]
+    s = math.sin(w * t)
+    c = math.cos(w * t)
+    a = P[AMP]
+    return a * s, a * w * c, -a * w * w * s
+
+
+@njit(cache=True)
+def _square(P, t):
+    if P[KIND] != 1.0:
+        return 0.0
+    ph = P[FREQ] * t
+    return P[VOLT] if ph - math.floor(ph) < 0.5 else -P[VOLT]
+
+
+@njit(cache=True)
+def _propagators(P, tau, W, off):
+    for i in range(3):
+        k = P[K + i]
+        sig = 0.5 * P[B + i]
+        disc = k - sig * sig
+        e = math.exp(-sig * tau)
+        if disc > 1e-9 * k:
+            wd = math.sqrt(disc)
+            c = math.cos(wd * tau)
+            s = math.sin(wd * tau) / wd
+        elif disc < -1e-9 * k:
+            wd = math.sqrt(-disc)
+            c = math.cosh(wd * tau)
+            s = math.sinh(wd * tau) / wd
+        else:
+            c = 1.0
+            s = tau
+        W[off + 4 * i] = e * (c + sig * s)
+        W[off + 4 * i + 1] = e * s
+        W[off + 4 * i + 2] = -e * k * s
+        W[off + 4 * i + 3] = e * (c - sig * s)
+
+
+@njit(cache=True)
+def _solve_pair(P, dz, dy):
+    il = int(P[IL])
+    iv = int(P[IV])
+    a = P[CZ + il]
+    bb = P[CZ + iv]
+    c = P[CY + il]
+    d = P[CY + iv]
+    det = a * d - bb * c
+    if abs(det) > 1e-12:
+        return (dz * d - bb * dy) / det, (a * dy - c * dz) / det
+    n2 = a * a + bb * bb
+    return a * dz / n2, bb * dz / n2
+
+
+@njit(cache=True)
+def _att(P, S, j):
+    """Attachment z, y, vz, vy of leg j."""
+    x = P[XJ + j]
+    y = P[YJ + j]
+    az = S[SQ + 1] + y * S[SQ + 2] - x * S[SQ + 3]
+    ay = S[SQ + 0] + x * S[SQ + 4]
+    vz = S[SU + 1] + y * S[SU + 2] - x * S[SU + 3]
+    vy = S[SU + 0] + x * S[SU + 4]
+    return az, ay, vz, vy
+
+
+@njit(cache=True)
+def _pin_pair(P, S, j, zg, vg):
+    il = int(P[IL])
+    iv = int(P[IV])
+    az, ay, vz, vy = _att(P, S, j)
+    fz = 0.0
+    fy = 0.0
+    gz = 0.0
+    gy = 0.0
+    for i in range(3):
+        if i != il and i != iv:
+            fz += P[CZ + i] * S[SXI + 3 * j + i]
+            fy += P[CY + i] * S[SXI + 3 * j + i]
+            gz += P[CZ + i] * S[SV + 3 * j + i]
+            gy += P[CY + i] * S[SV + 3 * j + i]
+    xl, xv = _solve_pair(P, zg - az - fz, S[SYP + j] - ay - fy)
+    S[SXI + 3 * j + il] = xl
+    S[SXI + 3 * j + iv] = xv
+    vl, vv = _solve_pair(P, vg - vz - gz, -vy - gy)
+    S[SV + 3 * j + il] = vl
+    S[SV + 3 * j + iv] = vv
+
+
+@njit(cache=True)
+def _pull(P, S, j, vg, ag):
+    fz = 0.0
+    for i in range(3):
+        fz += P[MM + i] * (P[K + i] * S[SXI + 3 * j + i] + P[B + i] * S[SV + 3 * j + i]) * P[CZ + i]
+    f_foot = -P[MF] * P[G] - P[AD] * vg * abs(vg)
+    return -P[F0] - fz + f_foot - P[MF] * ag
+
+
+@njit(cache=True)
+def _advance(P, S, mode, t, tau, dt, W):
+    if tau <= 0.0:
+        return
+    zg, vg, ag = _ground(P, t)
+    zg1, vg1, ag1 = _ground(P, t + tau)
+    volt = _square(P, t)
+    if tau == dt:
+        off = W_PROP
+    else:
+        _propagators(P, tau, W, W_PP)
+        off = W_PP
+    # leg forces on the body (deviation from static)
+    Fy = 0.0
+    Fz = 0.0
+    Mx = 0.0
+    My = 0.0
+    Mz = 0.0
+    for j in range(6):
+        fy = 0.0
+        fz = 0.0
+        for i in range(3):
+            f = P[MM + i] * (P[K + i] * S[SXI + 3 * j + i] + P[B + i] * S[SV + 3 * j + i])
+            fy += f * P[CY + i]
+            fz += f * P[CZ + i]
+        Fy += fy
+        Fz += fz
+        Mx += P[YJ + j] * fz - P[ZJ + j] * fy
+        My += -P[XJ + j] * fz
+        Mz += P[XJ + j] * fy
+    u0 = S[SU + 0]
+    u1 = S[SU + 1]
+    Fy -= P[AD] * u0 * abs(u0)
+    Fz -= P[AD] * u1 * abs(u1)
+    mb = P[MB]
+    hb = P[H0] + S[SQ + 1] - zg
+    hh = hb if hb > P[HMIN] else P[HMIN]
+    cb = P[BGB] / (hh * hh * hh)
+    vz1 = (u1 + tau * (Fz / mb + cb * vg1 / mb)) / (1.0 + tau * cb / mb)
+    a0 = Fy / mb
+    a1 = (vz1 - u1) / tau
+    a2 = Mx / P[IX]
+    a3 = My / P[IY]
+    a4 = Mz / P[IZ]
+    # attachment states at the start (for the feet in air), stored before the body moves
+    for j in range(6):
+        az, ay, vz, vy = _att(P, S, j)
+        W[W_FY + j] = vy
+        W[W_FZ + j] = vz
+        W[W_AZ + j] = az
+    # body update (trapezoid on positions; exact for constant acceleration)
+    n0 = u0 + tau * a0
+    n2 = S[SU + 2] + tau * a2
+    n3 = S[SU + 3] + tau * a3
+    n4 = S[SU + 4] + tau * a4
+    S[SQ + 0] += 0.5 * tau * (u0 + n0)
+    S[SQ + 1] += 0.5 * tau * (u1 + vz1)
+    S[SQ + 2] += 0.5 * tau * (S[SU + 2] + n2)
+    S[SQ + 3] += 0.5 * tau * (S[SU + 3] + n3)
+    S[SQ + 4] += 0.5 * tau * (S[SU + 4] + n4)
+    S[SU + 0] = n0
+    S[SU + 1] = vz1
+    S[SU + 2] = n2
+    S[SU + 3] = n3
+    S[SU + 4] = n4
+    for j in range(6):
+        xj = P[XJ + j]
+        yj = P[YJ + j]
+        aaz = a1 + yj * a2 - xj * a3
+        aay = a0 + xj * a4
+        air = mode[j] == AIR
+        ffz = 0.0
+        ffy = 0.0
+        hf = 0.0
+        if air:
+            vfz = W[W_FZ + j]
+            vfy = W[W_FY + j]
+            for i in range(3):
+                vfz += P[CZ + i] * S[SV + 3 * j + i]
+                vfy += P[CY + i] * S[SV + 3 * j + i]
+            ffz = -P[AD] * vfz * abs(vfz)
+            ffy = -P[AD] * vfy * abs(vfy)
+            hf = W[W_AZ + j] - zg
+            for i in range(3):
+                hf += P[CZ + i] * S[SXI + 3 * j + i]
+        drive = volt * P[PH + j]
+        for i in range(3):
+            a = P[R + i] + P[GACT + i] * drive - (P[CZ + i] * aaz + P[CY + i] * aay)
+            if air:
+                a += (P[CZ + i] * ffz + P[CY + i] * ffy) / P[MIMP + i]
+            p11 = W[off + 4 * i]
+            p12 = W[off + 4 * i + 1]
+            p21 = W[off + 4 * i + 2]
+            p22 = W[off + 4 * i + 3]
+            x = S[SXI + 3 * j + i]
+            v = S[SV + 3 * j + i]
+            S[SXI + 3 * j + i] = p11 * x + p12 * v + (1.0 - p11) / P[K + i] * a
+            S[SV + 3 * j + i] = p21 * x + p22 * v + p12 * a
+        if air:
+            hh = hf if hf > P[HMIN] else P[HMIN]
+            c = P[BGF] / (hh * hh * hh)
+            az1, ay1, vz1a, vy1a = _att(P, S, j)
+            s = vz1a - vg1
+            q = 0.0
+            for i in range(3):
+                s += P[CZ + i] * S[SV + 3 * j + i]
+                q += P[CZ + i] * P[CZ + i] / P[MIMP + i]
+            s_new = s / (1.0 + tau * c * q)
+            for i in range(3):
+                dv = -tau * c * s_new * P[CZ + i] / P[MIMP + i]
+                S[SV + 3 * j + i] += dv
+                S[SXI + 3 * j + i] += 0.5 * tau * dv
+        else:
+            S[STC + j] += tau
+            _pin_pair(P, S, j, zg1, vg1)
+
+
+@njit(cache=True)
+def _gap_vrel(P, S, j, zg, vg):
+    az, ay, vz, vy = _att(P, S, j)
+    h = az - zg
+    vr = vz - vg
+    for i in range(3):
+        h += P[CZ + i] * S[SXI + 3 * j + i]
+        vr += P[CZ + i] * S[SV + 3 * j + i]
+    return h, vr
+
+
+@njit(cache=True)
+def _log(events, count, t, leg, vpre, vpost, vypost, stuck):
+    n = count[CNT_EVENTS]
+    if n < events.shape[0]:
+        events[n, 0] = t
+        events[n, 1] = leg
+        events[n, 2] = vpre
+        events[n, 3] = vpost
+        events[n, 4] = vypost
+        events[n, 5] = 1.0 if stuck else 0.0
+        count[CNT_EVENTS] += 1
+    else:
+        count[CNT_LOST] += 1
+
+
+@njit(cache=True)
+def _impact(P, S, mode, j, t, events, count):
+    zg, vg, ag = _ground(P, t)
+    il = int(P[IL])
+    iv = int(P[IV])
+    az, ay, vz, vy = _att(P, S, j)
+    vrel = vz - vg
+    vlat = vy
+    h = az - zg
+    for i in range(3):
+        vrel += P[CZ + i] * S[SV + 3 * j + i]
+        vlat += P[CY + i] * S[SV + 3 * j + i]
+        h += P[CZ + i] * S[SXI + 3 * j + i]
+    dl, dv = _solve_pair(P, -(1.0 + P[CR]) * vrel, -vlat)
+    S[SV + 3 * j + il] += dl
+    S[SV + 3 * j + iv] += dv
+    dl, dv = _solve_pair(P, -h, 0.0)
+    S[SXI + 3 * j + il] += dl
+    S[SXI + 3 * j + iv] += dv
+    vpost = vz - vg
+    vypost = vy
+    ypin = ay
+    for i in range(3):
+        vpost += P[CZ + i] * S[SV + 3 * j + i]
+        vypost += P[CY + i] * S[SV + 3 * j + i]
+        ypin += P[CY + i] * S[SXI + 3 * j + i]
+    f = _pull(P, S, j, vg, ag)
+    stuck = vpost <= 0.0 or f <= P[CAD]
+    count[j] += 1
+    _log(events, count, t, j, vrel, vpost, vypost, stuck)
+    if stuck:
+        mode[j] = ADHESION if f > 0.0 else REST
+        S[STC + j] = 0.0
+        S[SYP + j] = ypin
+        _pin_pair(P, S, j, zg, vg)
+
+
+@njit(cache=True)
+def _step(P, S, T, mode, t, dt, W, events, count):
+    """One step with event location; the result is left in S."""
+    zg, vg, ag = _ground(P, t)
+    for j in range(6):
+        W[W_REL + j] = -1.0
+        if mode[j] == AIR:
+            continue
+        f = _pull(P, S, j, vg, ag)
+        if f > P[CADT] * S[STC + j] + P[CAD]:
+            W[W_REL + j] = S[STC + j]
+            mode[j] = AIR
+            S[STC + j] = 0.0
+        else:
+            mode[j] = ADHESION if f > 0.0 else REST
+    remaining = dt
+    now = t
+    n_ev = 0
+    while True:
+        for k in range(SSIZE):
+            T[k] = S[k]
+        _advance(P, T, mode, now, remaining, dt, W)
+        zg0, vg0, ag0 = _ground(P, now)
+        zg1, vg1, ag1 = _ground(P, now + remaining)
+        best = math.inf
+        who = -2
+        for j in range(6):
+            if mode[j] != AIR:
+                continue
+            h1, v1 = _gap_vrel(P, T, j, zg1, vg1)
+            if h1 >= 0.0:
+                continue
+            h0, v0 = _gap_vrel(P, S, j, zg0, vg0)
+            if h0 >= -GAP_TOL:
+                tau = remaining * h0 / (h0 - h1) if h0 > 0.0 else 0.0
+            elif v0 < 0.0:
+                tau = 0.0
+            else:
+                continue
+            if tau < best:
+                best = tau
+                who = j
+        hb0 = P[H0] + S[SQ + 1] - zg0
+        hb1 = P[H0] + T[SQ + 1] - zg1
+        if hb1 < 0.0:
+            if hb0 >= 0.0:
+                tau = remaining * hb0 / (hb0 - hb1)
+            elif S[SU + 1] - vg0 < 0.0:
+                tau = 0.0
+            else:
+                tau = math.inf
+            if tau < best:
+                best = tau
+                who = -1
+        if who == -2 or n_ev >= MAXEV:
+            if who != -2:
+                count[CNT_FORCED] += 1
+            for k in range(SSIZE):
+                S[k] = T[k]
+            return
+        n_ev += 1
+        _advance(P, S, mode, now, best, dt, W)
+        now += best
+        remaining -= best
+        if who == -1:
+            zg, vg, ag = _ground(P, now)
+            vpre = S[SU + 1] - vg
+            S[SU + 1] = vg - P[CRB] * vpre
+            S[SQ + 1] = zg - P[H0]
+            count[CNT_BODY] += 1
+            _log(events, count, now, -1, vpre, S[SU + 1] - vg, 0.0, False)
+        elif W[W_REL + who] >= 0.0:
+            zg, vg, ag = _ground(P, now)
+            mode[who] = ADHESION if _pull(P, S, who, vg, ag) > 0.0 else REST
+            S[STC + who] = W[W_REL + who] + (now - t)
+            W[W_REL + who] = -1.0
+            _pin_pair(P, S, who, zg, vg)
+        else:
+            _impact(P, S, mode, who, now, events, count)
+        if remaining <= 0.0:
+            return
+
+
+@njit(cache=True)
+def _record(P, S, mode, t, rec, rec_contact, row):
+    zg, vg, ag = _ground(P, t)
+    rec[row, REC_T] = t
+    rec[row, REC_Y] = S[SQ + 0]
+    rec[row, REC_Z] = P[H0] + S[SQ + 1]
+    rec[row, REC_PH] = S[SQ + 2]
+    rec[row, REC_PH + 1] = S[SQ + 3]
+    rec[row, REC_PH + 2] = S[SQ + 4]
+    rec[row, REC_ZG] = zg
+    for j in range(6):
+        az, ay, vz, vy = _att(P, S, j)
+        fz = az
+        fy = P[YFEQ + j] + ay
+        kv = vz
+        for i in range(3):
+            fz += P[CZ + i] * S[SXI + 3 * j + i]
+            fy += P[CY + i] * S[SXI + 3 * j + i]
+            kv += P[KTF + i] * P[CZ + i] * S[SV + 3 * j + i]
+        rec[row, REC_FZ + j] = fz
+        rec[row, REC_FY + j] = fy
+        rec[row, REC_KV + j] = kv
+        rec_contact[row, j] = mode[j]
+
+
+@njit(cache=True)
+def _integrate(P, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac, max_air, count, events):
+    W = np.zeros(W_SIZE)
+    T = np.zeros(SSIZE)
+    air_run = np.zeros(6)
+    _propagators(P, dt, W, W_PROP)
+    row = 0
+    for n in range(n_steps + 1):
+        t = n * dt
+        if n % every == 0 and row < rec.shape[0]:
+            _record(P, S, mode, t, rec, rec_contact, row)
+            row += 1
+        if n == n_steps:
+            break
+        _step(P, S, T, mode, t, dt, W, events, count)
+        if n >= n_skip:
+            for j in range(6):
+                frac[j, mode[j]] += dt
+                if mode[j] == AIR:
+                    air_run[j] += dt
+                    if air_run[j] > max_air[j]:
+                        max_air[j] = air_run[j]
+                else:
+                    air_run[j] = 0.0
+
+
+def run(P: np.ndarray, state: np.ndarray, mode: np.ndarray, n_steps: int, dt: float, every: int,
+        n_skip: int, n_rec: int, ev_cap: int) -> dict:
+    """Integrate with the compiled kernel; returns the output arrays (same as the reference's)."""
+    S = np.ascontiguousarray(state, dtype=np.float64).copy()
+    md = np.ascontiguousarray(mode, dtype=np.int64).copy()
+    out = {"rec": np.zeros((n_rec, _m.REC_COLS)), "rec_contact": np.zeros((n_rec, 6), np.int8),
+           "frac": np.zeros((6, 3)), "max_air": np.zeros(6), "count": np.zeros(_m.CNT_SIZE, np.int64),
+           "events": np.zeros((ev_cap, _m.EV_COLS))}
+    _integrate(np.ascontiguousarray(P, dtype=np.float64), S, md, int(n_steps), float(dt), int(every),
+               int(n_skip), out["rec"], out["rec_contact"], out["frac"], out["max_air"], out["count"],
+               out["events"])
+    out["state"] = S
+    out["mode"] = md
+    return out

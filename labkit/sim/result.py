@@ -1,0 +1,135 @@
+"""SimResult: one simulated run, its summary and its HDF5 file (kind ``sim_result``)."""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labkit.sim.model import MODE_NAMES
+
+#: Per-foot motion patterns (paper Fig. 9-11).
+PATTERNS = ("firm_contact", "partial_contact", "jumping")
+#: A foot is in firm contact when it spends less than this fraction of the time in the air.
+FIRM_AIR_FRACTION = 0.01
+#: A foot is jumping when one of its flights lasts longer than this many drive periods.
+JUMP_PERIODS = 1.0
+
+
+def classify_pattern(air_fraction: float, max_flight_s: float, drive_period_s: float) -> str:
+    """Pattern label of one foot: firm_contact | partial_contact | jumping.
+
+    ``firm_contact``: in the air less than :data:`FIRM_AIR_FRACTION` of the
+    time; ``jumping``: some flight longer than :data:`JUMP_PERIODS` drive
+    periods; otherwise ``partial_contact`` (held part of each cycle, then lets go).
+    """
+    if air_fraction < FIRM_AIR_FRACTION:
+        return "firm_contact"
+    if max_flight_s > JUMP_PERIODS * drive_period_s:
+        return "jumping"
+    return "partial_contact"
+
+
+@dataclass
+class SimResult:
+    """One simulated run (arrays sampled every ``record_dt_s``).
+
+    Attributes (units in the names): ``t_s``; ``body_y_um`` (forward),
+    ``body_z_um`` (height of the body's underside above the ground's rest
+    level), ``body_angles_rad`` (N, 3: phi_x, phi_y, phi_z); per foot (N, 6)
+    ``foot_z_um`` (height above the ground's rest level), ``foot_y_um``,
+    ``contact`` (int8: 0 AIR, 1 ADHESION, 2 REST), ``knee_vz_mm_s`` (absolute
+    vertical velocity of the knee: what a vibrometer sees); ``ground_z_um``;
+    ``mean_speed_mm_s`` (signed along +y, net displacement after the start-up
+    transient over the time after it); ``contact_fraction`` (``"leg1"`` ..
+    ``"leg6"`` -> ``{"air", "adhesion", "rest"}`` -> fraction of the time
+    after the transient); ``impacts`` (6,), ``body_impacts``; ``patterns``
+    (6 labels); ``events`` (impact log: t_s, leg (0-5, -1 body), relative
+    vertical velocity before/after the map in m/s, lateral velocity after,
+    stuck flag).
+    """
+
+    params: Any
+    scenario: Any
+    duration_s: float
+    dt_s: float
+    record_dt_s: float
+    transient_s: float
+    engine: str
+    t_s: np.ndarray
+    body_y_um: np.ndarray
+    body_z_um: np.ndarray
+    body_angles_rad: np.ndarray
+    foot_z_um: np.ndarray
+    foot_y_um: np.ndarray
+    contact: np.ndarray
+    knee_vz_mm_s: np.ndarray
+    ground_z_um: np.ndarray
+    mean_speed_mm_s: float
+    contact_fraction: dict
+    impacts: np.ndarray
+    body_impacts: int
+    patterns: list
+    max_flight_s: np.ndarray
+    events: np.ndarray
+    n_steps: int
+    wall_s: float
+    seed: int | None = None
+    ablation: str | None = None
+    counters: dict = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able key figures."""
+        return {
+            "scenario": self.scenario.to_dict(),
+            "engine": self.engine,
+            "duration_s": self.duration_s,
+            "dt_s": self.dt_s,
+            "record_dt_s": self.record_dt_s,
+            "transient_s": self.transient_s,
+            "n_steps": int(self.n_steps),
+            "wall_s": round(float(self.wall_s), 4),
+            "mean_speed_mm_s": float(self.mean_speed_mm_s),
+            "contact_fraction": {f: {k: round(float(v), 6) for k, v in d.items()}
+                                 for f, d in self.contact_fraction.items()},
+            "impacts": [int(x) for x in self.impacts],
+            "body_impacts": int(self.body_impacts),
+            "patterns": list(self.patterns),
+            "max_flight_s": [float(x) for x in self.max_flight_s],
+            "seed": self.seed,
+            "ablation": self.ablation,
+        }
+
+    def to_h5(self, path: str | Path) -> Path:
+        """Write the run (kind ``sim_result``): units on every dataset, params as TOML text."""
+        import h5py
+
+        from labkit.h5io import put, stamp
+
+        path = Path(path)
+        with h5py.File(path, "w") as f:
+            stamp(f, "sim_result")
+            f.attrs["params_toml"] = self.params.to_toml_text()
+            f.attrs["scenario_json"] = json.dumps(self.scenario.to_dict())
+            f.attrs["summary_json"] = json.dumps(self.summary())
+            f.attrs["contact_codes"] = "0 air, 1 adhesion, 2 rest"
+            put(f, "t_s", self.t_s, "s")
+            put(f, "body_y_um", self.body_y_um, "um")
+            put(f, "body_z_um", self.body_z_um, "um")
+            put(f, "body_angles_rad", self.body_angles_rad, "rad", columns="phi_x, phi_y, phi_z")
+            put(f, "foot_z_um", self.foot_z_um, "um")
+            put(f, "foot_y_um", self.foot_y_um, "um")
+            put(f, "contact", self.contact, "label", codes="0 air, 1 adhesion, 2 rest")
+            put(f, "knee_vz_mm_s", self.knee_vz_mm_s, "mm/s")
+            put(f, "ground_z_um", self.ground_z_um, "um")
+            put(f, "impacts", np.asarray(self.impacts), "1")
+            put(f, "max_flight_s", np.asarray(self.max_flight_s), "s")
+            frac = np.array([[self.contact_fraction[f"leg{j + 1}"][m] for m in MODE_NAMES] for j in range(6)])
+            put(f, "contact_fraction", frac, "1", columns=", ".join(MODE_NAMES))
+            put(f, "events", self.events, "mixed",
+                columns="t_s, leg (0-5; -1 body), vrel_pre_m_s, vrel_post_m_s, vy_post_m_s, stuck")
+            f.attrs["mean_speed_mm_s"] = float(self.mean_speed_mm_s)
+            f.attrs["patterns"] = json.dumps(list(self.patterns))
+        return path

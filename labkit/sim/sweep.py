@@ -1,0 +1,324 @@
+"""Parameter sweeps with Monte Carlo draws over parameter uncertainty.
+
+:func:`sweep` simulates one scenario (a :class:`~labkit.sim.Shaker` or
+:class:`~labkit.sim.PZT`) at every value of one quantity — any field of the
+scenario (``freq_hz``, ``amp_um``, ``voltage_v``, ``mass_mg``) or of
+:class:`~labkit.sim.RobotParams` — and, with ``draws > 0``, repeats every
+point with robot parameters drawn from the uncertainty table of
+:mod:`labkit.sim.uncertainty` (as the paper's error bars, Fig. 8 and 13).
+
+One task per (point, draw) goes through :func:`labkit.executor.map_tasks`.
+Every task carries its own seed, derived from ``(seed, draw)`` only, so
+
+* the numbers are identical serially, in local processes or on Dask;
+* draw ``d`` uses the *same* perturbed robot at every point (common random
+  numbers): a curve per draw is a physically consistent robot, and the spread
+  between points is not inflated by re-drawing the robot at each point.
+
+Draw 0 is always the nominal robot; draws ``1..n-1`` are perturbed. With
+``draws=0`` only the nominal robot runs (one column).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from labkit.errors import InputError
+
+#: Contact modes in the order of the last axis of ``contact_fraction``.
+CONTACT_MODES = ("air", "adhesion", "rest")
+#: Per-foot pattern labels (SimResult.patterns).
+PATTERNS = ("firm_contact", "partial_contact", "jumping")
+
+#: Units of the quantities one can sweep, by name suffix.
+_SUFFIX_UNITS = {"_hz": "Hz", "_um": "um", "_v": "V", "_mg": "mg", "_s": "s", "_n": "N",
+                 "_n_s": "N/s", "_kg": "kg", "_m": "m"}
+
+
+def units_of(name: str) -> str:
+    """The unit of a quantity from the suffix of its name (``"1"`` when it has none)."""
+    for suffix in sorted(_SUFFIX_UNITS, key=len, reverse=True):
+        if name.endswith(suffix):
+            return _SUFFIX_UNITS[suffix]
+    return "1"
+
+
+@dataclass
+class SweepResult:
+    """The outcome of :func:`sweep`.
+
+    Attributes
+    ----------
+    quantity:
+        The swept quantity's name (with its unit: ``freq_hz``, ``mass_mg``...).
+    values:
+        Its values, shape ``(points,)``.
+    speeds_mm_s:
+        Mean forward speed of every run, shape ``(points, draws)``; column 0
+        is the nominal robot.
+    contact_fraction:
+        Fraction of time in each contact mode, shape ``(points, draws, 6, 3)``
+        (feet x :data:`CONTACT_MODES`).
+    patterns:
+        Per-foot pattern label, shape ``(points, draws, 6)``.
+    impacts:
+        Impacts per foot, shape ``(points, draws, 6)``.
+    scenario:
+        The base scenario (its fields with units in their names).
+    params_toml:
+        The nominal robot's parameter file text.
+    meta:
+        Seed, duration, the uncertainty table used, the scheduler.
+    """
+
+    quantity: str
+    values: np.ndarray
+    speeds_mm_s: np.ndarray
+    contact_fraction: np.ndarray
+    patterns: np.ndarray
+    impacts: np.ndarray
+    scenario: dict[str, Any] = field(default_factory=dict)
+    params_toml: str = ""
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def draws(self) -> int:
+        return int(self.speeds_mm_s.shape[1])
+
+    @property
+    def mean_speed_mm_s(self) -> np.ndarray:
+        """Mean over draws at every point."""
+        return self.speeds_mm_s.mean(axis=1)
+
+    @property
+    def std_speed_mm_s(self) -> np.ndarray:
+        """Sample standard deviation over draws (0 with a single draw)."""
+        if self.draws < 2:
+            return np.zeros(len(self.values))
+        return self.speeds_mm_s.std(axis=1, ddof=1)
+
+    @property
+    def nominal_speed_mm_s(self) -> np.ndarray:
+        """The nominal robot's speed (draw 0) at every point."""
+        return self.speeds_mm_s[:, 0]
+
+    def pattern_counts(self, point: int) -> dict[str, int]:
+        """How many (draw, foot) pairs showed each pattern at one point."""
+        labels = self.patterns[point].ravel().tolist()
+        return {p: labels.count(p) for p in PATTERNS}
+
+    def dominant_pattern(self, point: int) -> str:
+        """The most frequent foot pattern at one point (ties: the first in :data:`PATTERNS`)."""
+        counts = self.pattern_counts(point)
+        return max(PATTERNS, key=lambda p: counts[p])
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-able summary: one entry per point with mean and spread."""
+        points = []
+        for i, value in enumerate(self.values):
+            s = self.speeds_mm_s[i]
+            frac = self.contact_fraction[i].mean(axis=(0, 1))
+            points.append({
+                self.quantity: float(value),
+                "mean_speed_mm_s": float(s.mean()),
+                "std_speed_mm_s": float(self.std_speed_mm_s[i]),
+                "min_speed_mm_s": float(s.min()),
+                "max_speed_mm_s": float(s.max()),
+                "nominal_speed_mm_s": float(s[0]),
+                "contact_fraction": {m: float(f) for m, f in zip(CONTACT_MODES, frac)},
+                "patterns": self.pattern_counts(i),
+                "dominant_pattern": self.dominant_pattern(i),
+            })
+        return {"quantity": self.quantity, "units": units_of(self.quantity),
+                "draws": self.draws, "scenario": self.scenario,
+                "duration_s": self.meta.get("duration_s"), "seed": self.meta.get("seed"),
+                "points": points}
+
+    def to_h5(self, path: str | Path) -> Path:
+        """Write the sweep as an HDF5 file of kind ``"sim_sweep"``; returns the path."""
+        import h5py
+
+        from labkit.h5io import put, put_json, stamp
+
+        path = Path(path)
+        if path.parent and not path.parent.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+        with h5py.File(path, "w") as f:
+            stamp(f, "sim_sweep")
+            f.attrs["quantity"] = self.quantity
+            f.attrs["quantity_units"] = units_of(self.quantity)
+            f.attrs["params_toml"] = self.params_toml
+            put_json(f, "scenario_json", self.scenario)
+            put_json(f, "meta_json", self.meta)
+            put_json(f, "summary_json", self.summary())
+            put(f, "values", self.values, units_of(self.quantity), quantity=self.quantity)
+            put(f, "speeds_mm_s", self.speeds_mm_s, "mm/s",
+                description="mean forward speed per run; axis 0 points, axis 1 draws (0 = nominal)")
+            put(f, "mean_speed_mm_s", self.mean_speed_mm_s, "mm/s")
+            put(f, "std_speed_mm_s", self.std_speed_mm_s, "mm/s", ddof=1)
+            put(f, "contact_fraction", self.contact_fraction, "1",
+                axes="point, draw, foot, mode", modes=",".join(CONTACT_MODES))
+            put(f, "impacts", self.impacts, "1", axes="point, draw, foot")
+            put(f, "patterns", self.patterns.astype("S16"), "label", axes="point, draw, foot",
+                labels=",".join(PATTERNS))
+        return path
+
+    @classmethod
+    def from_h5(cls, path: str | Path) -> "SweepResult":
+        """Read back a file written by :meth:`to_h5`."""
+        from labkit.h5io import get_json, open_h5
+
+        with open_h5(path, kind="sim_sweep") as f:
+            return cls(quantity=str(f.attrs["quantity"]), values=f["values"][()],
+                       speeds_mm_s=f["speeds_mm_s"][()], contact_fraction=f["contact_fraction"][()],
+                       patterns=f["patterns"][()].astype(str), impacts=f["impacts"][()],
+                       scenario=get_json(f, "scenario_json", {}), params_toml=str(f.attrs["params_toml"]),
+                       meta=get_json(f, "meta_json", {}))
+
+
+# --------------------------------------------------------------------------- helpers
+
+def scenario_dict(scenario: Any) -> dict[str, Any]:
+    """A scenario as a JSON-able dict with its type (``{"type": "shaker", ...}``)."""
+    fields = dataclasses.asdict(scenario) if dataclasses.is_dataclass(scenario) else dict(vars(scenario))
+    return {"type": type(scenario).__name__.lower(), **fields}
+
+
+def apply_value(params: Any, scenario: Any, quantity: str, value: float) -> tuple[Any, Any]:
+    """Set ``quantity`` to ``value`` on the scenario if it has that field, else on the params.
+
+    ``mass_mg`` of a scenario without a payload field (a shaker run) sets the
+    robot's total mass with the extra mass on the body (as the PZT payload),
+    so the legs keep their mass.
+    """
+    from labkit.sim.uncertainty import params_fields
+
+    if dataclasses.is_dataclass(scenario) and quantity in {f.name for f in dataclasses.fields(scenario)}:
+        return params, dataclasses.replace(scenario, **{quantity: float(value)})
+    if quantity == "mass_mg":
+        extra = float(value) - params.mass_mg
+        return params.replace(mass_mg=float(value), body_mass_mg=params.body_mass_mg + extra), scenario
+    if quantity in params_fields(params):
+        return params.replace(**{quantity: float(value)}), scenario
+    raise InputError(f"cannot sweep {quantity!r}: neither the {type(scenario).__name__} scenario "
+                     "nor the robot parameters have it", key=quantity,
+                     expected="freq_hz, amp_um, voltage_v, mass_mg or a RobotParams field")
+
+
+def _task_seed(seed: int, draw: int) -> int:
+    """One integer seed per draw, the same at every point (common random numbers)."""
+    return int(np.random.SeedSequence([int(seed), int(draw)]).generate_state(1)[0])
+
+
+def run_point(task: tuple) -> dict[str, Any]:
+    """Run one (point, draw) task: draw the parameters, apply the value, simulate.
+
+    A module-level function so the executor can pickle it by reference.
+    """
+    from labkit.sim import simulate
+    from labkit.sim.uncertainty import draw_params
+
+    params, scenario, quantity, value, draw, seed, duration_s, table = task
+    task_seed = _task_seed(seed, draw)
+    if draw > 0:
+        params = draw_params(params, np.random.default_rng(task_seed), table)
+    params, scenario = apply_value(params, scenario, quantity, value)
+    r = simulate(params, scenario, duration_s=duration_s, seed=task_seed)
+    return result_row(r)
+
+
+def result_row(r: Any) -> dict[str, Any]:
+    """The small, picklable part of a SimResult a sweep keeps."""
+    frac = np.zeros((6, len(CONTACT_MODES)))
+    cf = r.contact_fraction
+    for j, foot in enumerate(_feet(cf)):
+        modes = cf[foot]
+        for m, name in enumerate(CONTACT_MODES):
+            frac[j, m] = float(modes.get(name, modes.get(name.upper(), 0.0)))
+    return {"speed_mm_s": float(r.mean_speed_mm_s), "contact_fraction": frac,
+            "patterns": [str(p) for p in r.patterns], "impacts": np.asarray(r.impacts, dtype=int)}
+
+
+def _feet(cf: Any) -> list:
+    keys = list(cf.keys()) if isinstance(cf, dict) else list(range(len(cf)))
+    return keys[:6]
+
+
+# --------------------------------------------------------------------------- sweep
+
+def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
+          values: Sequence[float] = (), draws: int = 0, duration_s: float = 2.0,
+          scheduler: str | None = None, workers: int | None = None, seed: int = 0,
+          quiet: bool = False, table: dict[str, float] | None = None) -> SweepResult:
+    """Simulate ``base_scenario`` at every value of ``quantity``, with Monte Carlo draws.
+
+    Parameters
+    ----------
+    params:
+        The nominal :class:`~labkit.sim.RobotParams`.
+    base_scenario:
+        A :class:`~labkit.sim.Shaker` or :class:`~labkit.sim.PZT`; every field
+        but the swept one is kept.
+    quantity:
+        The scenario field (``freq_hz``, ``amp_um``, ``voltage_v``,
+        ``mass_mg``) or RobotParams field to sweep; ``mass_mg`` on a shaker
+        run sets the robot's total mass.
+    values:
+        The values, in the quantity's unit.
+    draws:
+        Monte Carlo draws per point: 0 runs the nominal robot only; ``n >= 1``
+        runs the nominal robot (draw 0) plus ``n - 1`` robots drawn from
+        ``table``.
+    duration_s:
+        Simulated time per run.
+    scheduler, workers:
+        Passed to :func:`labkit.executor.map_tasks` (local processes by
+        default, ``"serial"``, or ``"tcp://host:port"`` for Dask).
+    seed:
+        Seeds every draw; the same seed gives the same numbers on any backend.
+    quiet:
+        Hide the progress bar.
+    table:
+        Relative standard uncertainties (default
+        :data:`labkit.sim.uncertainty.DEFAULT_TABLE`).
+
+    Returns
+    -------
+    SweepResult
+    """
+    from labkit.executor import map_tasks
+    from labkit.sim.uncertainty import DEFAULT_TABLE, check_table
+
+    values = np.asarray([float(v) for v in values], dtype=float)
+    if values.size == 0:
+        raise InputError("no values to sweep", key=quantity, expected="at least one value")
+    if int(draws) < 0:
+        raise InputError(f"draws must be >= 0, got {draws}", key="draws", expected="an integer >= 0")
+    if not duration_s > 0:
+        raise InputError(f"duration must be > 0 s, got {duration_s}", key="duration_s",
+                         expected="a duration in s, > 0")
+    table = dict(DEFAULT_TABLE if table is None else table)
+    check_table(params, table)
+    # Fail on a bad quantity before any process starts.
+    apply_value(params, base_scenario, quantity, values[0])
+    n_draws = max(1, int(draws))
+    tasks = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table)
+             for v in values for d in range(n_draws)]
+    rows = map_tasks(run_point, tasks, scheduler=scheduler, workers=workers,
+                     desc=f"sweep {quantity}", quiet=quiet)
+    shape = (len(values), n_draws)
+    speeds = np.array([r["speed_mm_s"] for r in rows]).reshape(shape)
+    frac = np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, len(CONTACT_MODES)))
+    patterns = np.array([r["patterns"] for r in rows], dtype=object).reshape(shape + (6,)).astype(str)
+    impacts = np.array([r["impacts"] for r in rows]).reshape(shape + (6,))
+    meta = {"seed": int(seed), "draws": n_draws, "duration_s": float(duration_s),
+            "uncertainty_table": table, "scheduler": scheduler or "local",
+            "draw_0": "nominal", "seeding": "SeedSequence([seed, draw]) per draw, same at every point",
+            "task_seeds": [_task_seed(seed, d) for d in range(n_draws)]}
+    return SweepResult(quantity=quantity, values=values, speeds_mm_s=speeds, contact_fraction=frac,
+                       patterns=patterns, impacts=impacts, scenario=scenario_dict(base_scenario),
+                       params_toml=params.to_toml_text(), meta=meta)

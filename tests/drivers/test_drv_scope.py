@@ -1,0 +1,216 @@
+"""Oscilloscopes: channel set-up, acquisition, binary transfers, scaling, faults."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from drivers.scope import InfiniiVision, RigolDS1000Z
+from drivers.testing import STALL, Drop, expected_protocol
+from labkit.errors import InstrumentError, LimitError
+
+OK = b'+0,"No error"\n'
+R_OK = b'0,"No error"\n'
+
+
+def _w(*cmds: str):
+    return [(c.encode() + b"\n", None) for c in cmds]
+
+
+def block(payload: bytes, digits: int = 8) -> bytes:
+    return b"#" + str(digits).encode() + str(len(payload)).zfill(digits).encode() + payload + b"\n"
+
+
+def preamble(fmt, points, xinc, xorig, xref, yinc, yorig, yref) -> bytes:
+    return (f"{fmt},0,{points},1,{xinc:E},{xorig:E},{xref},{yinc:E},{yorig:E},{yref}\n").encode()
+
+
+KS_WORD_SETUP = _w(":WAV:SOUR CHAN2", ":WAV:FORM WORD", ":WAV:BYT MSBF", ":WAV:UNS 1",
+                   ":WAV:POIN:MODE RAW", ":WAV:POIN MAX") + [(b":SYST:ERR?\n", OK)]
+
+
+def test_infiniivision_setup_and_timebase():
+    script = _w(":CHAN1:DISP 1", ":CHAN1:COUP AC", ":CHAN1:SCAL 0.05", ":CHAN1:OFFS -0.1") + [
+        (b":SYST:ERR?\n", OK)] + _w(":TIM:SCAL 0.001") + [(b":SYST:ERR?\n", OK)] + _w(
+        ":TRIG:MODE EDGE", ":TRIG:EDGE:SOUR CHAN2", ":TRIG:EDGE:LEV 0.1", ":TRIG:EDGE:SLOP NEG") + [
+        (b":SYST:ERR?\n", OK)]
+    with expected_protocol(InfiniiVision, script) as sc:
+        sc.setup_channel(1, volts_per_div=0.05, offset_v=-0.1, coupling="ac")
+        sc.set_timebase(record_s=0.01)
+        sc.set_trigger("chan2", 0.1, "NEG")
+    assert sc.state["channels"]["1"]["coupling"] == "AC" and sc.state["time_per_div_s"] == 0.001
+
+
+def test_scope_limits_before_sending():
+    with expected_protocol(InfiniiVision, [], channels=2) as sc:
+        with pytest.raises(LimitError, match="scope channel"):
+            sc.setup_channel(3, 0.1)
+        with pytest.raises(LimitError, match="volts_per_div"):
+            sc.setup_channel(1, 50)
+        with pytest.raises(LimitError, match="coupling"):
+            sc.setup_channel(1, 0.1, coupling="GND50")
+        with pytest.raises(LimitError, match="waveform format"):
+            sc.read_waveform(1, fmt="ASCII")
+
+
+def test_infiniivision_single_and_wait():
+    script = _w(":SING") + [(b":OPER:COND?\n", b"+40\n"), (b":OPER:COND?\n", b"+32\n")]
+    with expected_protocol(InfiniiVision, script) as sc:
+        sc.single()
+        sc.wait_done(timeout_s=2)
+
+
+def test_wait_done_gives_up_at_its_timeout():
+    script = [(b":OPER:COND?\n", b"+8\n")] * 3
+    with expected_protocol(InfiniiVision, script) as sc:
+        sc.poll_s = 0.05
+        with pytest.raises(InstrumentError, match="not complete within 0.1 s"):
+            sc.wait_done(timeout_s=0.1)
+
+
+@pytest.mark.parametrize("fast_blocks", [True, False])
+def test_infiniivision_word_waveform_scaled(fast_blocks):
+    rng = np.random.default_rng(1)
+    raw = rng.integers(0, 65535, 1000).astype(">u2")
+    raw[:4] = [0x0A0A, 0x000A, 0x0A00, 0x2300]        # termination bytes and '#' inside the data
+    pre = preamble(1, 1000, 1e-6, -5e-4, 0, 3e-5, 0.1, 32768)
+    script = KS_WORD_SETUP + [(b":WAV:PRE?\n", pre), (b":WAV:DATA?\n", block(raw.tobytes()))]
+    with expected_protocol(InfiniiVision, script, fast_blocks=fast_blocks) as sc:
+        wf = sc.read_waveform(2, "WORD")
+    np.testing.assert_allclose(wf.volts, (raw.astype(float) - 32768) * 3e-5 + 0.1)
+    np.testing.assert_allclose(wf.t_s, np.arange(1000) * 1e-6 - 5e-4)
+    assert wf.channel == 2 and wf.xinc_s == 1e-6 and wf.fs_hz == pytest.approx(1e6)
+
+
+def test_infiniivision_byte_waveform():
+    raw = np.arange(256, dtype=np.uint8)
+    pre = preamble(0, 256, 2e-6, 0.0, 10, 0.01, -0.5, 128)
+    script = _w(":WAV:SOUR CHAN1", ":WAV:FORM BYTE", ":WAV:POIN:MODE RAW", ":WAV:POIN 1000") + [
+        (b":SYST:ERR?\n", OK), (b":WAV:PRE?\n", pre), (b":WAV:DATA?\n", block(raw.tobytes()))]
+    with expected_protocol(InfiniiVision, script, points=1000) as sc:
+        wf = sc.read_waveform(1, "BYTE")
+    np.testing.assert_allclose(wf.volts, (np.arange(256) - 128) * 0.01 - 0.5)
+    np.testing.assert_allclose(wf.t_s, (np.arange(256) - 10) * 2e-6)
+
+
+@pytest.mark.parametrize("fast_blocks", [True, False])
+@pytest.mark.parametrize("data_reply, match", [
+    (b"garbage\n", "bad binary block"),
+    (b"#A0000\n", "bad binary block"),
+    (block(b"\x00\x01" * 999), "preamble says 1000"),
+])
+def test_bad_blocks(data_reply, match, fast_blocks):
+    pre = preamble(1, 1000, 1e-6, 0, 0, 1e-3, 0, 0)
+    script = KS_WORD_SETUP + [(b":WAV:PRE?\n", pre), (b":WAV:DATA?\n", data_reply)]
+    with expected_protocol(InfiniiVision, script, fast_blocks=fast_blocks) as sc:
+        with pytest.raises(InstrumentError, match=match) as ei:
+            sc.read_waveform(2)
+    assert ei.value.command == ":WAV:DATA?"
+
+
+@pytest.mark.parametrize("pre, match", [
+    (b"1,0,1000\n", "garbled preamble"),
+    (b"1,0,x,1,1,1,1,1,1,1\n", "garbled preamble"),
+    (b"1,0,0,1,1e-6,0,0,1e-3,0,0\n", "implausible preamble"),
+    (b"0,0,1000,1,1e-6,0,0,1e-3,0,0\n", "is not WORD"),
+])
+def test_bad_preamble(pre, match):
+    with expected_protocol(InfiniiVision, KS_WORD_SETUP + [(b":WAV:PRE?\n", pre)]) as sc:
+        with pytest.raises(InstrumentError, match=match):
+            sc.read_waveform(2)
+
+
+def test_block_without_termination_is_error():
+    pre = preamble(1, 4, 1e-6, 0, 0, 1e-3, 0, 0)
+    script = KS_WORD_SETUP + [(b":WAV:PRE?\n", pre),
+                              (b":WAV:DATA?\n", b"#18" + b"\x00" * 8 + b"X\n")]
+    with expected_protocol(InfiniiVision, script, timeout_s=0.3) as sc:
+        with pytest.raises(InstrumentError, match="not followed by the termination"):
+            sc.read_waveform(2)
+
+
+def test_drop_mid_transfer_within_timeout():
+    raw = np.zeros(100_000, ">u2").tobytes()
+    pre = preamble(1, 100_000, 1e-6, 0, 0, 1e-3, 0, 0)
+    script = KS_WORD_SETUP + [(b":WAV:PRE?\n", pre), (b":WAV:DATA?\n", Drop(block(raw)[:50_000]))]
+    t0 = time.monotonic()
+    with expected_protocol(InfiniiVision, script, timeout_s=0.3) as sc:
+        with pytest.raises(InstrumentError, match="connection closed") as ei:
+            sc.read_waveform(2)
+    assert time.monotonic() - t0 < 3.0 and ei.value.command == ":WAV:DATA?"
+
+
+def test_stall_mid_transfer_within_timeout():
+    pre = preamble(1, 1000, 1e-6, 0, 0, 1e-3, 0, 0)
+    script = KS_WORD_SETUP + [(b":WAV:PRE?\n", pre), (b":WAV:DATA?\n", b"#800002000\x00\x01")]
+    t0 = time.monotonic()
+    with expected_protocol(InfiniiVision, script, timeout_s=0.3) as sc:
+        with pytest.raises(InstrumentError, match="no reply within"):
+            sc.read_waveform(2)
+    assert time.monotonic() - t0 < 3.0
+
+
+def _rigol_chunks(raw: np.ndarray, per_read: int, width: int) -> list:
+    out = []
+    n = raw.size
+    start = 1
+    while start <= n:
+        stop = min(start + per_read - 1, n)
+        out += _w(f":WAV:STAR {start}", f":WAV:STOP {stop}")
+        out.append((b":WAV:DATA?\n", block(raw[start - 1:stop].tobytes(), 9)))
+        start = stop + 1
+    return out
+
+
+def test_rigol_raw_word_chunked_and_scaled():
+    n = 1000
+    samples = (np.arange(n) % 256).astype(np.uint16)
+    raw = samples.astype("<u2")
+    raw[::7] |= 0xAB00             # WORD: only the low byte is the sample; the high byte is ignored
+    pre = preamble(0, n, 1e-6, -1e-4, 0, 0.04, 10, 127)
+    script = _w(":STOP", ":WAV:SOUR CHAN3", ":WAV:MODE RAW", ":WAV:FORM WORD") + [
+        (b":SYST:ERR?\n", R_OK), (b":WAV:PRE?\n", pre)] + _rigol_chunks(raw, 150, 2)
+    with expected_protocol(RigolDS1000Z, script, max_block_bytes=300) as sc:
+        wf = sc.read_waveform(3, "WORD")
+    np.testing.assert_allclose(wf.volts, (samples.astype(float) - 10 - 127) * 0.04)
+    np.testing.assert_allclose(wf.t_s, np.arange(n) * 1e-6 - 1e-4)
+    assert sum(1 for e, _ in script if e == b":WAV:DATA?\n") == 7
+
+
+def test_rigol_byte_default_chunks_of_250000():
+    n = 600_000
+    raw = (np.arange(n) % 251).astype(np.uint8)
+    pre = preamble(1, n, 1e-7, 0, 0, 0.01, 0, 128)
+    script = _w(":STOP", ":WAV:SOUR CHAN1", ":WAV:MODE RAW", ":WAV:FORM BYTE") + [
+        (b":SYST:ERR?\n", R_OK), (b":WAV:PRE?\n", pre)] + _rigol_chunks(raw, 250_000, 1)
+    assert [e for e, _ in script if e and e.startswith(b":WAV:STOP")] == [
+        b":WAV:STOP 250000\n", b":WAV:STOP 500000\n", b":WAV:STOP 600000\n"]
+    with expected_protocol(RigolDS1000Z, script, timeout_s=2.0) as sc:
+        wf = sc.read_waveform(1, "BYTE")
+    np.testing.assert_allclose(wf.volts, (raw.astype(float) - 128) * 0.01)
+
+
+def test_rigol_short_chunk_is_error():
+    pre = preamble(1, 10, 1e-6, 0, 0, 0.01, 0, 128)
+    script = _w(":STOP", ":WAV:SOUR CHAN1", ":WAV:MODE RAW", ":WAV:FORM BYTE") + [
+        (b":SYST:ERR?\n", R_OK), (b":WAV:PRE?\n", pre)] + _w(":WAV:STAR 1", ":WAV:STOP 10") + [
+        (b":WAV:DATA?\n", block(b"\x00" * 9, 9))]
+    with expected_protocol(RigolDS1000Z, script) as sc:
+        with pytest.raises(InstrumentError, match="asked for 1..10"):
+            sc.read_waveform(1, "BYTE")
+
+
+def test_rigol_timebase_single_and_wait():
+    script = _w(":TIM:MAIN:SCAL 0.001") + [(b":SYST:ERR?\n", R_OK)] + _w(":SING") + [
+        (b":TRIG:STAT?\n", b"WAIT\n"), (b":TRIG:STAT?\n", b"STOP\n")]
+    with expected_protocol(RigolDS1000Z, script) as sc:
+        sc.set_timebase(0.012)           # 12 divisions
+        sc.single()
+        sc.wait_done(1.0)
+
+
+def test_wait_done_stall_is_instrument_error():
+    with expected_protocol(RigolDS1000Z, [(b":TRIG:STAT?\n", STALL)], timeout_s=0.2) as sc:
+        with pytest.raises(InstrumentError, match="no reply"):
+            sc.wait_done(5.0)

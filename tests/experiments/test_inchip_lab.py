@@ -1,0 +1,107 @@
+"""In-chip sweeps against the virtual lab (real sockets and pty): FRF peaks, interlocks, a lost instrument."""
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from labcfg import inchip_toml, lab_timeline
+from labkit.errors import InstrumentError, LimitError
+from labkit.experiments.session import run_session
+from labkit.lab import VirtualLab
+
+
+def _peak_hz(f: np.ndarray, mag: np.ndarray, lo: float, hi: float) -> float:
+    """Peak of |H| inside [lo, hi]: a parabola through the top three points (in log f)."""
+    sel = np.flatnonzero((f >= lo) & (f <= hi))
+    k = sel[np.argmax(mag[sel])]
+    assert sel[0] < k < sel[-1], f"no interior maximum in {lo:.0f}-{hi:.0f} Hz (max at {f[k]:.1f} Hz)"
+    x = np.log(f[k - 1:k + 2])
+    a, b, _ = np.polyfit(x, mag[k - 1:k + 2], 2)
+    return float(np.exp(-b / (2 * a)))
+
+
+@pytest.mark.slow
+def test_inchip_frf_peaks_at_tethered_resonances(tmp_path):
+    truth = VirtualLab(seed=0).truth["tethered_modes"]           # not started: just its parameters
+    modes = {n: f for n, f in zip(truth["names"], truth["freq_hz"]) if n in ("tether", "knee")}
+    # a coarse log grid plus a 0.5 % grid across +-2 % of each resonance
+    freqs = set(np.round(np.geomspace(300, 5000, 6), 3))
+    for f0 in modes.values():
+        freqs |= set(np.round(f0 * (1 + 0.005 * np.arange(-4, 5)), 3))
+    freqs = sorted(freqs)
+    cfg = inchip_toml(tmp_path / "inchip.toml", freqs, settle_s=0.03, dwell_cycles=12)
+    out = tmp_path / "run.h5"
+    summary = run_session("inchip", cfg, out, lab=True, quiet=True)
+    assert summary["status"] == "complete" and summary["points_ok"] == 3 * len(freqs)
+    with h5py.File(out, "r") as f:
+        assert f.attrs["kind"] == "run_inchip" and f.attrs["status"] == "complete"
+        stored = json.loads(f["virtual_lab"].attrs["truth_json"])["tethered_modes"]
+        assert stored["freq_hz"] == truth["freq_hz"]
+        for loc in ("body", "hip", "knee"):
+            g = f[f"locations/{loc}"]
+            fr, h, q = g["freq_hz"][...], g["frf"][...], g["quality"][...]
+            assert list(fr) == freqs and g["frf"].attrs["units"] == "(mm/s)/V"
+            for name, f0 in modes.items():
+                peak = _peak_hz(fr, np.abs(h), f0 * 0.98, f0 * 1.02)
+                assert abs(peak / f0 - 1) < 0.01, (loc, name, peak, f0)
+                near = np.abs(fr / f0 - 1) < 0.01
+                assert q[near].min() > 0.99          # clean sines at the resonances
+        # the drive was on during the sweep and off at the end (the lab's own record)
+        t, on = lab_timeline(f)
+        assert on.any() and not on[-1]
+
+
+def test_over_range_interlock_skips_points_and_turns_drive_off(tmp_path):
+    # 1 mm/s/V: the knee's 3.4 kHz resonance (~12 mm/s) exceeds the 10 V analog range
+    freqs = [1000.0, 3400.0, 3420.0, 4500.0]
+    cfg = inchip_toml(tmp_path / "il.toml", freqs, locations=("knee",), scale_mm_s_per_v=1.0,
+                      settle_s=0.02, dwell_cycles=10)
+    out = tmp_path / "il.h5"
+    with VirtualLab(seed=1) as lab:
+        summary = run_session("inchip", cfg, out, lab=lab, quiet=True)
+        assert lab.output_state("funcgen", 1) is False
+    assert summary["status"] == "complete"
+    assert [il["index"] for il in summary["interlocks"]] == [1, 2]
+    with h5py.File(out, "r") as f:
+        st = list(f["points/status"].asstr()[...])
+        assert st == ["ok", "interlock", "interlock", "ok"]
+        assert "over-range" in f["points/reason"].asstr()[1]
+        assert list(f["locations/knee/freq_hz"][...]) == [1000.0, 4500.0]
+        events = list(f["events/text"].asstr()[...])
+        assert sum("drive off (interlock: vibrometer over-range)" in e for e in events) == 2
+        # the drive went off after each interlocked point: three on/off pairs on the lab's record
+        _, on = lab_timeline(f)
+        assert list(on) == [False, True, False, True, False, True, False]
+    cfg_end = inchip_toml(tmp_path / "end.toml", freqs, locations=("knee",), scale_mm_s_per_v=1.0,
+                          settle_s=0.02, dwell_cycles=10, on_interlock="end")
+    with pytest.raises(LimitError, match="over-range at point 1; run ended"):
+        run_session("inchip", cfg_end, tmp_path / "end.h5", lab=True, quiet=True)
+    with h5py.File(tmp_path / "end.h5", "r") as f:
+        assert f.attrs["status"].startswith("aborted: interlock")
+        assert list(f["points/status"].asstr()[...]) == ["ok", "interlock"]
+        _, on = lab_timeline(f)
+        assert not on[-1]
+
+
+@pytest.mark.parametrize("instrument, match", [("scope", "DATA?"), ("funcgen", "SYST:ERR?")])
+def test_lost_instrument_leaves_output_off(tmp_path, instrument, match):
+    cfg = inchip_toml(tmp_path / "c.toml", [800.0, 900.0, 1000.0, 1100.0, 1200.0], locations=("hip",),
+                      settle_s=0.01, dwell_cycles=10, timeout_s=0.5)
+    out = tmp_path / "lost.h5"
+    with VirtualLab(seed=2) as lab:
+        # the link drops in the middle of the third point (after the drive is on)
+        lab.inject_fault(instrument, "drop", after=5, match=match)
+        with pytest.raises(InstrumentError) as err:
+            run_session("inchip", cfg, out, lab=lab, quiet=True)
+        assert instrument in str(err.value)
+        assert lab.output_state("funcgen", 1) is False and lab.output_state("funcgen", 2) is False
+        on_times = [t for t, inst, ch, on in lab.output_timeline if inst == "funcgen" and on]
+        assert on_times, "the drive was never on: the fault hit too early to test anything"
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"].startswith("aborted: InstrumentError")
+        n = f["points/index"].shape[0]
+        assert f["locations/hip/freq_hz"].shape[0] == n >= 1
+        assert any("drive off" in e for e in f["events/text"].asstr()[...])

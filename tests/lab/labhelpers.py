@@ -1,0 +1,89 @@
+"""Helpers of the virtual-lab tests: a raw-socket SCPI client and signal fits."""
+from __future__ import annotations
+
+import socket
+import time
+
+import numpy as np
+
+from labkit.lab import VirtualLab
+
+
+class Raw:
+    """A bare TCP client: lines out, lines and IEEE 488.2 blocks in (no pyvisa)."""
+
+    def __init__(self, resource: str, timeout_s: float = 5.0) -> None:
+        _, host, port, _ = resource.split("::")
+        self.sock = socket.create_connection((host, int(port)), timeout=timeout_s)
+        self.buf = b""
+
+    def write(self, text: str) -> None:
+        self.sock.sendall(text.encode("ascii") + b"\n")
+
+    def _fill(self, n: int) -> None:
+        while len(self.buf) < n:
+            chunk = self.sock.recv(1 << 20)
+            if not chunk:
+                raise ConnectionError(f"closed after {len(self.buf)} bytes")
+            self.buf += chunk
+
+    def readline(self) -> str:
+        while b"\n" not in self.buf:
+            chunk = self.sock.recv(65536)
+            if not chunk:
+                raise ConnectionError("closed")
+            self.buf += chunk
+        line, self.buf = self.buf.split(b"\n", 1)
+        return line.decode("ascii")
+
+    def query(self, text: str) -> str:
+        self.write(text)
+        return self.readline()
+
+    def query_block(self, text: str) -> bytes:
+        """Send ``text``; return the payload of the definite-length block it answers."""
+        self.write(text)
+        self._fill(2)
+        assert self.buf[:1] == b"#", self.buf[:20]
+        n = int(self.buf[1:2])
+        self._fill(2 + n)
+        size = int(self.buf[2:2 + n])
+        self._fill(2 + n + size + 1)
+        payload = self.buf[2 + n:2 + n + size]
+        assert self.buf[2 + n + size:2 + n + size + 1] == b"\n"
+        self.buf = self.buf[2 + n + size + 1:]
+        return payload
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def drive_sine(fg: Raw, freq_hz: float, amp_vpp: float) -> None:
+    """Program generator channel 1 for a sine into the high-Z PZT and switch it on."""
+    fg.write("OUTP1:LOAD INF")
+    fg.write(f"SOUR1:FUNC SIN;FREQ {freq_hz};VOLT {amp_vpp};VOLT:OFFS 0")
+    fg.write("OUTP1 ON")
+    assert fg.query("SYST:ERR?") == '+0,"No error"'
+
+
+def fit_sine(t: np.ndarray, y: np.ndarray, freq_hz: float) -> complex:
+    """Complex amplitude c of y ~ Im(c exp(j w t)) (least squares)."""
+    w = 2 * np.pi * freq_hz
+    m = np.column_stack([np.sin(w * t), np.cos(w * t), np.ones_like(t)])
+    a, b, _ = np.linalg.lstsq(m, y, rcond=None)[0]
+    return complex(a, b)
+
+
+def read_word(sc: Raw, ch: int) -> tuple[np.ndarray, np.ndarray]:
+    """Transfer channel ``ch`` as WORD and scale it with the preamble: (t_s, volts)."""
+    sc.write(f":WAV:SOUR CHAN{ch};:WAV:FORM WORD;:WAV:BYT MSBF;:WAV:UNS 1")
+    pre = [float(x) for x in sc.query(":WAV:PRE?").split(",")]
+    data = np.frombuffer(sc.query_block(":WAV:DATA?"), dtype=">u2")
+    assert len(data) == int(pre[2])
+    xinc, xorig, xref, yinc, yorig, yref = pre[4], pre[5], pre[6], pre[7], pre[8], pre[9]
+    return (np.arange(len(data)) - xref) * xinc + xorig, (data - yref) * yinc + yorig
+
+
+def settle(lab: VirtualLab) -> None:
+    """Wait until the structure's transient after a drive change has died out."""
+    time.sleep(lab.model.settle_s() + 0.02)

@@ -1,0 +1,120 @@
+"""The control channel, its Python client, the shaker set-up and the virtual camera."""
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+import pytest
+import pyvisa
+from labhelpers import drive_sine, fit_sine, read_word
+
+from labkit.errors import InstrumentError
+from labkit.lab import VirtualLab
+from labkit.lab.client import LabCamera, LabControl, parse_socket_resource
+
+
+def test_control_language_over_pyvisa(lab):
+    rm = pyvisa.ResourceManager("@py")
+    ctl = rm.open_resource(lab.resources["control"], read_termination="\n", write_termination="\n",
+                           timeout=2000)
+    try:
+        assert ctl.query("*IDN?").startswith("labkit,VirtualLab control")
+        ctl.write("LAB:SPOT HIP")
+        assert ctl.query("LAB:SPOT?") == "HIP" and lab.spot == "hip"
+        ctl.write("LAB:SETUP SHAK")
+        assert ctl.query("LAB:SETup?") == "SHAKER" and lab.setup == "shaker"
+        ctl.write("LAB:SPOT ELBOW")
+        assert ctl.query("SYST:ERR?").startswith("-224")
+        assert lab.spot == "hip"
+        ctl.write('LAB:FAULT funcgen,stall,0,"FREQ?"')
+        assert ctl.query("SYST:ERR?") == '+0,"No error"'
+        assert lab.servers["funcgen"].faults[0].match == "FREQ?"
+        assert ctl.query("LAB:FAULT:CLEAR;*OPC?") == "1"
+        assert lab.servers["funcgen"].faults == []
+    finally:
+        ctl.close()
+
+
+def test_lab_control_client(lab):
+    assert parse_socket_resource("TCPIP0::127.0.0.1::5025::SOCKET") == ("127.0.0.1", 5025)
+    with LabControl(lab.resources["control"], timeout_s=2) as ctl:
+        ctl.set_spot("body")
+        assert ctl.spot() == "body" and lab.spot == "body"
+        ctl.set_setup("shaker")
+        assert ctl.setup() == "shaker"
+        truth = ctl.truth()
+        assert truth["tethered_modes"]["freq_hz"] == pytest.approx(lab.truth["tethered_modes"]["freq_hz"])
+        assert truth["amplifier_gain_db"] == 20.0
+        with pytest.raises(InstrumentError, match="lab-control"):
+            ctl.set_spot("elbow")
+        ctl.inject_fault("scope", "garbage", after=3)
+        assert lab.servers["scope"].faults[0].after == 3
+
+
+def test_control_client_fails_clearly_without_a_lab():
+    with VirtualLab() as lab:
+        resource = lab.resources["control"]
+    with pytest.raises(InstrumentError, match="cannot connect"):
+        LabControl(resource, timeout_s=0.5)
+
+
+def test_shaker_setup_drives_the_tray_and_the_simulated_robot(lab, raw):
+    fg, sc = raw("funcgen"), raw("scope")
+    lab.set_setup("shaker")
+    lab.set_spot("knee")
+    freq_hz, amp_um = 240.0, 25.0
+    vpp = 2 * amp_um / lab.chain.tray_amp_um(freq_hz, 1.0)
+    drive_sine(fg, freq_hz, vpp)
+    time.sleep(lab.chain.settle_s())
+    sc.write(":CHAN1:DISP 1;:CHAN2:DISP 1;:CHAN3:DISP 1;:TIM:RANG 0.05")
+    sc.write(":WAV:POIN:MODE RAW;:WAV:POIN 20000")
+    assert sc.query(":DIG;*OPC?") == "1"
+    scale = lab.vibrometer.scale_mm_s_per_v
+    t, drive = read_word(sc, 1)
+    _, knee = read_word(sc, 2)
+    _, tray = read_word(sc, 3)
+    # the tray: generator -> 20 dB -> shaker, 25 um at 240 Hz
+    tray_v = fit_sine(t, tray * scale, freq_hz)
+    assert abs(tray_v) / (2 * np.pi * freq_hz) * 1e3 == pytest.approx(amp_um, rel=0.01)
+    h = lab.chain.tray_velocity_frf(freq_hz)
+    assert np.angle(tray_v / fit_sine(t, drive, freq_hz) / h) == pytest.approx(0, abs=0.01)
+    # the knee: the hybrid simulator's answer for that tray motion (cached per freq, amp)
+    from labkit.sim import Shaker, simulate
+    res = simulate(lab.params, Shaker(freq_hz, round(lab.chain.tray_amp_um(freq_hz, lab.funcgen.drive(1).amp_v), 4)),
+                   duration_s=lab.sim_duration_s, seed=lab.seed, record_dt_s=1 / (freq_hz * 64))
+    sim_knee = np.asarray(res.knee_vz_mm_s)[:, 0]
+    settled = res.t_s > res.t_s[-1] / 3
+    assert np.std(knee * scale) == pytest.approx(np.std(sim_knee[settled]), rel=0.15)
+    assert len(lab._sim_cache) == 1
+
+
+def test_camera_records_a_readable_video(lab, tmp_path):
+    lab.set_setup("shaker")
+    lab.camera_fps = 20
+    with LabCamera(lab.resources["control"]) as cam:
+        info = cam.record(tmp_path / "clip.avi", 1.0)
+    assert info["frames"] == 20 and len(info["timestamps_s"]) == 20
+    assert np.all(np.diff(info["timestamps_s"]) > 0)
+    cap = cv2.VideoCapture(str(tmp_path / "clip.avi"))
+    frames = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        frames.append(frame)
+    cap.release()
+    assert len(frames) == 20 and frames[0].shape[:2] == (480, 640)
+    grey = frames[0].mean(axis=2)
+    assert grey.min() < 100 < grey.max()           # a dark chip on the light tray
+    # the slow turn: the heading changed over the clip
+    hd = lab.last_recording["heading_rad"]
+    assert hd[-1] - hd[0] == pytest.approx(np.deg2rad(1.5) * (info["timestamps_s"][-1]), rel=0.05, abs=0.01)
+
+
+def test_camera_bad_directory_is_a_clear_error(lab, tmp_path):
+    with LabControl(lab.resources["control"], timeout_s=2) as ctl:
+        t0 = time.monotonic()
+        with pytest.raises(InstrumentError, match="camera: no such directory"):
+            ctl.record_video(tmp_path / "missing" / "clip.avi", 0.2)
+        assert time.monotonic() - t0 < 1.0

@@ -1,0 +1,82 @@
+"""labkit report end to end on files in the agreed layouts (no simulator needed: --no-simulate)."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from tests.conftest import last_json, run_cli
+
+
+def _all_inputs(inputs):
+    tracks = [str(inputs[f"track{i}"]) for i in range(5)]
+    return ["--runs", str(inputs["inchip"]), str(inputs["shaker"]), "--tracks", *tracks,
+            "--fit", str(inputs["fit"]), "--sim", str(inputs["sweep"]), str(inputs["sim_200"]),
+            str(inputs["sim_300"]), "--no-simulate"]
+
+
+def test_full_report_is_self_contained_and_numbers_agree(inputs, tmp_path):
+    out = tmp_path / "rep"
+    proc = run_cli("report", *_all_inputs(inputs), "--out", str(out), "--json")
+    summary = last_json(proc)
+    assert summary["sections"] == {"frf": "ok", "stabilisation": "ok", "speed": "ok", "knee": "ok",
+                                   "agreement": "ok"}
+    html = (out / "report.html").read_text()
+    # self-contained: no external URL, no script, every image inline
+    assert not re.search(r"(src|href)\s*=\s*\"(https?:|//|file:)", html)
+    assert "<script" not in html.lower() and "<link" not in html.lower()
+    imgs = re.findall(r"<img [^>]*src=\"([^\"]+)\"", html)
+    assert len(imgs) == len(summary["figures"]) == 5          # frf, stab, speed, 2 knee drives
+    assert all(s.startswith("data:image/png;base64,") for s in imgs)
+    for fig in summary["figures"]:
+        assert Path(fig).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # speed agreement against the sweep: measured 3.0, 4.2, 2.5, 2.9, 0.0 at 150..600 Hz;
+    # simulated mean 3.5, 5.0, 3.0, 3.5, and 0.5 + (0 - 0.5) * 200/400 = 0.25 at 600 Hz
+    err = np.array([0.5, 0.8, 0.5, 0.6, 0.25])
+    agreement = {r["quantity"]: r["value"] for r in summary["agreement"]}
+    assert agreement["speed RMS error"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-9)
+    assert summary["speed_rms_error_mm_s"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-9)
+    # knee: 200 Hz measured firm (1.05 x tray), simulated firm (1.1 x tray) -> ratio 1.1/1.05, in phase
+    assert agreement["knee amplitude ratio (sim/meas) @ 200 Hz, 25 um"] == pytest.approx(1.1 / 1.05, rel=1e-3)
+    assert abs(agreement["knee phase difference (sim - meas) @ 200 Hz, 25 um"]) < 1.0
+    assert agreement["leg-pattern agreement (knee records)"] == pytest.approx(1.0)   # firm/firm, jumping/jumping
+    # every number has its provenance, naming the files
+    data = json.loads((out / "agreement.json").read_text())
+    for row in data["agreement"]:
+        assert row["provenance"], row
+    speed_row = next(r for r in data["agreement"] if r["quantity"] == "speed RMS error")
+    assert str(inputs["sweep"]) == speed_row["provenance"]["simulated"]
+    assert any("track0.h5" in s for s in speed_row["provenance"]["measured"])
+    assert "track0.h5" in html and "sweep.h5" in html
+
+
+def test_missing_inputs_are_reported_not_fatal(inputs, tmp_path):
+    out = tmp_path / "rep"
+    proc = run_cli("report", "--tracks", str(inputs["track4"]), "--out", str(out), "--json")
+    s = last_json(proc)
+    assert s["sections"]["frf"] == "missing" and "--fit" in s["missing"]["frf"]
+    assert s["sections"]["stabilisation"] == "missing"
+    assert s["sections"]["speed"] == "ok"                     # measured point alone is drawn
+    assert s["sections"]["agreement"] == "missing"
+    html = (out / "report.html").read_text()
+    assert "No fit given" in html and "Nothing to compare" in html
+
+
+def test_unreadable_input_exits_2_naming_the_file(inputs, tmp_path):
+    bad = tmp_path / "broken.h5"
+    bad.write_bytes(b"not hdf5 at all")
+    proc = run_cli("report", "--runs", str(bad), "--out", str(tmp_path / "r"), check=2)
+    assert str(bad) in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    # a file of the wrong kind passed as a fit
+    proc = run_cli("report", "--fit", str(inputs["shaker"]), "--out", str(tmp_path / "r"), check=2)
+    assert str(inputs["shaker"]) in proc.stderr and "modal_fit" in proc.stderr
+    # a track without its speed
+    t = tmp_path / "t.h5"
+    with h5py.File(t, "w") as h:
+        h.attrs["kind"] = "track"
+    proc = run_cli("report", "--tracks", str(t), "--out", str(tmp_path / "r"), check=2)
+    assert "mean_speed_mm_s" in proc.stderr and str(t) in proc.stderr

@@ -1,0 +1,80 @@
+"""``labkit simulate``: exit codes, JSON last line, HDF5 outputs (real CLI in a subprocess)."""
+from __future__ import annotations
+
+import h5py
+import pytest
+
+from tests.conftest import last_json, run_cli
+
+
+def test_shaker_json_and_h5(tmp_path):
+    out = tmp_path / "run.h5"
+    proc = run_cli("simulate", "shaker", "--freq-hz", "240", "--amp-um", "25", "--duration-s", "0.02",
+                   "--out", str(out), "--json")
+    js = last_json(proc)
+    assert isinstance(js["mean_speed_mm_s"], float)
+    assert len(js["patterns"]) == 6 and set(js["patterns"]) <= {"firm_contact", "partial_contact", "jumping"}
+    assert len(js["contact_fraction"]) == 6
+    assert js["freq_hz"] == 240.0 and js["amp_um"] == 25.0 and js["out"] == str(out)
+    with h5py.File(out) as f:
+        assert f.attrs["kind"] == "sim_result"
+
+
+def test_sweep_shaker_json_points_and_h5(tmp_path):
+    out = tmp_path / "sweep.h5"
+    proc = run_cli("simulate", "sweep", "shaker", "--freq-hz", "200:400:3", "--amp-um", "25", "--draws", "2",
+                   "--duration-s", "0.02", "--workers", "1", "--out", str(out), "--json")
+    js = last_json(proc)
+    assert js["quantity"] == "freq_hz" and js["draws"] == 2
+    assert [p["freq_hz"] for p in js["points"]] == [200.0, 300.0, 400.0]
+    assert all("mean_speed_mm_s" in p and "std_speed_mm_s" in p for p in js["points"])
+    with h5py.File(out) as f:
+        assert f.attrs["kind"] == "sim_sweep"
+        assert f["speeds_mm_s"].shape == (3, 2) and f["values"].attrs["units"] == "Hz"
+
+
+def test_sweep_pzt_mass_text_output():
+    proc = run_cli("simulate", "sweep", "pzt", "--mass-mg", "0.33,1.5", "--freq-hz", "1800", "--voltage-v", "20",
+                   "--duration-s", "0.01", "--workers", "1")
+    assert "mass_mg" in proc.stdout and "1.5" in proc.stdout
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["sweep", "shaker", "--freq-hz", "150:2000", "--amp-um", "25"], "--freq-hz"),
+    (["sweep", "shaker", "--freq-hz", "150:x:4"], "--freq-hz"),
+    (["sweep", "pzt", "--mass-mg", "0.3:2:0"], "--mass-mg"),
+    (["sweep", "shaker", "--freq-hz", "100:200:3", "--amp-um", "5:10:2"], "--amp-um"),
+    (["sweep", "shaker", "--freq-hz", "240"], "range"),
+    (["shaker", "--amp-um", "abc"], "--amp-um"),
+    (["pzt", "--freq-hz", "-5"], "--freq-hz"),
+    (["sweep", "shaker", "--freq-hz", "100:200:3", "--draws", "two"], "--draws"),
+    (["shaker", "--params", "/nonexistent/robot.toml"], "/nonexistent/robot.toml"),
+])
+def test_bad_input_exits_2_with_one_line(args, needle):
+    proc = run_cli("simulate", *args, "--duration-s", "0.01", check=2)
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert needle in lines[0]
+
+
+def test_bad_params_file_names_file_and_key(tmp_path):
+    bad = tmp_path / "robot.toml"
+    bad.write_text("not_a_parameter = 3\n")
+    proc = run_cli("simulate", "shaker", "--params", str(bad), "--duration-s", "0.01", check=2)
+    assert str(bad) in proc.stderr and "not_a_parameter" in proc.stderr
+    assert proc.stderr.count("\n") == 1
+
+
+def test_scenario_names_match_the_registry():
+    from labkit.commands.simulate import SCENARIO_NAMES
+    from labkit.sim.scenarios import SCENARIOS
+
+    assert list(SCENARIO_NAMES) == list(SCENARIOS)
+
+
+def test_scenario_cli_quick_writes_figure(tmp_path):
+    proc = run_cli("simulate", "scenario", "ablations", "--quick", "--out", str(tmp_path), "--json")
+    js = last_json(proc)
+    assert js["name"] == "ablations"
+    assert (tmp_path / "sim_ablations.png").stat().st_size > 1000
+    assert set(js["runs"]) == {"full model", "no adhesion", "no squeeze film"}

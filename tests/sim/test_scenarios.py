@@ -1,0 +1,59 @@
+"""Named scenarios (labkit.sim.scenarios): short runs produce their labelled outputs."""
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from labkit.errors import InputError
+from labkit.sim import RobotParams
+from labkit.sim.scenarios import SCENARIOS, ablate, adhesion_field, aperiodicity, run_scenario
+
+
+def test_aperiodicity_oracles():
+    t = np.arange(0, 0.1, 1e-5)
+    f = 240.0
+    assert aperiodicity(t, np.sin(2 * np.pi * f * t), f) < 1e-3
+    # a period-2 subharmonic is periodic too
+    assert aperiodicity(t, np.sin(np.pi * f * t) + np.sin(2 * np.pi * f * t), f) < 1e-3
+    noise = np.random.default_rng(0).standard_normal(t.size)
+    assert aperiodicity(t, noise, f) > 1.0
+    assert np.isnan(aperiodicity(t[:500], np.sin(2 * np.pi * f * t[:500]), f))
+
+
+def test_ablate_zeroes_the_forces():
+    p = RobotParams()
+    noad = ablate(p, "no_adhesion")
+    assert getattr(noad, adhesion_field(p)) == 0.0
+    assert getattr(p, adhesion_field(p)) > 0
+    nosq = ablate(p, "no-squeeze-film")
+    zeroed = [f for f in vars(p) if getattr(nosq, f) != getattr(p, f)]
+    assert len(zeroed) == 2 and all(getattr(nosq, f) == 0.0 for f in zeroed)
+    assert ablate(p, "none") is p
+    with pytest.raises(InputError, match="ablate"):
+        ablate(p, "no_gravity")
+
+
+@pytest.mark.parametrize("name", list(SCENARIOS))
+def test_quick_scenario_outputs(name, tmp_path):
+    s = run_scenario(name, out_dir=tmp_path, quick=True, workers=1, quiet=True)
+    assert s["name"] == name and s["quick"] is True
+    assert s["finding"] and isinstance(s["checks"], dict)
+    assert all(isinstance(v, bool) for v in s["checks"].values())
+    png = tmp_path / f"sim_{name}.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size < 150_000
+    with h5py.File(s["data"]) as f:
+        assert str(f.attrs["kind"]).startswith("sim_")
+
+
+def test_leg_patterns_labels_per_amplitude(tmp_path):
+    s = run_scenario("leg-patterns", out_dir=None, quick=True, workers=1, quiet=True)
+    assert len(s["dominant_pattern"]) == len(s["amps_um"])
+    assert set(s["dominant_pattern"]) <= {"firm_contact", "partial_contact", "jumping"}
+    for share in zip(*s["pattern_share"].values()):
+        assert sum(share) == pytest.approx(1.0)
+
+
+def test_unknown_scenario():
+    with pytest.raises(InputError, match="scenario"):
+        run_scenario("moonwalk", out_dir=None)
