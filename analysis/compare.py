@@ -190,47 +190,61 @@ def dominant_pattern(labels: Sequence[str] | np.ndarray) -> str:
     return max(PATTERNS, key=lambda p: flat.count(p))
 
 
-def classify_knee_pattern(t_s: np.ndarray, knee_vz_mm_s: np.ndarray, tray_vz_mm_s: np.ndarray,
-                          freq_hz: float, *, follow_tol: float = 0.25,
-                          firm_fraction: float = 0.95) -> dict[str, Any]:
+def classify_knee_pattern(t_s: np.ndarray, knee_vz_mm_s: np.ndarray, tray_vz_mm_s: np.ndarray | None,
+                          freq_hz: float, *, firm_distortion: float = 0.15,
+                          jump_aperiodicity: float = 0.3) -> dict[str, Any]:
     """Label a measured knee velocity record as firm contact, partial contact or jumping.
 
-    The paper's definitions (section 5.2), made operational (**choice**):
-    the knee *follows* the tray while ``|v_knee - v_tray|`` stays within
-    ``follow_tol`` times the tray's velocity amplitude. Firm contact: it
-    follows for at least ``firm_fraction`` of the record. Jumping: some
-    excursion from the tray lasts longer than one drive period ("in the air
-    for more than one actuation period"). Otherwise partial contact.
+    The paper's patterns (section 5.2), made operational (**choice**) from the
+    knee record alone, because a knee in firm contact does not move like the
+    tray (the leg flexes: it moves at the drive frequency with its own
+    amplitude and phase):
+
+    * firm contact: the knee moves as a pure sinusoid at the drive frequency —
+      the residual after fitting that sinusoid is below ``firm_distortion``
+      of its RMS;
+    * jumping: the motion does not repeat from one drive period to the next
+      (feet in the air for more than one period) — the RMS difference between
+      the record and itself one period later exceeds ``jump_aperiodicity`` of
+      the record's RMS;
+    * partial contact: otherwise (periodic at the drive period, but not
+      sinusoidal: adhesion holds the foot, then it lets go abruptly).
+
+    ``tray_vz_mm_s`` is only used to report how closely the knee follows the tray.
 
     Returns
     -------
     dict
-        ``pattern``, ``follow_fraction``, ``longest_air_periods``, ``method``.
+        ``pattern``, ``distortion``, ``aperiodicity``, ``knee_to_tray_amplitude``, ``method``.
     """
     t = np.asarray(t_s, float)
-    rel = np.asarray(knee_vz_mm_s, float) - np.asarray(tray_vz_mm_s, float)
-    amp = fundamental(t, tray_vz_mm_s, freq_hz)["amplitude"]
-    if not amp > 0:
-        amp = float(np.max(np.abs(tray_vz_mm_s))) or 1.0
-    follows = np.abs(rel) <= follow_tol * amp
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-    longest = 0
-    run = 0
-    for ok in follows:
-        run = 0 if ok else run + 1
-        longest = max(longest, run)
-    longest_periods = longest * dt * freq_hz
-    frac = float(follows.mean()) if follows.size else float("nan")
-    if frac >= firm_fraction:
+    x = np.asarray(knee_vz_mm_s, float)
+    fit = fundamental(t, x, freq_hz)
+    w = 2 * np.pi * freq_hz * t
+    pure = fit["amplitude"] * np.sin(w + fit["phase_rad"]) + fit["offset"]
+    ac = x - fit["offset"]
+    rms = float(np.sqrt(np.mean(ac ** 2))) or 1.0
+    distortion = float(np.sqrt(np.mean((x - pure) ** 2)) / rms)
+    period = 1.0 / freq_hz
+    later = t + period
+    ok = later <= t[-1]
+    aperiodicity = (float(np.sqrt(np.mean((np.interp(later[ok], t, x) - x[ok]) ** 2)) / (np.sqrt(2) * rms))
+                    if ok.sum() > 4 else float("nan"))
+    if distortion < firm_distortion:
         label = "firm_contact"
-    elif longest_periods > 1.0:
+    elif aperiodicity > jump_aperiodicity:
         label = "jumping"
     else:
         label = "partial_contact"
-    return {"pattern": label, "follow_fraction": _f(frac), "longest_air_periods": _f(longest_periods),
-            "method": f"|v_knee - v_tray| <= {follow_tol:g} x tray velocity amplitude counts as following; "
-                      f"firm if following >= {firm_fraction:g} of the time, jumping if an excursion "
-                      "lasts > 1 drive period, else partial"}
+    ratio = None
+    if tray_vz_mm_s is not None:
+        tray_amp = fundamental(t, tray_vz_mm_s, freq_hz)["amplitude"]
+        ratio = _f(fit["amplitude"] / tray_amp) if tray_amp > 0 else None
+    return {"pattern": label, "distortion": _f(distortion), "aperiodicity": _f(aperiodicity),
+            "knee_to_tray_amplitude": ratio,
+            "method": f"firm if the residual after a drive-frequency sinusoid is < {firm_distortion:g} of the "
+                      f"RMS; jumping if the record differs from itself one period later by > "
+                      f"{jump_aperiodicity:g} of the RMS (x sqrt 2); else partial"}
 
 
 # --------------------------------------------------------------------------- knee vertical motion

@@ -39,7 +39,7 @@ def plot_frf_fit(fit: Any, path: str | Path, *, title: str = "", units: str = ""
         for i, m in enumerate(fit.modes):
             for ax in (am, ap):
                 ax.axvline(m.freq_hz, color="C0", lw=0.6, ls=":")
-            am.annotate(f"{m.freq_hz:.4g} Hz\nzeta {m.damping_ratio:.3g}", (m.freq_hz, 1.0),
+            am.annotate(f"{m.freq_hz:.4g} Hz\nzeta {m.damping_ratio:.3g}", (m.freq_hz, 1.0 - 0.1 * (i % 3)),
                         xycoords=("data", "axes fraction"), xytext=(2, -2), textcoords="offset points",
                         fontsize=6.5, va="top", color="C0")
         am.set_title(f"{loc}  (nrmse {fit.nrmse.get(loc, float('nan')):.3g})", fontsize=9)
@@ -47,6 +47,8 @@ def plot_frf_fit(fit: Any, path: str | Path, *, title: str = "", units: str = ""
         ap.set_ylabel("phase (deg)", fontsize=8)
         ap.set_xlabel("frequency (Hz)", fontsize=8)
         ap.set_ylim(-190, 190)
+        if f.max() / f.min() > 5:
+            ap.set_xscale("log")
         ap.set_yticks([-180, -90, 0, 90, 180])
         for ax in (am, ap):
             ax.tick_params(labelsize=7)
@@ -69,9 +71,11 @@ def plot_stabilisation(stab: Any, path: str | Path, *, fit: Any = None, title: s
               2: ("o", "C2", "stable frequency + damping")}
     for st, (mk, col, lab) in styles.items():
         sel = stab.status == st
-        ax.scatter(stab.freq_hz[sel], stab.order[sel], marker=mk, s=12 if st else 8,
-                   facecolors="none" if mk == "o" else col, edgecolors=col if mk == "o" else None,
-                   c=None if mk == "o" else col, lw=0.8, label=lab)
+        if mk == "o":
+            ax.scatter(stab.freq_hz[sel], stab.order[sel], marker=mk, s=12, facecolors="none",
+                       edgecolors=col, lw=0.8, label=lab)
+        else:
+            ax.scatter(stab.freq_hz[sel], stab.order[sel], marker=mk, s=8, color=col, lw=0.8, label=lab)
     for f0 in np.atleast_1d(stab.chosen_hz):
         ax.axvline(f0, color="C3", lw=0.8, ls="--")
     ax.set_xlabel("frequency (Hz)", fontsize=8)

@@ -63,6 +63,7 @@ class Mode:
     amplitude_std: np.ndarray        # sqrt(var Re + var Im) per location
     peak: np.ndarray                 # |R| / (zeta wn): the mode's own FRF peak per location
     dominant_location: str
+    freq_damping_cov: float = 0.0    # covariance of freq_hz and damping_ratio (Hz)
 
     def to_dict(self, locations: Sequence[str]) -> dict[str, Any]:
         return {"freq_hz": self.freq_hz, "freq_hz_std": self.freq_hz_std,
@@ -244,9 +245,9 @@ def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple
     warnings: list[str] = []
     if method == "lscf":
         if n_max is None:
-            n_max = int(min(40, 32 if n_modes is None else max(16, 4 * n_modes + 12), 2 * ((n_lines // 3) // 2)))
+            n_max = int(min(40, 32 if n_modes is None else max(16, 4 * n_modes + 12), 2 * ((n_lines - 4) // 2)))
         stab = stabilisation([(c.w, c.H, c.weight) for c in chans], n_max, band)
-        lam0 = choose_poles(stab, n_modes)
+        lam0 = choose_poles(stab, n_modes, band_hz=band)
         if n_modes is not None and lam0.size < n_modes:
             warnings.append(f"only {lam0.size} of {n_modes} modes found in the stabilisation diagram")
         if lam0.size == 0:
@@ -254,11 +255,19 @@ def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple
         stab.chosen_hz = pole_to_modal(lam0)[0]
         _check_size(chans, lam0.size, powers)
         ref = refine(chans, lam0, powers, band_hz=band, covariance=covariance)
+        for _ in range(3):
+            keep = _credible(chans, ref, warnings)
+            if keep.all() or not keep.any():
+                break
+            ref = refine(chans, modal_to_pole(ref.freq_hz[keep], ref.damping_ratio[keep]), powers,
+                         band_hz=band, covariance=covariance)
         if len(chans) > 1:
             # Weight each location by its own noise level (feasible weighted least squares).
             _reweight(chans, ref, powers)
             ref = refine(chans, modal_to_pole(ref.freq_hz, ref.damping_ratio), powers, band_hz=band,
                          covariance=covariance)
+        if n_modes is not None and ref.freq_hz.size < n_modes:
+            warnings.append(f"{ref.freq_hz.size} of the {n_modes} modes asked for are credible")
         if not ref.success:
             warnings.append("nonlinear refinement did not converge")
         order = np.argsort(ref.freq_hz)
@@ -268,11 +277,47 @@ def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple
         lin = ref.lin
         lin_var = [np.clip(np.diag(ref.cov)[2 * m + k * lin[0].size: 2 * m + (k + 1) * lin[0].size], 0, None)
                    for k in range(len(chans))]
+        fz_cov = np.array([ref.cov[2 * i, 2 * i + 1] for i in range(m)])
         fit = _assemble(chans, ref.freq_hz, ref.damping_ratio, f_std, z_std, lin, lin_var, order,
-                        method, kind, band, powers, stab, ref.cov, ref.success, warnings)
+                        method, kind, band, powers, stab, ref.cov, ref.success, warnings, fz_cov)
         _drop_outside(fit)
         return fit
     return _fit_sdof(chans, n_modes, band, method, kind, powers, n_boot, seed, warnings)
+
+
+def _credible(chans: list[Channel], ref, warnings: list[str]) -> np.ndarray:
+    """Which refined modes are real: resolvable by the line spacing and significantly non-zero.
+
+    A mode narrower than the spacing of the lines around it (half-power
+    bandwidth ``2 zeta f`` below it) is fitting noise between lines; a mode
+    whose residue is nowhere larger than 3 standard uncertainties is not
+    supported by the data.
+    """
+    m = ref.freq_hz.size
+    n_lin = ref.lin[0].size
+    var = np.clip(np.diag(ref.cov), 0, None)
+    keep = np.ones(m, dtype=bool)
+    for i in range(m):
+        f, z = ref.freq_hz[i], ref.damping_ratio[i]
+        spacing = np.inf
+        snr = 0.0
+        for k, c in enumerate(chans):
+            fk = c.w / (2 * np.pi)
+            j = int(np.searchsorted(fk, f))
+            near = fk[max(j - 1, 0):j + 1]
+            if near.size == 2 and fk[0] <= f <= fk[-1]:
+                spacing = min(spacing, float(near[1] - near[0]))
+            R = abs(complex(ref.lin[k][2 * i], ref.lin[k][2 * i + 1]))
+            sd = np.sqrt(var[2 * m + k * n_lin + 2 * i] + var[2 * m + k * n_lin + 2 * i + 1])
+            snr = max(snr, R / sd if sd > 0 else np.inf)
+        if 2 * z * f < spacing:
+            keep[i] = False
+            warnings.append(f"dropped a pole at {f:.5g} Hz: narrower (2 zeta f = {2 * z * f:.3g} Hz) than the "
+                            f"line spacing ({spacing:.3g} Hz)")
+        elif snr < 3.0:
+            keep[i] = False
+            warnings.append(f"dropped a pole at {f:.5g} Hz: its residue is below 3 standard uncertainties")
+    return keep
 
 
 def _check_size(chans: list[Channel], m: int, powers: Sequence[int]) -> None:
@@ -294,7 +339,7 @@ def _reweight(chans: list[Channel], ref, powers: Sequence[int]) -> None:
 
 
 def _assemble(chans, f, z, f_std, z_std, lin, lin_var, order, method, kind, band, powers, stab, cov,
-              converged, warnings) -> ModalFit:
+              converged, warnings, fz_cov=None) -> ModalFit:
     m = len(f)
     names = [c.name for c in chans]
     modes = []
@@ -304,7 +349,7 @@ def _assemble(chans, f, z, f_std, z_std, lin, lin_var, order, method, kind, band
         wn = 2 * np.pi * f[i]
         peak = np.abs(amp) / max(z[i] * wn, 1e-300)
         modes.append(Mode(float(f[i]), float(f_std[i]), float(z[i]), float(z_std[i]), amp, amp_std, peak,
-                          names[int(np.argmax(peak))]))
+                          names[int(np.argmax(peak))], 0.0 if fz_cov is None else float(fz_cov[i])))
     resid_terms = [np.array([p[2 * m + 2 * k] + 1j * p[2 * m + 2 * k + 1] for k in range(len(powers))])
                    for p in lin]
     fit = ModalFit(modes, names, method, kind, band, tuple(powers), [c.w / (2 * np.pi) for c in chans],
@@ -394,14 +439,34 @@ def _fit_sdof(chans, n_modes, band, method, kind, powers, n_boot, seed, warnings
         f_std = np.std(boots_f, axis=0, ddof=1) if len(boots_f) > 1 else np.full(lam.size, np.nan)
         z_std = np.std(boots_z, axis=0, ddof=1) if len(boots_z) > 1 else np.full(lam.size, np.nan)
         lin_var = [np.var([b[k] for b in boots_lin], axis=0, ddof=1) for k in range(len(chans))]
+        fz_cov = np.array([np.cov(np.array(boots_f)[:, i], np.array(boots_z)[:, i])[0, 1]
+                           if len(boots_f) > 1 else np.nan for i in range(lam.size)])
     else:
+        fz_cov = np.full(lam.size, np.nan)
         f_std = z_std = np.full(lam.size, np.nan)
         lin_var = [np.full(p.size, np.nan) for p in lin]
     order = np.argsort(f0)
-    for a, b in zip(order[:-1], order[1:]):
-        if f0[b] - f0[a] < 1.5 * (z0[a] * f0[a] + z0[b] * f0[b]):
-            warnings.append(f"modes at {f0[a]:.4g} and {f0[b]:.4g} Hz overlap: single-mode estimates are "
-                            "biased there (the bootstrap uncertainty covers noise, not that bias); "
-                            "use method 'lscf'")
-    return _assemble(chans, f0, z0, f_std, z_std, lin, lin_var, order, method, kind, band, powers, None,
-                     None, True, warnings)
+    fit = _assemble(chans, f0, z0, f_std, z_std, lin, lin_var, order, method, kind, band, powers, None,
+                    None, True, warnings, fz_cov)
+    _warn_interference(fit)
+    return fit
+
+
+def _warn_interference(fit: ModalFit, limit: float = 0.03) -> None:
+    """Warn where other modes (and residual terms) add more than ``limit`` of a mode's own peak.
+
+    Single-mode estimators assume each resonance is alone; there the result is
+    biased, and a bootstrap uncertainty covers noise, not that bias.
+    """
+    for m in fit.modes:
+        k = fit.locations.index(m.dominant_location)
+        lam = modal_to_pole(np.array([m.freq_hz]), np.array([m.damping_ratio]))[0]
+        jw = 2j * np.pi * m.freq_hz
+        R = m.amplitude[k]
+        own = R / (jw - lam) + np.conj(R) / (jw - np.conj(lam))
+        rest = fit.model([m.freq_hz], k)[0] - own
+        ratio = abs(rest) / max(abs(own), 1e-300)
+        if ratio > limit:
+            fit.warnings.append(f"mode at {m.freq_hz:.4g} Hz: neighbouring modes add {ratio:.0%} of its peak "
+                                f"at {m.dominant_location}; single-mode estimates are biased there (the "
+                                "bootstrap uncertainty covers noise, not that bias): use method 'lscf'")

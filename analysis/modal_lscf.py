@@ -96,7 +96,7 @@ def _poles_for_order(blocks, n: int, dt: float) -> np.ndarray:
     # Constraint: highest coefficient = 1.
     alpha = np.ones(m)
     alpha[:n] = np.linalg.lstsq(M[:n, :n], -M[:n, n], rcond=None)[0]
-    roots = np.roots(alpha[::-1])
+    roots = np.roots(alpha[::-1]).astype(complex)
     roots = roots[np.abs(roots) > 0]
     return np.log(roots) / dt
 
@@ -155,8 +155,8 @@ def stabilisation(channels, n_max: int, band_hz: tuple[float, float], *, n_min: 
                          orders, poles_by_order=by_order)
 
 
-def choose_poles(stab: Stabilisation, n_modes: int | None, *, min_fraction: float = 0.3,
-                 cluster_tol: float = 0.005) -> np.ndarray:
+def choose_poles(stab: Stabilisation, n_modes: int | None, *, band_hz: tuple[float, float] | None = None,
+                 min_fraction: float = 0.3, cluster_tol: float = 0.005) -> np.ndarray:
     """Pick physical poles from a stabilisation diagram.
 
     Poles that are frequency-stable are clustered in frequency (relative
@@ -179,6 +179,9 @@ def choose_poles(stab: Stabilisation, n_modes: int | None, *, min_fraction: floa
                 c.append(i)
                 continue
         clusters.append([i])
+    # Poles within 1 % of a band edge stand in for modes outside the band.
+    lo, hi = band_hz if band_hz is not None else (-np.inf, np.inf)
+    clusters = [c for c in clusters if lo * 1.01 < np.median(f[c]) < hi * 0.99]
     n_orders = max(len(stab.orders), 1)
     counts = np.array([len(c) for c in clusters])
     cand = [(counts[k], k) for k in range(len(clusters))]

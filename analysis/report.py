@@ -23,7 +23,8 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
                  fit: str | None = None, sims: Sequence[str] = (), params: str | None = None,
                  knee_drives: Sequence[tuple[float, float]] | None = None, simulate_knee: bool = True,
                  knee_duration_s: float = 0.3, leg: int = 0, band_k: float = 2.0,
-                 scheduler: str | None = None, title: str = "labkit: model against measurement",
+                 scheduler: str | None = None, workers: int | None = None,
+                 title: str = "labkit: model against measurement",
                  quiet: bool = True) -> dict[str, Any]:
     """Read the inputs, compare, draw, and write ``report.html``, PNGs and ``agreement.json``.
 
@@ -50,6 +51,8 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
         Which leg's knee (0..5) the simulated record shows.
     band_k:
         Monte Carlo band half-width in standard deviations.
+    scheduler, workers:
+        Passed to :func:`labkit.executor.map_tasks` for the knee simulations.
 
     Returns
     -------
@@ -88,7 +91,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     sections.append(speed_sec)
     agreement += speed_rows
     knee_sec, knee_rows, knee_num = _knee_section(out, shaker, results, sweeps, fit, params, knee_drives,
-                                                  simulate_knee, knee_duration_s, leg, scheduler, quiet)
+                                                  simulate_knee, knee_duration_s, leg, scheduler, workers, quiet)
     sections.append(knee_sec)
     agreement += knee_rows
     sections.append(_agreement_section(agreement))
@@ -114,27 +117,36 @@ def _missing(sid: str, title: str, message: str) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- FRF and stabilisation
 
+GROUP_TITLES = {"inchip": "tethered robot, in-chip sweep: FRF (paper Fig. 5)",
+                "shaker": "released robot on the shaker: transmissibility (paper Fig. 6)"}
+
+
 def _frf_section(out: Path, inchip: list[dict], fit: dict | None) -> dict[str, Any]:
     title = "Frequency responses with the fitted model (paper Fig. 5/6)"
-    if fit is not None and fit["locations"]:
-        locations, source = fit["locations"], fit["file"]
-    elif inchip:
-        locations, source = inchip[0]["locations"], inchip[0]["file"]
-    else:
+    groups = {k: g for k, g in (fit["groups"].items() if fit else []) if g["locations"]}
+    if not groups and not inchip:
         return _missing("frf", title, "No in-chip run file (--runs RUN.h5) or fit (--fit robot.fit.h5) given.")
-    modes = fit["modes"] if fit else []
-    png = figs.frf_figure(locations, modes, out / "fig_frf.png")
-    sec = {"id": "frf", "title": title, "status": "ok", "figures": [(png, f"FRF per location from {source}"
-                                                                     + (" with the fitted model" if fit else ""))],
-           "html": []}
-    if fit is None:
+    sec: dict[str, Any] = {"id": "frf", "title": title, "status": "ok", "figures": [], "html": []}
+    if not groups:
         sec["message"] = "No fit given (--fit robot.fit.h5): measured FRFs only, no model curve."
-    if modes:
-        keys = [k for k in modes[0] if k != "freq_hz"]
-        sec["html"].append(rh.table(["mode", "freq_hz"] + keys,
-                                    [[i + 1, m["freq_hz"]] + [m.get(k) for k in keys] for i, m in enumerate(modes)],
-                                    num_cols=set(range(len(keys) + 2))))
-        sec["html"].append(f'<p class="prov">modes from {rh._e(fit["file"])}</p>')
+        for k, run in enumerate(inchip):
+            png = figs.frf_figure(run["locations"], [], out / f"fig_frf_run{k + 1}.png", units="(mm/s)/V",
+                                  title=GROUP_TITLES["inchip"])
+            sec["figures"].append((png, f"measured FRF per location from {run['file']}"))
+        return sec
+    for name, g in groups.items():
+        png = figs.frf_figure(g["locations"], g["modes"], out / f"fig_frf_{name}.png", units=g["units"],
+                              title=GROUP_TITLES.get(name, name))
+        sec["figures"].append((png, f"{GROUP_TITLES.get(name, name)}: measured and fitted model "
+                                    f"({g['method']}, quality {g['quality']:.3g}) from {fit['file']}"))
+        if g["modes"]:
+            keys = [k for k in g["modes"][0] if k != "freq_hz"]
+            sec["html"].append(f"<h3>Modes ({rh._e(name)})</h3>")
+            sec["html"].append(rh.table(["mode", "freq_hz"] + keys,
+                                        [[i + 1, m["freq_hz"]] + [m.get(k) for k in keys]
+                                         for i, m in enumerate(g["modes"])],
+                                        num_cols=set(range(len(keys) + 2))))
+            sec["html"].append(f'<p class="prov">from {rh._e(fit["file"])}, group {rh._e(name)}</p>')
     return sec
 
 
@@ -142,11 +154,15 @@ def _stab_section(out: Path, fit: dict | None) -> dict[str, Any]:
     title = "Stabilisation diagram"
     if fit is None:
         return _missing("stabilisation", title, "No fit given (--fit robot.fit.h5).")
-    if not fit.get("stabilisation"):
+    groups = {k: g for k, g in fit["groups"].items() if g.get("stabilisation")}
+    if not groups:
         return _missing("stabilisation", title, f"{fit['file']} holds no stabilisation data.")
-    png = figs.stabilisation_figure(fit["stabilisation"], out / "fig_stabilisation.png", fit["locations"])
-    return {"id": "stabilisation", "title": title, "status": "ok", "html": [],
-            "figures": [(png, f"poles by model order, from {fit['file']}")]}
+    sec: dict[str, Any] = {"id": "stabilisation", "title": title, "status": "ok", "html": [], "figures": []}
+    for name, g in groups.items():
+        png = figs.stabilisation_figure(g["stabilisation"], out / f"fig_stabilisation_{name}.png", g["locations"],
+                                        title=f"stabilisation diagram: {name}")
+        sec["figures"].append((png, f"poles by model order ({name}), from {fit['file']}"))
+    return sec
 
 
 # --------------------------------------------------------------------------- speed
@@ -157,7 +173,9 @@ def _sim_curves(sweeps: list[dict], band_k: float) -> list[dict[str, Any]]:
         sw = s["sweep"]
         if sw.quantity != "freq_hz":
             continue
-        mean, lo, hi = compare.band_from_draws(sw.speeds_mm_s, k=band_k)
+        # measured speed is unsigned (the paper compares speed, not velocity: the robot turns),
+        # the simulator's is signed along +y: compare magnitudes, draw by draw
+        mean, lo, hi = compare.band_from_draws(np.abs(sw.speeds_mm_s), k=band_k)
         order = np.argsort(sw.values)
         curves.append({"file": s["file"], "label": Path(s["file"]).name, "freq_hz": sw.values[order],
                        "mean_mm_s": mean[order], "lo_mm_s": lo[order], "hi_mm_s": hi[order], "sweep": sw})
@@ -174,26 +192,33 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
                         "simulated frequency sweep (--sim SWEEP.h5) given."), [], {}
     png = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed.png")
     sec = {"id": "speed", "title": title, "status": "ok", "html": [],
-           "figures": [(png, f"measured speed with its confidence interval; simulated Monte Carlo mean with a "
-                             f"+-{band_k:g} std band over draws")]}
+           "figures": [(png, f"measured speed with its confidence interval (by tray amplitude); simulated "
+                             f"Monte Carlo mean with a +-{band_k:g} std band over draws")]}
     msgs = []
     if not have_meas:
         msgs.append("No measured speeds given: simulation only.")
     if measured is not None and measured["unmatched"]:
-        msgs.append(f"Tracks with no known shaker frequency (left out): {', '.join(measured['unmatched'])}.")
+        msgs.append(f"Tracks with no known shaker frequency or no speed (left out): {', '.join(measured['unmatched'])}.")
     if not curves:
         msgs.append("No simulated frequency sweep (--sim SWEEP.h5): no model curve.")
-    sec["message"] = " ".join(msgs)
     rows, numbers = [], {}
     if have_meas and curves:
         for c in curves:
-            p = {"measured": sorted(set(measured["sources"])), "simulated": c["file"],
+            # compare only points measured at the sweep's tray amplitude (or of unknown amplitude)
+            amp = float(c["sweep"].scenario.get("amp_um", np.nan))
+            mask = ~np.isfinite(measured["amp_um"]) | ~np.isfinite(amp) | \
+                (np.abs(measured["amp_um"] - amp) <= 0.1 * abs(amp))
+            m = ri.select(measured, mask)
+            if not m["freq_hz"].size:
+                msgs.append(f"No measured point at the tray amplitude of {c['file']} ({amp:.3g} um).")
+                continue
+            p = {"measured": sorted(set(m["sources"])), "simulated": c["file"],
                  "draws": c["sweep"].draws, "band": f"mean +- {band_k:g} std (ddof=1) over draws",
+                 "simulated_speed": "|mean forward velocity| of each draw",
                  "sim_duration_s": c["sweep"].meta.get("duration_s"), "sim_seed": c["sweep"].meta.get("seed"),
-                 "scenario": c["sweep"].scenario}
-            a = compare.speed_agreement(measured["freq_hz"], measured["speed_mm_s"], measured["lo_mm_s"],
-                                        measured["hi_mm_s"], c["freq_hz"], c["mean_mm_s"], c["lo_mm_s"],
-                                        c["hi_mm_s"], provenance=p)
+                 "scenario": c["sweep"].scenario, "measured_amp_um_within": "10 % of the sweep's amp_um"}
+            a = compare.speed_agreement(m["freq_hz"], m["speed_mm_s"], m["lo_mm_s"], m["hi_mm_s"], c["freq_hz"],
+                                        c["mean_mm_s"], c["lo_mm_s"], c["hi_mm_s"], provenance=p)
             numbers[c["file"]] = a
             for q, k, u in (("speed RMS error", "rms_error_mm_s", "mm/s"),
                             ("speed bias (sim - meas)", "mean_error_mm_s", "mm/s"),
@@ -201,39 +226,41 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
                             ("speed correlation", "correlation", "1"),
                             ("fraction of measured points inside band", "fraction_inside_band", "1")):
                 rows.append({"quantity": q, "value": a[k], "units": u, "n": a["n_points"], "provenance": p})
-            pts = a["points"]
+            sec["html"].append(f"<h3>Measured against {rh._e(c['label'])} ({amp:.3g} um)</h3>")
             sec["html"].append(rh.table(
                 ["freq_hz", "measured_mm_s", "CI lo", "CI hi", "simulated_mm_s", "band lo", "band hi", "inside band"],
                 [[q["freq_hz"], q["measured_mm_s"], q["measured_lo_mm_s"], q["measured_hi_mm_s"],
-                  q["simulated_mm_s"], q["band_lo_mm_s"], q["band_hi_mm_s"], q["inside_band"]] for q in pts],
+                  q["simulated_mm_s"], q["band_lo_mm_s"], q["band_hi_mm_s"], q["inside_band"]] for q in a["points"]],
                 num_cols=set(range(7))))
-        rows += _sweep_pattern_rows(shaker, curves)
+            rows += _sweep_pattern_rows(m, c)
+    sec["message"] = " ".join(msgs)
     return sec, rows, numbers
 
 
-def _sweep_pattern_rows(shaker: list[dict], curves: list[dict]) -> list[dict[str, Any]]:
-    """Pattern labels stored in shaker run files against the sweep's dominant pattern at that frequency."""
-    rows = []
-    for c in curves:
-        meas, sim, keys, files = [], [], [], []
-        for run in shaker:
-            for fz, lab in zip(run["freq_hz"], run.get("patterns", [])):
-                if lab not in compare.PATTERNS:
-                    continue
-                i = int(np.argmin(np.abs(c["sweep"].values - fz)))
-                if abs(c["sweep"].values[i] - fz) > 0.02 * fz:
-                    continue
-                meas.append(lab)
-                sim.append(c["sweep"].dominant_pattern(i))
-                keys.append(float(fz))
-                files.append(run["file"])
-        if meas:
-            a = compare.pattern_agreement(meas, sim, keys=keys,
-                                          provenance={"measured": sorted(set(files)), "simulated": c["file"],
-                                                      "simulated_label": "dominant over draws and feet"})
-            rows.append({"quantity": "leg-pattern agreement (sweep)", "value": a["fraction_agree"], "units": "1",
-                         "n": a["n"], "provenance": a["provenance"]})
-    return rows
+def _sweep_pattern_rows(measured: dict[str, Any], c: dict[str, Any]) -> list[dict[str, Any]]:
+    """Leg patterns of the measured points (labels in the run, or classified from knee records)
+    against the sweep's dominant pattern at the nearest frequency (within 2 %)."""
+    meas, sim, keys, files = [], [], [], []
+    values = c["sweep"].values
+    for fz, lab, src in zip(measured["freq_hz"], measured["patterns"], measured["sources"]):
+        if lab not in compare.PATTERNS:
+            continue
+        i = int(np.argmin(np.abs(values - fz)))
+        if abs(values[i] - fz) > 0.02 * fz:
+            continue
+        meas.append(lab)
+        sim.append(c["sweep"].dominant_pattern(i))
+        keys.append(float(fz))
+        files.append(src)
+    if not meas:
+        return []
+    a = compare.pattern_agreement(meas, sim, keys=keys,
+                                  provenance={"measured": sorted(set(files)), "simulated": c["file"],
+                                              "measured_label": "run file label, or classify_knee_pattern "
+                                                                "on the point's knee record",
+                                              "simulated_label": "dominant over draws and feet"})
+    return [{"quantity": "leg-pattern agreement (sweep)", "value": a["fraction_agree"], "units": "1",
+             "n": a["n"], "provenance": a["provenance"]}]
 
 
 # --------------------------------------------------------------------------- knee motion
@@ -269,7 +296,7 @@ def _knee_params(fit: str | None, params: str | None, sweeps: list[dict]) -> tup
 
 
 def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simulate_knee, duration_s, leg,
-                  scheduler, quiet):
+                  scheduler, workers, quiet):
     title = "Knee vertical motion, measured against simulated (paper Fig. 10/11)"
     records = [dict(r, file=run["file"]) for run in shaker for r in run["knee"]]
     drives = list(knee_drives) if knee_drives else [(r["freq_hz"], r["tray_amp_um"]) for r in records][:4]
@@ -291,7 +318,7 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
 
         p, param_src = _knee_params(fit, params, sweeps)
         outs = map_tasks(_sim_knee_task, [(p, drives[i][0], drives[i][1], duration_s, 0) for i in todo],
-                         scheduler=scheduler, desc="knee sims", quiet=quiet)
+                         scheduler=scheduler, workers=workers, desc="knee sims", quiet=quiet)
         for i, o in zip(todo, outs):
             sims[i] = dict(o, source=f"simulate({param_src}, Shaker({drives[i][0]:g} Hz, {drives[i][1]:g} um), "
                                      f"duration_s={duration_s:g}, seed=0)")
@@ -305,9 +332,8 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
         sim = sims.get(i)
         case: dict[str, Any] = {"freq_hz": freq, "tray_amp_um": amp}
         if meas is not None:
-            if meas.get("tray_vz_mm_s") is not None:
-                meas = dict(meas, **compare.classify_knee_pattern(meas["t_s"], meas["knee_vz_mm_s"],
-                                                                  meas["tray_vz_mm_s"], freq))
+            meas = dict(meas, **compare.classify_knee_pattern(meas["t_s"], meas["knee_vz_mm_s"],
+                                                              meas.get("tray_vz_mm_s"), freq))
             case["measured"] = meas
         if sim is not None:
             t = np.asarray(sim["t_s"])
@@ -319,7 +345,7 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
                                  "pattern": (pats[leg] if len(pats) > leg else "?"),
                                  "patterns": pats, "source": sim["source"]}
         png = figs.knee_figure(case, out / f"fig_knee_{i + 1}.png")
-        sec["figures"].append((png, f"drive {freq:g} Hz, {amp:g} um: measured "
+        sec["figures"].append((png, f"drive {freq:.4g} Hz, {amp:.3g} um: measured "
                                     f"{meas['file'] if meas else '(none)'}; simulated "
                                     f"{sim['source'] if sim else '(none)'}, leg {leg + 1}"))
         if meas is not None and sim is not None:
@@ -330,23 +356,23 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
             a = compare.knee_motion_agreement(meas["t_s"], meas["knee_vz_mm_s"], t[settle], s["knee_vz_mm_s"][settle],
                                               freq, ref_meas=meas.get("tray_vz_mm_s"), ref_sim=tray_v[settle],
                                               provenance=p)
-            numbers[f"{freq:g}Hz_{amp:g}um"] = a
+            numbers[f"{freq:.4g}Hz_{amp:.3g}um"] = a
             for q, k, u in (("knee amplitude ratio (sim/meas)", "amplitude_ratio", "1"),
                             ("knee phase difference (sim - meas)", "phase_diff_deg", "deg"),
                             ("knee waveform correlation", "correlation", "1")):
-                rows.append({"quantity": f"{q} @ {freq:g} Hz, {amp:g} um", "value": a[k], "units": u, "n": 1,
+                rows.append({"quantity": f"{q} @ {freq:.4g} Hz, {amp:.3g} um", "value": a[k], "units": u, "n": 1,
                              "provenance": p})
             table_rows.append([freq, amp, a["amplitude_meas_mm_s"], a["amplitude_sim_mm_s"], a["phase_diff_deg"],
                                a["correlation"], meas.get("pattern", "?"), s["pattern"]])
             if meas.get("pattern") in compare.PATTERNS and s["patterns"]:
                 pat_meas.append(meas["pattern"])
                 pat_sim.append(compare.dominant_pattern(s["patterns"]))
-                pat_keys.append(f"{freq:g} Hz, {amp:g} um")
+                pat_keys.append(f"{freq:.4g} Hz, {amp:.3g} um")
                 pat_files.append(meas["file"])
         elif meas is None:
-            msgs.append(f"No measured knee record at {freq:g} Hz, {amp:g} um.")
+            msgs.append(f"No measured knee record at {freq:.4g} Hz, {amp:.3g} um.")
         else:
-            msgs.append(f"No simulation at {freq:g} Hz, {amp:g} um (give --sim SIM_RESULT.h5 or allow simulation).")
+            msgs.append(f"No simulation at {freq:.4g} Hz, {amp:.3g} um (give --sim SIM_RESULT.h5 or allow simulation).")
     if pat_meas:
         a = compare.pattern_agreement(pat_meas, pat_sim, keys=pat_keys,
                                       provenance={"measured": sorted(set(pat_files)),

@@ -30,7 +30,7 @@ def _save(fig: Any, path: Path) -> Path:
 
 
 def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]], path: Path,
-               title: str = "") -> Path:
+               title: str = "", units: str = "(mm/s)/V") -> Path:
     """Magnitude and phase of the measured FRF per location, with the fitted model (Fig. 5/6)."""
     locs = [loc for loc in ("body", "hip", "knee") if loc in locations] + \
            [loc for loc in locations if loc not in ("body", "hip", "knee")]
@@ -53,7 +53,7 @@ def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]]
             for ax in (am, ap):
                 ax.axvline(m["freq_hz"], color="0.6", lw=0.7, ls=":")
         am.set_title(f"{loc}")
-        am.set_ylabel("|FRF| ((mm/s)/V)")
+        am.set_ylabel(f"|FRF| ({units})" if units != "1" else "|transmissibility|")
         ap.set_ylabel("phase (deg)")
         ap.set_xlabel("frequency (Hz)")
         am.legend(fontsize=8)
@@ -64,15 +64,22 @@ def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]]
     return _save(fig, path)
 
 
-def stabilisation_figure(stab: dict[str, np.ndarray], path: Path, locations: dict[str, Any] | None = None) -> Path:
-    """Poles found at each model order against frequency, stable ones highlighted."""
+def stabilisation_figure(stab: dict[str, np.ndarray], path: Path, locations: dict[str, Any] | None = None,
+                         title: str = "stabilisation diagram") -> Path:
+    """Poles found at each model order against frequency (status codes of analysis.modal_io:
+    0 new, 1 stable frequency, 2 stable frequency and damping), with the chosen modes."""
     fig = _figure(7.5, 4.2)
     ax = fig.subplots()
     f = np.asarray(stab["freq_hz"], float).ravel()
     order = np.asarray(stab["order"], float).ravel()
-    stable = np.asarray(stab.get("stable", np.zeros_like(f)), bool).ravel()
-    ax.plot(f[~stable], order[~stable], "x", color="0.6", ms=4, label="pole")
-    ax.plot(f[stable], order[stable], "o", mfc="none", color="C2", ms=5, label="stable pole")
+    status = np.asarray(stab.get("status", np.zeros_like(f)), int).ravel()
+    for code, marker, colour, name in ((0, "x", "0.6", "new pole"), (1, "^", "C1", "stable frequency"),
+                                       (2, "o", "C2", "stable frequency and damping")):
+        sel = status == code
+        if sel.any():
+            ax.plot(f[sel], order[sel], marker, mfc="none", color=colour, ms=5, label=name)
+    for k, fc in enumerate(np.atleast_1d(stab.get("chosen_hz", []))):
+        ax.axvline(float(fc), color="C3", lw=0.8, ls="--", label="chosen" if k == 0 else None)
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel("model order")
     ax.grid(True, alpha=0.3)
@@ -80,10 +87,10 @@ def stabilisation_figure(stab: dict[str, np.ndarray], path: Path, locations: dic
         twin = ax.twinx()
         for loc, d in locations.items():
             twin.semilogy(d["freq_hz"], np.abs(d["frf"]), "-", lw=0.8, alpha=0.5,
-                          color=LOC_COLOURS.get(loc, "C0"), label=f"|FRF| {loc}")
-        twin.set_ylabel("|FRF| ((mm/s)/V)")
+                          color=LOC_COLOURS.get(loc, "C0"))
+        twin.set_ylabel("|FRF| (measured, per location)")
     ax.legend(fontsize=8, loc="upper left")
-    ax.set_title("stabilisation diagram")
+    ax.set_title(title)
     return _save(fig, path)
 
 
@@ -98,9 +105,14 @@ def speed_figure(measured: dict[str, Any] | None, sims: list[dict[str, Any]], pa
         ax.plot(s["freq_hz"], s["mean_mm_s"], "--", color=c, lw=1.5, label=f"simulated mean ({s['label']})")
     if measured is not None and measured["freq_hz"].size:
         m = measured
-        yerr = np.vstack([m["speed_mm_s"] - m["lo_mm_s"], m["hi_mm_s"] - m["speed_mm_s"]])
-        ax.errorbar(m["freq_hz"], m["speed_mm_s"], yerr=np.clip(yerr, 0, None), fmt="o", color="C3",
-                    ms=4, capsize=3, label="measured (CI)")
+        amps = np.asarray(m.get("amp_um", np.full(m["freq_hz"].size, np.nan)), float)
+        keys = np.where(np.isfinite(amps), np.round(amps, 0), -1.0)
+        for k, (key, marker) in enumerate(zip(np.unique(keys), "osD^v<>")):
+            sel = keys == key
+            yerr = np.vstack([m["speed_mm_s"][sel] - m["lo_mm_s"][sel], m["hi_mm_s"][sel] - m["speed_mm_s"][sel]])
+            name = "measured (CI)" + (f", {key:g} um" if key >= 0 else "")
+            ax.errorbar(m["freq_hz"][sel], m["speed_mm_s"][sel], yerr=np.clip(yerr, 0, None), fmt=marker,
+                        color=("C3", "C4", "C5", "C6", "C7", "C8", "C9")[k % 7], ms=4, capsize=3, label=name)
     ax.set_xlabel("shaker frequency (Hz)")
     ax.set_ylabel("speed (mm/s)")
     ax.grid(True, alpha=0.3)
@@ -155,5 +167,5 @@ def knee_figure(case: dict[str, Any], path: Path, periods: float = 6.0) -> Path:
         if ax.lines:
             ax.legend(fontsize=7, loc="upper right")
     axes[2].set_xlabel("time (ms)")
-    fig.suptitle(f"knee vertical motion at {f:g} Hz, tray {case.get('tray_amp_um', float('nan')):.3g} um")
+    fig.suptitle(f"knee vertical motion at {f:.4g} Hz, tray {case.get('tray_amp_um', float('nan')):.3g} um")
     return _save(fig, path)

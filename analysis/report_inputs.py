@@ -143,9 +143,14 @@ def _knee_records(f: Any, run: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def load_track(path: str | Path) -> dict[str, Any]:
-    """Speed of a ``track`` file: ``mean_speed_mm_s``, ``speed_ci_mm_s`` (lo, hi), and
-    ``freq_hz``/``video`` when the track records them."""
-    from labkit.h5io import open_h5
+    """Speed of a ``track`` file (layout: :mod:`analysis.track_output`).
+
+    Returns ``mean_speed_mm_s`` (NaN when the track has no speed), ``speed_ci_mm_s``
+    (lo, hi), ``ci_level``, ``freq_hz`` if the track records one, and ``videos``:
+    candidate absolute paths of the tracked video (``source_video`` as written,
+    resolved against the working folder and against the track's folder).
+    """
+    from labkit.h5io import get_json, open_h5
 
     path = Path(path)
     with open_h5(path, kind="track") as f:
@@ -155,82 +160,109 @@ def load_track(path: str | Path) -> dict[str, Any]:
         ci = np.asarray(f.attrs.get("speed_ci_mm_s", [speed, speed]), float).ravel()
         if ci.size != 2:
             raise InputError("expected two values", file=path, key="speed_ci_mm_s", expected="[lo, hi] in mm/s")
+        summ = get_json(f, "summary_json", {}) or {}
         out = {"file": str(path), "kind": "track", "mean_speed_mm_s": speed, "speed_ci_mm_s": ci,
-               "ci_level": float(f.attrs.get("speed_ci_level", 0.95))}
+               "ci_level": float(f.attrs.get("speed_ci_level", summ.get("ci_level", 0.95)))}
         for key in ("freq_hz", "shaker_freq_hz"):
             if key in f.attrs:
                 out["freq_hz"] = float(f.attrs[key])
-        for key in ("video", "source", "source_video", "video_path"):
-            if key in f.attrs:
-                v = _s(f.attrs[key])
-                out["video"] = str((path.parent / v).resolve()) if v else ""
+        out["videos"] = []
+        for key in ("source_video", "video", "source"):
+            if key in f.attrs and _s(f.attrs[key]):
+                v = Path(_s(f.attrs[key]))
+                cands = [v] if v.is_absolute() else [Path.cwd() / v, path.parent / v]
+                out["videos"] = [str(c.resolve()) for c in cands]
                 break
     return out
 
 
 def measured_speeds(shaker_runs: list[dict[str, Any]], tracks: list[dict[str, Any]]) -> dict[str, Any]:
-    """Measured speed against frequency from shaker runs and tracks.
+    """Measured speed against frequency (and tray amplitude) from shaker runs and tracks.
 
-    A track gets its frequency from its own ``freq_hz`` attribute, or from the
-    shaker run point whose video it tracked. Speeds stored in a run file
-    itself are used for points no track covers. The standard deviation is
-    recovered from the confidence interval assuming a normal spread.
+    A track gets its drive from the shaker run point whose video it tracked
+    (frequency and measured tray amplitude), or from its own ``freq_hz``
+    attribute (amplitude then unknown: NaN, unless it has ``tray_amp_um``).
+    Speeds stored in a run file itself are used for points no track covers.
+    The standard deviation is recovered from the confidence interval assuming
+    a normal spread. A knee record of the same run point gives the point's
+    leg pattern (:func:`analysis.compare.classify_knee_pattern`).
 
     Returns
     -------
     dict
-        ``freq_hz``, ``speed_mm_s``, ``lo_mm_s``, ``hi_mm_s``,
-        ``std_mm_s`` (arrays sorted by frequency), ``sources`` (file per
-        point), ``unmatched`` (tracks with no frequency).
+        Arrays sorted by frequency: ``freq_hz``, ``amp_um``, ``speed_mm_s``,
+        ``lo_mm_s``, ``hi_mm_s``, ``std_mm_s``; lists ``patterns`` ("" when
+        unknown) and ``sources`` (file per point); ``unmatched`` (tracks with
+        no frequency or no speed).
     """
     from scipy.stats import norm
 
-    by_video: dict[str, tuple[float, str]] = {}
+    from analysis.compare import classify_knee_pattern
+
+    by_video: dict[str, tuple[dict[str, Any], int]] = {}
     for run in shaker_runs:
-        for fz, video in zip(run["freq_hz"], run["videos"]):
+        for k, video in enumerate(run["videos"]):
             if video:
-                by_video[str(Path(video).resolve())] = (float(fz), run["file"])
-    rows: list[tuple[float, float, float, float, float, str]] = []
-    covered: set[str] = set()
+                by_video[str(Path(video).resolve())] = (run, k)
+
+    def pattern_of(run: dict[str, Any], k: int) -> str:
+        if run.get("patterns"):
+            return run["patterns"][k]
+        rec = next((r for r in run.get("knee", []) if r["point"] == int(run["index"][k])), None)
+        if rec is None:
+            return ""
+        return classify_knee_pattern(rec["t_s"], rec["knee_vz_mm_s"], rec["tray_vz_mm_s"], rec["freq_hz"])["pattern"]
+
+    rows: list[tuple] = []
+    covered: set[tuple[str, int]] = set()
     unmatched = []
     for tr in tracks:
-        freq = tr.get("freq_hz")
-        src = tr["file"]
-        if freq is None and tr.get("video"):
-            hit = by_video.get(str(Path(tr["video"]).resolve()))
+        freq, amp, pattern, src = tr.get("freq_hz"), tr.get("tray_amp_um", np.nan), "", tr["file"]
+        if not np.isfinite(tr["mean_speed_mm_s"]):
+            unmatched.append(f"{tr['file']} (no speed)")
+            continue
+        if freq is None:
+            hit = next((by_video[v] for v in tr.get("videos", []) if v in by_video), None)
             if hit:
-                freq = hit[0]
-                src = f"{tr['file']} (video of {hit[1]})"
-                covered.add(str(Path(tr["video"]).resolve()))
+                run, k = hit
+                freq, amp, pattern = float(run["freq_hz"][k]), float(run["tray_amp_um"][k]), pattern_of(run, k)
+                src = f"{tr['file']} (video of {run['file']} point {int(run['index'][k])})"
+                covered.add((run["file"], k))
         if freq is None:
             unmatched.append(tr["file"])
             continue
         lo, hi = tr["speed_ci_mm_s"]
         z = norm.ppf(0.5 + tr.get("ci_level", 0.95) / 2)
-        rows.append((float(freq), tr["mean_speed_mm_s"], lo, hi, (hi - lo) / (2 * z), src))
+        rows.append((float(freq), float(amp), tr["mean_speed_mm_s"], lo, hi, (hi - lo) / (2 * z), pattern, src))
     for run in shaker_runs:
         if "speed_mm_s" not in run:
             continue
-        for i, fz in enumerate(run["freq_hz"]):
-            video = run["videos"][i] if i < len(run["videos"]) else ""
-            if video and str(Path(video).resolve()) in covered:
-                continue
-            s = float(run["speed_mm_s"][i])
-            if not np.isfinite(s):
+        for k, fz in enumerate(run["freq_hz"]):
+            s = float(run["speed_mm_s"][k])
+            if (run["file"], k) in covered or not np.isfinite(s):
                 continue
             if "speed_std_mm_s" in run:
-                std = float(run["speed_std_mm_s"][i])
+                std = float(run["speed_std_mm_s"][k])
                 lo, hi = s - 1.96 * std, s + 1.96 * std
             else:
-                lo = float(run.get("speed_lo_mm_s", [s] * (i + 1))[i])
-                hi = float(run.get("speed_hi_mm_s", [s] * (i + 1))[i])
+                lo = float(run["speed_lo_mm_s"][k]) if "speed_lo_mm_s" in run else s
+                hi = float(run["speed_hi_mm_s"][k]) if "speed_hi_mm_s" in run else s
                 std = (hi - lo) / (2 * 1.96)
-            rows.append((float(fz), s, lo, hi, std, f"{run['file']} (point {i})"))
-    rows.sort(key=lambda r: r[0])
-    cols = list(zip(*rows)) if rows else [[]] * 6
-    return {"freq_hz": np.asarray(cols[0], float), "speed_mm_s": np.asarray(cols[1], float),
-            "lo_mm_s": np.asarray(cols[2], float), "hi_mm_s": np.asarray(cols[3], float),
-            "std_mm_s": np.asarray(cols[4], float), "sources": list(cols[5]), "unmatched": unmatched}
+            rows.append((float(fz), float(run["tray_amp_um"][k]), s, lo, hi, std, pattern_of(run, k),
+                         f"{run['file']} (point {int(run['index'][k])})"))
+    rows.sort(key=lambda r: (r[0], r[1]))
+    cols = list(zip(*rows)) if rows else [[]] * 8
+    return {"freq_hz": np.asarray(cols[0], float), "amp_um": np.asarray(cols[1], float),
+            "speed_mm_s": np.asarray(cols[2], float), "lo_mm_s": np.asarray(cols[3], float),
+            "hi_mm_s": np.asarray(cols[4], float), "std_mm_s": np.asarray(cols[5], float),
+            "patterns": list(cols[6]), "sources": list(cols[7]), "unmatched": unmatched}
+
+
+def select(measured: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
+    """The rows of :func:`measured_speeds` where ``mask`` holds."""
+    idx = np.flatnonzero(mask)
+    return {k: (v[idx] if isinstance(v, np.ndarray) else [v[i] for i in idx] if k in ("patterns", "sources") else v)
+            for k, v in measured.items()}
 
 
 def load_speed_table(path: str | Path) -> dict[str, Any]:
@@ -286,64 +318,65 @@ def load_speed_table(path: str | Path) -> dict[str, Any]:
 # --------------------------------------------------------------------------- fits and simulations
 
 def load_fit(path: str | Path) -> dict[str, Any]:
-    """A ``modal_fit`` file: per-location measured FRF and fitted model, modes, stabilisation.
+    """A ``modal_fit`` file (layout: :mod:`analysis.modal_io`), one entry per fit group.
 
-    Returns ``{"file", "locations": {loc: {"freq_hz", "frf", "model_frf"?, "model_freq_hz"?}},
-    "modes": [{"freq_hz", "damping_ratio", "freq_std_hz"?, "damping_std"?}], "stabilisation": {...}|None,
-    "attrs": {...}}``.
+    Returns ``{"file", "groups": {group: {"locations": {loc: {"freq_hz", "frf", "model_frf"}},
+    "modes": [{"freq_hz", "freq_hz_std", "damping_ratio", ...}], "stabilisation": {...} | None,
+    "units", "method", "quality"}}, "summary": {...}}``; group is ``inchip`` (tethered robot,
+    FRF in (mm/s)/V) or ``shaker`` (released robot, transmissibility).
     """
-    from labkit.h5io import open_h5
+    from labkit.h5io import get_json, open_h5
 
     path = Path(path)
-    out: dict[str, Any] = {"file": str(path), "kind": "modal_fit", "locations": {}, "modes": [],
-                           "stabilisation": None}
+    out: dict[str, Any] = {"file": str(path), "kind": "modal_fit", "groups": {}}
     with open_h5(path, kind="modal_fit") as f:
-        out["attrs"] = {k: _s(v) if isinstance(v, (bytes, str)) else np.asarray(v).tolist()
-                        for k, v in f.attrs.items() if len(str(v)) < 300}
-        locs = f["locations"] if "locations" in f else {}
-        for loc, g in locs.items():
-            entry: dict[str, Any] = {}
-            for src, dst in (("freq_hz", "freq_hz"), ("frf", "frf"), ("measured_frf", "frf"),
-                             ("frf_measured", "frf"), ("model_frf", "model_frf"), ("fit_frf", "model_frf"),
-                             ("frf_model", "model_frf"), ("fitted_frf", "model_frf"),
-                             ("model_freq_hz", "model_freq_hz")):
-                if src in g and dst not in entry:
-                    entry[dst] = g[src][()]
-            if "freq_hz" in entry and "frf" in entry:
-                out["locations"][loc] = entry
-        out["modes"] = _read_modes(f)
-        out["stabilisation"] = _read_stabilisation(f)
+        out["summary"] = get_json(f, "summary_json", {}) or {}
+        if "groups" not in f:
+            raise InputError("no fit groups", file=path, key="groups", expected="/groups/<inchip|shaker>")
+        for name, g in f["groups"].items():
+            entry: dict[str, Any] = {"locations": {}, "method": _s(g.attrs.get("method", "?")),
+                                     "quality": float(g.attrs.get("quality", np.nan)),
+                                     "units": "(mm/s)/V" if name == "inchip" else "1"}
+            for loc, lg in (g["locations"].items() if "locations" in g else []):
+                if "freq_hz" not in lg or "frf" not in lg:
+                    raise InputError("missing freq_hz or frf", file=path, key=f"groups/{name}/locations/{loc}")
+                entry["units"] = _s(lg["frf"].attrs.get("units", entry["units"]))
+                d = {"freq_hz": lg["freq_hz"][()].astype(float), "frf": lg["frf"][()].astype(complex)}
+                if "model" in lg:
+                    d["model_frf"] = lg["model"][()].astype(complex)
+                entry["locations"][_s(lg.attrs.get("name", loc))] = d
+            entry["modes"] = _read_modes(g)
+            entry["stabilisation"] = _read_stabilisation(g)
+            out["groups"][name] = entry
     return out
 
 
-def _read_modes(f: Any) -> list[dict[str, float]]:
-    g = f.get("modes")
-    if g is None:
+def _read_modes(g: Any) -> list[dict[str, Any]]:
+    """One dict per mode from the 1-D columns of ``modes/`` (2-D per-location arrays are left out)."""
+    mg = g.get("modes")
+    if mg is None or "freq_hz" not in mg:
         return []
-    cols = {k: np.asarray(g[k][()]).ravel() for k in g if hasattr(g[k], "shape")}
-    fkey = next((k for k in ("freq_hz", "natural_freq_hz") if k in cols), None)
-    if fkey is None:
-        return []
-    modes = []
-    for i, fz in enumerate(cols[fkey]):
-        m = {"freq_hz": float(fz)}
-        for k, v in cols.items():
-            if k != fkey and v.size == cols[fkey].size and np.issubdtype(v.dtype, np.number):
-                m[k] = float(v[i])
-            elif k != fkey and v.size == cols[fkey].size:
-                m[k] = _s(v[i])
-        modes.append(m)
+    freq = np.asarray(mg["freq_hz"][()], float).ravel()
+    modes = [{"freq_hz": float(x)} for x in freq]
+    for k in mg:
+        if k == "freq_hz":
+            continue
+        v = mg[k][()]
+        if v.ndim != 1 or v.size != freq.size:
+            continue
+        for i, x in enumerate(v):
+            if isinstance(x, (bytes, str)):
+                modes[i][k] = _s(x)
+            elif np.isrealobj(x):
+                modes[i][k] = float(x)
     return modes
 
 
-def _read_stabilisation(f: Any) -> dict[str, np.ndarray] | None:
-    g = f.get("stabilisation") or f.get("stabilization")
-    if g is None:
+def _read_stabilisation(g: Any) -> dict[str, np.ndarray] | None:
+    sg = g.get("stabilisation")
+    if sg is None or "freq_hz" not in sg or "order" not in sg:
         return None
-    cols = {k: np.asarray(g[k][()]) for k in g if hasattr(g[k], "shape")}
-    if "freq_hz" not in cols or "order" not in cols:
-        return None
-    return cols
+    return {k: np.asarray(sg[k][()]) for k in sg}
 
 
 def load_sim(path: str | Path) -> dict[str, Any]:

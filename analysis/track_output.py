@@ -15,7 +15,6 @@ HDF5 layout (``schema_version`` 1)::
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +30,7 @@ def summary(track: Track, speed: SpeedResult | None) -> dict[str, Any]:
         "source_video": track.source, "frames": track.frames, "lost_frames": track.lost_frames,
         "degraded_frames": int(np.sum((track.quality != QUALITY_OK) & (track.quality != QUALITY_LOST))),
         "timestamps_source": track.timestamps_source,
+        "timestamp_faults": int(track.meta.get("timestamp_faults", 0)),
         "mean_frame_interval_s": float(np.mean(np.diff(track.t_s))) if track.frames > 1 else None,
         "mm_per_px": track.mm_per_px, "mm_per_px_std": track.scale.mm_per_px_std if track.scale else None,
         "scale_method": track.scale.method if track.scale else None,

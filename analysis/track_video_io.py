@@ -42,7 +42,14 @@ def open_video(path: str | Path, *, grey: bool = True):
     path = Path(path)
     if not path.is_file():
         raise InputError("no such video file", file=path)
-    cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    # OpenCV's own warning on an unreadable file would precede our one-line message: silence it
+    log = cv2.utils.logging
+    level = log.getLogLevel()
+    log.setLogLevel(log.LOG_LEVEL_ERROR)
+    try:
+        cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    finally:
+        log.setLogLevel(level)
     if not cap.isOpened():
         cap.release()
         raise InputError("not a readable video (OpenCV/FFmpeg cannot open it)", file=path,
@@ -84,18 +91,24 @@ def iter_frames(cap, info: VideoInfo) -> Iterator[tuple[np.ndarray, float]]:
         yield frame, t_ms / 1000.0
 
 
-def check_timestamps(t_s: np.ndarray, fps_nominal: float, path: str) -> tuple[np.ndarray, str]:
-    """Validate container timestamps; fall back to the nominal rate only when there are none."""
+def check_timestamps(t_s: np.ndarray, fps_nominal: float, path: str) -> tuple[np.ndarray, str, np.ndarray]:
+    """Validate container timestamps; fall back to the nominal rate only when there are none.
+
+    Returns ``(t_s, source, faulty)``: ``faulty`` marks frames whose timestamp
+    does not exceed every earlier one (a camera's duplicated or reordered
+    frame); the tracker flags them lost rather than guess their time.
+    """
     t_s = np.asarray(t_s, float)
     if t_s.size > 1 and np.all(t_s == t_s[0]):
         if fps_nominal <= 0:
             raise InputError("the video carries no timestamps and no frame rate", file=path)
-        return np.arange(t_s.size) / fps_nominal, "nominal_fps"
-    if t_s.size > 1 and np.any(np.diff(t_s) <= 0):
-        bad = int(np.argmax(np.diff(t_s) <= 0)) + 1
-        raise InputError(f"frame timestamps are not increasing at frame {bad} "
-                         f"({t_s[bad - 1]:.4f} s then {t_s[bad]:.4f} s)", file=path)
-    return t_s, "container"
+        return np.arange(t_s.size) / fps_nominal, "nominal_fps", np.zeros(t_s.size, bool)
+    faulty = np.zeros(t_s.size, bool)
+    if t_s.size > 1:
+        faulty[1:] = t_s[1:] <= np.maximum.accumulate(t_s)[:-1]
+    if faulty.sum() > t_s.size // 2:
+        raise InputError(f"{int(faulty.sum())} of {t_s.size} frame timestamps do not increase", file=path)
+    return t_s, "container", faulty
 
 
 def read_sample_frames(cap, info: VideoInfo, count: int) -> list[np.ndarray]:

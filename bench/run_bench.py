@@ -15,12 +15,39 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+
+CONFIG = """
+[run]
+locations = ["knee"]
+[instruments.funcgen]
+model = "33500B"
+resource = "TCPIP0::192.0.2.1::5025::SOCKET"
+[instruments.scope]
+model = "InfiniiVision"
+resource = "TCPIP0::192.0.2.2::5025::SOCKET"
+[instruments.vibrometer]
+model = "OFV-5000"
+resource = "ASRL/dev/ttyUSB0::INSTR"
+[drive]
+amp_vpp = 4.0
+offset_v = 2.0
+[frequencies]
+list_hz = [{freqs}]
+[method]
+settle_s = {settle_s}
+dwell_cycles = {dwell_cycles}
+[scope]
+drive_channel = 1
+velocity_channel = 2
+[vibrometer]
+scale_mm_s_per_v = 25.0
+"""
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -29,9 +56,6 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--settle-s", type=float, default=0.02)
     ap.add_argument("--dwell-cycles", type=float, default=10.0)
     args = ap.parse_args(argv)
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "experiments"))
-    from labcfg import inchip_toml
 
     from labkit.experiments.config import comparable, load_inchip
     from labkit.experiments.plans import inchip_plan
@@ -42,8 +66,9 @@ def main(argv: list[str] | None = None) -> dict:
 
     freqs = np.geomspace(1000.0, 2000.0, args.points)
     with tempfile.TemporaryDirectory() as tmp:
-        cfg_path = inchip_toml(Path(tmp) / "bench.toml", freqs, locations=("knee",), settle_s=args.settle_s,
-                               dwell_cycles=args.dwell_cycles)
+        cfg_path = Path(tmp) / "bench.toml"
+        cfg_path.write_text(CONFIG.format(freqs=", ".join(repr(float(f)) for f in freqs), settle_s=args.settle_s,
+                                          dwell_cycles=args.dwell_cycles))
         cfg = load_inchip(cfg_path)
         cpu0 = time.process_time()
         with virtual_lab(cfg) as (lab, cfg):
@@ -52,7 +77,9 @@ def main(argv: list[str] | None = None) -> dict:
                     Rig(cfg) as rig:
                 runner = Runner(rig, run, cfg, quiet=True)
                 t0 = time.monotonic()
+                th0 = time.thread_time()
                 runner.run(plan)
+                runner_cpu = time.thread_time() - th0        # this thread only: the runner, not the lab
                 wall = time.monotonic() - t0
         cpu = time.process_time() - cpu0
     pts = plan.points
@@ -72,6 +99,7 @@ def main(argv: list[str] | None = None) -> dict:
         "overhead_ms_first_point": round(float(over_ms[0]), 2),
         "target_ms": 20.0, "meets_target": bool(np.median(steady) < 20.0),
         "run_wall_s": round(wall, 3), "process_cpu_s_incl_lab": round(cpu, 3),
+        "runner_cpu_ms_per_point": round(runner_cpu / len(pts) * 1e3, 2),
         "loadavg_1min": os.getloadavg()[0], "cpus": os.cpu_count(),
     }
     print(json.dumps(out))

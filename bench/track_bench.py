@@ -8,7 +8,10 @@ is written as Motion-JPEG ``.avi`` and tracked twice:
 * ``fps_tracking_only``: :func:`analysis.tracking.track_frames` on frames
   already in memory (the tracker's own cost, independent of the codec).
 
-Target: ``fps_end_to_end >= 500``.
+Target: ``fps_end_to_end >= 500`` (wall clock, best of 5). On a shared machine
+the wall clock swings with the load; the ``*_cpu`` figures (frames per CPU
+second of this single-threaded process) show the uncontended rate, and
+``load_avg_1min`` says how busy the machine was.
 """
 from __future__ import annotations
 
@@ -43,23 +46,28 @@ def main(frames: int = 600) -> dict:
         path = Path(tmp) / "bench.avi"
         write_video(path, video, fps)
         size_mb = path.stat().st_size / 1e6
-        best_e2e = np.inf
-        for _ in range(3):
-            t0 = time.perf_counter()
+        best_e2e = best_e2e_cpu = np.inf
+        for _ in range(5):
+            t0, c0 = time.perf_counter(), time.process_time()
             trk = track_video(path, mm_per_px=0.05)
             best_e2e = min(best_e2e, time.perf_counter() - t0)
-        best_trk = np.inf
-        for _ in range(3):
-            t0 = time.perf_counter()
+            best_e2e_cpu = min(best_e2e_cpu, time.process_time() - c0)
+        best_trk = best_trk_cpu = np.inf
+        for _ in range(5):
+            t0, c0 = time.perf_counter(), time.process_time()
             raw = track_frames(zip(video, t), (640, 480))
             best_trk = min(best_trk, time.perf_counter() - t0)
+            best_trk_cpu = min(best_trk_cpu, time.process_time() - c0)
     ok = trk.quality == 0
     err = np.hypot(trk.u_px - truth.u_px, trk.v_px - truth.v_px)[ok]
     return {"frames": frames, "size_px": [640, 480], "threads": 1, "codec": "MJPG avi",
             "video_mb": round(size_mb, 2),
             "fps_end_to_end": round(frames / best_e2e, 1),
+            "fps_end_to_end_cpu": round(frames / best_e2e_cpu, 1),
             "fps_tracking_only": round(frames / best_trk, 1),
+            "fps_tracking_only_cpu": round(frames / best_trk_cpu, 1),
             "target_fps": 500, "meets_target": bool(frames / best_e2e >= 500),
+            "load_avg_1min": round(os.getloadavg()[0], 2),
             "lost_frames": int(np.sum(raw["quality"] == 2)),
             "position_rms_px": round(float(np.sqrt(np.mean(err ** 2))), 4)}
 

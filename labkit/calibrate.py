@@ -9,7 +9,8 @@ with bounds),
 * ``w * (1 - share of feet showing the observed pattern)`` for every leg-pattern
   observation (optional),
 
-where ``v_sim`` is the nominal robot's mean speed from :func:`labkit.sim.simulate`
+where ``v_sim`` is the nominal robot's mean speed (magnitude of the mean forward
+velocity: a tracked speed has no sign) from :func:`labkit.sim.simulate`
 on the shaker at that point's frequency and tray amplitude. Every evaluation —
 the residual and the forward-difference Jacobian, one batch of
 ``(parameters + 1) x points`` simulations per iteration — goes through
@@ -95,7 +96,9 @@ def speed_task(task: tuple) -> dict[str, Any]:
 
     params, freq_hz, amp_um, duration_s, seed = task
     r = simulate(params, Shaker(freq_hz=float(freq_hz), amp_um=float(amp_um)), duration_s=duration_s, seed=seed)
-    return {"speed_mm_s": float(r.mean_speed_mm_s), "patterns": [str(p) for p in r.patterns]}
+    # measured speeds are unsigned (tracked path speed; the paper compares speed, not velocity)
+    return {"speed_mm_s": abs(float(r.mean_speed_mm_s)), "velocity_mm_s": float(r.mean_speed_mm_s),
+            "patterns": [str(p) for p in r.patterns]}
 
 
 @dataclass
@@ -327,6 +330,8 @@ def observations_from_files(paths: Sequence[str], *, amp_um: float | None = None
 
     The tray amplitude of each point is the run's measured one; tables (and
     tracks with their own ``freq_hz``) use ``amp_um`` (InputError if not given).
+    Leg patterns come from a table's ``pattern`` column or from the knee
+    records of shaker runs (classified by :func:`analysis.compare.classify_knee_pattern`).
     """
     from analysis import report_inputs as ri
 
@@ -349,13 +354,14 @@ def observations_from_files(paths: Sequence[str], *, amp_um: float | None = None
     freq, amp, speed, sd, pats, src = [], [], [], [], [], []
     if runs or tracks:
         m = ri.measured_speeds(runs, tracks)
-        amp_of = {float(f): float(a) for r in runs for f, a in zip(r["freq_hz"], r["tray_amp_um"])}
-        for f, s, d, source in zip(m["freq_hz"], m["speed_mm_s"], m["std_mm_s"], m["sources"]):
-            a = amp_of.get(float(f), amp_um)
-            if a is None or not math.isfinite(a):
-                raise InputError("tray amplitude unknown for a track with its own frequency", file=source,
-                                 key="--amp-um", expected="--amp-um AMP")
-            freq.append(f), amp.append(a), speed.append(s), sd.append(d), pats.append(""), src.append(source)
+        for f, a, s, d, pat, source in zip(m["freq_hz"], m["amp_um"], m["speed_mm_s"], m["std_mm_s"],
+                                           m["patterns"], m["sources"]):
+            if not math.isfinite(a):
+                if amp_um is None:
+                    raise InputError("tray amplitude unknown for a track with its own frequency", file=source,
+                                     key="--amp-um", expected="--amp-um AMP (um)")
+                a = amp_um
+            freq.append(f), amp.append(a), speed.append(s), sd.append(d), pats.append(pat), src.append(source)
     for t in tables:
         if amp_um is None:
             raise InputError("a speed table holds no tray amplitude", file=t["file"], key="--amp-um",

@@ -4,7 +4,7 @@ from __future__ import annotations
 import h5py
 import numpy as np
 
-from conftest import last_json, run_cli
+from clihelpers import last_json, run_cli
 from labkit.h5io import put, stamp
 
 

@@ -35,6 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--no-simulate", action="store_true", help="never run the simulator; use --sim files only")
     parser.add_argument("--band-k", type=float, default=2.0, help="Monte Carlo band: mean +- K std (default 2)")
     parser.add_argument("--scheduler", help="tcp://HOST:PORT of a Dask scheduler for the knee simulations")
+    parser.add_argument("--workers", type=int, help="local worker processes for the knee simulations")
     parser.add_argument("--title", default="labkit: model against measurement")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (report.html, fig_*.png)")
 
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     summary = build_report(args.out, runs=args.runs, tracks=args.tracks, fit=args.fit, sims=args.sim,
                            params=args.params, knee_drives=args.knee_drives, simulate_knee=not args.no_simulate,
                            knee_duration_s=args.knee_duration_s, leg=args.leg - 1, band_k=args.band_k,
-                           scheduler=args.scheduler, title=args.title, quiet=args.quiet or args.json)
+                           scheduler=args.scheduler, workers=args.workers, title=args.title, quiet=args.quiet or args.json)
     if not args.json:
         print(f"report: {summary['html']}")
         for name, status in summary["sections"].items():

@@ -110,6 +110,8 @@ class Rig:
         self._funcgen_limits: dict[str, Any] = {}
         self.velocity_vpd = cfg.scope.velocity_volts_per_div or 2 * VIB_OUTPUT_MAX_V / VERTICAL_DIVS
         self.drive_vpd: float | None = None
+        self._at: str | None = None                  # where the laser points
+        self._range_at: dict[str, float] = {}        # velocity V/div last used per spot
 
     # -- opening ---------------------------------------------------------------------------
     def open(self) -> "Rig":
@@ -185,6 +187,17 @@ class Rig:
             self.scope.write(f":WAV:POIN {points}")
         self._points = points
 
+    def chirp_timebase(self, length_s: float) -> None:
+        """Record exactly the sweep: the trigger (sweep start) at the record's first sample.
+
+        InfiniiVision: reference LEFT puts the trigger one division (10 %) in;
+        a delay of that much moves it to the record's start.
+        """
+        self.scope.set_timebase(length_s)
+        if hasattr(self.scope, "points"):
+            self.scope.write(":TIM:REF LEFT")
+            self.scope.write(f":TIM:POS {0.1 * length_s:.6g}")
+
     def reopen_funcgen(self) -> Any:
         """A new connection to the generator (the old link was lost)."""
         self.funcgen = _open(self.cfg.instruments["funcgen"], **self._funcgen_limits)
@@ -208,7 +221,14 @@ class Rig:
 
     # -- what the runner asks --------------------------------------------------------------
     def move_spot(self, spot: str) -> None:
+        """Move the laser; the velocity channel gets back the range it last had at that spot."""
+        if self._at is not None:
+            self._range_at[self._at] = self.velocity_vpd
         self._spot.move(spot)
+        self._at = spot
+        want = self._range_at.get(spot)
+        if want is not None and want != self.velocity_vpd:
+            self._set_velocity_vpd(want)
 
     def on_drive_amplitude(self, amp_vpp: float, offset_v: float) -> None:
         """Fit the drive channel's vertical scale to the drive (only when it changes much)."""

@@ -36,6 +36,11 @@ from labkit.experiments.safety import DriveGuard, Interlock, deferred, shielded,
 from labkit.progress import progress
 
 
+#: how long past twice the record an acquisition may take before the scope counts as lost
+#: (a missing trigger; generous because a simulated robot may be computed meanwhile)
+ACQUIRE_MARGIN_S = 10.0
+
+
 class InterlockEnd(LimitError):
     """The run ended on an interlock (``on_interlock = "end"``); the file is complete up to it."""
 
@@ -218,7 +223,7 @@ class Runner:
         for attempt in range(4):
             t_acq = time.monotonic()
             rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
-                                  timeout_s=dwell_s * 2 + 2.0)
+                                  timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
             waited += min(dwell_s, time.monotonic() - t_acq)
             if rig.vibrometer.over_range():
                 raise Interlock("vibrometer over-range")
@@ -251,7 +256,7 @@ class Runner:
         self.sine_set = None
         fg.set_sweep(p.start_hz, p.stop_hz, p.length_s, spacing=p.spacing, trigger_source="BUS")
         self.guard.on()
-        rig.scope.set_timebase(p.length_s)
+        rig.chirp_timebase(p.length_s)
         rig.set_record_points(math.ceil(p.length_s * p.stop_hz * 10))
         self.record_s = p.length_s
         records = []
@@ -259,7 +264,7 @@ class Runner:
             for _ in range(p.averages):
                 rig.scope.single()
                 fg.trigger()
-                rig.scope.wait_done(p.length_s * 2 + 2.0)
+                rig.scope.wait_done(p.length_s * 2 + ACQUIRE_MARGIN_S)
                 wd = rig.scope.read_waveform(rig.drive_channel)
                 wv = rig.scope.read_waveform(rig.velocity_channel)
                 if rig.vibrometer.over_range():

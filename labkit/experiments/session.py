@@ -124,35 +124,42 @@ def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: A
         if lab is not False and lab is not None:
             lab_obj, cfg = stack.enter_context(virtual_lab(cfg, seed=seed, lab=None if lab is True else lab))
         cfg_json = comparable(cfg)
-        if resume is not None:
-            run = rf.RunFile.resume(path, cfg, cfg_json)
-        else:
-            n_total = (inchip_plan(cfg) if kind == "inchip" else shaker_plan(cfg)).points_total
-            extra = _extra_attrs(cfg)
-            run = rf.RunFile.create(path, cfg, cfg_json, n_total, extra)
-        plan: Plan = inchip_plan(cfg, run.done) if kind == "inchip" else shaker_plan(cfg, run.done)
+        run = rf.RunFile.resume(path, cfg, cfg_json) if resume is not None else None   # checks the config
         runner = None
         try:
             from labkit.experiments.rig import PromptSpot, Rig
             from labkit.experiments.runner import Runner
 
-            spot = PromptSpot(stdin=stdin) if stdin is not None and "control" not in cfg.instruments else None
+            # a given stdin means a person answers the prompts (even with a lab control channel)
+            spot = PromptSpot(stdin=stdin) if stdin is not None else None
+            # instruments first (the drive stays off): a rig that cannot be opened leaves no new file
             rig = stack.enter_context(Rig(cfg, spot=spot))
+            if run is None:
+                n_total = (inchip_plan(cfg) if kind == "inchip" else shaker_plan(cfg)).points_total
+                run = rf.RunFile.create(path, cfg, cfg_json, n_total, _extra_attrs(cfg))
+            plan: Plan = inchip_plan(cfg, run.done) if kind == "inchip" else shaker_plan(cfg, run.done)
             for role, (model, resource, snap) in rig.snapshots().items():
                 run.set_instrument(role, model, resource, snap)
             runner = Runner(rig, run, cfg, quiet=quiet)
             status = runner.run(plan)
         except BaseException as exc:
-            if runner is None:          # failed before the runner owned the drive: record why
+            if runner is None and run is not None:   # failed before the runner owned the drive: say why
+                from labkit.errors import Interrupted
+
+                if isinstance(exc, (KeyboardInterrupt, Interrupted)):
+                    why = f"interrupted: {getattr(exc, 'signame', 'SIGINT')}"
+                else:
+                    why = f"aborted: {type(exc).__name__}: {exc}"
                 with shielded():
-                    run.event(f"run not started: {type(exc).__name__}: {exc}")
-                    run.finish(f"aborted: {type(exc).__name__}: {exc}")
+                    run.event(f"run not started: {why}")
+                    run.finish(why)
             raise
         finally:
             with shielded():
-                run.close()
-                if lab_obj is not None:
-                    _store_lab_record(path, lab_obj)
+                if run is not None:
+                    run.close()
+                    if lab_obj is not None:
+                        _store_lab_record(path, lab_obj)
     out_summary = rf.summary(path)
     out_summary.update(ok=True, status=status)
     if runner is not None:

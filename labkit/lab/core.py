@@ -74,6 +74,17 @@ class VirtualLab:
         The scope's acquisition memory (a record has the requested
         ``:WAVeform:POINts``, at most this many).
 
+    Attributes
+    ----------
+    log:
+        ``(t_s, instrument, kind, text)`` since the lab started: ``kind`` is
+        ``"rx"`` (a line received), ``"tx"`` (a reply sent; binary blocks
+        summarised), ``"fault"`` (an injected fault acted), ``"state"`` (spot,
+        set-up, camera) or ``"error"`` (a simulation failed).
+    output_timeline:
+        ``(t_s, instrument, channel, on)``: the initial states at t = 0, then
+        every change (``OUTP``, ``*RST``, ``APPLy``, the lab's shutdown).
+
     Examples
     --------
     >>> with VirtualLab(seed=1) as lab:            # doctest: +SKIP
@@ -282,27 +293,37 @@ class VirtualLab:
             return tray
         return self._robot_velocity(spot, drive, t_abs, tray)
 
-    def _signals(self, t_abs: np.ndarray, rng: np.random.Generator,
-                 channels: tuple[int, ...] = (1, 2, 3, 4)) -> dict[int, np.ndarray]:
-        """The scope channels' volts at absolute times ``t_abs`` (one acquisition)."""
+    def _signals(self) -> Any:
+        """The scope's view of the bench now: a function of sample times, frozen at this moment.
+
+        What the generator, the spot, the set-up and the decoder range are at
+        the trigger is what the record shows, however late it is transferred.
+        """
         with self._state_lock:
             spot, setup = self._spot, self._setup
         drive = self.funcgen.drive(1)
         scale = self.vibrometer.scale_mm_s_per_v
-        n = len(t_abs)
-        out: dict[int, np.ndarray] = {}
-        for ch in channels:
-            if ch == 1:
-                out[1] = drive.voltage(t_abs)
-            elif ch == 2 or (ch == 3 and setup == "shaker"):
-                v = (self._spot_velocity(spot, setup, drive, t_abs) if ch == 2
-                     else self._tray_velocity(drive, t_abs))
-                v = v + rng.normal(0.0, self.noise_mm_s_rms, n)
-                out[ch] = np.clip(v / scale, -FULL_SCALE_V, FULL_SCALE_V)
-            else:
-                out[ch] = np.zeros(n)
-            out[ch] += rng.normal(0.0, self.noise_v_rms, n)
-        return out
+
+        def render(t_abs: np.ndarray, rng: np.random.Generator,
+                   channels: tuple[int, ...] = (1, 2, 3, 4)) -> dict[int, np.ndarray]:
+            n = len(t_abs)
+            out: dict[int, np.ndarray] = {}
+            for ch in channels:
+                if ch == 1:
+                    out[1] = drive.voltage(t_abs)
+                elif ch == 2 or (ch == 3 and setup == "shaker"):
+                    v = (self._spot_velocity(spot, setup, drive, t_abs) if ch == 2
+                         else self._tray_velocity(drive, t_abs))
+                    v = v + rng.normal(0.0, self.noise_mm_s_rms, n)
+                    if ch == 2:
+                        self.vibrometer.clipped = bool(np.max(np.abs(v)) > scale * FULL_SCALE_V)
+                    out[ch] = np.clip(v / scale, -FULL_SCALE_V, FULL_SCALE_V)
+                else:
+                    out[ch] = np.zeros(n)
+                out[ch] += rng.normal(0.0, self.noise_v_rms, n)
+            return out
+
+        return render
 
     def _sync(self, source: str, t_min: float) -> float | None:
         """The scope's trigger: generator sync (EXT) or a rising edge of the drive (CHAN1)."""
@@ -330,7 +351,7 @@ class VirtualLab:
             return 0.0
         lo, hi = drive.freq_range_hz()
         freqs = np.geomspace(max(lo, 1.0), max(hi, 1.0), 200) if hi > lo else np.array([max(lo, 1e-3)])
-        peak_v = drive.amp_v + abs(drive.offset_v) * 0
+        peak_v = drive.amp_v    # the offset is DC: no velocity
         with self._state_lock:
             spot, setup = self._spot, self._setup
         if setup == "inchip":

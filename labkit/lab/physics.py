@@ -139,22 +139,32 @@ def lti_response(parts: list[tuple[np.ndarray, np.ndarray]], u: np.ndarray, dt_s
 
 def simulate_linear(parts: list[tuple[np.ndarray, np.ndarray]], drive: Callable[[np.ndarray], np.ndarray],
                     t_abs: np.ndarray, t_start: float, f_max_hz: float,
-                    oversample: float = 40.0, max_samples: int = 30_000_000) -> np.ndarray:
+                    oversample: float = 128.0) -> np.ndarray:
     """Response at the uniformly spaced times ``t_abs`` to ``drive(t)``, at rest at ``t_start``.
 
-    The system is simulated on a grid through ``t_abs`` at least ``oversample``
-    samples per period of ``f_max_hz`` and sampled back at ``t_abs`` (the way a
-    scope decimates its fast ADC).
+    The system is simulated on a grid of at least ``oversample`` samples per
+    period of ``f_max_hz``. A record sampled more coarsely than that is read
+    off the grid (every k-th sample, as a scope decimates its fast ADC); a
+    record sampled more finely is interpolated from the grid with a cubic
+    spline (error ~ (w dt)^4 / 384, negligible), so a 1 M-point record of a few
+    milliseconds does not cost a 1 M-point-per-millisecond simulation.
     """
     n = len(t_abs)
     xinc = (t_abs[-1] - t_abs[0]) / (n - 1) if n > 1 else 1e-6
-    step = max(1, int(np.ceil(xinc * f_max_hz * oversample)))
-    dt = xinc / step
+    dt_max = 1.0 / (f_max_hz * oversample)
+    if xinc > dt_max:
+        step = int(np.ceil(xinc / dt_max))
+        dt = xinc / step
+        n_pre = max(0, int(np.ceil((t_abs[0] - t_start) / dt)))
+        grid = t_abs[0] + (np.arange(n_pre + (n - 1) * step + 1) - n_pre) * dt
+        y = lti_response(parts, drive(grid), dt)
+        return y[n_pre::step][:n]
+    from scipy.interpolate import CubicSpline
+
+    dt = dt_max
     n_pre = max(0, int(np.ceil((t_abs[0] - t_start) / dt)))
-    total = n_pre + (n - 1) * step + 1
-    if total > max_samples:  # a very long record: keep the grid, shorten the settling history
-        n_pre = max(0, max_samples - (n - 1) * step - 1)
-        total = n_pre + (n - 1) * step + 1
-    grid = t_abs[0] + (np.arange(total) - n_pre) * dt
+    n_rec = int(np.ceil((t_abs[-1] - t_abs[0]) / dt)) + 2
+    grid = t_abs[0] + (np.arange(n_pre + n_rec) - n_pre) * dt
     y = lti_response(parts, drive(grid), dt)
-    return y[n_pre::step][:n]
+    keep = slice(max(0, n_pre - 2), None)
+    return CubicSpline(grid[keep], y[keep])(t_abs)

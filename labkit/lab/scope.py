@@ -30,26 +30,53 @@ from labkit.lab.scpi import (Call, ScpiError, ScpiInstrument, definite_block, fm
 NORMAL_MAX_POINTS = 62_500
 RAW_MAX_POINTS = 8_000_000
 AUTO_TRIGGER_S = 0.05
+MAX_SRATE_SA_S = 5e9
+
+
+# render(t_abs, rng, channels) -> {channel: volts}: the lab's physics, frozen at one moment
+RenderFn = Callable[[np.ndarray, np.random.Generator, tuple[int, ...]], dict[int, np.ndarray]]
+# signals() -> a RenderFn for the lab's present state; sync(source, t_min) -> trigger time or None
+SignalFn = Callable[[], RenderFn]
+SyncFn = Callable[[str, float], float | None]
 
 
 @dataclass
 class Acquisition:
-    """One record: its times (relative to the trigger) and every channel's volts."""
+    """One record: its geometry, the physics frozen at its trigger, and its digitised volts.
+
+    The record is the full memory depth, but the volts are computed per
+    decimation step (``volts[step][channel]``): a transfer of fewer points
+    reads every ``step``-th sample, and only what is transferred is ever
+    computed. The eager step is the one the transfer settings ask for when the
+    acquisition completes, so the usual transfer only encodes and sends.
+    """
 
     points: int
     xinc_s: float
     xorig_s: float
     t_arm: float
     t_trig: float | None = None
-    volts: dict[int, np.ndarray] = field(default_factory=dict)
+    channels: tuple[int, ...] = ()
+    seed: tuple[int, ...] = ()
+    render: RenderFn | None = None
+    volts: dict[int, dict[int, np.ndarray]] = field(default_factory=dict)
     done: threading.Event = field(default_factory=threading.Event)
+    lock: threading.Lock = field(default_factory=threading.Lock)
     cancelled: bool = False
     error: str | None = None
 
-
-# signals(t_abs, rng, channels) -> {channel: volts}; sync(source, t_min) -> trigger time or None
-SignalFn = Callable[[np.ndarray, np.random.Generator, tuple[int, ...]], dict[int, np.ndarray]]
-SyncFn = Callable[[str, float], float | None]
+    def get(self, step: int) -> dict[int, np.ndarray]:
+        """Every ``step``-th sample of the record, per channel (computed once)."""
+        with self.lock:
+            if step not in self.volts:
+                if self.render is None or self.t_trig is None:
+                    self.volts[step] = {}
+                else:
+                    idx = np.arange(0, self.points, step)
+                    t_abs = self.t_trig + self.xorig_s + self.xinc_s * idx
+                    rng = np.random.default_rng([*self.seed, step])
+                    self.volts[step] = self.render(t_abs, rng, self.channels)
+            return self.volts[step]
 
 
 class InfiniiVision(ScpiInstrument):
@@ -109,7 +136,7 @@ class InfiniiVision(ScpiInstrument):
                      lambda v: "ASC" if v == "ASC" else v)
         self.setting(":WAVeform:POINts:MODE", "points_mode", "NORM",
                      lambda t: parse_enum(t, ["NORMal", "MAXimum", "RAW"]), str)
-        self.add(":WAVeform:POINts", set=self._set_points, query=lambda c: fmt_int(self._points_out()))
+        self.add(":WAVeform:POINts", set=self._set_points, query=lambda c: fmt_int(self._scaling()[5]))
         self.setting(":WAVeform:BYTeorder", "byteorder", "MSBF", lambda t: parse_enum(t, ["MSBFirst", "LSBFirst"]),
                      str)
         self.setting(":WAVeform:UNSigned", "unsigned", True, parse_bool, lambda v: "1" if v else "0")
@@ -121,7 +148,7 @@ class InfiniiVision(ScpiInstrument):
         self.add(":WAVeform:YORigin", query=lambda c: fmt_num(self._scaling()[3]))
         self.add(":WAVeform:YREFerence", query=lambda c: fmt_int(self._scaling()[4]))
         self.add(":ACQuire:POINts", query=lambda c: fmt_int(self._last_acq().points))
-        self.add(":ACQuire:SRATe", query=lambda c: fmt_num(self._points_out() / self.get("range")))
+        self.add(":ACQuire:SRATe", query=lambda c: fmt_num(self._record_geometry()[0] / self.get("range")))
         self.add(":DIGitize", set=self._digitize)
         self.add(":SINGle", set=lambda c: self._arm("SING"))
         self.add(":RUN", set=lambda c: self._run())
@@ -158,23 +185,15 @@ class InfiniiVision(ScpiInstrument):
         else:
             self.settings["points"] = int(self.num(word, "", 100, RAW_MAX_POINTS))
 
-    def _points_out(self) -> int:
-        """Points a transfer returns: the request, capped by the mode and what was acquired."""
-        want = self.settings.get("points", 1000)
-        if self.get("points_mode") == "NORM":
-            want = min(want, NORMAL_MAX_POINTS)
-        acq = self.acq
-        if acq is not None and acq.done.is_set():
-            want = min(want, acq.points)
-        return int(want)
-
     # -- acquisition --------------------------------------------------------------------------
     def _record_geometry(self) -> tuple[int, float, float]:
-        """Acquisition depth: the requested transfer size, within the memory (and 62 500 in NORMal)."""
-        points = min(self.settings.get("points", 1000), self.memory_points)
-        if self.get("points_mode") == "NORM":
-            points = min(points, NORMAL_MAX_POINTS)
+        """Acquisition depth: the whole memory, unless the maximum sample rate limits it.
+
+        As on the instrument, the depth does not depend on ``:WAVeform:POINts``:
+        a transfer decimates the record (to at most 62 500 points in NORMal mode).
+        """
         rng = self.get("range")
+        points = int(min(self.memory_points, max(100, rng * MAX_SRATE_SA_S)))
         ref = {"LEFT": 0.1, "CENT": 0.5, "RIGH": 0.9}[self.get("reference")]
         xinc = rng / points
         xorig = self.get("position") - ref * rng
@@ -183,18 +202,25 @@ class InfiniiVision(ScpiInstrument):
     def _arm(self, state: str) -> Acquisition:
         self._cancel()
         points, xinc, xorig = self._record_geometry()
-        acq = Acquisition(points, xinc, xorig, t_arm=self.clock())
+        self.n_acq += 1
+        acq = Acquisition(points, xinc, xorig, t_arm=self.clock(), channels=self._displayed(),
+                          seed=(self.seed, self.n_acq))
         self.acq = acq
         self.run_state = state
-        self.n_acq += 1
         source = self.get("trig_source")
         sweep_mode = self.get("trig_sweep")
-        seed = (self.seed, self.n_acq)
-        threading.Thread(target=self._acquire, args=(acq, source, sweep_mode, seed), daemon=True,
+        threading.Thread(target=self._acquire, args=(acq, source, sweep_mode), daemon=True,
                          name="lab-scope-acq").start()
         return acq
 
-    def _acquire(self, acq: Acquisition, source: str, sweep_mode: str, seed: tuple[int, int]) -> None:
+    def _step_for(self, acq: Acquisition | None) -> int:
+        """Decimation step a transfer with today's ``:WAVeform:POINts`` settings uses."""
+        want = min(self.settings.get("points", 1000),
+                   NORMAL_MAX_POINTS if self.get("points_mode") == "NORM" else RAW_MAX_POINTS)
+        depth = acq.points if acq is not None else self._record_geometry()[0]
+        return max(1, depth // max(1, want))
+
+    def _acquire(self, acq: Acquisition, source: str, sweep_mode: str) -> None:
         """Wait for a trigger in real time, then for the post-trigger time; compute the record."""
         try:
             t_min = acq.t_arm + max(0.0, -acq.xorig_s)  # the pre-trigger part must be filled first
@@ -214,12 +240,11 @@ class InfiniiVision(ScpiInstrument):
                 time.sleep(min(0.01, max(0.0, t_end - self.clock())))
             if acq.cancelled:
                 return
-            t_abs = t_trig + acq.xorig_s + acq.xinc_s * np.arange(acq.points)
-            acq.volts = self.signals(t_abs, np.random.default_rng(list(seed)), self._displayed())
+            acq.render = self.signals()
+            acq.get(self._step_for(acq))     # digitise now what the next transfer will ask for
             self.triggered = True
-        except Exception as exc:  # keep the scope answering; the record reads as zeros
+        except Exception as exc:  # keep the scope answering; the transfer reports the error
             acq.error = f"{type(exc).__name__}: {exc}"
-            acq.volts = {}
         finally:
             acq.done.set()
             with self._cond:
@@ -266,17 +291,22 @@ class InfiniiVision(ScpiInstrument):
         """The latest record of a running scope: the one that ended just now."""
         points, xinc, xorig = self._record_geometry()
         now = self.clock()
-        acq = Acquisition(points, xinc, xorig, t_arm=now)
-        acq.t_trig = now - (xorig + points * xinc)
         self.n_acq += 1
-        t_abs = acq.t_trig + xorig + xinc * np.arange(points)
-        acq.volts = self.signals(t_abs, np.random.default_rng([self.seed, self.n_acq]), self._displayed())
+        acq = Acquisition(points, xinc, xorig, t_arm=now, channels=self._displayed(),
+                          seed=(self.seed, self.n_acq), render=self.signals())
+        acq.t_trig = now - (xorig + points * xinc)
         acq.done.set()
         self.acq = acq
         return acq
 
     def _last_acq(self) -> Acquisition:
         if self.run_state == "RUN":
+            # a running scope: the newest record (reused for 0.1 s so that a preamble
+            # and the data that follows it describe the same record)
+            acq = self.acq
+            if acq is not None and acq.done.is_set() and acq.t_trig is not None and \
+                    self.clock() - acq.t_arm < 0.1:
+                return acq
             return self._immediate()
         if self.acq is None:
             raise ScpiError(-230, "Data corrupt or stale;no acquisition")
@@ -309,16 +339,11 @@ class InfiniiVision(ScpiInstrument):
         scale = self.get("scale", ch)
         offset = self.get("offset", ch)
         fmt = self.get("wav_format")
-        if acq is None:
-            points, xinc, xorig = self._record_geometry()
-            step = 1
-        else:
-            points, xinc, xorig = acq.points, acq.xinc_s, acq.xorig_s
-            want = min(self.settings.get("points", 1000),
-                       NORMAL_MAX_POINTS if self.get("points_mode") == "NORM" else RAW_MAX_POINTS)
-            step = max(1, points // max(1, want))
-            points = len(range(0, acq.points, step))
-            xinc *= step
+        points, xinc, xorig = ((acq.points, acq.xinc_s, acq.xorig_s) if acq is not None
+                               else self._record_geometry())
+        step = self._step_for(acq)
+        points = len(range(0, points, step))
+        xinc *= step
         if fmt == "BYTE":
             yinc, yref = 10 * scale / 256, 128
         else:
@@ -342,11 +367,12 @@ class InfiniiVision(ScpiInstrument):
         if not self.get("display", ch):
             raise ScpiError(-221, "Settings conflict;waveform source channel is off")
         xinc, xorig, yinc, yorig, yref, points = self._scaling(acq)
-        step = max(1, acq.points // points) if points else 1
-        volts = acq.volts.get(ch)
+        if acq.error:
+            raise ScpiError(-300, f"Device-specific error;{acq.error}"[:200])
+        volts = acq.get(self._step_for(acq)).get(ch)
         if volts is None:   # switched on after the acquisition: nothing was digitised
             raise ScpiError(-230, "Data corrupt or stale;channel was off during the acquisition")
-        volts = volts[::step][:points]
+        volts = volts[:points]
         fmt = self.get("wav_format")
         full = 5 * self.get("scale", ch)   # the ADC spans +-5 divisions about the offset
         if fmt == "ASC":

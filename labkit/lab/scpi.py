@@ -402,3 +402,6 @@ class ScpiInstrument:
         except ScpiError as exc:
             self.push_error(exc.code, exc.message)
             return None
+        except Exception as exc:  # a fault of the simulation, not of the command: say so
+            self.push_error(-300, f"Device-specific error;{type(exc).__name__}: {exc}"[:200])
+            return None

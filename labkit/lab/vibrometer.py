@@ -9,8 +9,9 @@ out), except ``GetDevInfo`` of an unknown device which answers
 
 The analog output is velocity / scale factor, at most +-10 V;
 ``Get,VeloDec,1,OverRange`` is ``1`` while the velocity at the laser spot
-exceeds the range (a lab choice: the OFV-5000's over-range indicator has no
-documented remote query here).
+exceeds the range, or while the last acquisition clipped the output (a lab
+choice: the OFV-5000's over-range indicator has no documented remote query
+here; the drivers make the query a setting).
 """
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ class OFV5000:
         self.peak_velocity_mm_s = peak_velocity_mm_s
         self.lock = threading.RLock()
         self.scale_mm_s_per_v = 125.0
+        self.clipped = False   # the last acquisition saw the analog output at its +-10 V limit
         self.props: dict[tuple[str, int, str], str] = {
             ("Controller", 0, "Name"): "OFV-5000",
             ("Controller", 0, "Version"): "4.1",
@@ -62,7 +64,8 @@ class OFV5000:
         return self.scale_mm_s_per_v * FULL_SCALE_V
 
     def over_range(self) -> bool:
-        return self.peak_velocity_mm_s() > self.full_scale_mm_s
+        """The steady-state velocity at the spot exceeds the range, or the last record clipped."""
+        return self.clipped or self.peak_velocity_mm_s() > self.full_scale_mm_s
 
     def handle(self, line: str) -> bytes | None:
         parts = [p.strip() for p in line.strip().split(",")]
@@ -97,6 +100,7 @@ class OFV5000:
                 for r in RANGES_MM_S_PER_V:
                     if value.lower() == range_text(r).lower():
                         self.scale_mm_s_per_v = r
+                        self.clipped = False
                 return None
             if key in self.allowed and value not in self.allowed[key]:
                 return None      # invalid settings are ignored silently

@@ -14,7 +14,7 @@ from labkit.sim.params import RobotParams
 from labkit.sim.result import SimResult, classify_pattern
 
 #: Default step: this many steps per period of the fastest of (highest mode, drive).
-STEPS_PER_PERIOD = 50
+STEPS_PER_PERIOD = 25
 #: Default recording interval: at most 1e-4 s, and at least 20 samples per drive period.
 RECORD_DT_MAX_S = 1e-4
 RECORD_PER_PERIOD = 20

@@ -16,21 +16,37 @@ from numba import njit
 
 from labkit.sim import model as _m
 
+# numba freezes module-level ints (the layouts below) into the cached machine
+# code, and its cache only watches this file. So this file carries the layout it
+# was written for; a change of the layout in model.py must be copied here, which
+# also refreshes the cache.
+_LAYOUT = (
+    "([('AD', 9), ('AMP', 18), ('B', 33), ('BGB', 8), ('BGF', 7), ('BNS', 29), ('CAD', 12), ('C"
+    "ADT', 13), ('CR', 14), ('CRB', 15), ('CY', 39), ('CZ', 36), ('F0', 5), ('FREQ', 20), ('G',"
+    " 4), ('GACT', 54), ('GAM', 60), ('GAPTOL', 27), ('H0', 11), ('HMIN', 10), ('IL', 23), ('IV"
+    "', 22), ('IX', 1), ('IY', 2), ('IZ', 3), ('K', 30), ('KIND', 17), ('KTF', 57), ('M', 42), "
+    "('MAXEV', 28), ('MB', 0), ('MDIS', 48), ('MF', 6), ('MIMP', 45), ('MU', 16), ('NSUB', 25),"
+    " ('OMEGA', 19), ('PH', 81), ('QSQ', 24), ('R', 51), ('SQSTIFF', 26), ('VOLT', 21), ('XJ', "
+    "63), ('YFEQ', 87), ('YJ', 69), ('ZJ', 75)], 58, 25, 6, 10)"
+)
+if _m.layout_signature() != _LAYOUT:
+    raise ImportError("labkit.sim.kernel: the array layout in labkit/sim/model.py changed; "
+                      "paste labkit.sim.model.layout_signature() into kernel._LAYOUT")
+
 # numba sees module-level ints as compile-time constants.
 MB, IX, IY, IZ, G, F0, MF = (_m.IDX[k] for k in ("MB", "IX", "IY", "IZ", "G", "F0", "MF"))
 BGF, BGB, AD, HMIN, H0 = (_m.IDX[k] for k in ("BGF", "BGB", "AD", "HMIN", "H0"))
 CAD, CADT, CR, CRB, MU = (_m.IDX[k] for k in ("CAD", "CADT", "CR", "CRB", "MU"))
 KIND, AMP, OMEGA, FREQ, VOLT, IV, IL = (_m.IDX[k] for k in ("KIND", "AMP", "OMEGA", "FREQ", "VOLT", "IV", "IL"))
-K, B, CZ, CY, MM, MIMP, MDIS, R, GACT, KTF = (_m.IDX[k] for k in (
-    "K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF"))
+K, B, CZ, CY, MM, MIMP, MDIS, R, GACT, KTF, GAM = (_m.IDX[k] for k in (
+    "K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF", "GAM"))
 XJ, YJ, ZJ, PH, YFEQ = (_m.IDX[k] for k in ("XJ", "YJ", "ZJ", "PH", "YFEQ"))
 SQ, SU, SXI, SV, STC, SYP, SSIZE = _m.S_Q, _m.S_U, _m.S_XI, _m.S_V, _m.S_TC, _m.S_YPIN, _m.S_SIZE
 AIR, ADHESION, REST = _m.AIR, _m.ADHESION, _m.REST
 REC_T, REC_Y, REC_Z, REC_PH, REC_ZG, REC_FZ, REC_FY, REC_KV = (
     _m.REC_T, _m.REC_Y, _m.REC_Z, _m.REC_PH, _m.REC_ZG, _m.REC_FZ, _m.REC_FY, _m.REC_KV)
 CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED = _m.CNT_BODY, _m.CNT_EVENTS, _m.CNT_LOST, _m.CNT_FORCED
-MAXEV = _m.MAX_EVENTS_PER_STEP
-GAP_TOL = _m.GAP_TOL_M
+QSQ, NSUB, SQSTIFF, GAPTOL, MAXEV, BNS = (_m.IDX[k] for k in ("QSQ", "NSUB", "SQSTIFF", "GAPTOL", "MAXEV", "BNS"))
 # Scratch layout (W).
 W_PROP = 0      # 3 x 4 propagator of the full step
 W_PP = 12       # 3 x 4 propagator of a partial step
@@ -38,7 +54,12 @@ W_FY = 24       # 6 leg forces y
 W_FZ = 30       # 6 leg forces z
 W_REL = 36      # 6 contact time of feet released this step (-1 otherwise)
 W_AZ = 42       # 6 attachment heights at the start of an advance
-W_SIZE = 48
+W_A = 48        # 3 modal accelerations of the leg being advanced
+W_PSUB = 51     # 3 x 4 propagator of a squeeze sub-step of a full step
+W_PPS = 63      # 3 x 4 propagator of a squeeze sub-step of a partial step
+W_GZ = 75       # ground height at the squeeze sub-steps (up to 32)
+W_GV = 107      # ground velocity at the squeeze sub-steps
+W_SIZE = 139
 
 
 @njit(cache=True)
@@ -144,11 +165,63 @@ def _pull(P, S, j, vg, ag):
 
 
 @njit(cache=True)
+def _ground_table(P, t, tau, W):
+    """Ground height/velocity at t + k tau/NSUB, k = 0..NSUB (rotation recurrence: no sin/cos per point)."""
+    n = int(P[NSUB])
+    if P[KIND] != 0.0:
+        for k in range(n + 1):
+            W[W_GZ + k] = 0.0
+            W[W_GV + k] = 0.0
+        return
+    w = P[OMEGA]
+    a = P[AMP]
+    s = math.sin(w * t)
+    c = math.cos(w * t)
+    dc = math.cos(w * tau / n)
+    ds = math.sin(w * tau / n)
+    for k in range(n + 1):
+        W[W_GZ + k] = a * s
+        W[W_GV + k] = a * w * c
+        s, c = s * dc + c * ds, c * dc - s * ds
+
+
+@njit(cache=True)
+def _prop1(P, S, W, off, j, i):
+    """Exact step of mode i of leg j under the constant modal acceleration W[W_A + i]."""
+    p11 = W[off + 4 * i]
+    p12 = W[off + 4 * i + 1]
+    p21 = W[off + 4 * i + 2]
+    p22 = W[off + 4 * i + 3]
+    x = S[SXI + 3 * j + i]
+    v = S[SV + 3 * j + i]
+    a = W[W_A + i]
+    S[SXI + 3 * j + i] = p11 * x + p12 * v + (1.0 - p11) / P[K + i] * a
+    S[SV + 3 * j + i] = p21 * x + p22 * v + p12 * a
+
+
+@njit(cache=True)
+def _squeeze(P, S, W, j, h, v_base, c, q):
+    """Implicit squeeze-film correction of leg j over h (v_base: attachment minus ground velocity)."""
+    s = v_base
+    for i in range(3):
+        s += P[CZ + i] * S[SV + 3 * j + i]
+    s_new = s / (1.0 + h * c * q)
+    for i in range(3):
+        dv = -h * c * s_new * P[CZ + i] / P[MIMP + i]
+        S[SV + 3 * j + i] += dv
+        S[SXI + 3 * j + i] += 0.5 * h * dv
+
+
+@njit(cache=True)
 def _advance(P, S, mode, t, tau, dt, W):
     if tau <= 0.0:
         return
-    zg, vg, ag = _ground(P, t)
-    zg1, vg1, ag1 = _ground(P, t + tau)
+    _ground_table(P, t, tau, W)
+    nt = int(P[NSUB])
+    zg = W[W_GZ]
+    vg = W[W_GV]
+    zg1 = W[W_GZ + nt]
+    vg1 = W[W_GV + nt]
     volt = _square(P, t)
     if tau == dt:
         off = W_PROP
@@ -229,32 +302,49 @@ def _advance(P, S, mode, t, tau, dt, W):
             for i in range(3):
                 hf += P[CZ + i] * S[SXI + 3 * j + i]
         drive = volt * P[PH + j]
-        for i in range(3):
-            a = P[R + i] + P[GACT + i] * drive - (P[CZ + i] * aaz + P[CY + i] * aay)
-            if air:
-                a += (P[CZ + i] * ffz + P[CY + i] * ffy) / P[MIMP + i]
-            p11 = W[off + 4 * i]
-            p12 = W[off + 4 * i + 1]
-            p21 = W[off + 4 * i + 2]
-            p22 = W[off + 4 * i + 3]
-            x = S[SXI + 3 * j + i]
-            v = S[SV + 3 * j + i]
-            S[SXI + 3 * j + i] = p11 * x + p12 * v + (1.0 - p11) / P[K + i] * a
-            S[SV + 3 * j + i] = p21 * x + p22 * v + p12 * a
+        nsub = 1
+        c = 0.0
+        q = 0.0
         if air:
+            q = P[QSQ]
             hh = hf if hf > P[HMIN] else P[HMIN]
             c = P[BGF] / (hh * hh * hh)
+            if tau * c * q > P[SQSTIFF]:
+                nsub = int(P[NSUB])
+        for i in range(3):
+            a = P[R + i] + P[GACT + i] * drive - P[GAM + i] * (P[CZ + i] * aaz + P[CY + i] * aay)
+            if air:
+                a += (P[CZ + i] * ffz + P[CY + i] * ffy) / P[MIMP + i]
+            W[W_A + i] = a
+        if nsub == 1:
+            for i in range(3):
+                _prop1(P, S, W, off, j, i)
+        else:
+            # Stiff squeeze film: sub-cycle this leg's modes and its squeeze
+            # correction (the body's acceleration is constant over the step).
+            h = tau / nsub
+            if tau == dt:
+                offs = W_PSUB
+            else:
+                _propagators(P, h, W, W_PPS)
+                offs = W_PPS
+            vzs = W[W_FZ + j]
+            for k in range(1, nsub):
+                for i in range(3):
+                    _prop1(P, S, W, offs, j, i)
+                zgk = W[W_GZ + k]
+                vgk = W[W_GV + k]
+                _squeeze(P, S, W, j, h, vzs + (k * h) * aaz - vgk, c, q)
+                hk = W[W_AZ + j] + (k * h) * (W[W_FZ + j] + 0.5 * (k * h) * aaz) - zgk
+                for i in range(3):
+                    hk += P[CZ + i] * S[SXI + 3 * j + i]
+                hh = hk if hk > P[HMIN] else P[HMIN]
+                c = P[BGF] / (hh * hh * hh)
+            for i in range(3):
+                _prop1(P, S, W, offs, j, i)
+        if air:
             az1, ay1, vz1a, vy1a = _att(P, S, j)
-            s = vz1a - vg1
-            q = 0.0
-            for i in range(3):
-                s += P[CZ + i] * S[SV + 3 * j + i]
-                q += P[CZ + i] * P[CZ + i] / P[MIMP + i]
-            s_new = s / (1.0 + tau * c * q)
-            for i in range(3):
-                dv = -tau * c * s_new * P[CZ + i] / P[MIMP + i]
-                S[SV + 3 * j + i] += dv
-                S[SXI + 3 * j + i] += 0.5 * tau * dv
+            _squeeze(P, S, W, j, tau / nsub, vz1a - vg1, c, q)
         else:
             S[STC + j] += tau
             _pin_pair(P, S, j, zg1, vg1)
@@ -345,18 +435,22 @@ def _step(P, S, T, mode, t, dt, W, events, count):
         for k in range(SSIZE):
             T[k] = S[k]
         _advance(P, T, mode, now, remaining, dt, W)
-        zg0, vg0, ag0 = _ground(P, now)
-        zg1, vg1, ag1 = _ground(P, now + remaining)
+        # the trial advance left the ground at now .. now + remaining in W
+        nt = int(P[NSUB])
+        zg0 = W[W_GZ]
+        vg0 = W[W_GV]
+        zg1 = W[W_GZ + nt]
+        vg1 = W[W_GV + nt]
         best = math.inf
         who = -2
         for j in range(6):
             if mode[j] != AIR:
                 continue
             h1, v1 = _gap_vrel(P, T, j, zg1, vg1)
-            if h1 >= 0.0:
+            if h1 >= -P[GAPTOL]:
                 continue
             h0, v0 = _gap_vrel(P, S, j, zg0, vg0)
-            if h0 >= -GAP_TOL:
+            if h0 >= -P[GAPTOL]:
                 tau = remaining * h0 / (h0 - h1) if h0 > 0.0 else 0.0
             elif v0 < 0.0:
                 tau = 0.0
@@ -377,7 +471,7 @@ def _step(P, S, T, mode, t, dt, W, events, count):
             if tau < best:
                 best = tau
                 who = -1
-        if who == -2 or n_ev >= MAXEV:
+        if who == -2 or n_ev >= P[MAXEV]:
             if who != -2:
                 count[CNT_FORCED] += 1
             for k in range(SSIZE):
@@ -391,6 +485,8 @@ def _step(P, S, T, mode, t, dt, W, events, count):
             zg, vg, ag = _ground(P, now)
             vpre = S[SU + 1] - vg
             S[SU + 1] = vg - P[CRB] * vpre
+            if P[BNS] != 0.0:
+                S[SU + 0] = 0.0          # no lateral slip of the body either
             S[SQ + 1] = zg - P[H0]
             count[CNT_BODY] += 1
             _log(events, count, now, -1, vpre, S[SU + 1] - vg, 0.0, False)
@@ -437,6 +533,7 @@ def _integrate(P, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac, m
     T = np.zeros(SSIZE)
     air_run = np.zeros(6)
     _propagators(P, dt, W, W_PROP)
+    _propagators(P, dt / P[NSUB], W, W_PSUB)
     row = 0
     for n in range(n_steps + 1):
         t = n * dt

@@ -33,8 +33,9 @@ MODE_NAMES = ("air", "adhesion", "rest")
 
 # Layout of the flat constant vector P (the kernel cannot take Python objects).
 _SCALARS = ("MB", "IX", "IY", "IZ", "G", "F0", "MF", "BGF", "BGB", "AD", "HMIN", "H0",
-            "CAD", "CADT", "CR", "CRB", "MU", "KIND", "AMP", "OMEGA", "FREQ", "VOLT", "IV", "IL")
-_MODE_ARRAYS = ("K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF")
+            "CAD", "CADT", "CR", "CRB", "MU", "KIND", "AMP", "OMEGA", "FREQ", "VOLT", "IV", "IL",
+            "QSQ", "NSUB", "SQSTIFF", "GAPTOL", "MAXEV", "BNS")
+_MODE_ARRAYS = ("K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF", "GAM")
 _LEG_ARRAYS = ("XJ", "YJ", "ZJ", "PH", "YFEQ")
 IDX: dict[str, int] = {}
 _n = 0
@@ -48,6 +49,11 @@ for _name in _LEG_ARRAYS:
     IDX[_name] = _n
     _n += 6
 P_SIZE = _n
+
+
+def layout_signature() -> str:
+    """A text fingerprint of the array layouts (the kernel checks it: see kernel.py)."""
+    return repr((sorted(IDX.items()), S_SIZE, REC_COLS, EV_COLS, CNT_SIZE))
 
 # Layout of the flat state vector S.
 S_Q = 0        # body y, z, phx, phy, phz
@@ -77,6 +83,7 @@ class Model:
     c_ad_t: float
     c_r: float
     c_r_body: float
+    body_no_slip: bool
     mu: float
     kind: int                    # 0 shaker, 1 PZT
     amp_m: float
@@ -94,6 +101,7 @@ class Model:
     r: np.ndarray                # residual modal acceleration in air, m/s^2
     g_act: np.ndarray            # modal acceleration per volt, m/s^2/V
     ktf: np.ndarray
+    gamma: np.ndarray            # participation of the attachment's acceleration per mode
     xj: np.ndarray               # (6,)
     yj: np.ndarray
     zj: np.ndarray
@@ -111,11 +119,14 @@ class Model:
                     F0=self.f0, MF=self.m_f, BGF=self.b_g_foot, BGB=self.b_g_body, AD=self.a_drag,
                     HMIN=self.h_min, H0=self.h0, CAD=self.c_ad, CADT=self.c_ad_t, CR=self.c_r,
                     CRB=self.c_r_body, MU=self.mu, KIND=self.kind, AMP=self.amp_m, OMEGA=self.omega,
-                    FREQ=self.freq_hz, VOLT=self.volt, IV=self.iv, IL=self.il)
+                    FREQ=self.freq_hz, VOLT=self.volt, IV=self.iv, IL=self.il,
+                    QSQ=float(np.sum(self.cz * self.cz / self.m_imp)), NSUB=SQUEEZE_SUBSTEPS,
+                    SQSTIFF=SQUEEZE_STIFF, GAPTOL=GAP_TOL_M, MAXEV=MAX_EVENTS_PER_STEP,
+                    BNS=1.0 if self.body_no_slip else 0.0)
         for k, v in scal.items():
             p[IDX[k]] = v
         arrays = dict(K=self.k, B=self.b, CZ=self.cz, CY=self.cy, M=self.m_modal, MIMP=self.m_imp,
-                      MDIS=self.m_dis, R=self.r, GACT=self.g_act, KTF=self.ktf, XJ=self.xj, YJ=self.yj,
+                      MDIS=self.m_dis, R=self.r, GACT=self.g_act, KTF=self.ktf, GAM=self.gamma, XJ=self.xj, YJ=self.yj,
                       ZJ=self.zj, PH=self.phase, YFEQ=self.y_foot_eq)
         for k, v in arrays.items():
             p[IDX[k]:IDX[k] + len(v)] = v
@@ -157,6 +168,13 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
     free = [i for i in range(3) if i not in (iv, il)]
 
     grav = cz * (-m_f * g) / m_imp + cz * (-m_l * g) / m_dis   # modal acceleration from gravity
+    # Participation of the attachment's acceleration: by default the same as
+    # gravity's (m_f/m_imp + m_l/m_dis), so that gravity and acceleration are
+    # equivalent and a robot in free fall does not deform (see RobotParams).
+    if params.base_participation > 0:
+        gamma = np.full(3, params.base_participation)
+    else:
+        gamma = m_f / m_imp + m_l / m_dis
     x_eq = grav / k                                             # in-air equilibrium
     f0 = m_b * g / 6
     # Resting: the pinned pair carries the leg's share of the body, with zero lateral force.
@@ -194,9 +212,9 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
                  b_g_foot=params.b_g_foot_n_m2_s, b_g_body=params.b_g_body_n_m2_s,
                  a_drag=params.a_drag_n_s2_m2, h_min=params.h_min_um * 1e-6, h0=params.body_gap_um * 1e-6,
                  c_ad=params.c_ad_n, c_ad_t=params.c_ad_t_n_s, c_r=params.c_r, c_r_body=params.c_r_body,
-                 mu=params.mu, kind=kind, amp_m=amp, freq_hz=freq, volt=volt, iv=iv, il=il,
+                 body_no_slip=params.body_no_slip, mu=params.mu, kind=kind, amp_m=amp, freq_hz=freq, volt=volt, iv=iv, il=il,
                  k=k, b=b, cz=cz, cy=cy, m_modal=m_modal, m_imp=m_imp, m_dis=m_dis, r=r_air, g_act=g_act,
-                 ktf=np.array(params.knee_to_foot, float), xj=xj, yj=yj, zj=zj, phase=phase,
+                 ktf=np.array(params.knee_to_foot, float), gamma=gamma, xj=xj, yj=yj, zj=zj, phase=phase,
                  y_foot_eq=yj + y_fb_eq)
 
 # Columns of the recorded trajectory (SI; converted to the result's units later).
@@ -212,6 +230,13 @@ CNT_SIZE = 10
 #: (a femtometre: the rounding level of the 1e-4 m quantities in the gap), so a
 #: decision never hangs on the sign of a rounding error.
 GAP_TOL_M = 1e-15
+#: A foot in the air whose squeeze film is stiff over the step (dt * c * sum Cz^2/m_imp
+#: above SQUEEZE_STIFF) has its modes and squeeze correction sub-cycled in
+#: SQUEEZE_SUBSTEPS sub-steps: the operator splitting between the modes' exact
+#: propagation and the implicit squeeze correction is first order, and the
+#: constant is large when the film glues the foot (see the convergence test).
+SQUEEZE_SUBSTEPS = 8
+SQUEEZE_STIFF = 1.0
 #: Events (impacts) handled inside one step before the step is accepted as is.
 MAX_EVENTS_PER_STEP = 24
 

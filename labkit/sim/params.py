@@ -52,6 +52,8 @@ _SPECS: dict[str, _Spec] = {
     # --- choices (model.md)
     "c_r": _Spec("1", 0, False, 1, doc="coefficient of restitution of a foot (choice)"),
     "c_r_body": _Spec("1", 0, False, 1, doc="coefficient of restitution of the body (choice)"),
+    "body_no_slip": _Spec("true/false", kind="bool",
+                          doc="a body-ground impact also stops the body's lateral velocity (as a foot's)"),
     "cy_sign": _Spec("1 (-1, 0 or +1)", n=3, kind="sign",
                      doc="sign s_i of Cy_i: fixes the walking direction; 0 removes lateral coupling"),
     "knee_to_foot": _Spec("1", 0, True, n=3, doc="knee : foot amplitude ratio per mode (vibrometer spot)"),
@@ -61,6 +63,9 @@ _SPECS: dict[str, _Spec] = {
     "modal_participation": _Spec("1", 0, True, 1, doc="modal mass M_i = participation x leg mass"),
     "m_imp_factor": _Spec("1", 0, True, doc="m_i,imp / M_i (effective mass for foot forces)"),
     "m_dis_factor": _Spec("1", 0, True, doc="m_i,dis / M_i (effective mass for distributed forces)"),
+    "base_participation": _Spec("1", 0, doc="participation of the attachment's acceleration in each mode; "
+                                "0 = the same as gravity's, m_f/m_imp + m_l/m_dis (a falling robot does "
+                                "not deform); 1 = model.md's literal M_i (Cz a_z + Cy a_y)"),
     "leg_half_width_mm": _Spec("mm", 0, True, doc="|x_j| of the leg attachments"),
     "leg_pitch_mm": _Spec("mm", 0, False, doc="spacing along y of the leg attachments (y_j in -p, 0, +p)"),
     "leg_z_mm": _Spec("mm", doc="z_j of the leg attachments relative to the body's centre of mass"),
@@ -96,6 +101,7 @@ class RobotParams:
     c_ad_t_n_s: float = 1e-7
     c_r: float = 0.5
     c_r_body: float = 0.5
+    body_no_slip: bool = True
     cy_sign: tuple[float, float, float] = (1.0, 1.0, 1.0)
     knee_to_foot: tuple[float, float, float] = (0.5, 0.5, 0.5)
     act_um_per_v: tuple[float, float, float] = (5.0, 2.5, 2.5)
@@ -103,6 +109,7 @@ class RobotParams:
     modal_participation: float = 0.5
     m_imp_factor: float = 1.0
     m_dis_factor: float = 1.0
+    base_participation: float = 0.0
     leg_half_width_mm: float = 1.0
     leg_pitch_mm: float = 1.5
     leg_z_mm: float = 0.0

@@ -133,6 +133,31 @@ def pull(m: Model, st: RefState, j: int, vg: float, ag: float) -> float:
     return -m.f0 - fz + f_foot - m.m_f * ag
 
 
+def propagate_modes(m: Model, st: RefState, j: int, h: float, a_mode: np.ndarray) -> None:
+    """Exact step h of leg j's modes under constant modal accelerations a_mode."""
+    for i in range(3):
+        p11, p12, p21, p22 = propagator(m.k[i], m.b[i], h)
+        x, v, a = st.xi[j, i], st.v[j, i], a_mode[i]
+        st.xi[j, i] = p11 * x + p12 * v + (1.0 - p11) / m.k[i] * a
+        st.v[j, i] = p21 * x + p22 * v + p12 * a
+
+
+def squeeze(m: Model, st: RefState, j: int, h: float, v_base: float, c: float, q: float) -> None:
+    """Implicit squeeze-film correction of foot j over h; v_base = attachment - ground velocity.
+
+    ``F = -c (v_foot - v_g)`` is linear in the modal velocities for a frozen gap and
+    projects onto the modes as a rank-one term (Sherman-Morrison).
+    """
+    w = m.cz / m.m_imp
+    s = v_base + np.dot(m.cz, st.v[j])
+    s_new = s / (1.0 + h * c * q)
+    dv = -h * c * s_new * w
+    st.v[j] += dv
+    # Trapezoidal position update of the correction: without it the free
+    # acceleration inside the step would leak into the position.
+    st.xi[j] += 0.5 * h * dv
+
+
 def advance(m: Model, st: RefState, t: float, tau: float) -> None:
     """Integrate the whole robot from t over tau (no events), in place."""
     if tau <= 0.0:
@@ -163,29 +188,32 @@ def advance(m: Model, st: RefState, t: float, tau: float) -> None:
     # ---- legs (model.md section 3)
     for j in range(6):
         air = st.mode[j] == AIR
-        a_mode = m.r + m.g_act * volt * m.phase[j] - (m.cz * a_att_z[j] + m.cy * a_att_y[j])
+        a_mode = m.r + m.g_act * volt * m.phase[j] - m.gamma * (m.cz * a_att_z[j] + m.cy * a_att_y[j])
         if air:
             vfz = vz0[j] + np.dot(m.cz, st.v[j])
             vfy = vy0[j] + np.dot(m.cy, st.v[j])
             hf = az0[j] + np.dot(m.cz, st.xi[j]) - zg
             a_mode = a_mode + (m.cz * (-m.a_drag * vfz * abs(vfz)) + m.cy * (-m.a_drag * vfy * abs(vfy))) / m.m_imp
-        for i in range(3):
-            p11, p12, p21, p22 = propagator(m.k[i], m.b[i], tau)
-            x, v, a = st.xi[j, i], st.v[j, i], a_mode[i]
-            st.xi[j, i] = p11 * x + p12 * v + (1.0 - p11) / m.k[i] * a
-            st.v[j, i] = p21 * x + p22 * v + p12 * a
+        nsub, c, qs = 1, 0.0, 0.0
         if air:
-            # Squeeze film F = -c (v_foot - v_g): implicit, rank one over the modes.
+            qs = float(np.dot(m.cz, m.cz / m.m_imp))
             c = m.b_g_foot / max(hf, m.h_min) ** 3
-            w = m.cz / m.m_imp
-            s = vz1a[j] + np.dot(m.cz, st.v[j]) - vg1
-            s_new = s / (1.0 + tau * c * np.dot(m.cz, w))
-            dv = -tau * c * s_new * w
-            st.v[j] += dv
-            # Trapezoidal position update of the correction: without it the
-            # free acceleration inside the step would leak into the position.
-            st.xi[j] += 0.5 * tau * dv
-        else:
+            if tau * c * qs > M.SQUEEZE_STIFF:
+                nsub = M.SQUEEZE_SUBSTEPS
+        h = tau / nsub
+        for k in range(1, nsub + 1):
+            propagate_modes(m, st, j, h, a_mode)
+            if not air:
+                continue
+            if k < nsub:
+                # inside the step: the attachment moves with the body's constant acceleration
+                zgk, vgk, _ = ground(m, t + k * h)
+                squeeze(m, st, j, h, vz0[j] + k * h * a_att_z[j] - vgk, c, qs)
+                hk = az0[j] + k * h * (vz0[j] + 0.5 * k * h * a_att_z[j]) - zgk + np.dot(m.cz, st.xi[j])
+                c = m.b_g_foot / max(hk, m.h_min) ** 3
+            else:
+                squeeze(m, st, j, h, vz1a[j] - vg1, c, qs)
+        if not air:
             st.tc[j] += tau
             pin_pair(m, st, j, zg1, vg1)
 
@@ -232,6 +260,8 @@ def body_impact(m: Model, st: RefState, t: float, out) -> None:
     zg, vg, _ = ground(m, t)
     vpre = st.u[1] - vg
     st.u[1] = vg - m.c_r_body * vpre
+    if m.body_no_slip:
+        st.u[0] = 0.0          # no lateral slip of the body either
     st.q[1] = zg - m.h0
     out.count[M.CNT_BODY] += 1
     out.log(t, -1, vpre, st.u[1] - vg, 0.0, False)
@@ -271,7 +301,7 @@ def step(m: Model, st: RefState, t: float, dt: float, out) -> RefState:
         v0 = foot_vrel(m, st, vg0)
         best, who = math.inf, -2
         for j in range(6):
-            if st.mode[j] != AIR or trial.mode[j] != AIR or h1[j] >= 0.0:
+            if st.mode[j] != AIR or trial.mode[j] != AIR or h1[j] >= -M.GAP_TOL_M:
                 continue
             if h0[j] >= -M.GAP_TOL_M:
                 tau = remaining * h0[j] / (h0[j] - h1[j]) if h0[j] > 0.0 else 0.0

@@ -142,30 +142,36 @@ class SweepResult:
         """Write the sweep as an HDF5 file of kind ``"sim_sweep"``; returns the path."""
         import h5py
 
-        from labkit.h5io import put, put_json, stamp
+        from labkit.h5io import stamp
 
         path = Path(path)
         if path.parent and not path.parent.exists():
             path.parent.mkdir(parents=True, exist_ok=True)
         with h5py.File(path, "w") as f:
             stamp(f, "sim_sweep")
-            f.attrs["quantity"] = self.quantity
-            f.attrs["quantity_units"] = units_of(self.quantity)
-            f.attrs["params_toml"] = self.params_toml
-            put_json(f, "scenario_json", self.scenario)
-            put_json(f, "meta_json", self.meta)
-            put_json(f, "summary_json", self.summary())
-            put(f, "values", self.values, units_of(self.quantity), quantity=self.quantity)
-            put(f, "speeds_mm_s", self.speeds_mm_s, "mm/s",
-                description="mean forward speed per run; axis 0 points, axis 1 draws (0 = nominal)")
-            put(f, "mean_speed_mm_s", self.mean_speed_mm_s, "mm/s")
-            put(f, "std_speed_mm_s", self.std_speed_mm_s, "mm/s", ddof=1)
-            put(f, "contact_fraction", self.contact_fraction, "1",
-                axes="point, draw, foot, mode", modes=",".join(CONTACT_MODES))
-            put(f, "impacts", self.impacts, "1", axes="point, draw, foot")
-            put(f, "patterns", self.patterns.astype("S16"), "label", axes="point, draw, foot",
-                labels=",".join(PATTERNS))
+            self.write_group(f)
         return path
+
+    def write_group(self, g: Any) -> None:
+        """Write the sweep's attributes and datasets into an open HDF5 group."""
+        from labkit.h5io import put, put_json
+
+        g.attrs["quantity"] = self.quantity
+        g.attrs["quantity_units"] = units_of(self.quantity)
+        g.attrs["params_toml"] = self.params_toml
+        put_json(g, "scenario_json", self.scenario)
+        put_json(g, "meta_json", self.meta)
+        put_json(g, "summary_json", self.summary())
+        put(g, "values", self.values, units_of(self.quantity), quantity=self.quantity)
+        put(g, "speeds_mm_s", self.speeds_mm_s, "mm/s",
+            description="mean forward speed per run; axis 0 points, axis 1 draws (0 = nominal)")
+        put(g, "mean_speed_mm_s", self.mean_speed_mm_s, "mm/s")
+        put(g, "std_speed_mm_s", self.std_speed_mm_s, "mm/s", ddof=1)
+        put(g, "contact_fraction", self.contact_fraction, "1",
+            axes="point, draw, foot, mode", modes=",".join(CONTACT_MODES))
+        put(g, "impacts", self.impacts, "1", axes="point, draw, foot")
+        put(g, "patterns", self.patterns.astype("S16"), "label", axes="point, draw, foot",
+            labels=",".join(PATTERNS))
 
     @classmethod
     def from_h5(cls, path: str | Path) -> "SweepResult":

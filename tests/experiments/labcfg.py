@@ -65,12 +65,14 @@ def shaker_toml(path: Path, freqs_hz: Iterable[float], tray_amp_um: Iterable[flo
                 settle_s: float = 0.05, dwell_cycles: float = 15, on_interlock: str = "skip") -> Path:
     f = ", ".join(f"{x:g}" for x in freqs_hz)
     a = ", ".join(f"{x:g}" for x in tray_amp_um)
+    camera = ('\n[instruments.camera]\nmodel = "LabCamera"\nresource = "TCPIP0::192.0.2.3::5025::SOCKET"\n'
+              if video_s > 0 else "")
     path.write_text(f"""# test config
 [run]
 robot_spot = "{robot_spot}"
 video_s = {video_s}
 on_interlock = "{on_interlock}"
-{_INSTRUMENTS}
+{_INSTRUMENTS}{camera}
 [amplifier]
 gain_db = 20.0
 attenuator_db = 0.0

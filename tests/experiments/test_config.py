@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, last_json, run_cli
+from clihelpers import REPO, last_json, run_cli
 from labkit.errors import ConfigError, LimitError
 from labkit.experiments.config import load_inchip, load_shaker
 from labkit.experiments.plans import inchip_plan, shaker_plan
@@ -124,3 +124,12 @@ def test_cli_bad_config_exits_2_with_file_key_expected(tmp_path):
     assert not (tmp_path / "x.h5").exists()            # nothing written, nothing opened
     proc = run_cli("shaker", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "y.h5"), check=2)
     assert "missing.toml" in proc.stderr and "no such file" in proc.stderr
+
+
+def test_unreachable_instrument_exits_3_and_writes_nothing(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(INCHIP.read_text().replace("192.168.1.10::5025", "127.0.0.1::1"))   # nobody listens
+    out = tmp_path / "x.h5"
+    proc = run_cli("sweep", "inchip", str(cfg), "--out", str(out), check=3)
+    assert "funcgen" in proc.stderr and "open" in proc.stderr and "Traceback" not in proc.stderr
+    assert not out.exists()

@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import REPO, last_json, run_cli
+from clihelpers import REPO, last_json, run_cli
 from labkit.errors import InputError
 from labkit.experiments import runfile as rf
 from labkit.experiments.config import comparable, load_inchip, load_shaker

@@ -1,10 +1,16 @@
-"""Helpers of the virtual-lab tests: a raw-socket SCPI client and signal fits."""
+"""Helpers of the virtual-lab tests: fixtures, a raw-socket SCPI client, signal fits.
+
+The fixtures live here, not in a ``conftest.py``: a second top-level-importable
+``conftest`` module would shadow ``tests/conftest.py`` for modules that do
+``from clihelpers import run_cli``. Test modules import them by name.
+"""
 from __future__ import annotations
 
 import socket
 import time
 
 import numpy as np
+import pytest
 
 from labkit.lab import VirtualLab
 
@@ -87,3 +93,23 @@ def read_word(sc: Raw, ch: int) -> tuple[np.ndarray, np.ndarray]:
 def settle(lab: VirtualLab) -> None:
     """Wait until the structure's transient after a drive change has died out."""
     time.sleep(lab.model.settle_s() + 0.02)
+
+
+@pytest.fixture
+def lab():
+    with VirtualLab(seed=0) as lab:
+        yield lab
+
+
+@pytest.fixture
+def raw(lab):
+    opened: list[Raw] = []
+
+    def connect(name: str, timeout_s: float = 20.0) -> Raw:
+        client = Raw(lab.resources[name], timeout_s)
+        opened.append(client)
+        return client
+
+    yield connect
+    for client in opened:
+        client.close()

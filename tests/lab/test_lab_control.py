@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import pyvisa
 from labhelpers import drive_sine, fit_sine, read_word
+from labhelpers import lab, raw  # noqa: F401  (fixtures)
 
 from labkit.errors import InstrumentError
 from labkit.lab import VirtualLab

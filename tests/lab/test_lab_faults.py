@@ -9,6 +9,7 @@ import pytest
 import pyvisa
 import serial
 from labhelpers import Raw
+from labhelpers import lab, raw  # noqa: F401  (fixtures)
 
 from labkit.lab.transport import Fault
 
@@ -72,14 +73,14 @@ def test_pyvisa_sees_a_drop_mid_block_quickly(lab, raw):
     _arm_big_record(raw("scope"))
     rm = pyvisa.ResourceManager("@py")
     sc = rm.open_resource(lab.resources["scope"], read_termination="\n", write_termination="\n",
-                          timeout=2000)
+                          timeout=1000)
     try:
         sc.write(":WAV:POIN:MODE RAW;:WAV:POIN 200000;:WAV:FORM WORD;:WAV:SOUR CHAN1")
         lab.inject_fault("scope", "drop", match="DATA?")
         t0 = time.monotonic()
         with pytest.raises(Exception):
             sc.query_binary_values(":WAV:DATA?", datatype="H", is_big_endian=True, container=np.array)
-        assert time.monotonic() - t0 < 3.0
+        assert time.monotonic() - t0 < 2.0
     finally:
         sc.close()
 

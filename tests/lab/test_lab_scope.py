@@ -6,6 +6,7 @@ import time
 import numpy as np
 import pytest
 from labhelpers import drive_sine, fit_sine, read_word, settle
+from labhelpers import lab, raw  # noqa: F401  (fixtures)
 
 
 def _acquire(sc, record_s: float, points: int, channels=(1, 2)) -> None:
@@ -145,3 +146,37 @@ def test_sweep_response_contains_the_resonances(lab, raw):
     f_peak = f_inst[sel][np.argmax(env)]
     assert 3200 < f_peak < 3650
     assert abs(fit_sine(t[t < 0], drive[t < 0], 300.0)) == pytest.approx(1.0, rel=0.02)  # waiting at 300 Hz
+
+
+def test_pyvisa_binary_values_scale_back_to_the_true_response(lab, raw):
+    import pyvisa
+
+    fg = raw("funcgen")
+    lab.set_spot("hip")
+    drive_sine(fg, 438.0, 6.0)
+    settle(lab)
+    rm = pyvisa.ResourceManager("@py")
+    sc = rm.open_resource(lab.resources["scope"], read_termination="\n", write_termination="\n",
+                          timeout=20000)
+    try:
+        assert sc.query("*IDN?").startswith("KEYSIGHT TECHNOLOGIES,DSOX")
+        sc.write(":CHAN2:DISP ON;:CHAN2:SCAL 0.01;:CHAN1:SCAL 1")
+        sc.write(":TIMebase:RANGe 0.05;:TRIGger:EDGE:SOURce CHANnel1;:WAVeform:POINts:MODE RAW")
+        sc.write(":WAVeform:POINts 50000;:WAVeform:FORMat WORD;:WAVeform:BYTeorder MSBFirst")
+        assert sc.query(":DIGitize;*OPC?") == "1"
+        out = {}
+        for ch in (1, 2):
+            sc.write(f":WAVeform:SOURce CHANnel{ch}")
+            pre = [float(x) for x in sc.query(":WAVeform:PREamble?").split(",")]
+            codes = sc.query_binary_values(":WAVeform:DATA?", datatype="H", is_big_endian=True,
+                                           container=np.array)
+            assert len(codes) == int(pre[2]) == 50000
+            t = (np.arange(len(codes)) - pre[6]) * pre[4] + pre[5]
+            out[ch] = fit_sine(t, (codes - pre[9]) * pre[7] + pre[8], 438.0)
+        h = out[2] * lab.vibrometer.scale_mm_s_per_v / out[1]
+        truth = complex(lab.frf("hip", 438.0))
+        assert abs(h) == pytest.approx(abs(truth), rel=0.01)
+        assert np.angle(h / truth) == pytest.approx(0.0, abs=0.01)
+        assert sc.query(":SYSTem:ERRor?") == '+0,"No error"'
+    finally:
+        sc.close()

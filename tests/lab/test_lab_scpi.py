@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import pytest
 
+from labhelpers import lab, raw  # noqa: F401  (fixtures)
+
 from labkit.lab.scpi import ScpiInstrument, compile_pattern, definite_block, parse_number, split_commands
 
 

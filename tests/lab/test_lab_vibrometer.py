@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import serial
 from labhelpers import drive_sine
+from labhelpers import lab, raw  # noqa: F401  (fixtures)
 
 
 def _port(lab) -> serial.Serial:
@@ -55,3 +56,17 @@ def test_echo_setting_is_honoured(lab):
         port.write(b"Get,VeloDec,1,Range\n")
         assert port.readline() == b"Get,VeloDec,1,Range\n"
         assert port.readline() == b"125mm/s/V\n"
+
+
+def test_pyvisa_opens_the_asrl_resource(lab):
+    import pyvisa
+
+    rm = pyvisa.ResourceManager("@py")
+    port = rm.open_resource(lab.resources["vibrometer"], read_termination="\n", write_termination="\n",
+                            timeout=2000, baud_rate=115200)
+    try:
+        assert port.query("Get,VeloDec,1,Range") == "125mm/s/V"
+        port.write("Set,VeloDec,1,Range,1000mm/s/V")
+        assert port.query("Get,VeloDec,1,Range") == "1000mm/s/V"
+    finally:
+        port.close()

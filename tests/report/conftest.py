@@ -41,25 +41,36 @@ def write_inchip(path: Path) -> Path:
 
 
 def write_fit(path: Path) -> Path:
+    """A modal_fit file in the layout of analysis.modal_io (groups inchip and shaker)."""
     f = np.linspace(200, 3000, 120)
     rng = np.random.default_rng(1)
     with h5py.File(path, "w") as h:
         stamp(h, "modal_fit")
-        for loc in ("body", "hip", "knee"):
-            grp = h.create_group(f"locations/{loc}")
-            model = modal_frf(f)
-            put(grp, "freq_hz", f, "Hz")
-            put(grp, "frf", model * (1 + 0.05 * rng.standard_normal(f.size)), "(mm/s)/V")
-            put(grp, "model_frf", model, "(mm/s)/V")
-        m = h.create_group("modes")
-        put(m, "freq_hz", np.array(MODES_HZ), "Hz")
-        put(m, "damping_ratio", np.array(ZETA), "1")
-        put(m, "freq_std_hz", np.array([3.0, 8.0, 12.0]), "Hz")
-        s = h.create_group("stabilisation")
-        orders = np.repeat(np.arange(2, 12, 2), 3)
-        put(s, "order", orders, "1")
-        put(s, "freq_hz", np.tile(MODES_HZ, 5) * (1 + 0.01 * rng.standard_normal(15)), "Hz")
-        put(s, "stable", (orders >= 6).astype(np.int8), "1")
+        h.attrs["summary_json"] = json.dumps({"modes_hz": list(MODES_HZ)})
+        for group, units in (("inchip", "(mm/s)/V"), ("shaker", "1")):
+            g = h.create_group(f"groups/{group}")
+            g.attrs.update(method="lscf+refine", frf_kind=group, quality=0.97)
+            for loc in ("body", "hip", "knee"):
+                lg = g.create_group(f"locations/{loc}")
+                lg.attrs["name"] = loc
+                model = modal_frf(f)
+                put(lg, "freq_hz", f, "Hz")
+                put(lg, "frf", model * (1 + 0.05 * rng.standard_normal(f.size)), units)
+                put(lg, "model", model, units)
+            m = g.create_group("modes")
+            put(m, "freq_hz", np.array(MODES_HZ), "Hz")
+            put(m, "freq_hz_std", np.array([3.0, 8.0, 12.0]), "Hz")
+            put(m, "damping_ratio", np.array(ZETA), "1")
+            put(m, "damping_ratio_std", np.array([0.01, 0.01, 0.02]), "1")
+            put(m, "amplitude", np.ones((3, 3), complex), "x")
+            m.create_dataset("dominant_location", data=["hip", "knee", "knee"], dtype=h5py.string_dtype())
+            s = g.create_group("stabilisation")
+            orders = np.repeat(np.arange(2, 12, 2), 3)
+            put(s, "order", orders, "1")
+            put(s, "freq_hz", np.tile(MODES_HZ, 5) * (1 + 0.01 * rng.standard_normal(15)), "Hz")
+            put(s, "damping_ratio", np.tile(ZETA, 5), "1")
+            put(s, "status", np.clip(orders // 3 - 1, 0, 2), "label")
+            put(s, "chosen_hz", np.array(MODES_HZ), "Hz")
     return path
 
 
@@ -119,7 +130,7 @@ def write_track(path: Path, speed: float, ci: tuple[float, float], video: str | 
         h.attrs["mm_per_px"] = 0.01
         h.attrs["mm_per_px_std"] = 0.0001
         if video is not None:
-            h.attrs["video"] = video
+            h.attrs["source_video"] = video      # as analysis.track_output writes it
         if freq_hz is not None:
             h.attrs["freq_hz"] = freq_hz
     return path
@@ -169,6 +180,7 @@ def inputs(tmp_path: Path) -> dict[str, Path]:
     # tracks: four matched to the run's videos, one carrying its own frequency
     for i in range(4):
         s = SHAKER_SPEED[i]
-        files[f"track{i}"] = write_track(d / f"track{i}.h5", s, (s - 0.4, s + 0.4), video=f"videos/p{i}.mp4")
+        video = str(d / "videos/p0.mp4") if i == 0 else f"videos/p{i}.mp4"     # absolute, or beside the track
+        files[f"track{i}"] = write_track(d / f"track{i}.h5", s, (s - 0.4, s + 0.4), video=video)
     files["track4"] = write_track(d / "track4.h5", 0.0, (-0.05, 0.05), freq_hz=600.0)
     return files

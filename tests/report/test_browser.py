@@ -79,6 +79,7 @@ def test_chromium_is_installed():
     assert CHROMIUM, "Chromium not found: .ci/run installs it (apt-get install chromium)"
 
 
+@pytest.mark.slow
 def test_report_renders_in_chromium(inputs, tmp_path):
     from analysis.report import build_report
 
@@ -88,7 +89,7 @@ def test_report_renders_in_chromium(inputs, tmp_path):
                                                    str(inputs["sim_300"])], simulate_knee=False)
     assert CHROMIUM, "Chromium not found"
     v = open_in_browser(Path(s["html"]), tmp_path / "browser")
-    assert v["images"] == len(s["figures"]) == 5
+    assert v["images"] == len(s["figures"]) == 7
     assert v["decoded"] == v["images"], v["widths"]
     assert min(v["widths"]) >= 300                        # real figures, not 1-px placeholders
     assert v["sections"] == 5 and v["height"] > 2000

@@ -30,7 +30,7 @@ def test_full_report_is_self_contained_and_numbers_agree(inputs, tmp_path):
     assert not re.search(r"(src|href)\s*=\s*\"(https?:|//|file:)", html)
     assert "<script" not in html.lower() and "<link" not in html.lower()
     imgs = re.findall(r"<img [^>]*src=\"([^\"]+)\"", html)
-    assert len(imgs) == len(summary["figures"]) == 5          # frf, stab, speed, 2 knee drives
+    assert len(imgs) == len(summary["figures"]) == 7   # frf + stab for 2 fit groups, speed, 2 knee drives
     assert all(s.startswith("data:image/png;base64,") for s in imgs)
     for fig in summary["figures"]:
         assert Path(fig).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -44,6 +44,8 @@ def test_full_report_is_self_contained_and_numbers_agree(inputs, tmp_path):
     assert agreement["knee amplitude ratio (sim/meas) @ 200 Hz, 25 um"] == pytest.approx(1.1 / 1.05, rel=1e-3)
     assert abs(agreement["knee phase difference (sim - meas) @ 200 Hz, 25 um"]) < 1.0
     assert agreement["leg-pattern agreement (knee records)"] == pytest.approx(1.0)   # firm/firm, jumping/jumping
+    # the sweep says partial contact at 200 and 300 Hz; the knee records say firm and jumping
+    assert agreement["leg-pattern agreement (sweep)"] == pytest.approx(0.0)
     # every number has its provenance, naming the files
     data = json.loads((out / "agreement.json").read_text())
     for row in data["agreement"]:
@@ -80,3 +82,35 @@ def test_unreadable_input_exits_2_naming_the_file(inputs, tmp_path):
         h.attrs["kind"] = "track"
     proc = run_cli("report", "--tracks", str(t), "--out", str(tmp_path / "r"), check=2)
     assert "mean_speed_mm_s" in proc.stderr and str(t) in proc.stderr
+
+
+def test_report_with_the_real_simulator(inputs, tmp_path):
+    """Files written by labkit.sim itself (SweepResult.to_h5, SimResult.to_h5), and a knee drive
+    with no sim_result, simulated by the report through the executor."""
+    from labkit.sim import RobotParams, Shaker, simulate, sweep
+
+    p = RobotParams()
+    sw = sweep(p, Shaker(freq_hz=240.0, amp_um=25.0), values=[150.0, 250.0, 300.0], draws=2, duration_s=0.2,
+               scheduler="serial", quiet=True)
+    sweep_h5 = sw.to_h5(tmp_path / "sweep_real.h5")
+    res_h5 = simulate(p, Shaker(freq_hz=200.0, amp_um=25.0), duration_s=0.2, seed=0).to_h5(tmp_path / "r200.h5")
+    params = p.to_toml(tmp_path / "robot.toml")
+    out = tmp_path / "rep"
+    proc = run_cli("report", "--runs", str(inputs["shaker"]), "--tracks", *[str(inputs[f"track{i}"]) for i in range(4)],
+                   "--sim", str(sweep_h5), str(res_h5), "--params", str(params), "--knee-duration-s", "0.2",
+                   "--workers", "1", "--out", str(out), "--json")
+    s = last_json(proc)
+    assert s["sections"]["speed"] == "ok" and s["sections"]["knee"] == "ok" and s["sections"]["agreement"] == "ok"
+    data = json.loads((out / "agreement.json").read_text())
+    knee = data["details"]["knee"]
+    assert set(knee) >= {"200Hz_25um", "300Hz_25um"}
+    assert knee["200Hz_25um"]["provenance"]["simulated"] == str(res_h5)          # from the file
+    assert knee["300Hz_25um"]["provenance"]["simulated"].startswith(f"simulate({params}")   # simulated here
+    for k in ("200Hz_25um", "300Hz_25um"):
+        assert knee[k]["amplitude_sim_mm_s"] > 0 and knee[k]["amplitude_meas_mm_s"] > 0
+    speed = data["details"]["speed"][str(sweep_h5)]
+    # measured 150..300 Hz points against the sweep's nominal+draw mean, by hand
+    mean = np.abs(sw.speeds_mm_s).mean(axis=1)          # magnitudes: measured speed has no sign
+    sim_at = np.interp([150.0, 200.0, 250.0, 300.0], sw.values, mean)
+    from tests.report.conftest import SHAKER_SPEED
+    assert speed["rms_error_mm_s"] == pytest.approx(np.sqrt(np.mean((sim_at - SHAKER_SPEED[:4]) ** 2)))

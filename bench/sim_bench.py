@@ -1,0 +1,118 @@
+"""Speed of the bundled simulator; prints ONE JSON object.
+
+    python bench/sim_bench.py [--quick]
+
+Measures (wall clock, and CPU time of this process where it is the better
+number on a shared machine):
+
+* microseconds per step of the numba kernel and of the plain-Python
+  reference on the same scenario, and their ratio (target >= 300);
+* wall time to simulate 1 s of robot motion (kernel, warm);
+* JIT cost: the first ``simulate`` call in a fresh process with an empty
+  numba cache (cold: compiles) and in a second fresh process (warm: loads the
+  cache, ``cache=True``);
+* the wall time of a paper-style sweep, 40 shaker frequencies 150..2000 Hz x
+  10 draws x 2 s, both cores (target < 60 s); ``--quick`` runs a smaller sweep
+  and says so.
+
+The scenario is the walking robot (240 Hz, 25 um, c_ad_n = 50 nN): feet in
+the air and impacts every cycle, the expensive case. With the published
+adhesion (50 uN) the feet never leave and steps are cheaper.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+WALK = dict(c_ad_n=50e-9)
+
+_CHILD = r"""
+import time, json
+t0 = time.perf_counter()
+from labkit.sim import RobotParams, Shaker, simulate
+t1 = time.perf_counter()
+simulate(RobotParams(c_ad_n=50e-9), Shaker(240, 25), duration_s=0.002)
+t2 = time.perf_counter()
+print(json.dumps({"import_s": t1 - t0, "first_call_s": t2 - t1}))
+"""
+
+
+def _child_first_call(cache_dir: str) -> dict:
+    env = dict(os.environ)
+    if cache_dir:
+        env["NUMBA_CACHE_DIR"] = cache_dir
+    out = subprocess.run([sys.executable, "-c", _CHILD], env=env, capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="a small sweep and shorter runs (< 20 s)")
+    args = ap.parse_args()
+
+    import numpy as np
+
+    from labkit.sim import RobotParams, Shaker, simulate, sweep
+
+    params = RobotParams(**WALK)
+    sc = Shaker(freq_hz=240, amp_um=25)
+    out: dict = {"scenario": "shaker 240 Hz, 25 um, RobotParams(c_ad_n=50e-9)", "quick": args.quick}
+
+    # --- JIT: cold (empty cache) vs warm (cache filled by the cold process).
+    # --quick skips the cold compile (10-20 s) and times a warm process on the
+    # project's own cache.
+    if args.quick:
+        warm = _child_first_call(os.environ.get("NUMBA_CACHE_DIR", ""))
+        out["jit_cold_first_call_s"] = None
+        out["jit_note"] = "--quick: cold compile not measured"
+    else:
+        with tempfile.TemporaryDirectory() as cache:
+            cold = _child_first_call(cache)
+            warm = _child_first_call(cache)
+        out["jit_cold_first_call_s"] = round(cold["first_call_s"], 3)
+    out["jit_warm_first_call_s"] = round(warm["first_call_s"], 3)
+    out["import_labkit_sim_s"] = round(warm["import_s"], 3)
+
+    # --- kernel, warm
+    simulate(params, sc, duration_s=0.01)
+    dur = 0.5 if args.quick else 1.0
+    c0, w0 = time.process_time(), time.perf_counter()
+    r = simulate(params, sc, duration_s=dur)
+    c1, w1 = time.process_time(), time.perf_counter()
+    kernel_us = (c1 - c0) / r.n_steps * 1e6
+    out["dt_s"] = r.dt_s
+    out["kernel_us_per_step"] = round(kernel_us, 3)
+    out["kernel_us_per_step_wall"] = round((w1 - w0) / r.n_steps * 1e6, 3)
+    out["wall_s_per_simulated_s"] = round((w1 - w0) / dur, 4)
+    out["cpu_s_per_simulated_s"] = round((c1 - c0) / dur, 4)
+    out["speed_mm_s_check"] = round(r.mean_speed_mm_s, 4)
+
+    # --- reference on the same scenario (a short stretch: it is slow)
+    ref_dur = 0.005 if args.quick else 0.02
+    c0 = time.process_time()
+    rr = simulate(params, sc, duration_s=ref_dur, engine="reference")
+    ref_us = (time.process_time() - c0) / rr.n_steps * 1e6
+    out["reference_us_per_step"] = round(ref_us, 1)
+    out["ratio_reference_over_kernel"] = round(ref_us / kernel_us, 1)
+
+    # --- paper-style sweep with both cores
+    if args.quick:
+        freqs, draws, sdur = np.linspace(150, 2000, 6), 2, 0.5
+    else:
+        freqs, draws, sdur = np.linspace(150, 2000, 40), 10, 2.0
+    w0 = time.perf_counter()
+    s = sweep(params, sc, "freq_hz", freqs, draws=draws, duration_s=sdur, workers=2, seed=0, quiet=True)
+    out["sweep"] = {"points": len(freqs), "draws": draws, "duration_s": sdur, "workers": 2,
+                    "runs": len(freqs) * draws, "wall_s": round(time.perf_counter() - w0, 2),
+                    "full_size": not args.quick,
+                    "mean_speed_mm_s_at_150_hz": round(float(s.mean_speed_mm_s[0]), 3)}
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,76 @@
+"""``labkit lab serve`` in a real subprocess: JSON line, an instrument answers, SIGINT ends it."""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+
+import pytest
+import serial
+from labhelpers import Raw
+
+from tests.conftest import run_cli  # noqa: F401  (the shared helper; used below)
+
+
+@pytest.mark.slow
+def test_serve_prints_resources_answers_and_stops_on_sigint(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "labkit", "lab", "serve", "--json", "--seed", "5"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        resources = json.loads(line)
+        assert set(resources) == {"funcgen", "scope", "vibrometer", "control"}
+        fg = Raw(resources["funcgen"], 10)
+        assert fg.query("*IDN?").startswith("Keysight Technologies,33522B")
+        fg.write("OUTP1 ON")
+        assert fg.query("OUTP1?") == "1"
+        fg.close()
+        with serial.Serial(resources["vibrometer"][4:-7], 115200, timeout=5) as port:
+            port.write(b"Get,VeloDec,1,Range\n")
+            assert port.readline() == b"125mm/s/V\n"
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, err
+    assert "interrupted by SIGINT" in err and "Traceback" not in err
+    assert json.loads(out.strip().splitlines()[-1])["exit_code"] == 130
+
+
+@pytest.mark.slow
+def test_serve_sigterm_also_shuts_down(tmp_path):
+    from labkit.lab.client import LabControl
+    from labkit.sim import RobotParams
+
+    robot = tmp_path / "robot.toml"
+    RobotParams().with_modes(freq_hz=(450.0, 1200.0, 1800.0)).to_toml(robot, provenance={"by": "test"})
+    proc = subprocess.Popen([sys.executable, "-m", "labkit", "lab", "serve", "--robot", str(robot),
+                             "--setup", "shaker", "--spot", "hip"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        resources = json.loads(proc.stdout.readline())
+        assert resources["scope"].startswith("TCPIP0::127.0.0.1::")
+        with LabControl(resources["control"], timeout_s=10) as ctl:
+            truth = ctl.truth()       # the robot file's hip mode is the lab's
+            assert truth["tethered_modes"]["freq_hz"][0] == pytest.approx(450.0)
+            assert ctl.setup() == "shaker" and ctl.spot() == "hip"
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130 and "SIGTERM" in err
+
+
+@pytest.mark.slow
+def test_serve_bad_robot_file_exits_2(tmp_path):
+    bad = tmp_path / "robot.toml"
+    bad.write_text("mass_mg = -3\n")
+    proc = run_cli("lab", "serve", "--robot", str(bad), check=2, timeout=60)
+    assert "robot.toml" in proc.stderr and "mass_mg" in proc.stderr and "Traceback" not in proc.stderr
+    proc = run_cli("lab", "serve", "--robot", str(tmp_path / "none.toml"), check=2, timeout=60)
+    assert "none.toml" in proc.stderr

@@ -1,0 +1,106 @@
+"""The project's drivers against the virtual lab, over real loopback sockets and a pty."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from labhelpers import fit_sine, lab, settle  # noqa: F401  (lab is a fixture)
+
+from drivers.funcgen import Keysight33500B
+from drivers.scope import InfiniiVision
+from drivers.vibrometer import OFV5000
+from labkit.errors import InstrumentError
+
+
+def _measure(lab, fg, sc, freq_hz: float, amp_vpp: float, spot: str) -> complex:
+    """One stepped-sine point as the experiment runner does it: velocity / drive, (mm/s)/V."""
+    lab.set_spot(spot)
+    fg.set_sine(freq_hz, amp_vpp)
+    fg.output(True)
+    settle(lab)
+    sc.set_timebase(30 / freq_hz)
+    sc.set_trigger("CHAN1", 0.0, "POS")
+    sc.single()
+    sc.wait_done(10)
+    drive = sc.read_waveform(1, "WORD")
+    vib = sc.read_waveform(2, "WORD")
+    scale = lab.vibrometer.scale_mm_s_per_v
+    return fit_sine(vib.t_s, vib.volts * scale, freq_hz) / fit_sine(drive.t_s, drive.volts, freq_hz)
+
+
+def test_drivers_measure_the_true_frf(lab):
+    with Keysight33500B.open(lab.resources["funcgen"], max_amp_vpp=10, timeout_s=5) as fg, \
+            InfiniiVision.open(lab.resources["scope"], points=20000, timeout_s=10) as sc, \
+            OFV5000.open(lab.resources["vibrometer"], timeout_s=2) as vib:
+        assert "33522B" in fg.identity and "OFV-5000" in vib.identity
+        vib.scale_mm_s_per_v = 25.0
+        assert vib.scale_mm_s_per_v == 25.0 and lab.vibrometer.scale_mm_s_per_v == 25.0
+        sc.setup_channel(1, 0.5)
+        sc.setup_channel(2, 0.5)
+        for spot, f in (("knee", 3400.0), ("body", 830.0)):
+            h = _measure(lab, fg, sc, f, 4.0, spot)
+            truth = complex(lab.frf(spot, f))
+            assert abs(h) == pytest.approx(abs(truth), rel=0.01)
+            assert np.angle(h / truth) == pytest.approx(0.0, abs=0.01)
+        assert not vib.over_range()
+        assert lab.funcgen.drive(1).amp_v == pytest.approx(2.0)    # high-Z set before the amplitude
+        snap = fg.snapshot()
+        assert snap and "33522B" in str(snap)
+    # leaving the with-block turned every generator output off
+    assert lab.output_state("funcgen", 1) is False and lab.output_state("funcgen", 2) is False
+    rx = [text for _, inst, d, text in lab.log if inst == "funcgen" and d == "rx"]
+    assert rx.index("OUTP1:LOAD INF") < rx.index("SOUR1:VOLT 4")
+    assert "OUTP2 OFF" in rx[-4:]
+
+
+@pytest.mark.parametrize("kind", ["drop", "stall", "garbage"])
+def test_scope_fault_mid_run_raises_and_outputs_go_off(lab, kind):
+    timeout_s = 1.0
+    with pytest.raises(InstrumentError) as info:
+        with Keysight33500B.open(lab.resources["funcgen"], max_amp_vpp=10, timeout_s=2) as fg, \
+                InfiniiVision.open(lab.resources["scope"], points=100000, timeout_s=timeout_s) as sc:
+            fg.set_sine(1000.0, 2.0)
+            fg.output(True)
+            assert lab.output_state("funcgen", 1) is True
+            sc.setup_channel(1, 0.5)
+            sc.set_timebase(2e-3)
+            sc.single()
+            sc.wait_done(5)
+            lab.inject_fault("scope", kind, match="DATA?")
+            t0 = time.monotonic()
+            try:
+                sc.read_waveform(1, "WORD")
+            finally:
+                elapsed = time.monotonic() - t0
+    assert elapsed < timeout_s + 1.0
+    err = info.value
+    assert "DATA?" in (err.command or "") and err.instrument
+    assert lab.output_state("funcgen", 1) is False
+    assert lab.output_timeline[-1][1:] == ("funcgen", 1, False) or \
+        lab.output_timeline[-1][1:] == ("funcgen", 2, False)
+
+
+def test_generator_stall_raises_within_the_timeout(lab):
+    with Keysight33500B.open(lab.resources["funcgen"], max_amp_vpp=10, timeout_s=0.5) as fg:
+        lab.inject_fault("funcgen", "stall", match="ERR?")
+        t0 = time.monotonic()
+        with pytest.raises(InstrumentError) as info:
+            fg.set_sine(500.0, 1.0)              # the error-queue check after the settings stalls
+        assert time.monotonic() - t0 < 1.5
+        assert "no reply" in str(info.value)
+    assert lab.output_state("funcgen", 1) is False
+
+
+def test_vibrometer_faults_on_the_pty(lab):
+    with OFV5000.open(lab.resources["vibrometer"], timeout_s=0.5) as vib:
+        assert vib.scale_mm_s_per_v == 125.0
+        lab.inject_fault("vibrometer", "garbage")
+        with pytest.raises(InstrumentError):
+            vib.scale_mm_s_per_v
+        lab.inject_fault("vibrometer", "stall")
+        t0 = time.monotonic()
+        with pytest.raises(InstrumentError, match="Range"):
+            vib.scale_mm_s_per_v
+        assert time.monotonic() - t0 < 1.5
+        assert vib.scale_mm_s_per_v == 125.0      # one reply lost; the next is fine

@@ -1,0 +1,154 @@
+"""simulate() end to end: impacts, symmetry, convergence, kernel vs reference, outputs."""
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from labkit.errors import InputError
+from labkit.sim import ABLATIONS, PZT, RobotParams, Shaker, SimResult, simulate
+from labkit.sim import model as M
+
+# The published adhesion (50 uN, ~15 body weights) holds the feet for good at 25 um;
+# with 50 nN the robot walks at 240 Hz (see the report), which exercises every mode.
+WALK = RobotParams(c_ad_n=50e-9)
+
+
+@pytest.fixture(scope="module")
+def walking():
+    return simulate(WALK, Shaker(freq_hz=240, amp_um=25), duration_s=0.3)
+
+
+def test_walking_run_shape_and_summary(walking):
+    r = walking
+    n = len(r.t_s)
+    assert isinstance(r, SimResult) and n == pytest.approx(0.3 / r.record_dt_s + 1, abs=1)
+    assert r.body_angles_rad.shape == (n, 3)
+    for a in (r.foot_z_um, r.foot_y_um, r.contact, r.knee_vz_mm_s):
+        assert a.shape == (n, 6)
+    assert r.contact.dtype == np.int8 and set(np.unique(r.contact)) <= {0, 1, 2}
+    assert r.mean_speed_mm_s > 1.0                 # it walks, forward (+y)
+    assert r.impacts.min() > 0
+    for foot, fr in r.contact_fraction.items():
+        assert set(fr) == {"air", "adhesion", "rest"} and sum(fr.values()) == pytest.approx(1.0)
+    assert set(r.patterns) <= {"firm_contact", "partial_contact", "jumping"}
+    s = json.loads(json.dumps(r.summary()))
+    assert s["mean_speed_mm_s"] == r.mean_speed_mm_s and s["scenario"]["freq_hz"] == 240.0
+    # the knee's velocity is what a vibrometer would integrate to the knee's motion
+    assert np.abs(r.knee_vz_mm_s).max() > 10
+
+
+def test_restitution_and_zero_lateral_slip_at_every_impact(walking):
+    ev = walking.events
+    feet = ev[ev[:, M.EV_LEG] >= 0]
+    assert len(feet) == walking.impacts.sum() > 20
+    vpre, vpost, vy = feet[:, M.EV_VPRE], feet[:, M.EV_VPOST], feet[:, M.EV_VYPOST]
+    assert np.all(vpre < 0)                          # every impact meets the ground moving into it
+    np.testing.assert_allclose(vpost, -WALK.c_r * vpre, rtol=1e-9, atol=1e-15)
+    assert np.abs(vy).max() < 1e-12                  # no lateral slip, m/s
+    # and with another restitution
+    r = simulate(WALK.replace(c_r=0.8, c_ad_n=0.0), Shaker(240, 25), duration_s=0.05)
+    f = r.events[r.events[:, M.EV_LEG] >= 0]
+    np.testing.assert_allclose(f[:, M.EV_VPOST], -0.8 * f[:, M.EV_VPRE], rtol=1e-9, atol=1e-15)
+
+
+def test_no_foot_below_the_ground_in_air(walking):
+    r = walking
+    gap = r.foot_z_um - r.ground_z_um[:, None]
+    assert gap[r.contact == M.AIR].min() > -1e-6      # um: no missed impact
+    pinned = r.contact != M.AIR
+    assert np.abs(gap[pinned]).max() < 1e-6           # pinned feet sit exactly on the ground
+
+
+def test_mirror_symmetry_of_the_walk(walking):
+    flipped = simulate(WALK.replace(cy_sign=(-1, -1, -1)), Shaker(240, 25), duration_s=0.3)
+    assert flipped.mean_speed_mm_s == pytest.approx(-walking.mean_speed_mm_s, rel=1e-6)
+    np.testing.assert_allclose(flipped.body_y_um, -walking.body_y_um, atol=1e-6)
+    np.testing.assert_allclose(flipped.body_z_um, walking.body_z_um, atol=1e-6)
+    none = simulate(WALK.replace(cy_sign=(0, 0, 0)), Shaker(240, 25), duration_s=0.3)
+    assert none.mean_speed_mm_s == 0.0 and np.all(none.body_y_um == 0.0)
+    assert none.impacts.sum() > 0                    # it still hops
+
+
+def test_convergence_as_dt_shrinks():
+    sc = Shaker(240, 25)
+    f_top = max(WALK.modal_freq_hz)
+    runs = [simulate(WALK, sc, duration_s=0.03, dt_s=1 / (n * f_top), record_dt_s=1 / (25 * f_top))
+            for n in (25, 50, 100, 800)]
+    fine = runs[-1]
+    err_y = [np.abs(r.body_y_um - fine.body_y_um).max() for r in runs[:-1]]
+    err_z = [np.abs(r.body_z_um - fine.body_z_um).max() for r in runs[:-1]]
+    assert err_y[0] > err_y[1] > err_y[2] and err_z[0] > err_z[1] > err_z[2]
+    assert err_y[0] < 5.0 and err_z[0] < 2.0         # um, at the default step
+    assert runs[0].mean_speed_mm_s == pytest.approx(fine.mean_speed_mm_s, rel=0.05)
+
+
+@pytest.mark.parametrize("scenario, duration", [(Shaker(240, 25), 0.02), (PZT(1800, 20.0, mass_mg=1.0), 0.006)])
+def test_kernel_agrees_with_reference(scenario, duration):
+    a = simulate(WALK, scenario, duration_s=duration, engine="numba")
+    b = simulate(WALK, scenario, duration_s=duration, engine="reference")
+    assert b.engine == "reference"
+    assert np.abs(a.body_y_um - b.body_y_um).max() < 1e-4
+    assert np.abs(a.body_z_um - b.body_z_um).max() < 1e-4
+    assert np.abs(a.foot_z_um - b.foot_z_um).max() < 1e-4
+    assert np.abs(a.knee_vz_mm_s - b.knee_vz_mm_s).max() < 1e-3
+    assert a.impacts.sum() == b.impacts.sum()
+    assert np.array_equal(a.contact, b.contact) or np.mean(a.contact != b.contact) < 0.01
+
+
+def test_pzt_drive_and_payload():
+    r = simulate(WALK, PZT(freq_hz=1800, voltage_v=20), duration_s=0.1)
+    assert r.impacts.sum() > 0 and np.isfinite(r.mean_speed_mm_s)
+    heavy = simulate(WALK, PZT(freq_hz=1800, voltage_v=20, mass_mg=3.0), duration_s=0.05)
+    assert not np.allclose(heavy.body_z_um, r.body_z_um[:len(heavy.t_s)])
+    with pytest.raises(InputError, match="mass_mg"):
+        simulate(WALK, PZT(1800, 20, mass_mg=0.04), duration_s=0.01)
+
+
+def test_ablations(walking):
+    assert set(ABLATIONS) == {"none", "no_adhesion", "no_squeeze_film"}
+    r = simulate(WALK, Shaker(240, 25), duration_s=0.05, ablation="no_squeeze_film")
+    assert r.params.b_g_foot_n_m2_s == 0.0 and r.params.b_g_body_n_m2_s == 0.0 and r.ablation == "no_squeeze_film"
+    # without the film the legs swing further (paper Fig. 12, left)
+    n = len(r.t_s)
+    assert np.abs(r.knee_vz_mm_s).max() > np.abs(walking.knee_vz_mm_s[:n]).max()
+    q = simulate(RobotParams(), Shaker(240, 25), duration_s=0.02, ablation="no-adhesion")
+    assert q.params.c_ad_n == 0.0 and q.params.c_ad_t_n_s == 0.0
+    with pytest.raises(InputError, match="ablation"):
+        simulate(WALK, Shaker(240, 25), duration_s=0.01, ablation="no_gravity")
+
+
+def test_bad_arguments():
+    with pytest.raises(InputError, match="engine"):
+        simulate(WALK, Shaker(240, 25), duration_s=0.01, engine="fortran")
+    with pytest.raises(InputError, match="duration_s"):
+        simulate(WALK, Shaker(240, 25), duration_s=-1)
+    with pytest.raises(InputError, match="dt_s"):
+        simulate(WALK, Shaker(240, 25), duration_s=0.01, dt_s=0.0)
+    with pytest.raises(InputError, match="scenario"):
+        simulate(WALK, {"freq_hz": 240}, duration_s=0.01)
+
+
+def test_seed_is_reproducible():
+    a = simulate(WALK, Shaker(300, 25), duration_s=0.02, seed=3)
+    b = simulate(WALK, Shaker(300, 25), duration_s=0.02, seed=3)
+    c = simulate(WALK, Shaker(300, 25), duration_s=0.02, seed=4)
+    assert np.array_equal(a.foot_z_um, b.foot_z_um)
+    assert not np.array_equal(a.foot_z_um, c.foot_z_um)
+
+
+def test_to_h5(walking, tmp_path):
+    path = walking.to_h5(tmp_path / "run.h5")
+    with h5py.File(path, "r") as f:
+        assert f.attrs["kind"] == "sim_result" and int(f.attrs["schema_version"]) >= 1
+        for name, ds in f.items():
+            assert "units" in ds.attrs, name
+        assert f["foot_z_um"].attrs["units"] == "um" and f["knee_vz_mm_s"].attrs["units"] == "mm/s"
+        assert f["t_s"].shape == walking.t_s.shape
+        toml_text = f.attrs["params_toml"]
+        summary = json.loads(f.attrs["summary_json"])
+    (tmp_path / "p.toml").write_text(toml_text)
+    assert RobotParams.from_toml(tmp_path / "p.toml") == WALK
+    assert summary["patterns"] == walking.patterns
