@@ -29,7 +29,8 @@ def plot_frf_fit(fit: Any, path: str | Path, *, title: str = "", units: str = ""
     axes = fig.subplots(2, n, sharex="col", squeeze=False)
     for k, loc in enumerate(fit.locations):
         f, H = fit.freq_hz[k], fit.frf[k]
-        fm = np.linspace(f.min(), f.max(), max(2000, 4 * f.size))
+        logx = f.max() / f.min() > 5
+        fm = (np.geomspace if logx else np.linspace)(f.min(), f.max(), max(2000, 4 * f.size))
         Hm = fit.model(fm, k)
         am, ap = axes[0, k], axes[1, k]
         am.semilogy(f, np.abs(H), ".", ms=2.5, color="0.45", label="measured")
@@ -47,11 +48,11 @@ def plot_frf_fit(fit: Any, path: str | Path, *, title: str = "", units: str = ""
         ap.set_ylabel("phase (deg)", fontsize=8)
         ap.set_xlabel("frequency (Hz)", fontsize=8)
         ap.set_ylim(-190, 190)
-        if f.max() / f.min() > 5:
+        if logx:
             ap.set_xscale("log")
         ap.set_yticks([-180, -90, 0, 90, 180])
         for ax in (am, ap):
-            ax.tick_params(labelsize=7)
+            ax.tick_params(which="both", labelsize=7)
             ax.grid(True, lw=0.3, alpha=0.5)
         if k == 0:
             am.legend(fontsize=7, loc="lower left")

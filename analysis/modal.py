@@ -11,8 +11,11 @@ Methods
     stable), residues by linear least squares, then every pole, residue and
     residual term refined together by nonlinear least squares on the
     pole-residue model (:mod:`analysis.modal_refine`); standard uncertainties
-    from the covariance at the optimum, scaled by the residual variance.
-    Resolves overlapping modes.
+    from the covariance at the optimum (robust sandwich form by default, or
+    scaled by the residual variance).  Poles narrower than the line spacing or
+    with residues below 3 standard uncertainties everywhere are dropped (with
+    a warning) and the rest refitted; with several locations each is then
+    weighted by its own noise level and refitted.  Resolves overlapping modes.
 ``"peak"``
     Peak picking on the locations' combined mobility magnitude, half-power
     bandwidth for damping (:mod:`analysis.modal_sdof`).
@@ -188,7 +191,7 @@ def _channels(freq_hz: Any, frf: Any, locations: Sequence[str] | None, weights: 
 def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple[float, float] | None = None,
               method: str = "lscf", *, locations: Sequence[str] | None = None, weights: Any = None,
               kind: str = "mobility", residual_powers: Sequence[int] | None = None,
-              covariance: str = "residual", n_max: int | None = None, n_boot: int = 100,
+              covariance: str = "sandwich", n_max: int | None = None, n_boot: int = 100,
               seed: int = 0) -> ModalFit:
     """Fit modes (common poles) to one or several FRFs.
 
@@ -218,8 +221,9 @@ def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple
     residual_powers:
         Powers ``q`` of ``(j w)^q`` terms for out-of-band modes (default by kind).
     covariance:
-        ``"residual"`` (``s^2 (J^T J)^-1``) or ``"sandwich"`` (robust to noise
-        that varies from line to line).
+        ``"sandwich"`` (default; HC3, honest when the noise level varies from
+        line to line, as it does along a sweep) or ``"residual"``
+        (``s^2 (J^T J)^-1``, for white noise of one level).
     n_max:
         Highest LSCF order in the stabilisation diagram.
     n_boot, seed:
@@ -280,7 +284,7 @@ def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple
         fz_cov = np.array([ref.cov[2 * i, 2 * i + 1] for i in range(m)])
         fit = _assemble(chans, ref.freq_hz, ref.damping_ratio, f_std, z_std, lin, lin_var, order,
                         method, kind, band, powers, stab, ref.cov, ref.success, warnings, fz_cov)
-        _drop_outside(fit)
+        _warn_outside(fit)
         return fit
     return _fit_sdof(chans, n_modes, band, method, kind, powers, n_boot, seed, warnings)
 
@@ -365,7 +369,7 @@ def _assemble(chans, f, z, f_std, z_std, lin, lin_var, order, method, kind, band
     return fit
 
 
-def _drop_outside(fit: ModalFit) -> None:
+def _warn_outside(fit: ModalFit) -> None:
     """Warn about modes the refinement pushed out of the band (they model out-of-band behaviour)."""
     lo, hi = fit.band_hz
     for md in fit.modes:

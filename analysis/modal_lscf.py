@@ -75,8 +75,9 @@ def _blocks(channels: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], n_max
     out = []
     powers = np.arange(n_max + 1)
     for w, H, wt in channels:
-        X = np.exp(1j * np.outer(w * dt, powers)) * wt[:, None]        # (N, n+1)
-        Y = -(H * wt)[:, None] * np.exp(1j * np.outer(w * dt, powers))
+        E = np.exp(1j * np.outer(w * dt, powers))                     # (N, n+1): z_k^i
+        X = E * wt[:, None]
+        Y = E * -(H * wt)[:, None]
         R = (X.conj().T @ X).real
         S = (X.conj().T @ Y).real
         T = (Y.conj().T @ Y).real

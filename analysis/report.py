@@ -107,6 +107,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     return {"html": str(html_path), "figures": figures, "agreement_json": str(out / "agreement.json"),
             "sections": {s["id"]: s["status"] for s in sections},
             "missing": {s["id"]: s["message"] for s in sections if s["status"] != "ok"},
+            "notes": {s["id"]: s["message"] for s in sections if s["status"] == "ok" and s.get("message")},
             "speed_rms_error_mm_s": headline["value"] if headline else None,
             "agreement": [{k: r[k] for k in ("quantity", "value", "units")} for r in agreement]}
 
@@ -176,6 +177,7 @@ def _sim_curves(sweeps: list[dict], band_k: float) -> list[dict[str, Any]]:
         # measured speed is unsigned (the paper compares speed, not velocity: the robot turns),
         # the simulator's is signed along +y: compare magnitudes, draw by draw
         mean, lo, hi = compare.band_from_draws(np.abs(sw.speeds_mm_s), k=band_k)
+        lo = np.maximum(lo, 0.0)                    # a speed magnitude's band stops at zero
         order = np.argsort(sw.values)
         curves.append({"file": s["file"], "label": Path(s["file"]).name, "freq_hz": sw.values[order],
                        "mean_mm_s": mean[order], "lo_mm_s": lo[order], "hi_mm_s": hi[order], "sweep": sw})
@@ -199,6 +201,9 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
         msgs.append("No measured speeds given: simulation only.")
     if measured is not None and measured["unmatched"]:
         msgs.append(f"Tracks with no known shaker frequency or no speed (left out): {', '.join(measured['unmatched'])}.")
+    other = [f"{s['file']} (over {s['sweep'].quantity})" for s in sweeps if s["sweep"].quantity != "freq_hz"]
+    if other:
+        msgs.append(f"Sweeps not over freq_hz are not drawn here: {', '.join(other)}.")
     if not curves:
         msgs.append("No simulated frequency sweep (--sim SWEEP.h5): no model curve.")
     rows, numbers = [], {}
@@ -213,7 +218,7 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
                 msgs.append(f"No measured point at the tray amplitude of {c['file']} ({amp:.3g} um).")
                 continue
             p = {"measured": sorted(set(m["sources"])), "simulated": c["file"],
-                 "draws": c["sweep"].draws, "band": f"mean +- {band_k:g} std (ddof=1) over draws",
+                 "draws": c["sweep"].draws, "band": f"mean +- {band_k:g} std (ddof=1) over draws, floored at 0",
                  "simulated_speed": "|mean forward velocity| of each draw",
                  "sim_duration_s": c["sweep"].meta.get("duration_s"), "sim_seed": c["sweep"].meta.get("seed"),
                  "scenario": c["sweep"].scenario, "measured_amp_um_within": "10 % of the sweep's amp_um"}
@@ -341,17 +346,22 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
             knee = np.asarray(sim["knee_vz_mm_s"])
             knee = knee[:, leg] if knee.ndim == 2 else knee
             pats = sim.get("patterns") or []
+            # the settled second half of the run is what gets compared with the measured record
+            settle = t >= t[0] + 0.5 * (t[-1] - t[0])
+            # label the simulated knee record with the same classifier as the measured one: the
+            # same observable on both sides (the simulator's own per-foot label is shown beside it)
+            knee_label = compare.classify_knee_pattern(t[settle], knee[settle], tray_v[settle], freq)["pattern"]
             case["simulated"] = {"t_s": t, "knee_vz_mm_s": knee, "tray_vz_mm_s": tray_v, "contact": sim["contact"],
-                                 "pattern": (pats[leg] if len(pats) > leg else "?"),
-                                 "patterns": pats, "source": sim["source"]}
+                                 "pattern": f"{knee_label} (foot contact: "
+                                            f"{pats[leg] if len(pats) > leg else '?'})",
+                                 "knee_pattern": knee_label, "foot_pattern": pats[leg] if len(pats) > leg else "?",
+                                 "source": sim["source"]}
         png = figs.knee_figure(case, out / f"fig_knee_{i + 1}.png")
         sec["figures"].append((png, f"drive {freq:.4g} Hz, {amp:.3g} um: measured "
                                     f"{meas['file'] if meas else '(none)'}; simulated "
                                     f"{sim['source'] if sim else '(none)'}, leg {leg + 1}"))
         if meas is not None and sim is not None:
             s = case["simulated"]
-            # compare the settled end of the simulation with the measured record
-            settle = t >= t[0] + 0.5 * (t[-1] - t[0])
             p = {"measured": meas["file"], "measured_point": meas["point"], "simulated": s["source"], "leg": leg + 1}
             a = compare.knee_motion_agreement(meas["t_s"], meas["knee_vz_mm_s"], t[settle], s["knee_vz_mm_s"][settle],
                                               freq, ref_meas=meas.get("tray_vz_mm_s"), ref_sim=tray_v[settle],
@@ -363,10 +373,10 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
                 rows.append({"quantity": f"{q} @ {freq:.4g} Hz, {amp:.3g} um", "value": a[k], "units": u, "n": 1,
                              "provenance": p})
             table_rows.append([freq, amp, a["amplitude_meas_mm_s"], a["amplitude_sim_mm_s"], a["phase_diff_deg"],
-                               a["correlation"], meas.get("pattern", "?"), s["pattern"]])
-            if meas.get("pattern") in compare.PATTERNS and s["patterns"]:
+                               a["correlation"], meas.get("pattern", "?"), s["knee_pattern"], s["foot_pattern"]])
+            if meas.get("pattern") in compare.PATTERNS:
                 pat_meas.append(meas["pattern"])
-                pat_sim.append(compare.dominant_pattern(s["patterns"]))
+                pat_sim.append(s["knee_pattern"])
                 pat_keys.append(f"{freq:.4g} Hz, {amp:.3g} um")
                 pat_files.append(meas["file"])
         elif meas is None:
@@ -377,14 +387,16 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
         a = compare.pattern_agreement(pat_meas, pat_sim, keys=pat_keys,
                                       provenance={"measured": sorted(set(pat_files)),
                                                   "measured_label": "classify_knee_pattern on the knee record",
-                                                  "simulated_label": "dominant over the six feet",
+                                                  "simulated_label": f"classify_knee_pattern on leg {leg + 1}'s "
+                                                                     "simulated knee record (settled half)",
                                                   "params": param_src})
         numbers["patterns"] = a
         rows.append({"quantity": "leg-pattern agreement (knee records)", "value": a["fraction_agree"], "units": "1",
                      "n": a["n"], "provenance": a["provenance"]})
     if table_rows:
         sec["html"].append(rh.table(["freq_hz", "tray_amp_um", "measured amp (mm/s)", "simulated amp (mm/s)",
-                                     "phase diff (deg)", "correlation", "measured pattern", "simulated pattern"],
+                                     "phase diff (deg)", "correlation", "measured pattern (knee)",
+                                     "simulated pattern (knee)", f"simulated foot contact (leg {leg + 1})"],
                                     table_rows, num_cols={0, 1, 2, 3, 4, 5}))
     if param_src:
         sec["html"].append(f'<p class="prov">simulated with {rh._e(param_src)}</p>')

@@ -63,9 +63,19 @@ def table(headers: list[str], rows: list[list[Any]], num_cols: set[int] | None =
 
 
 def prov(p: Any) -> tuple[str, str]:
-    """Provenance rendered as a compact monospace cell."""
-    text = p if isinstance(p, str) else json.dumps(p, sort_keys=True, default=str)
-    return ("html", f'<span class="prov">{_e(text)}</span>')
+    """Provenance rendered as a compact monospace cell: one ``key: value`` line per entry."""
+    if not isinstance(p, dict):
+        return ("html", f'<span class="prov">{_e(p)}</span>')
+    lines = []
+    for key, value in p.items():
+        if isinstance(value, (list, tuple)):
+            text = "; ".join(str(v) for v in value)
+        elif isinstance(value, dict):
+            text = json.dumps(value, sort_keys=True, default=str)
+        else:
+            text = fmt(value)
+        lines.append(f"<b>{_e(key)}</b>: {_e(text)}")
+    return ("html", '<span class="prov">' + "<br>".join(lines) + "</span>")
 
 
 def render(title: str, sections: list[dict[str, Any]], meta: dict[str, Any]) -> str:

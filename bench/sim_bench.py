@@ -105,12 +105,25 @@ def main() -> None:
         freqs, draws, sdur = np.linspace(150, 2000, 6), 2, 0.5
     else:
         freqs, draws, sdur = np.linspace(150, 2000, 40), 10, 2.0
+    load_before = os.getloadavg()[0]
     w0 = time.perf_counter()
     s = sweep(params, sc, "freq_hz", freqs, draws=draws, duration_s=sdur, workers=2, seed=0, quiet=True)
-    out["sweep"] = {"points": len(freqs), "draws": draws, "duration_s": sdur, "workers": 2,
-                    "runs": len(freqs) * draws, "wall_s": round(time.perf_counter() - w0, 2),
-                    "full_size": not args.quick,
-                    "mean_speed_mm_s_at_150_hz": round(float(s.mean_speed_mm_s[0]), 3)}
+    sweep_wall = time.perf_counter() - w0
+    # CPU the sweep needs, from nominal runs at a few of its frequencies in this
+    # process: on a shared machine the wall time above also measures the others.
+    probe = freqs[:: max(1, len(freqs) // 8)]
+    c0 = time.process_time()
+    for f in probe:
+        simulate(params, Shaker(float(f), sc.amp_um), duration_s=sdur)
+    cpu_per_run = (time.process_time() - c0) / len(probe)
+    runs = len(freqs) * draws
+    out["sweep"] = {"points": len(freqs), "freq_hz": [float(freqs[0]), float(freqs[-1])], "draws": draws,
+                    "duration_s": sdur, "workers": 2, "runs": runs, "wall_s": round(sweep_wall, 2),
+                    "full_size": not args.quick, "loadavg_1min_before": round(load_before, 2),
+                    "cpu_s_per_run_estimate": round(cpu_per_run, 4),
+                    "cpu_s_total_estimate": round(cpu_per_run * runs, 1),
+                    "wall_s_on_2_idle_cores_estimate": round(cpu_per_run * runs / 2, 1),
+                    "mean_speed_mm_s_at_first_point": round(float(s.mean_speed_mm_s[0]), 3)}
     print(json.dumps(out))
 
 

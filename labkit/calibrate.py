@@ -298,7 +298,7 @@ def calibrate(params: Any, names: Sequence[str], obs: Observations, *, duration_
     sol = least_squares(fun, x_start, jac=jac, bounds=(lo_a, hi_a), method="trf", x_scale=1.0,
                         max_nfev=max_iterations + 1, diff_step=None)
     after_rows = run_many([np.asarray(sol.x, float)])[0]
-    J = jac(np.asarray(sol.x, float))
+    J = np.asarray(sol.jac, float)          # the Jacobian at the solution (linear loss: unmodified)
     m_res = sol.fun.size
     dof = max(1, m_res - x0.size)
     chi2_red = float(np.sum(sol.fun ** 2) / dof)

@@ -38,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--method", choices=METHODS, default="lscf",
                         help="lscf (multi-mode, default), peak (half power) or circle")
     parser.add_argument("--covariance", choices=("sandwich", "residual"), default="sandwich",
-                        help="uncertainty: sandwich (robust to line-to-line noise changes, default) or "
-                             "residual (s^2 (J^T J)^-1)")
+                        help="uncertainty of the lscf fit: sandwich (robust to line-to-line noise changes, "
+                             "default) or residual (s^2 (J^T J)^-1); peak and circle use a bootstrap")
     parser.add_argument("--base", metavar="robot.toml", help="parameter file for everything not fitted "
                         "(default: the paper's values)")
     parser.add_argument("--min-quality", type=float, default=0.0, metavar="Q",
@@ -61,8 +61,6 @@ def _band(text: str | None) -> tuple[float, float] | None:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    import numpy as np
-
     from analysis import modal_assign as ma
     from analysis.modal import fit_modes
     from analysis.modal_io import read_run, runs_json, write_fit_h5
@@ -163,8 +161,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "nrmse": {g: f.nrmse for g, f in fits.items()},
         "fitted_modes": [{k: v for k, v in it.items() if v is not None} for it in listing],
         "modes": modes_prov,
-        "uncertainty": "standard uncertainties (1 sigma) from the refinement's covariance "
-                       f"({args.covariance}); k and b propagated with the f-zeta covariance",
+        "uncertainty": ("standard uncertainties (1 sigma) from the nonlinear refinement's covariance "
+                        f"({args.covariance})" if args.method == "lscf" else
+                        "standard uncertainties (1 sigma) from a wild bootstrap of the single-mode estimator "
+                        "(noise only, not the bias from neighbouring modes)")
+        + "; k and b propagated with the f-zeta covariance",
     }
     params.to_toml(out, provenance=provenance)
 

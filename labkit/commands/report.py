@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if not args.json:
         print(f"report: {summary['html']}")
         for name, status in summary["sections"].items():
-            note = summary["missing"].get(name, "")
+            note = summary["missing"].get(name, "") or summary["notes"].get(name, "")
             print(f"  {name:14s} {status:8s} {note}")
         for row in summary["agreement"]:
             v = row["value"]

@@ -65,30 +65,7 @@ def _open(spec: InstrumentSpec, **extra: Any) -> Any:
     except InputError as exc:
         raise type(exc)(exc.message, file=exc.file, key=f"instruments.{spec.role}." + (exc.key or "model"),
                         expected=exc.expected) if not isinstance(exc, LimitError) else exc
-    _no_delay(inst)
     return inst
-
-
-def _no_delay(inst: Any) -> None:
-    """Turn Nagle's algorithm off on a raw-socket VISA link.
-
-    A command followed at once by ``SYST:ERR?`` is two small writes; with
-    Nagle on, the second waits for the instrument's delayed ACK (~40 ms on
-    Linux) and every setting costs that much. (VISA's own default for
-    ``VI_ATTR_TCPIP_NODELAY`` is true; pyvisa-py leaves the socket alone.)
-    """
-    res = getattr(getattr(inst, "transport", None), "_res", None)
-    if res is None or not str(getattr(inst, "resource", "")).upper().endswith("::SOCKET"):
-        return
-    try:
-        import socket
-
-        # pyvisa-py 0.8 maps VI_ATTR_TCPIP_NODELAY to no setter (UnknownAttribute): set the
-        # option on the session's socket itself.
-        sock = res.visalib.sessions[res.session].interface
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-    except Exception:  # another backend: slower, still correct
-        pass
 
 
 class Rig:

@@ -17,6 +17,14 @@ Guarantees
 * The drive is turned off before the laser spot is moved to another in-chip
   location (the person may touch the setup); within a shaker point the tray and
   robot measurements are taken with the drive on (the robot keeps its state).
+* A lower amplitude is programmed before a new frequency, never after, so no
+  intermediate generator state drives the shaker harder than either point.
+* Reaching a tray displacement: start small (``tray_control.start_vpp``, or
+  the response per volt measured at the previous amplitude of the same
+  frequency), then scale the drive by request/measured, at most
+  ``max_step_ratio`` per step, until within ``tolerance``; every measured
+  amplitude is checked against ``interlock.tray_max_um`` and the envelope,
+  and every drive against the amplifier's input cap, before it is sent.
 """
 from __future__ import annotations
 
@@ -109,7 +117,7 @@ class Runner:
                     n_done += 1
                     bar.set_postfix_str(f"point {n_done}/{plan.points_total}", refresh=False)
                     bar.update(step.est_s)
-                    self.timing[-1]["total_s"] = time.monotonic() - t0 if self.timing else 0.0
+                    self.timing[-1]["total_s"] = time.monotonic() - t0
             status = "complete"
             return status
         except InterlockEnd as exc:
@@ -201,7 +209,15 @@ class Runner:
     def _set_sine(self, freq_hz: float, amp_vpp: float, offset_v: float) -> None:
         """Program the generator, sending only what changed (fewer round trips per point)."""
         fg = self.rig.funcgen = self.guard.funcgen
-        if self.sine_set != (amp_vpp, offset_v):
+        if self.sine_set is not None and self.sine_set[1] == offset_v and amp_vpp < self.sine_set[0]:
+            # Lower the amplitude BEFORE moving the frequency: the old, larger drive must never
+            # meet a frequency where it would move the shaker further (x ~ V / f^2).
+            fg.set_amplitude(amp_vpp)
+            if self.freq_set != freq_hz:
+                fg.set_frequency(freq_hz)
+            self.sine_set = (amp_vpp, offset_v)
+            self.rig.on_drive_amplitude(amp_vpp, offset_v)
+        elif self.sine_set != (amp_vpp, offset_v):
             fg.set_sine(freq_hz, amp_vpp, offset_v)
             self.sine_set = (amp_vpp, offset_v)
             self.rig.on_drive_amplitude(amp_vpp, offset_v)

@@ -1,6 +1,7 @@
 """labkit.sim — the bundled hybrid simulator of the Qu-Choi-Oldham 2017 hexapod model.
 
-Public API (``docs/model.md`` is the specification)::
+Public API (``docs/model.md`` is the specification; every "choice" there is a
+:class:`RobotParams` field, see :data:`labkit.sim.params.FIELD_DOCS`)::
 
     from labkit.sim import RobotParams, Shaker, PZT, simulate, SimResult, sweep, SweepResult
     r = simulate(RobotParams(), Shaker(freq_hz=240, amp_um=25), duration_s=2.0)
@@ -24,7 +25,13 @@ Switches for ablations and checks (all plain RobotParams fields or
   ``params.replace(...)`` with those fields at 0);
 * ``cy_sign=(s1, s2, s3)``: the sign of each mode's lateral coupling (flip
   to reverse the walk; 0 removes lateral coupling);
-* ``mu``: Coulomb friction of a pinned foot (``inf``, the default, = no slip);
+* ``mu``: Coulomb friction of a pinned foot (``inf``, the default, = no slip as in
+  the paper; the normal load is the compression plus the adhesion force);
+* ``body_no_slip`` (default true): a body-ground impact also stops the body's
+  lateral velocity, as a foot impact does;
+* ``base_participation``: how the attachment's acceleration drives the modes
+  (0, the default: the same participation as gravity, so a falling robot does
+  not deform; 1: model.md's literal ``M_i (Cz a_z + Cy a_y)``);
 * ``simulate(..., engine="numba" | "reference")``, ``dt_s``, ``record_dt_s``,
   ``seed`` (small random start of the free modes), ``transient_s``.
 """

@@ -1,4 +1,24 @@
-"""simulate(): run one scenario with the compiled kernel or the Python reference."""
+"""simulate(): run one scenario with the compiled kernel or the Python reference.
+
+Numerics (both engines run the same scheme, :mod:`labkit.sim.reference`):
+
+* fixed step, default ``1 / (STEPS_PER_PERIOD * max(highest mode, drive))``
+  (2.2e-5 s for the paper's robot); every mode is advanced by the exact
+  transition of its damped oscillator, so the step is set by accuracy, not
+  stability;
+* the squeeze film (rates up to ~1e8 1/s near the ground) is implicit and
+  sub-cycled when stiff, the body's film implicit;
+* impacts are located inside the step (linear interpolation of the gap),
+  applied, and the rest of the step integrated; releases are checked at the
+  start of each step;
+* convergence (tests/sim/test_engine.py): on the 240 Hz / 25 um walk the
+  mean speed at the default step is within ~1-5 % of the dt -> 0 value
+  (0.6 % at 240 Hz, ~4 % at 300 Hz, ~1 % at 150 Hz); pass ``dt_s`` for more.
+* the start: the robot rests on its six feet in static equilibrium and rides
+  the tray (its vertical velocity is the ground's at t = 0), so a shaker run
+  does not begin with a jolt; on still ground that state is an exact fixed
+  point (no drift, not even from rounding: :mod:`labkit.sim.model`).
+"""
 from __future__ import annotations
 
 import math

@@ -59,7 +59,8 @@ W_PSUB = 51     # 3 x 4 propagator of a squeeze sub-step of a full step
 W_PPS = 63      # 3 x 4 propagator of a squeeze sub-step of a partial step
 W_GZ = 75       # ground height at the squeeze sub-steps (up to 32)
 W_GV = 107      # ground velocity at the squeeze sub-steps
-W_SIZE = 139
+W_SLIP = 139    # 6 lateral friction force on a slipping pinned foot (NaN: it sticks)
+W_SIZE = 145
 
 
 @njit(cache=True)
@@ -153,6 +154,29 @@ def _pin_pair(P, S, j, zg, vg):
     vl, vv = _solve_pair(P, vg - vz - gz, -vy - gy)
     S[SV + 3 * j + il] = vl
     S[SV + 3 * j + iv] = vv
+
+
+@njit(cache=True)
+def _slip(P, S, W, j, zg, vg):
+    """A slipping pinned foot: held vertically on the ground, free laterally (friction in W_SLIP)."""
+    il = int(P[IL])
+    iv = int(P[IV])
+    az, ay, vz, vy = _att(P, S, j)
+    hz = az - zg
+    vr = vz - vg
+    yf = ay
+    for i in range(3):
+        hz += P[CZ + i] * S[SXI + 3 * j + i]
+        vr += P[CZ + i] * S[SV + 3 * j + i]
+    dl, dv = _solve_pair(P, -hz, 0.0)
+    S[SXI + 3 * j + il] += dl
+    S[SXI + 3 * j + iv] += dv
+    dl, dv = _solve_pair(P, -vr, 0.0)
+    S[SV + 3 * j + il] += dl
+    S[SV + 3 * j + iv] += dv
+    for i in range(3):
+        yf += P[CY + i] * S[SXI + 3 * j + i]
+    S[SYP + j] = yf
 
 
 @njit(cache=True)
@@ -315,6 +339,8 @@ def _advance(P, S, mode, t, tau, dt, W):
             a = P[R + i] + P[GACT + i] * drive - P[GAM + i] * (P[CZ + i] * aaz + P[CY + i] * aay)
             if air:
                 a += (P[CZ + i] * ffz + P[CY + i] * ffy) / P[MIMP + i]
+            elif W[W_SLIP + j] == W[W_SLIP + j]:     # not NaN: slipping
+                a += P[CY + i] * W[W_SLIP + j] / P[MIMP + i]
             W[W_A + i] = a
         if nsub == 1:
             for i in range(3):
@@ -347,7 +373,10 @@ def _advance(P, S, mode, t, tau, dt, W):
             _squeeze(P, S, W, j, tau / nsub, vz1a - vg1, c, q)
         else:
             S[STC + j] += tau
-            _pin_pair(P, S, j, zg1, vg1)
+            if W[W_SLIP + j] == W[W_SLIP + j]:
+                _slip(P, S, W, j, zg1, vg1)
+            else:
+                _pin_pair(P, S, j, zg1, vg1)
 
 
 @njit(cache=True)
@@ -414,6 +443,25 @@ def _impact(P, S, mode, j, t, events, count):
 
 
 @njit(cache=True)
+def _friction(P, S, mode, vg, ag, W):
+    """Coulomb friction (beyond the paper; off when mu is inf): which pinned feet slip now."""
+    for j in range(6):
+        W[W_SLIP + j] = math.nan
+        if mode[j] == AIR or not P[MU] < math.inf:
+            continue
+        # normal load: compression plus the adhesion holding the foot (Derjaguin)
+        normal = P[CADT] * S[STC + j] + P[CAD] - _pull(P, S, j, vg, ag)
+        if normal < 0.0:
+            normal = 0.0
+        fy = 0.0
+        for i in range(3):
+            fy += P[MM + i] * (P[K + i] * S[SXI + 3 * j + i] + P[B + i] * S[SV + 3 * j + i]) * P[CY + i]
+        if abs(fy) > P[MU] * normal:
+            # the leg pushes the body by fy, so the foot by -fy; the ground resists at mu N
+            W[W_SLIP + j] = (1.0 if fy > 0.0 else -1.0) * P[MU] * normal
+
+
+@njit(cache=True)
 def _step(P, S, T, mode, t, dt, W, events, count):
     """One step with event location; the result is left in S."""
     zg, vg, ag = _ground(P, t)
@@ -428,6 +476,7 @@ def _step(P, S, T, mode, t, dt, W, events, count):
             S[STC + j] = 0.0
         else:
             mode[j] = ADHESION if f > 0.0 else REST
+    _friction(P, S, mode, vg, ag, W)
     remaining = dt
     now = t
     n_ev = 0

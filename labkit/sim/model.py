@@ -17,6 +17,32 @@ drift, not even by rounding. The static parts cancel analytically:
 symmetric), zero static lateral force per leg. What is left of gravity in
 air is the constant modal acceleration ``R_i`` (``-k_i x_eq,i`` + gravity on
 leg and foot), zero for the modes that are free at rest.
+
+Choices where model.md is silent (each a RobotParams field or a constant here):
+
+* legs: leg ``n`` (1-based) sits at ``x = +w`` for odd ``n``, ``-w`` for even
+  ``n``; ``y = +p`` for legs 1-2, 0 for 3-4, ``-p`` for 5-6 (so {1, 4, 5} is a
+  tripod); ``w = leg_half_width_mm``, ``p = leg_pitch_mm``, ``z = leg_z_mm``;
+* masses: the legs' mass ``mass_mg - body_mass_mg`` split over six legs, a
+  ``foot_mass_fraction`` of it at the foot; modal mass ``M_i =
+  modal_participation x leg mass``; ``m_imp,i = m_imp_factor M_i``,
+  ``m_dis,i = m_dis_factor M_i``; a PZT payload rides on the body;
+* the first vertical / first lateral mode (the pinned pair and the impact
+  redistribution) are the lowest-frequency modes with ratio < 1 / > 1;
+* base excitation: ``-Gamma_i (Cz_i a_z + Cy_i a_y)`` with ``Gamma_i`` the
+  participation of gravity (``base_participation = 0``) or a given value;
+* the body touches the ground at the centre of its underside (tilt ignored
+  for contact), gap ``body_gap_um`` at rest; a body impact restitutes its
+  vertical velocity (``c_r_body``) and, with ``body_no_slip``, stops its
+  lateral velocity;
+* air drag acts on the feet in both directions (absolute velocity, still
+  air), on the body vertically and laterally;
+* the release test adds the foot's own inertia (``m_f a_g``) to the pull, so
+  that with no adhesion a rigid robot leaves exactly when the tray's
+  acceleration exceeds g;
+* friction (``mu`` finite): the normal load of a pinned foot is its
+  compression plus the adhesion holding it; a slipping foot stays on the
+  ground vertically and feels ``mu N`` laterally.
 """
 from __future__ import annotations
 

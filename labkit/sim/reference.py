@@ -158,7 +158,38 @@ def squeeze(m: Model, st: RefState, j: int, h: float, v_base: float, c: float, q
     st.xi[j] += 0.5 * h * dv
 
 
-def advance(m: Model, st: RefState, t: float, tau: float) -> None:
+def friction(m: Model, st: RefState, t: float) -> np.ndarray:
+    """Coulomb friction (beyond the paper; off when mu is inf): lateral friction force on
+    each pinned foot that slips now (NaN for the feet that stick or are in the air)."""
+    slip = np.full(6, np.nan)
+    if not m.mu < math.inf:
+        return slip
+    _, vg, ag = ground(m, t)
+    for j in range(6):
+        if st.mode[j] == AIR:
+            continue
+        # normal load: compression plus the adhesion holding the foot (Derjaguin)
+        normal = max(m.c_ad_t * st.tc[j] + m.c_ad - pull(m, st, j, vg, ag), 0.0)
+        fy = float(np.dot(m.m_modal * (m.k * st.xi[j] + m.b * st.v[j]), m.cy))
+        if abs(fy) > m.mu * normal:
+            slip[j] = math.copysign(m.mu * normal, fy)
+    return slip
+
+
+def slip_pair(m: Model, st: RefState, j: int, zg: float, vg: float) -> None:
+    """A slipping pinned foot: put back on the ground vertically, free laterally."""
+    az, ay, vz, vy = attachment(m, st.q, st.u)
+    il, iv = m.il, m.iv
+    dl, dv = solve_pair(m, -(az[j] + np.dot(m.cz, st.xi[j]) - zg), 0.0)
+    st.xi[j, il] += dl
+    st.xi[j, iv] += dv
+    dl, dv = solve_pair(m, -(vz[j] + np.dot(m.cz, st.v[j]) - vg), 0.0)
+    st.v[j, il] += dl
+    st.v[j, iv] += dv
+    st.ypin[j] = ay[j] + np.dot(m.cy, st.xi[j])
+
+
+def advance(m: Model, st: RefState, t: float, tau: float, slip: np.ndarray | None = None) -> None:
     """Integrate the whole robot from t over tau (no events), in place."""
     if tau <= 0.0:
         return
@@ -194,6 +225,8 @@ def advance(m: Model, st: RefState, t: float, tau: float) -> None:
             vfy = vy0[j] + np.dot(m.cy, st.v[j])
             hf = az0[j] + np.dot(m.cz, st.xi[j]) - zg
             a_mode = a_mode + (m.cz * (-m.a_drag * vfz * abs(vfz)) + m.cy * (-m.a_drag * vfy * abs(vfy))) / m.m_imp
+        elif slip is not None and not np.isnan(slip[j]):
+            a_mode = a_mode + m.cy * slip[j] / m.m_imp
         nsub, c, qs = 1, 0.0, 0.0
         if air:
             qs = float(np.dot(m.cz, m.cz / m.m_imp))
@@ -215,7 +248,10 @@ def advance(m: Model, st: RefState, t: float, tau: float) -> None:
                 squeeze(m, st, j, h, vz1a[j] - vg1, c, qs)
         if not air:
             st.tc[j] += tau
-            pin_pair(m, st, j, zg1, vg1)
+            if slip is not None and not np.isnan(slip[j]):
+                slip_pair(m, st, j, zg1, vg1)
+            else:
+                pin_pair(m, st, j, zg1, vg1)
 
 
 def foot_gap(m: Model, st: RefState, zg: float) -> np.ndarray:
@@ -290,10 +326,11 @@ def release(m: Model, st: RefState, t: float) -> np.ndarray:
 def step(m: Model, st: RefState, t: float, dt: float, out) -> RefState:
     """One full step with event location; returns the new state."""
     released = release(m, st, t)
+    slip = friction(m, st, t)
     remaining, now, n_ev = dt, t, 0
     while True:
         trial = st.copy()
-        advance(m, trial, now, remaining)
+        advance(m, trial, now, remaining, slip)
         zg0, vg0, _ = ground(m, now)
         zg1, _, _ = ground(m, now + remaining)
         h0 = foot_gap(m, st, zg0)
@@ -328,7 +365,7 @@ def step(m: Model, st: RefState, t: float, dt: float, out) -> RefState:
             out.count[M.CNT_FORCED] += 1
             return trial
         n_ev += 1
-        advance(m, st, now, best)
+        advance(m, st, now, best, slip)
         now += best
         remaining -= best
         if who == -1:

@@ -104,7 +104,19 @@ def test_nan_lines_and_an_interrupted_run_still_fit(tmp_path, capsys):
     assert any("interrupted" in w for w in s["warnings"])
 
 
+def test_two_inchip_runs_share_poles_and_name_their_channels(tmp_path, capsys):
+    a = write_inchip(tmp_path / "day1.h5", np.geomspace(200, 5000, 150), seed=4)
+    b = write_inchip(tmp_path / "day2.h5", np.linspace(300, 4500, 120), seed=5)
+    code, s, err = _fit(capsys, str(a), str(b), "--out", str(tmp_path / "r.toml"), "--no-figures")
+    assert code == 0, err
+    np.testing.assert_allclose([m["freq_hz"] for m in s["fitted_modes"]], TRUE_HZ, rtol=3e-3)
+    assert sorted(s["nrmse"]["inchip"]) == sorted(f"{d}:{loc}" for d in ("day1", "day2")
+                                                  for loc in ("body", "hip", "knee"))
+    assert RobotParams.from_toml(tmp_path / "r.toml").provenance["modes"]["1"]["runs"] == [str(a), str(b)]
+
+
 @pytest.mark.parametrize("extra, message", [
+    (["--min-quality", "1.0"], "no usable FRF lines"),
     (["--assign", "1=999"], "no fitted mode within 10% of 999 Hz"),
     (["--assign", "4=438"], "bad simulator mode"),
     (["--assign", "1=#9"], "no fitted mode #9"),

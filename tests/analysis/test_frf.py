@@ -151,3 +151,15 @@ def test_transmissibility_of_sdof_base_excitation():
 def test_bad_inputs_raise_input_error(call):
     with pytest.raises(InputError):
         call()
+
+
+def test_demodulate_linear_detrend_removes_a_drifting_baseline():
+    fs, f = 10_000.0, 250.0
+    t = np.arange(1234) / fs
+    x = 0.8 * np.cos(2 * np.pi * f * t - 0.3) + 0.5 + 40.0 * t          # baseline drifts by 5 V
+    d = frf.demodulate(x, fs, f, detrend="linear")
+    assert abs(d.amplitude - 0.8 * np.exp(-0.3j)) < 1e-9
+    assert d.quality > 0.999999
+    assert frf.demodulate(x, fs, f).quality < 0.5                           # an offset alone cannot follow it
+    with pytest.raises(InputError, match="detrend"):
+        frf.demodulate(x, fs, f, detrend="quadratic")

@@ -8,8 +8,18 @@ import numpy as np
 import pytest
 
 from labcfg import lab_timeline, shaker_toml
+from labkit.errors import LimitError
 from labkit.experiments.session import run_session
 from labkit.lab import VirtualLab
+
+
+@pytest.fixture(scope="module", autouse=True)
+def compiled_simulator():
+    """Compile the robot simulator once before the runs: a first JIT compile (a minute under
+    load when its cache is stale) inside the lab's scope thread would look like a lost trigger."""
+    from labkit.sim import RobotParams, Shaker, simulate
+
+    simulate(RobotParams(), Shaker(freq_hz=150.0, amp_um=8.0), duration_s=0.02, seed=0)
 
 
 @pytest.mark.slow
@@ -21,6 +31,19 @@ def test_shaker_grid_reaches_requested_tray_amplitudes(tmp_path):
         summary = run_session("shaker", cfg, out, lab=lab, quiet=True)
         assert lab.output_state("funcgen", 1) is False
         chain = lab.chain
+        # every generator state commanded on the way (frequency and amplitude changes, in the order
+        # received) kept the tray inside the interlock limit: amplitudes fall before frequencies do
+        f_hz, vpp, worst = None, None, 0.0
+        for _, inst, direction, text in lab.log:
+            if inst != "funcgen" or direction != "rx":
+                continue
+            if text.startswith("SOUR1:FREQ "):
+                f_hz = float(text.split()[1])
+            elif text.startswith("SOUR1:VOLT ") and not text.startswith("SOUR1:VOLT:"):
+                vpp = float(text.split()[1])
+            if f_hz and vpp:
+                worst = max(worst, chain.tray_amp_um(f_hz, vpp / 2))
+        assert 19.0 < worst < 60.0, worst
     assert summary["status"] == "complete" and summary["points_ok"] == 4
     with h5py.File(out, "r") as f:
         assert f.attrs["kind"] == "run_shaker" and f.attrs["robot_spot"] == "knee"
@@ -108,3 +131,20 @@ def test_shaker_ctrl_c_then_resume(tmp_path):
         assert sorted(f["records"]) == ["p00000", "p00001"]
         got, req = f["points/tray_amp_um"][...], f["points/tray_amp_request_um"][...]
         assert np.all(np.abs(got / req - 1) < 0.05)
+
+
+def test_envelope_interlock_with_fixed_drive_ends_the_run(tmp_path):
+    # a declared stroke of 10 um peak: 0.2 Vpp at 150 Hz moves the tray ~23 um, outside it
+    cfg = shaker_toml(tmp_path / "env.toml", [150.0, 200.0], [1.0], on_interlock="end", settle_s=0.03,
+                      dwell_cycles=10)
+    text = cfg.read_text().replace("tray_amp_um = [1]", "drive_vpp = [0.2]")
+    cfg.write_text(text.replace("payload_kg = 0.001", "payload_kg = 0.001\nstroke_peak_mm = 0.01"))
+    out = tmp_path / "env.h5"
+    with VirtualLab(seed=8) as lab:
+        with pytest.raises(LimitError, match="shaker envelope.*stroke.*run ended"):
+            run_session("shaker", cfg, out, lab=lab, quiet=True)
+        assert lab.output_state("funcgen", 1) is False
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"].startswith("aborted: interlock: shaker envelope")
+        assert list(f["points/status"].asstr()[...]) == ["interlock"]      # the 200 Hz point never ran
+        assert f["points/drive_request_vpp"][0] == 0.2

@@ -6,7 +6,7 @@ import pytest
 
 from labkit.calibrate import Observations, calibrate, parse_names, set_values, speed_task
 from labkit.errors import InputError
-from tests.conftest import last_json, run_cli
+from clihelpers import last_json, run_cli
 
 # The deliberately changed parameter: the hip (lateral) mode's stiffness, +10 %. The paper
 # ties shaker locomotion to that mode, and the speed below it varies smoothly with it.

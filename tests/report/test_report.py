@@ -9,7 +9,8 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.conftest import last_json, run_cli
+from clihelpers import last_json, run_cli
+from report_data import SHAKER_SPEED
 
 
 def _all_inputs(inputs):
@@ -66,6 +67,12 @@ def test_missing_inputs_are_reported_not_fatal(inputs, tmp_path):
     assert s["sections"]["agreement"] == "missing"
     html = (out / "report.html").read_text()
     assert "No fit given" in html and "Nothing to compare" in html
+    # an in-chip run alone: its measured FRFs are drawn, without a model curve
+    proc = run_cli("report", "--runs", str(inputs["inchip"]), "--out", str(tmp_path / "rep2"), "--json")
+    s = last_json(proc)
+    assert s["sections"]["frf"] == "ok" and "no model curve" in s["notes"]["frf"]
+    assert s["sections"]["speed"] == "missing" and s["sections"]["knee"] == "missing"
+    assert [Path(f).name for f in s["figures"]] == ["fig_frf_run1.png"]
 
 
 def test_unreadable_input_exits_2_naming_the_file(inputs, tmp_path):
@@ -112,5 +119,4 @@ def test_report_with_the_real_simulator(inputs, tmp_path):
     # measured 150..300 Hz points against the sweep's nominal+draw mean, by hand
     mean = np.abs(sw.speeds_mm_s).mean(axis=1)          # magnitudes: measured speed has no sign
     sim_at = np.interp([150.0, 200.0, 250.0, 300.0], sw.values, mean)
-    from tests.report.conftest import SHAKER_SPEED
     assert speed["rms_error_mm_s"] == pytest.approx(np.sqrt(np.mean((sim_at - SHAKER_SPEED[:4]) ** 2)))

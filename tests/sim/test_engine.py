@@ -152,3 +152,16 @@ def test_to_h5(walking, tmp_path):
     (tmp_path / "p.toml").write_text(toml_text)
     assert RobotParams.from_toml(tmp_path / "p.toml") == WALK
     assert summary["patterns"] == walking.patterns
+
+
+def test_coulomb_friction_option(walking):
+    """mu = inf (default) is the paper's no-slip; a large mu changes nothing; a small one does."""
+    big = simulate(WALK.replace(mu=1e3), Shaker(240, 25), duration_s=0.3)
+    np.testing.assert_allclose(big.body_y_um, walking.body_y_um, atol=1e-2)
+    slippery = simulate(WALK.replace(mu=0.1), Shaker(240, 25), duration_s=0.3)
+    assert abs(slippery.mean_speed_mm_s - walking.mean_speed_mm_s) > 0.05
+    at_rest = simulate(RobotParams(mu=0.0), Shaker(240, 0.0), duration_s=0.05)
+    assert np.all(at_rest.body_y_um == 0.0)
+    a = simulate(WALK.replace(mu=0.1), Shaker(240, 25), duration_s=0.02, engine="numba")
+    b = simulate(WALK.replace(mu=0.1), Shaker(240, 25), duration_s=0.02, engine="reference")
+    assert np.abs(a.body_y_um - b.body_y_um).max() < 1e-4
