@@ -263,7 +263,8 @@ def _sweep_pattern_rows(measured: dict[str, Any], c: dict[str, Any]) -> list[dic
                                   provenance={"measured": sorted(set(files)), "simulated": c["file"],
                                               "measured_label": "run file label, or classify_knee_pattern "
                                                                 "on the point's knee record",
-                                              "simulated_label": "dominant over draws and feet"})
+                                              "simulated_label": "dominant foot-contact pattern over draws "
+                                                                 "and feet (a sweep keeps no knee records)"})
     return [{"quantity": "leg-pattern agreement (sweep)", "value": a["fraction_agree"], "units": "1",
              "n": a["n"], "provenance": a["provenance"]}]
 

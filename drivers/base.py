@@ -27,11 +27,13 @@ from __future__ import annotations
 
 import logging
 import re
+import termios
 from typing import Any, ClassVar
 
 import numpy as np
 
 from labkit.errors import ConfigError, InstrumentError, LimitError
+from labkit.jsonutil import to_jsonable
 
 from drivers.transport import (TRANSPORT_KEYS, SerialTransport, Transport, TransportError,
                                VisaTransport, _Closed, open_transport, resource_manager)
@@ -80,7 +82,8 @@ def check_choice(name: str, value: str, choices: tuple[str, ...]) -> str:
 # ---------------------------------------------------------------------------------------------
 # the base driver
 
-_WRAPPED = (TransportError, OSError, EOFError, ValueError, RuntimeError, UnicodeError)
+# termios.error (a pty whose peer vanished, from pyserial's tcdrain) is not an OSError.
+_WRAPPED = (TransportError, OSError, EOFError, ValueError, RuntimeError, UnicodeError, termios.error)
 
 
 def _wrappable() -> tuple[type[BaseException], ...]:
@@ -290,8 +293,8 @@ class Instrument:
     def snapshot(self) -> dict[str, Any]:
         """Identity, declared settings and everything commanded so far; JSON-able."""
         return {"model": self.model, "name": self.name, "resource": self.resource,
-                "identity": self.identity, "settings": _jsonable(self.settings()),
-                "state": _jsonable(self.state)}
+                "identity": self.identity, "settings": to_jsonable(self.settings()),
+                "state": to_jsonable(self.state)}
 
     def safe_off(self) -> None:
         """Put the instrument in a safe state (outputs off). The base has nothing to do."""
@@ -374,15 +377,3 @@ class ScpiInstrument(Instrument):
             raise InstrumentError("instrument reported " + "; ".join(errors), instrument=self.name,
                                   command=after or self.err_command)
 
-
-def _jsonable(obj: Any) -> Any:
-    """Plain JSON types from numpy scalars/arrays, tuples and nested dicts."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj

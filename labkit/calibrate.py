@@ -6,8 +6,9 @@ minimises, by :func:`scipy.optimize.least_squares` (trust-region reflective,
 with bounds),
 
 * ``(v_sim(f_i) - v_meas,i) / sigma_i`` for every measured speed, and
-* ``w * (1 - share of feet showing the observed pattern)`` for every leg-pattern
-  observation (optional),
+* ``w * (1 - share of legs showing the observed pattern)`` for every leg-pattern
+  observation (optional; the simulated legs are labelled from their knee records
+  by :func:`analysis.compare.classify_knee_pattern`, as the observed ones are),
 
 where ``v_sim`` is the nominal robot's mean speed (magnitude of the mean forward
 velocity: a tracked speed has no sign) from :func:`labkit.sim.simulate`
@@ -94,11 +95,20 @@ def speed_task(task: tuple) -> dict[str, Any]:
     """One simulation: ``(params, freq_hz, amp_um, duration_s, seed)`` -> speed and foot patterns."""
     from labkit.sim import Shaker, simulate
 
+    from analysis.compare import classify_knee_pattern
+
     params, freq_hz, amp_um, duration_s, seed = task
     r = simulate(params, Shaker(freq_hz=float(freq_hz), amp_um=float(amp_um)), duration_s=duration_s, seed=seed)
+    # observed patterns come from knee records: label the simulated knees the same way
+    t = np.asarray(r.t_s)
+    settled = t >= t[0] + 0.5 * (t[-1] - t[0])
+    tray = np.gradient(np.asarray(r.ground_z_um), t) * 1e-3
+    knee = np.asarray(r.knee_vz_mm_s)
+    knee_patterns = [classify_knee_pattern(t[settled], knee[settled, j], tray[settled], freq_hz)["pattern"]
+                     for j in range(knee.shape[1])]
     # measured speeds are unsigned (tracked path speed; the paper compares speed, not velocity)
     return {"speed_mm_s": abs(float(r.mean_speed_mm_s)), "velocity_mm_s": float(r.mean_speed_mm_s),
-            "patterns": [str(p) for p in r.patterns]}
+            "foot_patterns": [str(p) for p in r.patterns], "patterns": knee_patterns}
 
 
 @dataclass

@@ -18,6 +18,7 @@ from types import ModuleType
 from typing import Any, Sequence
 
 from labkit import __version__
+from labkit.jsonutil import to_jsonable
 from labkit.errors import EXIT_INTERRUPTED, InputError, Interrupted, LabkitError
 
 
@@ -70,21 +71,8 @@ def _on_sigterm(signum: int, frame: Any) -> None:
 
 def emit_json(summary: dict[str, Any]) -> None:
     """Print the summary as one JSON line (NaN becomes null so any parser reads it)."""
-    print(json.dumps(_finite(summary), sort_keys=False, default=str), flush=True)
+    print(json.dumps(to_jsonable(summary, finite=True)), flush=True)
 
-
-def _finite(obj: Any) -> Any:
-    if isinstance(obj, float):
-        return obj if obj == obj and abs(obj) != float("inf") else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    if hasattr(obj, "item") and callable(obj.item) and getattr(obj, "ndim", 1) == 0:
-        return _finite(obj.item())
-    if hasattr(obj, "tolist"):
-        return _finite(obj.tolist())
-    return obj
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -22,6 +22,7 @@ import numpy as np
 
 from labkit import __version__
 from labkit.errors import InputError
+from labkit.jsonutil import to_jsonable
 
 SCHEMA_VERSION = 1
 
@@ -50,7 +51,7 @@ def put(group: Any, name: str, data: Any, units: str, **attrs: Any) -> Any:
 
 def put_json(group: Any, name: str, obj: Any) -> None:
     """Store a JSON-able object as a string attribute (snapshots, summaries)."""
-    group.attrs[name] = json.dumps(obj, sort_keys=True, default=_jsonable)
+    group.attrs[name] = json.dumps(to_jsonable(obj), sort_keys=True)
 
 
 def get_json(group: Any, name: str, default: Any = None) -> Any:
@@ -59,15 +60,6 @@ def get_json(group: Any, name: str, default: Any = None) -> Any:
         return default
     return json.loads(group.attrs[name])
 
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
 
 
 def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None):

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from labkit.errors import InputError, LimitError
+from labkit.jsonutil import to_jsonable
 from labkit.experiments import runfile as rf
 from labkit.experiments.config import (InchipConfig, InstrumentSpec, ShakerConfig, comparable, load_inchip,
                                        load_shaker)
@@ -188,27 +189,8 @@ def _store_lab_record(path: Path, lab: Any) -> None:
     offset = time.time() - lab.now_s()
     truth = None
     try:
-        truth = _jsonable(lab.truth)
+        truth = to_jsonable(lab.truth)
     except Exception:
         pass
     rf.write_lab_record(path, timeline, truth, clock_offset_s=offset, t0_monotonic_s=getattr(lab, "t0", None))
 
-
-def _jsonable(obj: Any) -> Any:
-    import dataclasses
-
-    import numpy as np
-
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return _jsonable(dataclasses.asdict(obj))
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, (str, int, float, bool)) or obj is None:
-        return obj
-    return str(obj)

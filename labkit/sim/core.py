@@ -116,6 +116,9 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
         raise InputError(f"out of range: {dt_s!r}", key="dt_s", expected=f"a number in s, > 0, <= {duration_s}")
     if record_dt_s is None:
         record_dt_s = min(RECORD_DT_MAX_S, 1.0 / (RECORD_PER_PERIOD * scenario.freq_hz))
+    if not (record_dt_s > 0 and record_dt_s <= duration_s / 2):
+        raise InputError(f"out of range: {record_dt_s!r}", key="record_dt_s",
+                         expected=f"a number in s, > 0, <= duration_s / 2 ({duration_s / 2:g})")
     every = max(1, int(round(record_dt_s / dt)))
     n_steps = int(round(duration_s / dt))
     if transient_s is None:

@@ -26,8 +26,8 @@ _LAYOUT = (
     " 4), ('GACT', 54), ('GAM', 60), ('GAPTOL', 27), ('H0', 11), ('HMIN', 10), ('IL', 23), ('IV"
     "', 22), ('IX', 1), ('IY', 2), ('IZ', 3), ('K', 30), ('KIND', 17), ('KTF', 57), ('M', 42), "
     "('MAXEV', 28), ('MB', 0), ('MDIS', 48), ('MF', 6), ('MIMP', 45), ('MU', 16), ('NSUB', 25),"
-    " ('OMEGA', 19), ('PH', 81), ('QSQ', 24), ('R', 51), ('SQSTIFF', 26), ('VOLT', 21), ('XJ', "
-    "63), ('YFEQ', 87), ('YJ', 69), ('ZJ', 75)], 58, 25, 6, 10)"
+    " ('OMEGA', 19), ('PH', 84), ('PINV', 96), ('QSQ', 24), ('R', 51), ('SQSTIFF', 26), ('VOLT'"
+    ", 21), ('WZ', 63), ('XJ', 66), ('YFEQ', 90), ('YJ', 72), ('ZJ', 78)], 58, 25, 6, 10)"
 )
 if _m.layout_signature() != _LAYOUT:
     raise ImportError("labkit.sim.kernel: the array layout in labkit/sim/model.py changed; "
@@ -38,8 +38,9 @@ MB, IX, IY, IZ, G, F0, MF = (_m.IDX[k] for k in ("MB", "IX", "IY", "IZ", "G", "F
 BGF, BGB, AD, HMIN, H0 = (_m.IDX[k] for k in ("BGF", "BGB", "AD", "HMIN", "H0"))
 CAD, CADT, CR, CRB, MU = (_m.IDX[k] for k in ("CAD", "CADT", "CR", "CRB", "MU"))
 KIND, AMP, OMEGA, FREQ, VOLT, IV, IL = (_m.IDX[k] for k in ("KIND", "AMP", "OMEGA", "FREQ", "VOLT", "IV", "IL"))
-K, B, CZ, CY, MM, MIMP, MDIS, R, GACT, KTF, GAM = (_m.IDX[k] for k in (
-    "K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF", "GAM"))
+K, B, CZ, CY, MM, MIMP, MDIS, R, GACT, KTF, GAM, WZ = (_m.IDX[k] for k in (
+    "K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF", "GAM", "WZ"))
+PINV = _m.IDX["PINV"]
 XJ, YJ, ZJ, PH, YFEQ = (_m.IDX[k] for k in ("XJ", "YJ", "ZJ", "PH", "YFEQ"))
 SQ, SU, SXI, SV, STC, SYP, SSIZE = _m.S_Q, _m.S_U, _m.S_XI, _m.S_V, _m.S_TC, _m.S_YPIN, _m.S_SIZE
 AIR, ADHESION, REST = _m.AIR, _m.ADHESION, _m.REST
@@ -48,19 +49,20 @@ REC_T, REC_Y, REC_Z, REC_PH, REC_ZG, REC_FZ, REC_FY, REC_KV = (
 CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED = _m.CNT_BODY, _m.CNT_EVENTS, _m.CNT_LOST, _m.CNT_FORCED
 QSQ, NSUB, SQSTIFF, GAPTOL, MAXEV, BNS = (_m.IDX[k] for k in ("QSQ", "NSUB", "SQSTIFF", "GAPTOL", "MAXEV", "BNS"))
 # Scratch layout (W).
-W_PROP = 0      # 3 x 4 propagator of the full step
-W_PP = 12       # 3 x 4 propagator of a partial step
-W_FY = 24       # 6 leg forces y
-W_FZ = 30       # 6 leg forces z
-W_REL = 36      # 6 contact time of feet released this step (-1 otherwise)
-W_AZ = 42       # 6 attachment heights at the start of an advance
-W_A = 48        # 3 modal accelerations of the leg being advanced
-W_PSUB = 51     # 3 x 4 propagator of a squeeze sub-step of a full step
-W_PPS = 63      # 3 x 4 propagator of a squeeze sub-step of a partial step
-W_GZ = 75       # ground height at the squeeze sub-steps (up to 32)
-W_GV = 107      # ground velocity at the squeeze sub-steps
-W_SLIP = 139    # 6 lateral friction force on a slipping pinned foot (NaN: it sticks)
-W_SIZE = 145
+# A propagator is 5 numbers per mode: p11, p12, p21, p22 and (1 - p11) / k.
+W_PROP = 0      # 3 x 5 propagator of the full step
+W_PP = 15       # 3 x 5 propagator of a partial step
+W_PSUB = 30     # 3 x 5 propagator of a squeeze sub-step of a full step
+W_PPS = 45      # 3 x 5 propagator of a squeeze sub-step of a partial step
+W_FY = 60       # 6 attachment lateral velocities at the start of an advance
+W_FZ = 66       # 6 attachment vertical velocities at the start of an advance
+W_REL = 72      # 6 contact time of feet released this step (-1 otherwise)
+W_AZ = 78       # 6 attachment heights at the start of an advance
+W_A = 84        # 3 modal accelerations of the leg being advanced
+W_GZ = 87       # ground height at the squeeze sub-steps (up to 32)
+W_GV = 120      # ground velocity at the squeeze sub-steps
+W_SLIP = 153    # 6 lateral friction force on a slipping pinned foot (NaN: it sticks)
+W_SIZE = 159
 
 
 @njit(cache=True)
@@ -100,25 +102,19 @@ def _propagators(P, tau, W, off):
         else:
             c = 1.0
             s = tau
-        W[off + 4 * i] = e * (c + sig * s)
-        W[off + 4 * i + 1] = e * s
-        W[off + 4 * i + 2] = -e * k * s
-        W[off + 4 * i + 3] = e * (c - sig * s)
+        p11 = e * (c + sig * s)
+        W[off + 5 * i] = p11
+        W[off + 5 * i + 1] = e * s
+        W[off + 5 * i + 2] = -e * k * s
+        W[off + 5 * i + 3] = e * (c - sig * s)
+        W[off + 5 * i + 4] = (1.0 - p11) / k
 
 
 @njit(cache=True)
 def _solve_pair(P, dz, dy):
-    il = int(P[IL])
-    iv = int(P[IV])
-    a = P[CZ + il]
-    bb = P[CZ + iv]
-    c = P[CY + il]
-    d = P[CY + iv]
-    det = a * d - bb * c
-    if abs(det) > 1e-12:
-        return (dz * d - bb * dy) / det, (a * dy - c * dz) / det
-    n2 = a * a + bb * bb
-    return a * dz / n2, bb * dz / n2
+    """(lateral, vertical) modal changes for foot changes (dz, dy): the 2x2 solve of
+    paper eq. 8, by its inverse precomputed in model.py (minimum norm if singular)."""
+    return P[PINV] * dz + P[PINV + 1] * dy, P[PINV + 2] * dz + P[PINV + 3] * dy
 
 
 @njit(cache=True)
@@ -212,15 +208,12 @@ def _ground_table(P, t, tau, W):
 @njit(cache=True)
 def _prop1(P, S, W, off, j, i):
     """Exact step of mode i of leg j under the constant modal acceleration W[W_A + i]."""
-    p11 = W[off + 4 * i]
-    p12 = W[off + 4 * i + 1]
-    p21 = W[off + 4 * i + 2]
-    p22 = W[off + 4 * i + 3]
+    o = off + 5 * i
     x = S[SXI + 3 * j + i]
     v = S[SV + 3 * j + i]
     a = W[W_A + i]
-    S[SXI + 3 * j + i] = p11 * x + p12 * v + (1.0 - p11) / P[K + i] * a
-    S[SV + 3 * j + i] = p21 * x + p22 * v + p12 * a
+    S[SXI + 3 * j + i] = W[o] * x + W[o + 1] * v + W[o + 4] * a
+    S[SV + 3 * j + i] = W[o + 2] * x + W[o + 3] * v + W[o + 1] * a
 
 
 @njit(cache=True)
@@ -231,7 +224,7 @@ def _squeeze(P, S, W, j, h, v_base, c, q):
         s += P[CZ + i] * S[SV + 3 * j + i]
     s_new = s / (1.0 + h * c * q)
     for i in range(3):
-        dv = -h * c * s_new * P[CZ + i] / P[MIMP + i]
+        dv = -h * c * s_new * P[WZ + i]
         S[SV + 3 * j + i] += dv
         S[SXI + 3 * j + i] += 0.5 * h * dv
 

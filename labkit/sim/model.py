@@ -61,7 +61,7 @@ MODE_NAMES = ("air", "adhesion", "rest")
 _SCALARS = ("MB", "IX", "IY", "IZ", "G", "F0", "MF", "BGF", "BGB", "AD", "HMIN", "H0",
             "CAD", "CADT", "CR", "CRB", "MU", "KIND", "AMP", "OMEGA", "FREQ", "VOLT", "IV", "IL",
             "QSQ", "NSUB", "SQSTIFF", "GAPTOL", "MAXEV", "BNS")
-_MODE_ARRAYS = ("K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF", "GAM")
+_MODE_ARRAYS = ("K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF", "GAM", "WZ")
 _LEG_ARRAYS = ("XJ", "YJ", "ZJ", "PH", "YFEQ")
 IDX: dict[str, int] = {}
 _n = 0
@@ -74,6 +74,8 @@ for _name in _MODE_ARRAYS:
 for _name in _LEG_ARRAYS:
     IDX[_name] = _n
     _n += 6
+IDX["PINV"] = _n        # 2x2 inverse of the pinned pair's coupling matrix, row-major
+_n += 4
 P_SIZE = _n
 
 
@@ -134,6 +136,20 @@ class Model:
     phase: np.ndarray            # +1 tripod A, -1 tripod B
     y_foot_eq: np.ndarray        # y_j + static lateral foot offset
 
+    def pair_inverse(self) -> np.ndarray:
+        """Maps foot changes (dz, dy) to (lateral, vertical) modal changes: paper eq. 8.
+
+        Row-major 2x2; when the lateral row vanishes (``cy_sign`` 0) the
+        minimum-norm solution of the vertical equation alone.
+        """
+        a, bb = self.cz[self.il], self.cz[self.iv]
+        c, d = self.cy[self.il], self.cy[self.iv]
+        det = a * d - bb * c
+        if abs(det) > 1e-12:
+            return np.array([d / det, -bb / det, -c / det, a / det])
+        n2 = a * a + bb * bb
+        return np.array([a / n2, 0.0, bb / n2, 0.0])
+
     @property
     def omega(self) -> float:
         return 2 * math.pi * self.freq_hz
@@ -151,7 +167,7 @@ class Model:
                     BNS=1.0 if self.body_no_slip else 0.0)
         for k, v in scal.items():
             p[IDX[k]] = v
-        arrays = dict(K=self.k, B=self.b, CZ=self.cz, CY=self.cy, M=self.m_modal, MIMP=self.m_imp,
+        arrays = dict(WZ=self.cz / self.m_imp, PINV=self.pair_inverse(), K=self.k, B=self.b, CZ=self.cz, CY=self.cy, M=self.m_modal, MIMP=self.m_imp,
                       MDIS=self.m_dis, R=self.r, GACT=self.g_act, KTF=self.ktf, GAM=self.gamma, XJ=self.xj, YJ=self.yj,
                       ZJ=self.zj, PH=self.phase, YFEQ=self.y_foot_eq)
         for k, v in arrays.items():

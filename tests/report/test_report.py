@@ -105,12 +105,15 @@ def test_report_with_the_real_simulator(inputs, tmp_path):
     out = tmp_path / "rep"
     proc = run_cli("report", "--runs", str(inputs["shaker"]), "--tracks", *[str(inputs[f"track{i}"]) for i in range(4)],
                    "--sim", str(sweep_h5), str(res_h5), "--params", str(params), "--knee-duration-s", "0.2",
+                   "--knee-drive", "200:25", "300:25", "240:40",
                    "--workers", "1", "--out", str(out), "--json")
     s = last_json(proc)
     assert s["sections"]["speed"] == "ok" and s["sections"]["knee"] == "ok" and s["sections"]["agreement"] == "ok"
     data = json.loads((out / "agreement.json").read_text())
     knee = data["details"]["knee"]
     assert set(knee) >= {"200Hz_25um", "300Hz_25um"}
+    assert "No measured knee record at 240 Hz, 40 um" in s["notes"]["knee"]      # drawn, simulated only
+    assert len([f for f in s["figures"] if "fig_knee_" in f]) == 3
     assert knee["200Hz_25um"]["provenance"]["simulated"] == str(res_h5)          # from the file
     assert knee["300Hz_25um"]["provenance"]["simulated"].startswith(f"simulate({params}")   # simulated here
     for k in ("200Hz_25um", "300Hz_25um"):

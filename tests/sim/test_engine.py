@@ -127,6 +127,8 @@ def test_bad_arguments():
         simulate(WALK, Shaker(240, 25), duration_s=-1)
     with pytest.raises(InputError, match="dt_s"):
         simulate(WALK, Shaker(240, 25), duration_s=0.01, dt_s=0.0)
+    with pytest.raises(InputError, match="record_dt_s"):
+        simulate(WALK, Shaker(240, 25), duration_s=0.01, record_dt_s=1.0)
     with pytest.raises(InputError, match="scenario"):
         simulate(WALK, {"freq_hz": 240}, duration_s=0.01)
 
