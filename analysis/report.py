@@ -221,6 +221,7 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
                  "draws": c["sweep"].draws, "band": f"mean +- {band_k:g} std (ddof=1) over draws, floored at 0",
                  "simulated_speed": "|mean forward velocity| of each draw",
                  "sim_duration_s": c["sweep"].meta.get("duration_s"), "sim_seed": c["sweep"].meta.get("seed"),
+                 "uncertainty_table": c["sweep"].meta.get("uncertainty_table"),
                  "scenario": c["sweep"].scenario, "measured_amp_um_within": "10 % of the sweep's amp_um"}
             a = compare.speed_agreement(m["freq_hz"], m["speed_mm_s"], m["lo_mm_s"], m["hi_mm_s"], c["freq_hz"],
                                         c["mean_mm_s"], c["lo_mm_s"], c["hi_mm_s"], provenance=p)

@@ -260,14 +260,16 @@ def run_demo(out: str | Path = "labkit-demo", *, quick: bool = False, seed: int 
         for p in points:
             if not p["video"]:
                 continue
-            video = (shaker.parent / p["video"]).resolve()
+            video = (shaker.parent / p["video"]).resolve()     # absolute: the track names its video
             track_path = out / "tracks" / f"{video.stem}.h5"
             summ, _ = call_command("track", [str(video), "--out", str(track_path)])
             p.update(track=str(track_path), speed_mm_s=float(summ["mean_speed_mm_s"]),
-                     speed_ci_mm_s=[float(v) for v in summ["speed_ci_mm_s"]])
+                     speed_ci_mm_s=[float(v) for v in summ["speed_ci_mm_s"]],
+                     frames=int(summ["frames"]), lost_frames=int(summ["lost_frames"]),
+                     degraded_frames=int(summ.get("degraded_frames", 0)))
     tracks = [p["track"] for p in points if p.get("track")]
     files["tracks"] = tracks
-    files["videos"] = [str((shaker.parent / p["video"]).resolve()) for p in points if p["video"]]
+    files["videos"] = [str(shaker.parent / p["video"]) for p in points if p["video"]]
 
     # 6. simulated sweep with the fitted parameters
     from labkit.sim import RobotParams, Shaker, sweep
@@ -290,14 +292,17 @@ def run_demo(out: str | Path = "labkit-demo", *, quick: bool = False, seed: int 
                            knee_duration_s=s.knee_duration_s, title="labkit demo: virtual lab", quiet=True)
     files.update(report_html=rep["html"], report_figures=rep["figures"], agreement_json=rep["agreement_json"])
 
+    resonances = compare_resonances(truth["tethered_modes"], fit["fitted_modes"])
+    speeds = compare_speeds(points, sw)
     summary = {
         "ok": True, "out_dir": str(out), "mode": s.name, "seed": seed,
+        "headline": headline(resonances, speeds, rep.get("speed_rms_error_mm_s")),
         "wall_s": round(time.perf_counter() - t_start, 1), "stage_s": st.times_s,
         "files": files,
-        "resonances": compare_resonances(truth["tethered_modes"], fit["fitted_modes"]),
+        "resonances": resonances,
         "simulator_modes": simulator_modes(fit, truth_robot, base),
         "assignment": fit["assignment_note"],
-        "speeds": compare_speeds(points, sw),
+        "speeds": speeds,
         "speed_rms_error_mm_s": rep.get("speed_rms_error_mm_s"),
         "report_sections": rep.get("sections", {}),
         "virtual_robot": {"changes_from_paper": {"c_ad_n": DEMO_C_AD_N, "hip_freq_hz": TRUE_HIP_HZ,
@@ -440,6 +445,7 @@ def compare_speeds(points: list[dict[str, Any]], sw: Any) -> list[dict[str, Any]
         sp = np.abs(sw.speeds_mm_s[i])
         row = {"freq_hz": p["freq_hz"], "tray_amp_um": p["tray_amp_um"],
                "measured_mm_s": p.get("speed_mm_s"), "measured_ci_mm_s": p.get("speed_ci_mm_s"),
+               "frames": p.get("frames"), "lost_frames": p.get("lost_frames"),
                "simulated_nominal_mm_s": float(sw.speeds_mm_s[i, 0]),
                "simulated_mm_s": float(sp.mean()),
                "simulated_std_mm_s": float(sp.std(ddof=1)) if sp.size > 1 else 0.0,
@@ -448,10 +454,27 @@ def compare_speeds(points: list[dict[str, Any]], sw: Any) -> list[dict[str, Any]
     return rows
 
 
-def _finite(obj: Any) -> Any:
-    from labkit.cli import _finite as finite
+def headline(resonances: list[dict[str, Any]], speeds: list[dict[str, Any]],
+             report_rms: float | None) -> dict[str, Any]:
+    """The few numbers a newcomer looks at first."""
+    ferr = [abs(r["freq_error_pct"]) for r in resonances if "freq_error_pct" in r]
+    zerr = [abs(r["damping_error_pct"]) for r in resonances if "damping_error_pct" in r]
+    pairs = [(r["measured_mm_s"], abs(r["simulated_nominal_mm_s"])) for r in speeds
+             if r["measured_mm_s"] is not None]
+    rms = float(np.sqrt(np.mean([(m - n) ** 2 for m, n in pairs]))) if pairs else None
+    # a true mode counts as found when its nearest fitted mode is within 5 % and no other true mode's
+    found = {r["fitted_index"] for r in resonances if abs(r.get("freq_error_pct", 100.0)) < 5}
+    return {"modes_found": f"{len(found)} of {len(resonances)}",
+            "max_freq_error_pct": max(ferr) if ferr else None,
+            "max_damping_error_pct": max(zerr) if zerr else None,
+            "speed_rms_error_vs_nominal_mm_s": rms,
+            "speed_rms_error_vs_mc_mean_mm_s": report_rms}
 
-    return finite(obj)
+
+def _finite(obj: Any) -> Any:
+    from labkit.jsonutil import to_jsonable
+
+    return to_jsonable(obj, finite=True)
 
 
 def format_summary(s: dict[str, Any]) -> str:
@@ -468,6 +491,8 @@ def format_summary(s: dict[str, Any]) -> str:
         lines.append(f"  {r['mode']:8} {r['true_freq_hz']:9.1f} {r['freq_hz']:9.1f} +-{r['freq_hz_std']:5.1f} "
                      f"{r['freq_error_pct']:+6.2f}%   {r['true_damping_ratio']:9.4f} "
                      f"{r['damping_ratio']:8.4f} +-{r['damping_ratio_std']:6.4f} {r['damping_error_pct']:+6.1f}%")
+    lines.append(f"  modes found: {s['headline']['modes_found']} (the tether and in-chip knee modes exist only "
+                 "in-chip: the simulator does not use them)")
     lines.append("")
     lines.append(f"Robot parameter file {f['robot_params']}:")
     for m in s["simulator_modes"]:
@@ -488,8 +513,12 @@ def format_summary(s: dict[str, Any]) -> str:
                      f"{r['simulated_mm_s']:8.2f} +- {r['simulated_std_mm_s']:4.2f}")
     lines.append("  (nominal: signed, + = forward; the tracker measures speed without direction; the Monte Carlo "
                  "draws perturb the parameters by labkit.sim.uncertainty's table)")
-    if s.get("speed_rms_error_mm_s") is not None:
-        lines.append(f"  speed RMS error (report): {s['speed_rms_error_mm_s']:.3g} mm/s")
+    h = s["headline"]
+    if h["speed_rms_error_vs_nominal_mm_s"] is not None:
+        lines.append(f"  speed RMS error, measured - nominal simulation: {h['speed_rms_error_vs_nominal_mm_s']:.3g} mm/s")
+    if h["speed_rms_error_vs_mc_mean_mm_s"] is not None:
+        lines.append(f"  speed RMS error, measured - Monte Carlo mean (the report's): "
+                     f"{h['speed_rms_error_vs_mc_mean_mm_s']:.3g} mm/s")
     lines.append("")
     lines.append("Files:")
     for key, label in (("inchip_runs", "in-chip run files"), ("shaker_run", "shaker run file"),

@@ -19,7 +19,8 @@ Everything is made by the project's own code on the demo's virtual robot
     to one point, 240 Hz at 25 um (the paper's headline drive).
 ``shaker_240hz.mkv``
     A short top-view video of the robot walking at that drive, from the
-    virtual lab's camera (Motion-JPEG in Matroska, per-frame timestamps).
+    virtual lab's camera (Motion-JPEG in Matroska, per-frame timestamps),
+    re-encoded at a lower JPEG quality to keep the sample small.
 ``shaker_240hz_track.h5`` and ``.csv``
     ``labkit track`` of that video.
 
@@ -36,12 +37,16 @@ from typing import Any, Callable
 
 import numpy as np
 
-from labkit.errors import InputError
+from labkit.errors import InputError, LabkitError
 
 GENERATOR = "labkit sample-data"
 VIDEO_FREQ_HZ = 240.0
 VIDEO_AMP_UM = 25.0
-VIDEO_S = 1.0
+VIDEO_S = 2.0
+#: JPEG quality of the sample video (the lab's camera writes 100: ~150 kB a frame)
+VIDEO_QUALITY = 70
+#: largest relative difference between the tracked speed and the simulator's for the same drive
+SPEED_CHECK_REL = 0.2
 MAX_TOTAL_BYTES = 5 * 1024 * 1024
 #: the files this command writes (the example configs are read, not written)
 OUTPUTS = ("inchip_run.h5", "robot.toml", "robot.fit.h5", "shaker_run.h5", "shaker_240hz.mkv",
@@ -128,17 +133,24 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
         drive_vpp = _drive_of(shaker)
         say(f"filming {VIDEO_S:g} s at {VIDEO_FREQ_HZ:g} Hz, {drive_vpp:.4g} Vpp -> shaker_240hz.mkv ...")
         video = out / "shaker_240hz.mkv"
-        film(lab, video, VIDEO_FREQ_HZ, drive_vpp, VIDEO_S, shaker_table)
-    # track
+        film(lab, tmp / "camera.mkv", VIDEO_FREQ_HZ, drive_vpp, VIDEO_S, shaker_table)
+        reencode(tmp / "camera.mkv", video, VIDEO_QUALITY)
+    # track, and check the walk it shows against the simulator's for the same robot and drive
     say("tracking -> shaker_240hz_track.h5 / .csv ...")
     track = track_sample(video, out / "shaker_240hz_track.h5", tag)
-    readme = write_readme(out, seed, fit, track, peaks, inchip_cfg.name, shaker_cfg.name)
+    expected = expected_speed(truth, shaker, seed)
+    if not abs(track["mean_speed_mm_s"] - expected) <= SPEED_CHECK_REL * expected:
+        raise LabkitError(f"the sample video shows {track['mean_speed_mm_s']:.3g} mm/s, the simulator gives "
+                          f"{expected:.3g} mm/s for the same robot and drive: not written as sample data "
+                          "(is labkit.sim working? see the virtual lab's log)")
+    readme = write_readme(out, seed, fit, track, peaks, inchip_cfg.name, shaker_cfg.name, expected)
     sizes = {name: (out / name).stat().st_size for name in OUTPUTS if (out / name).exists()}
     total = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     return {"out": str(out), "files": {k: str(out / k) for k in sizes}, "bytes": sizes,
             "total_bytes_folder": total, "under_5_mb": total < MAX_TOTAL_BYTES, "readme": str(readme),
             "fitted_modes_hz": [m["freq_hz"] for m in fit["fitted_modes"]],
             "robot_modal_freq_hz": fit["modal_freq_hz"], "track_speed_mm_s": track["mean_speed_mm_s"],
+            "simulated_speed_mm_s": expected,
             "wall_s": round(time.perf_counter() - t0, 1), "notes": notes}
 
 
@@ -171,6 +183,8 @@ def _relabel_params(path: Path, tmp: Path, tag: str) -> None:
     prov["generated_by"] = tag
     prov["runs"] = ["inchip_run.h5"]
     p.replace(provenance={}).to_toml(path, provenance=prov)
+    path.write_text(f"# {tag}\n# Regenerate with `{GENERATOR}`; see README.md.\n" + path.read_text(encoding="utf-8"),
+                    encoding="utf-8")
 
 
 def _one_point_shaker(table: dict[str, Any], path: Path, name: str, tag: str) -> Path:
@@ -227,6 +241,33 @@ def film(lab: Any, path: Path, freq_hz: float, drive_vpp: float, duration_s: flo
     return info
 
 
+def reencode(src: Path, dst: Path, quality: int) -> Path:
+    """Re-encode a Motion-JPEG clip at a lower JPEG quality, keeping every frame's timestamp."""
+    from analysis.track_video_io import iter_frames, open_video
+    from labkit.lab.render import write_video
+
+    cap, info = open_video(src)
+    try:
+        pairs = list(iter_frames(cap, info))
+    finally:
+        cap.release()
+    if not pairs:
+        raise LabkitError(f"the virtual camera wrote no frames to {src}")
+    return write_video(dst, [f for f, _ in pairs], info.fps_nominal or 30.0,
+                       t_s=[t for _, t in pairs], quality=int(quality))
+
+
+def expected_speed(robot: Any, shaker_run: Path, seed: int) -> float:
+    """The simulator's speed for ``robot`` at the shaker run's first point (measured tray amplitude)."""
+    from labkit.h5io import open_h5
+    from labkit.sim import Shaker, simulate
+
+    with open_h5(shaker_run, kind="run_shaker") as f:
+        freq = float(f["points/freq_hz"][0])
+        amp = float(f["points/tray_amp_um"][0])
+    return abs(float(simulate(robot, Shaker(freq_hz=freq, amp_um=amp), duration_s=1.0, seed=seed).mean_speed_mm_s))
+
+
 def track_sample(video: Path, out: Path, tag: str) -> dict[str, Any]:
     """Track the video (labkit track's functions) into ``out`` and ``out.csv``, labelled."""
     import h5py
@@ -252,7 +293,7 @@ def track_sample(video: Path, out: Path, tag: str) -> dict[str, Any]:
 
 
 def write_readme(out: Path, seed: int, fit: dict[str, Any], track: dict[str, Any], peaks: list[float],
-                 inchip_name: str, shaker_name: str) -> Path:
+                 inchip_name: str, shaker_name: str, expected: float) -> Path:
     """``README.md``: what each file is, which command made it, and its size."""
     def size(name: str) -> str:
         p = out / name
@@ -281,9 +322,13 @@ def write_readme(out: Path, seed: int, fit: dict[str, Any], track: dict[str, Any
         f"| `shaker_run.h5` | shaker run (`run_shaker`): `{shaker_name}` at {VIDEO_FREQ_HZ:g} Hz, {VIDEO_AMP_UM:g} um | "
         f"`{GENERATOR}` (`labkit shaker ... --lab`) | {size('shaker_run.h5')} |",
         f"| `shaker_240hz.mkv` | {VIDEO_S:g} s top-view video of the robot walking at that drive (virtual camera, "
-        f"MJPEG, per-frame timestamps) | `{GENERATOR}` (the lab's camera, `CAM:REC`) | {size('shaker_240hz.mkv')} |",
+        f"MJPEG re-encoded at quality {VIDEO_QUALITY} to stay small, per-frame timestamps) | `{GENERATOR}` (the lab's "
+        f"camera, `CAM:REC`) | {size('shaker_240hz.mkv')} |",
         f"| `shaker_240hz_track.h5`, `.csv` | track of the video: mean speed {track['mean_speed_mm_s']:.2f} mm/s | "
         f"`{GENERATOR}` (`labkit track`) | {size('shaker_240hz_track.h5')}, {size('shaker_240hz_track.csv')} |",
+        "",
+        f"Check made by the command: the tracked speed ({track['mean_speed_mm_s']:.2f} mm/s) is within "
+        f"{SPEED_CHECK_REL:.0%} of the simulator's for the same robot and drive ({expected:.2f} mm/s).",
         "",
         "Labels: HDF5 files carry root attributes `generated_by`, `generator` and `sample_description`;",
         "`robot.toml` has `generated_by` in its `[provenance]`; the CSV starts with a comment line.",

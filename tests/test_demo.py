@@ -64,6 +64,7 @@ def test_quick_demo_identifies_the_virtual_robots_resonances(quick_demo):
         assert abs(r["damping_ratio"] / z0 - 1) < 0.15, (name, r)
     # three distinct fitted modes, not one mode matched three times
     assert len({r["fitted_index"] for r in rows.values()}) == 3
+    assert s["headline"]["modes_found"] == "3 of 3" and s["headline"]["max_freq_error_pct"] < 3
 
 
 @pytest.mark.slow

@@ -78,6 +78,10 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     for kind, opts in SWEEPABLE.items():
         p = swsub.add_parser(kind, parents=[common, run_opts, sweep_opts],
                              help=f"sweep a {kind} run over one of {', '.join(o for o, _, _ in opts)}")
+        if kind == "shaker":
+            p.add_argument("--accel-limit-g", default=None, metavar="G",
+                           help="cap the tray's peak acceleration (g) by cutting the amplitude, as a "
+                                "force-limited shaker does at high frequency (default: no cap)")
         for opt, field, unit in opts:
             default = DEFAULTS[kind].get(field)
             p.add_argument(opt, default=None if default is None else str(default), metavar="X|A:B:N",
@@ -250,9 +254,11 @@ def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
         params, _ = apply_value(params, _scenario_from(kind, base), "mass_mg", fixed["mass_mg"])
     draws = integer(args.draws, "--draws")
     workers = None if args.workers is None else integer(args.workers, "--workers", minimum=1)
+    accel = getattr(args, "accel_limit_g", None)
     s = sweep(params, _scenario_from(kind, base), quantity=quantity, values=values, draws=draws,
               duration_s=number(args.duration_s, "--duration-s", positive=True), scheduler=args.scheduler,
-              workers=workers, seed=integer(args.seed, "--seed"), quiet=args.quiet)
+              workers=workers, seed=integer(args.seed, "--seed"), quiet=args.quiet,
+              accel_limit_g=None if accel is None else number(accel, "--accel-limit-g", positive=True))
     summary = s.summary()
     summary["ablate"] = args.ablate
     if args.out:
@@ -294,8 +300,10 @@ def _print_single(s: dict[str, Any]) -> None:
 def _print_sweep(s: dict[str, Any]) -> None:
     q = s["quantity"]
     print(f"sweep of {q} [{s['units']}], {s['draws']} draw(s) per point")
-    print(f"  {q:>12}  mean mm/s   std mm/s  pattern")
+    amp = "amp_um" in s["points"][0] if s["points"] else False
+    print(f"  {q:>12}  mean mm/s   std mm/s  pattern" + ("          amp um" if amp else ""))
     for p in s["points"]:
-        print(f"  {p[q]:12.4g}  {p['mean_speed_mm_s']:9.3f}  {p['std_speed_mm_s']:9.3f}  {p['dominant_pattern']}")
+        print(f"  {p[q]:12.4g}  {p['mean_speed_mm_s']:9.3f}  {p['std_speed_mm_s']:9.3f}  {p['dominant_pattern']:<15}"
+              + (f"  {p['amp_um']:7.3g}" if amp else ""))
     if "out" in s:
         print(f"  wrote {s['out']}")

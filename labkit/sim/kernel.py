@@ -271,7 +271,10 @@ def _advance(P, S, mode, t, tau, dt, W):
     hb = P[H0] + S[SQ + 1] - zg
     hh = hb if hb > P[HMIN] else P[HMIN]
     cb = P[BGB] / (hh * hh * hh)
-    vz1 = (u1 + tau * (Fz / mb + cb * vg1 / mb)) / (1.0 + tau * cb / mb)
+    if mode[6] == REST:
+        vz1 = vg1                # the body rests on the ground: it moves with it
+    else:
+        vz1 = (u1 + tau * (Fz / mb + cb * vg1 / mb)) / (1.0 + tau * cb / mb)
     a0 = Fy / mb
     a1 = (vz1 - u1) / tau
     a2 = Mx / P[IX]
@@ -289,7 +292,10 @@ def _advance(P, S, mode, t, tau, dt, W):
     n3 = S[SU + 3] + tau * a3
     n4 = S[SU + 4] + tau * a4
     S[SQ + 0] += 0.5 * tau * (u0 + n0)
-    S[SQ + 1] += 0.5 * tau * (u1 + vz1)
+    if mode[6] == REST:
+        S[SQ + 1] = zg1 - P[H0]
+    else:
+        S[SQ + 1] += 0.5 * tau * (u1 + vz1)
     S[SQ + 2] += 0.5 * tau * (S[SU + 2] + n2)
     S[SQ + 3] += 0.5 * tau * (S[SU + 3] + n3)
     S[SQ + 4] += 0.5 * tau * (S[SU + 4] + n4)
@@ -436,6 +442,17 @@ def _impact(P, S, mode, j, t, events, count):
 
 
 @njit(cache=True)
+def _body_fz(P, S):
+    """Vertical force on the body beyond its weight: legs (deviation) and drag."""
+    fz = 0.0
+    for j in range(6):
+        for i in range(3):
+            fz += P[MM + i] * (P[K + i] * S[SXI + 3 * j + i] + P[B + i] * S[SV + 3 * j + i]) * P[CZ + i]
+    u1 = S[SU + 1]
+    return fz - P[AD] * u1 * abs(u1)
+
+
+@njit(cache=True)
 def _friction(P, S, mode, vg, ag, W):
     """Coulomb friction (beyond the paper; off when mu is inf): which pinned feet slip now."""
     for j in range(6):
@@ -455,6 +472,12 @@ def _friction(P, S, mode, vg, ag, W):
 
 
 @njit(cache=True)
+def _crossing(h0, v0, h1, rem):
+    """When a gap going from h0 >= 0 to h1 < 0 over rem reaches zero (linear)."""
+    return rem * h0 / (h0 - h1) if h0 > 0.0 else 0.0
+
+
+@njit(cache=True)
 def _step(P, S, T, mode, t, dt, W, events, count):
     """One step with event location; the result is left in S."""
     zg, vg, ag = _ground(P, t)
@@ -470,6 +493,8 @@ def _step(P, S, T, mode, t, dt, W, events, count):
         else:
             mode[j] = ADHESION if f > 0.0 else REST
     _friction(P, S, mode, vg, ag, W)
+    if mode[6] == REST and _body_fz(P, S) > P[MB] * ag:
+        mode[6] = AIR            # the legs lift the body off faster than the ground moves
     remaining = dt
     now = t
     n_ev = 0
@@ -493,7 +518,7 @@ def _step(P, S, T, mode, t, dt, W, events, count):
                 continue
             h0, v0 = _gap_vrel(P, S, j, zg0, vg0)
             if h0 >= -P[GAPTOL]:
-                tau = remaining * h0 / (h0 - h1) if h0 > 0.0 else 0.0
+                tau = _crossing(h0, v0, h1, remaining)
             elif v0 < 0.0:
                 tau = 0.0
             else:
@@ -503,9 +528,9 @@ def _step(P, S, T, mode, t, dt, W, events, count):
                 who = j
         hb0 = P[H0] + S[SQ + 1] - zg0
         hb1 = P[H0] + T[SQ + 1] - zg1
-        if hb1 < 0.0:
-            if hb0 >= 0.0:
-                tau = remaining * hb0 / (hb0 - hb1)
+        if hb1 < 0.0 and mode[6] != REST:
+            if hb0 >= -P[GAPTOL]:
+                tau = _crossing(hb0, S[SU + 1] - vg0, hb1, remaining)
             elif S[SU + 1] - vg0 < 0.0:
                 tau = 0.0
             else:
@@ -527,6 +552,12 @@ def _step(P, S, T, mode, t, dt, W, events, count):
             zg, vg, ag = _ground(P, now)
             vpre = S[SU + 1] - vg
             S[SU + 1] = vg - P[CRB] * vpre
+            if P[CRB] * abs(vpre) <= P[G] * dt or vpre >= 0.0:
+                # a rebound slower than gravity adds in a step, or a body caught
+                # at the step's start on its way back: it comes to rest on the
+                # ground (no Zeno cascade of ever smaller bounces)
+                S[SU + 1] = vg
+                mode[6] = REST
             if P[BNS] != 0.0:
                 S[SU + 0] = 0.0          # no lateral slip of the body either
             S[SQ + 1] = zg - P[H0]
@@ -600,7 +631,10 @@ def run(P: np.ndarray, state: np.ndarray, mode: np.ndarray, n_steps: int, dt: fl
         n_skip: int, n_rec: int, ev_cap: int) -> dict:
     """Integrate with the compiled kernel; returns the output arrays (same as the reference's)."""
     S = np.ascontiguousarray(state, dtype=np.float64).copy()
-    md = np.ascontiguousarray(mode, dtype=np.int64).copy()
+    md = np.zeros(7, np.int64)          # 6 feet, then the body (AIR or REST on the ground)
+    md[:6] = mode[:6]
+    if len(mode) > 6:
+        md[6] = mode[6]
     out = {"rec": np.zeros((n_rec, _m.REC_COLS)), "rec_contact": np.zeros((n_rec, 6), np.int8),
            "frac": np.zeros((6, 3)), "max_air": np.zeros(6), "count": np.zeros(_m.CNT_SIZE, np.int64),
            "events": np.zeros((ev_cap, _m.EV_COLS))}
@@ -608,5 +642,5 @@ def run(P: np.ndarray, state: np.ndarray, mode: np.ndarray, n_steps: int, dt: fl
                int(n_skip), out["rec"], out["rec_contact"], out["frac"], out["max_air"], out["count"],
                out["events"])
     out["state"] = S
-    out["mode"] = md
+    out["mode"] = md.astype(np.int8)
     return out

@@ -45,7 +45,9 @@ class RefState:
         self.v = flat[M.S_V:M.S_V + 18].reshape(6, 3).copy()
         self.tc = flat[M.S_TC:M.S_TC + 6].copy()
         self.ypin = flat[M.S_YPIN:M.S_YPIN + 6].copy()
-        self.mode = mode.astype(np.int64).copy()
+        # contact modes of the 6 feet, then of the body (AIR, or REST on the ground)
+        self.mode = np.zeros(7, np.int64)
+        self.mode[:len(mode)] = mode[:7]
 
     def copy(self) -> "RefState":
         return RefState(self.flat(), self.mode)
@@ -206,13 +208,18 @@ def advance(m: Model, st: RefState, t: float, tau: float, slip: np.ndarray | Non
     Mz = np.sum(m.xj * fy)
     hb = m.h0 + q[1] - zg
     cb = m.b_g_body / max(hb, m.h_min) ** 3
-    vz1 = (u[1] + tau * (Fz / m.m_b + cb * vg1 / m.m_b)) / (1.0 + tau * cb / m.m_b)
+    if st.mode[6] == REST:
+        vz1 = vg1                # the body rests on the ground: it moves with it
+    else:
+        vz1 = (u[1] + tau * (Fz / m.m_b + cb * vg1 / m.m_b)) / (1.0 + tau * cb / m.m_b)
     acc = np.array([Fy / m.m_b, (vz1 - u[1]) / tau, Mx / m.inertia[0], My / m.inertia[1], Mz / m.inertia[2]])
     az0, ay0, vz0, vy0 = attachment(m, q, u)
     u1 = u + tau * acc
     u1[1] = vz1
     st.q = q + 0.5 * tau * (u + u1)
     st.u = u1
+    if st.mode[6] == REST:
+        st.q[1] = zg1 - m.h0
     a_att_z = acc[1] + m.yj * acc[2] - m.xj * acc[3]
     a_att_y = acc[0] + m.xj * acc[4]
     az1, ay1, vz1a, vy1a = attachment(m, st.q, st.u)
@@ -291,11 +298,19 @@ def impact(m: Model, st: RefState, j: int, t: float, out) -> None:
         pin_pair(m, st, j, zg, vg)
 
 
-def body_impact(m: Model, st: RefState, t: float, out) -> None:
-    """Restitution of the body's vertical velocity against the ground."""
+def body_impact(m: Model, st: RefState, t: float, dt: float, out) -> None:
+    """Restitution of the body's vertical velocity against the ground.
+
+    A rebound slower than what gravity adds in one step ends the bouncing: the
+    body rests on the ground (moves with it) until the legs lift it off;
+    otherwise it would bounce ever smaller (Zeno).
+    """
     zg, vg, _ = ground(m, t)
     vpre = st.u[1] - vg
     st.u[1] = vg - m.c_r_body * vpre
+    if m.c_r_body * abs(vpre) <= m.g * dt or vpre >= 0.0:
+        st.u[1] = vg
+        st.mode[6] = REST
     if m.body_no_slip:
         st.u[0] = 0.0          # no lateral slip of the body either
     st.q[1] = zg - m.h0
@@ -323,10 +338,20 @@ def release(m: Model, st: RefState, t: float) -> np.ndarray:
     return released
 
 
+def crossing(h0: float, v0: float, h1: float, rem: float) -> float:
+    """When a gap going from h0 >= 0 to h1 < 0 over rem reaches zero (linear)."""
+    return rem * h0 / (h0 - h1) if h0 > 0.0 else 0.0
+
+
 def step(m: Model, st: RefState, t: float, dt: float, out) -> RefState:
     """One full step with event location; returns the new state."""
     released = release(m, st, t)
     slip = friction(m, st, t)
+    _, _, ag = ground(m, t)
+    if st.mode[6] == REST:
+        fy, fz = leg_forces(m, st)
+        if fz.sum() - m.a_drag * st.u[1] * abs(st.u[1]) > m.m_b * ag:
+            st.mode[6] = AIR     # the legs lift the body off faster than the ground moves
     remaining, now, n_ev = dt, t, 0
     while True:
         trial = st.copy()
@@ -341,7 +366,7 @@ def step(m: Model, st: RefState, t: float, dt: float, out) -> RefState:
             if st.mode[j] != AIR or trial.mode[j] != AIR or h1[j] >= -M.GAP_TOL_M:
                 continue
             if h0[j] >= -M.GAP_TOL_M:
-                tau = remaining * h0[j] / (h0[j] - h1[j]) if h0[j] > 0.0 else 0.0
+                tau = crossing(h0[j], v0[j], h1[j], remaining)
             elif v0[j] < 0.0:
                 tau = 0.0
             else:
@@ -350,9 +375,9 @@ def step(m: Model, st: RefState, t: float, dt: float, out) -> RefState:
                 best, who = tau, j
         hb0 = m.h0 + st.q[1] - zg0
         hb1 = m.h0 + trial.q[1] - zg1
-        if hb1 < 0.0:
-            if hb0 >= 0.0:
-                tau = remaining * hb0 / (hb0 - hb1)
+        if hb1 < 0.0 and st.mode[6] != REST:
+            if hb0 >= -M.GAP_TOL_M:
+                tau = crossing(hb0, st.u[1] - vg0, hb1, remaining)
             elif st.u[1] - vg0 < 0.0:
                 tau = 0.0
             else:
@@ -369,7 +394,7 @@ def step(m: Model, st: RefState, t: float, dt: float, out) -> RefState:
         now += best
         remaining -= best
         if who == -1:
-            body_impact(m, st, now, out)
+            body_impact(m, st, now, dt, out)
         elif released[who] >= 0.0:
             # Released at the start of this step but back on the ground within it:
             # the foot did not actually leave (the "would move away" test), no impact.
@@ -416,7 +441,7 @@ def record(m: Model, st: RefState, t: float, out: RefOutputs, row: int) -> None:
     r[M.REC_FZ:M.REC_FZ + 6] = az + st.xi @ m.cz
     r[M.REC_FY:M.REC_FY + 6] = m.y_foot_eq + ay + st.xi @ m.cy
     r[M.REC_KV:M.REC_KV + 6] = vz + st.v @ (m.ktf * m.cz)
-    out.rec_contact[row] = st.mode
+    out.rec_contact[row] = st.mode[:6]
 
 
 def integrate(m: Model, flat: np.ndarray, mode: np.ndarray, n_steps: int, dt: float, n_rec_every: int,

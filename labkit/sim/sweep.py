@@ -133,6 +133,8 @@ class SweepResult:
                 "patterns": self.pattern_counts(i),
                 "dominant_pattern": self.dominant_pattern(i),
             })
+            if "amp_um" in self.meta and self.quantity != "amp_um":
+                points[-1]["amp_um"] = float(self.meta["amp_um"][i])
         return {"quantity": self.quantity, "units": units_of(self.quantity),
                 "draws": self.draws, "scenario": self.scenario,
                 "duration_s": self.meta.get("duration_s"), "seed": self.meta.get("seed"),
@@ -215,6 +217,26 @@ def apply_value(params: Any, scenario: Any, quantity: str, value: float) -> tupl
                      expected="freq_hz, amp_um, voltage_v, mass_mg or a RobotParams field")
 
 
+#: Standard gravity, for accelerations given in g.
+G0_M_S2 = 9.80665
+
+
+def limit_acceleration(scenario: Any, accel_limit_g: float | None) -> Any:
+    """A shaker scenario with its amplitude cut to a peak-acceleration limit.
+
+    ``amp_um = min(amp_um, a_max / (2 pi f)^2)``: what a force-limited
+    shaker does (its amplitude falls as 1/f^2 above some frequency; the
+    paper: "maximum amplitudes achievable by the shaker become smaller" at
+    high frequency). ``None`` or a scenario without ``amp_um``: unchanged.
+    """
+    if accel_limit_g is None or not hasattr(scenario, "amp_um"):
+        return scenario
+    amp_max_um = accel_limit_g * G0_M_S2 / (2 * np.pi * scenario.freq_hz) ** 2 * 1e6
+    if scenario.amp_um <= amp_max_um:
+        return scenario
+    return dataclasses.replace(scenario, amp_um=float(amp_max_um))
+
+
 def _task_seed(seed: int, draw: int) -> int:
     """One integer seed per draw, the same at every point (common random numbers)."""
     return int(np.random.SeedSequence([int(seed), int(draw)]).generate_state(1)[0])
@@ -228,11 +250,12 @@ def run_point(task: tuple) -> dict[str, Any]:
     from labkit.sim import simulate
     from labkit.sim.uncertainty import draw_params
 
-    params, scenario, quantity, value, draw, seed, duration_s, table = task
+    params, scenario, quantity, value, draw, seed, duration_s, table, accel_limit_g = task
     task_seed = _task_seed(seed, draw)
     if draw > 0:
         params = draw_params(params, np.random.default_rng(task_seed), table)
     params, scenario = apply_value(params, scenario, quantity, value)
+    scenario = limit_acceleration(scenario, accel_limit_g)
     r = simulate(params, scenario, duration_s=duration_s, seed=task_seed)
     return result_row(r)
 
@@ -259,7 +282,8 @@ def _feet(cf: Any) -> list:
 def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
           values: Sequence[float] = (), draws: int = 0, duration_s: float = 2.0,
           scheduler: str | None = None, workers: int | None = None, seed: int = 0,
-          quiet: bool = False, table: dict[str, float] | None = None) -> SweepResult:
+          quiet: bool = False, table: dict[str, float] | None = None,
+          accel_limit_g: float | None = None) -> SweepResult:
     """Simulate ``base_scenario`` at every value of ``quantity``, with Monte Carlo draws.
 
     Parameters
@@ -291,6 +315,10 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
     table:
         Relative standard uncertainties (default
         :data:`labkit.sim.uncertainty.DEFAULT_TABLE`).
+    accel_limit_g:
+        Shaker runs only: cap the tray's peak acceleration (in g) by cutting
+        the amplitude (:func:`limit_acceleration`); the amplitude used at
+        each point is in ``meta["amp_um"]``. ``None``: the amplitude is kept.
 
     Returns
     -------
@@ -312,7 +340,10 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
     # Fail on a bad quantity before any process starts.
     apply_value(params, base_scenario, quantity, values[0])
     n_draws = max(1, int(draws))
-    tasks = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table)
+    if accel_limit_g is not None and not accel_limit_g > 0:
+        raise InputError(f"acceleration limit must be > 0 g, got {accel_limit_g}", key="accel_limit_g",
+                         expected="a peak acceleration in g, > 0")
+    tasks = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table, accel_limit_g)
              for v in values for d in range(n_draws)]
     rows = map_tasks(run_point, tasks, scheduler=scheduler, workers=workers,
                      desc=f"sweep {quantity}", quiet=quiet)
@@ -325,6 +356,10 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
             "uncertainty_table": table, "scheduler": scheduler or "local",
             "draw_0": "nominal", "seeding": "SeedSequence([seed, draw]) per draw, same at every point",
             "task_seeds": [_task_seed(seed, d) for d in range(n_draws)]}
+    if accel_limit_g is not None and hasattr(base_scenario, "amp_um"):
+        meta["accel_limit_g"] = float(accel_limit_g)
+        meta["amp_um"] = [float(limit_acceleration(apply_value(params, base_scenario, quantity, v)[1],
+                                                   accel_limit_g).amp_um) for v in values]
     return SweepResult(quantity=quantity, values=values, speeds_mm_s=speeds, contact_fraction=frac,
                        patterns=patterns, impacts=impacts, scenario=scenario_dict(base_scenario),
                        params_toml=params.to_toml_text(), meta=meta)

@@ -20,6 +20,7 @@ def _all_inputs(inputs):
             str(inputs["sim_300"]), "--no-simulate"]
 
 
+@pytest.mark.slow
 def test_full_report_is_self_contained_and_numbers_agree(inputs, tmp_path):
     out = tmp_path / "rep"
     proc = run_cli("report", *_all_inputs(inputs), "--out", str(out), "--json")

@@ -133,3 +133,17 @@ def test_bad_quantity_and_values(params):
         sweep(params, Shaker(freq_hz=240, amp_um=25), "not_a_thing", [1.0], scheduler="serial", quiet=True)
     with pytest.raises(InputError):
         sweep(params, Shaker(freq_hz=240, amp_um=25), "freq_hz", [], scheduler="serial", quiet=True)
+
+
+def test_acceleration_limit_cuts_amplitude_as_one_over_f_squared(params):
+    from labkit.sim.sweep import limit_acceleration
+
+    g = 9.80665
+    s = limit_acceleration(Shaker(freq_hz=1000, amp_um=25), 5.0)
+    assert s.amp_um == pytest.approx(5.0 * g / (2 * np.pi * 1000) ** 2 * 1e6)
+    assert limit_acceleration(Shaker(freq_hz=100, amp_um=25), 5.0).amp_um == 25  # below the cap
+    assert limit_acceleration(PZT(freq_hz=1800, voltage_v=20), 5.0) == PZT(freq_hz=1800, voltage_v=20)
+    sw = sweep(params, Shaker(freq_hz=240, amp_um=25), "freq_hz", [100.0, 1000.0], duration_s=0.01,
+               scheduler="serial", quiet=True, accel_limit_g=5.0)
+    amps = [p["amp_um"] for p in sw.summary()["points"]]
+    assert amps == [25.0, pytest.approx(s.amp_um)]
