@@ -83,7 +83,8 @@ def _map_dask(fn, items, scheduler, desc, quiet):
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * len(items)
         with progress(len(items), desc, quiet=quiet) as bar:
-            for fut in dask_completed(futures):
+            # loop=: the client is not the default one, so as_completed cannot find it alone
+            for fut in dask_completed(futures, loop=client.loop):
                 results[index[fut.key]] = fut.result()
                 bar.update(1)
         return results

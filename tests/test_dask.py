@@ -11,15 +11,6 @@ import pytest
 distributed = pytest.importorskip("distributed")   # a declared dependency: present in the venv and CI
 
 
-# labkit/executor.py (as committed) iterates ``distributed.as_completed(futures)`` for a
-# client made with ``set_as_default=False``; as_completed then looks for a default client
-# and every ``--scheduler tcp://...`` run fails with "ValueError: No clients found".
-# The one-line fix (``as_completed(futures, loop=client.loop)``) is in the issue-7 report;
-# strict: once the executor is fixed these XPASS and fail, so the marker goes with the fix.
-EXECUTOR_DASK_BUG = pytest.mark.xfail(raises=ValueError, strict=True,
-                                      reason="executor: as_completed without loop= (see issue-7 report)")
-
-
 @pytest.fixture(scope="module")
 def scheduler():
     from distributed import LocalCluster
@@ -32,7 +23,6 @@ def scheduler():
 
 
 @pytest.mark.slow
-@EXECUTOR_DASK_BUG
 def test_map_tasks_on_dask_equals_local(scheduler):
     from labkit.executor import map_tasks
 
@@ -42,7 +32,6 @@ def test_map_tasks_on_dask_equals_local(scheduler):
 
 
 @pytest.mark.slow
-@EXECUTOR_DASK_BUG
 def test_both_dask_workers_take_part(scheduler):
     from distributed import Client
 
@@ -64,7 +53,6 @@ def _pid_after_sleep(seconds: float) -> int:
 
 
 @pytest.mark.slow
-@EXECUTOR_DASK_BUG
 def test_sweep_on_dask_equals_local_and_serial(scheduler):
     from labkit.sim import RobotParams, Shaker, sweep
 

@@ -126,3 +126,18 @@ def test_refine_lines_puts_fine_lines_across_narrow_peaks_only():
     assert np.max(np.diff(np.concatenate([[f[k - 1]], lines, [f[k + 1]]]))) <= 0.015 * peaks[0] + 1e-9
     # a flat response has no peak to refine
     assert len(refine_lines(f, [np.ones(f.size)])[0]) == 0
+
+
+@pytest.mark.slow
+def test_quick_demo_human_summary_names_the_paths_and_figures(quick_demo):
+    from labkit.demo_results import format_summary
+
+    cwd, _, s = quick_demo
+    text = format_summary(s)
+    for key in ("report_html", "robot_params", "shaker_run", "sim_sweep"):
+        assert s["files"][key] in text
+    for r in s["resonances"]:
+        assert f"{r['true_freq_hz']:9.1f} {r['freq_hz']:9.1f}" in text
+    for r in s["speeds"]:
+        assert f"{r['measured_mm_s']:6.2f}" in text
+    assert "not measurable in-chip" in text and "--assign 1=#" in text
