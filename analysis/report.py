@@ -180,7 +180,8 @@ def _sim_curves(sweeps: list[dict], band_k: float) -> list[dict[str, Any]]:
         lo = np.maximum(lo, 0.0)                    # a speed magnitude's band stops at zero
         order = np.argsort(sw.values)
         curves.append({"file": s["file"], "label": Path(s["file"]).name, "freq_hz": sw.values[order],
-                       "mean_mm_s": mean[order], "lo_mm_s": lo[order], "hi_mm_s": hi[order], "sweep": sw})
+                       "mean_mm_s": mean[order], "lo_mm_s": lo[order], "hi_mm_s": hi[order],
+                       "nominal_mm_s": np.abs(sw.speeds_mm_s[:, 0])[order], "sweep": sw})
     return curves
 
 
@@ -232,6 +233,14 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
                             ("speed correlation", "correlation", "1"),
                             ("fraction of measured points inside band", "fraction_inside_band", "1")):
                 rows.append({"quantity": q, "value": a[k], "units": u, "n": a["n_points"], "provenance": p})
+            # the nominal robot alone (draw 0): the Monte Carlo mean of speed magnitudes sits above it
+            pn = dict(p, simulated_speed="|mean forward velocity| of the nominal robot (draw 0)", band="none")
+            an = compare.speed_agreement(m["freq_hz"], m["speed_mm_s"], m["lo_mm_s"], m["hi_mm_s"], c["freq_hz"],
+                                         c["nominal_mm_s"], c["nominal_mm_s"], c["nominal_mm_s"], provenance=pn)
+            numbers[c["file"] + " (nominal)"] = an
+            for q, k, u in (("speed RMS error (nominal robot)", "rms_error_mm_s", "mm/s"),
+                            ("speed correlation (nominal robot)", "correlation", "1")):
+                rows.append({"quantity": q, "value": an[k], "units": u, "n": an["n_points"], "provenance": pn})
             sec["html"].append(f"<h3>Measured against {rh._e(c['label'])} ({amp:.3g} um)</h3>")
             sec["html"].append(rh.table(
                 ["freq_hz", "measured_mm_s", "CI lo", "CI hi", "simulated_mm_s", "band lo", "band hi", "inside band"],

@@ -103,6 +103,9 @@ def speed_figure(measured: dict[str, Any] | None, sims: list[dict[str, Any]], pa
         ax.fill_between(s["freq_hz"], s["lo_mm_s"], s["hi_mm_s"], color=c, alpha=0.2,
                         label=f"simulated band ({s['label']})")
         ax.plot(s["freq_hz"], s["mean_mm_s"], "--", color=c, lw=1.5, label=f"simulated mean ({s['label']})")
+        if "nominal_mm_s" in s:
+            ax.plot(s["freq_hz"], s["nominal_mm_s"], ":", color=c, lw=1.2, marker=".",
+                    label=f"nominal robot ({s['label']})")
     if measured is not None and measured["freq_hz"].size:
         m = measured
         amps = np.asarray(m.get("amp_um", np.full(m["freq_hz"].size, np.nan)), float)

@@ -189,6 +189,7 @@ def _dominant(labels: Sequence[str]) -> str:
 def calibrate(params: Any, names: Sequence[str], obs: Observations, *, duration_s: float = 1.0, seed: int = 0,
               bounds: dict[str, tuple[float, float]] | None = None, rel_step: float = 0.05,
               pattern_weight: float = 1.0, max_iterations: int = 10, min_std_mm_s: float = 0.05, scan: int = 0,
+              scan_rounds: int = 3,
               scheduler: str | None = None, workers: int | None = None, quiet: bool = False) -> Calibration:
     """Fit ``names`` of ``params`` to the observed speeds (and patterns).
 
@@ -216,6 +217,9 @@ def calibrate(params: Any, names: Sequence[str], obs: Observations, *, duration_
     scan:
         Size of a Latin-hypercube sample of the bounded box scored before the
         local fit, which then starts from the best point (0: start from ``params``).
+    scan_rounds:
+        Rounds of that sampling; each round after the first samples a box 4x
+        narrower (per parameter) around the best point so far.
     """
     from scipy.optimize import least_squares
 
@@ -291,20 +295,28 @@ def calibrate(params: Any, names: Sequence[str], obs: Observations, *, duration_
     x_start = np.clip(x0 / scale, lo_a, hi_a)
     before_rows = run_many([x_start])[0]
     scanned = 0
+    zoom = 4.0
     if scan > 0:
         # A hybrid model's speed is only piecewise smooth in its parameters: a local fit from
-        # the start value can stall in a kink. Score a space-filling sample of the bounded box
-        # (one batch of simulations) and start the local fit from the best point.
+        # the start value stalls in kinks. Score a space-filling sample of the bounded box (one
+        # batch of simulations), then of boxes shrinking around the best point so far (a zoom
+        # search), and start the local fit from the best point found.
         from scipy.stats import qmc
 
-        sample = qmc.LatinHypercube(d=x0.size, seed=seed).random(int(scan))
-        cands = [np.asarray(c, float) for c in qmc.scale(sample, lo_a, hi_a)]
-        rows = run_many(cands)
-        costs = [float(np.sum(residual_of(r) ** 2)) for r in rows]
-        best = int(np.argmin(costs))
-        if costs[best] < float(np.sum(residual_of(before_rows) ** 2)):
-            x_start = cands[best]
-        scanned = len(cands)
+        best_x, best_cost = x_start, float(np.sum(residual_of(before_rows) ** 2))
+        lo_box, hi_box = lo_a.copy(), hi_a.copy()
+        for rnd in range(max(1, int(scan_rounds))):
+            sample = qmc.LatinHypercube(d=x0.size, seed=seed + rnd).random(int(scan))
+            cands = [np.asarray(c, float) for c in qmc.scale(sample, lo_box, hi_box)]
+            for c, rows in zip(cands, run_many(cands)):
+                cost = float(np.sum(residual_of(rows) ** 2))
+                if cost < best_cost:
+                    best_x, best_cost = c, cost
+            scanned += len(cands)
+            half = (hi_box - lo_box) / (2 * zoom)
+            lo_box = np.maximum(lo_a, best_x - half)
+            hi_box = np.minimum(hi_a, best_x + half)
+        x_start = best_x
     sol = least_squares(fun, x_start, jac=jac, bounds=(lo_a, hi_a), method="trf", x_scale=1.0,
                         max_nfev=max_iterations + 1, diff_step=None)
     after_rows = run_many([np.asarray(sol.x, float)])[0]
@@ -326,7 +338,7 @@ def calibrate(params: Any, names: Sequence[str], obs: Observations, *, duration_
                        n_iterations=counter["jac"], status=str(sol.message),
                        settings={"duration_s": duration_s, "seed": seed, "rel_step": rel_step,
                                  "pattern_weight": pattern_weight if use_patterns else 0.0,
-                                 "min_std_mm_s": min_std_mm_s, "scan": scanned,
+                                 "min_std_mm_s": min_std_mm_s, "scan": scanned, "scan_rounds": scan_rounds if scan else 0,
                                  "start": dict(zip(labels, (x_start * scale).tolist())),
                                  "bounds": {n: [float(a), float(b)] for n, a, b in zip(labels, lo_a * scale, hi_a * scale)},
                                  "scheduler": scheduler or "local"},

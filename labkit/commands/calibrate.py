@@ -38,6 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--max-iterations", type=int, default=10)
     parser.add_argument("--scan", type=int, default=6,
                         help="Latin-hypercube points scored within the bounds before the local fit (0: none)")
+    parser.add_argument("--scan-rounds", type=int, default=3,
+                        help="rounds of scanning, each in a 4x narrower box around the best point (default 3)")
     parser.add_argument("--pattern-weight", type=float, default=1.0,
                         help="weight of leg-pattern residuals (0: speeds only)")
     parser.add_argument("--min-std-mm-s", type=float, default=0.05, help="floor of the speed std (mm/s)")
@@ -60,7 +62,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     obs = observations_from_files(args.measured, amp_um=args.amp_um)
     cal = calibrate(params, names, obs, duration_s=args.duration_s, seed=args.seed, bounds=dict(args.bounds),
                     rel_step=args.rel_step, pattern_weight=args.pattern_weight, max_iterations=args.max_iterations,
-                    min_std_mm_s=args.min_std_mm_s, scan=max(0, args.scan), scheduler=args.scheduler,
+                    min_std_mm_s=args.min_std_mm_s, scan=max(0, args.scan), scan_rounds=max(1, args.scan_rounds),
+                    scheduler=args.scheduler,
                     workers=args.workers, quiet=args.quiet or args.json)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

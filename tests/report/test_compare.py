@@ -75,6 +75,10 @@ def test_classify_knee_pattern():
     t = np.arange(0, 0.1, 1e-5)
     tray = np.cos(2 * np.pi * f * t)
     assert compare.classify_knee_pattern(t, tray * 1.05, tray, f)["pattern"] == "firm_contact"
+    noisy = 1.5 * np.cos(2 * np.pi * f * t - 0.3) + 0.015 * np.random.default_rng(0).standard_normal(t.size)
+    assert compare.classify_knee_pattern(t, noisy, tray, f)["pattern"] == "firm_contact"   # 1.4 % noise
+    clipped = np.minimum(1.5 * tray, 1.0)                  # flattened tops: leaves the ground each cycle
+    assert compare.classify_knee_pattern(t, clipped, tray, f)["pattern"] == "partial_contact"
     partial = tray.copy()
     partial[np.mod(t * f, 1.0) > 0.6] += 1.0               # lets go for 40 % of every cycle
     assert compare.classify_knee_pattern(t, partial, tray, f)["pattern"] == "partial_contact"

@@ -42,6 +42,9 @@ def test_full_report_is_self_contained_and_numbers_agree(inputs, tmp_path):
     agreement = {r["quantity"]: r["value"] for r in summary["agreement"]}
     assert agreement["speed RMS error"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-9)
     assert summary["speed_rms_error_mm_s"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-9)
+    # the nominal robot (draw 0 = 0.9 x base): 3.15, 4.5, 2.7, 3.15, 0.225 at 150..600 Hz
+    err_nominal = np.array([3.15, 4.5, 2.7, 3.15, 0.225]) - np.array([3.0, 4.2, 2.5, 2.9, 0.0])
+    assert agreement["speed RMS error (nominal robot)"] == pytest.approx(np.sqrt(np.mean(err_nominal ** 2)))
     # knee: 200 Hz measured firm (1.05 x tray), simulated firm (1.1 x tray) -> ratio 1.1/1.05, in phase
     assert agreement["knee amplitude ratio (sim/meas) @ 200 Hz, 25 um"] == pytest.approx(1.1 / 1.05, rel=1e-3)
     assert abs(agreement["knee phase difference (sim - meas) @ 200 Hz, 25 um"]) < 1.0

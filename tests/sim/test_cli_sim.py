@@ -33,6 +33,14 @@ def test_sweep_shaker_json_points_and_h5(tmp_path):
         assert f["speeds_mm_s"].shape == (3, 2) and f["values"].attrs["units"] == "Hz"
 
 
+def test_sweep_pzt_voltage_json():
+    js = last_json(run_cli("simulate", "sweep", "pzt", "--voltage-v", "10,20", "--freq-hz", "1800",
+                           "--duration-s", "0.01", "--workers", "1", "--json"))
+    assert js["quantity"] == "voltage_v" and js["units"] == "V"
+    assert [p["voltage_v"] for p in js["points"]] == [10.0, 20.0]
+    assert js["scenario"]["freq_hz"] == 1800.0
+
+
 def test_sweep_pzt_mass_text_output():
     proc = run_cli("simulate", "sweep", "pzt", "--mass-mg", "0.33,1.5", "--freq-hz", "1800", "--voltage-v", "20",
                    "--duration-s", "0.01", "--workers", "1")
@@ -49,6 +57,8 @@ def test_sweep_pzt_mass_text_output():
     (["pzt", "--freq-hz", "-5"], "--freq-hz"),
     (["sweep", "shaker", "--freq-hz", "100:200:3", "--draws", "two"], "--draws"),
     (["shaker", "--params", "/nonexistent/robot.toml"], "/nonexistent/robot.toml"),
+    (["sweep", "shaker", "--freq-hz", "100:200:3", "--accel-limit-g", "0"], "--accel-limit-g"),
+    (["sweep", "pzt", "--voltage-v", "1:20:3", "--workers", "0"], "--workers"),
 ])
 def test_bad_input_exits_2_with_one_line(args, needle):
     proc = run_cli("simulate", *args, "--duration-s", "0.01", check=2)

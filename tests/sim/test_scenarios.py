@@ -57,3 +57,13 @@ def test_leg_patterns_labels_per_amplitude(tmp_path):
 def test_unknown_scenario():
     with pytest.raises(InputError, match="scenario"):
         run_scenario("moonwalk", out_dir=None)
+
+
+def test_fig8_checks_on_synthetic_curves():
+    from labkit.sim.scenarios import fig8_checks
+
+    f = np.array([150.0, 240.0, 300.0, 600.0, 1200.0, 1800.0])
+    assert fig8_checks(f, [1.0, 4.0, 2.0, 0.0, 0.01, 0.0]) == {
+        "mm_s_between_150_and_300_hz": True, "none_from_500_hz_to_1800_hz": True}
+    assert fig8_checks(f, [0.0, 0.01, 0.0, 0.0, 0.0, 0.0])["mm_s_between_150_and_300_hz"] is False
+    assert fig8_checks(f, [1.0, 4.0, 2.0, 0.0, 3.0, 0.0])["none_from_500_hz_to_1800_hz"] is False

@@ -147,3 +147,13 @@ def test_acceleration_limit_cuts_amplitude_as_one_over_f_squared(params):
                scheduler="serial", quiet=True, accel_limit_g=5.0)
     amps = [p["amp_um"] for p in sw.summary()["points"]]
     assert amps == [25.0, pytest.approx(s.amp_um)]
+
+
+def test_dask_equals_serial(params, small_sweep):
+    distributed = pytest.importorskip("distributed")  # an optional extra: labkit[dask]
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        on_dask = sweep(params, Shaker(freq_hz=240, amp_um=25), "freq_hz", [200.0, 300.0], draws=3,
+                        duration_s=DUR, scheduler=cluster.scheduler_address, seed=7, quiet=True)
+    np.testing.assert_array_equal(on_dask.speeds_mm_s, small_sweep.speeds_mm_s)
+    np.testing.assert_array_equal(on_dask.patterns, small_sweep.patterns)
