@@ -87,7 +87,7 @@ FULL = DemoSettings(
     shaker_freqs_hz=(150.0, 170.0, 190.0, 210.0, 230.0, 240.0, 250.0, 270.0, 290.0), tray_amp_um=25.0,
     video_s=1.2, shaker_settle_s=0.1, shaker_dwell_cycles=20,
     sim_freqs_hz=tuple(float(f) for f in np.arange(150.0, 300.0, 10.0)),
-    sim_draws=10, sim_duration_s=1.5, knee_duration_s=0.2)
+    sim_draws=20, sim_duration_s=2.0, knee_duration_s=0.2)
 
 QUICK = DemoSettings(
     name="quick", coarse_start_hz=250.0, coarse_stop_hz=5000.0, coarse_count=24, refine_spacing_rel=0.015,

@@ -97,6 +97,7 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
     notes: list[str] = []
     t0 = time.perf_counter()
 
+    say("simulator: loading its compiled kernel (compiling it, the first time) ...")
     with VirtualLab(robot=truth, seed=seed) as lab, tempfile.TemporaryDirectory(prefix="labkit-sample-") as tmp:
         tmp = Path(tmp)
         base_file = base.to_toml(tmp / "base_robot.toml")

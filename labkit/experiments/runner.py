@@ -371,7 +371,7 @@ class Runner:
     def _video(self, p: ShakerPoint) -> tuple[str, int]:
         folder = self.file.path.with_name(self.file.path.stem + "_videos")
         folder.mkdir(exist_ok=True)
-        path = folder / f"p{p.index:05d}.mp4"
+        path = folder / f"p{p.index:05d}.mkv"   # Matroska keeps each frame's own timestamp
         info = self.rig.record_video(path, p.video_s)
         self._event(f"video {path.name}: {info.get('frames', 0)} frames")
         rel = os.path.relpath(Path(info.get("path", path)), self.file.path.parent)

@@ -138,6 +138,7 @@ class VirtualLab:
     def start(self) -> "VirtualLab":
         if self._started:
             return self
+        self._warm_simulator()
         self.servers = {
             "funcgen": TcpServer(self.funcgen, self._log, seed=self.seed + 1),
             "scope": TcpServer(self.scope, self._log, seed=self.seed + 2),
@@ -366,6 +367,20 @@ class VirtualLab:
         return float(np.max(np.abs(v[len(v) // 3:])))
 
     # -- shaker: the hybrid simulator -----------------------------------------------------------
+    def _warm_simulator(self) -> None:
+        """Load (or compile) the simulator's kernel before any instrument serves.
+
+        The shaker physics runs inside the servers' threads while a scope waits
+        for its trigger; numba's first call compiles the kernel (~10 s with an
+        empty cache, holding the GIL), long enough for an acquisition to time
+        out. Done once here, the kernel is in memory and in numba's disk cache.
+        """
+        if self.params is None:
+            return
+        from labkit.sim import Shaker, simulate
+
+        simulate(self.params, Shaker(freq_hz=240.0, amp_um=25.0), duration_s=0.005)
+
     def _simulation(self, freq_hz: float, amp_um: float) -> Any:
         """A cached ``labkit.sim.simulate`` of the robot on the tray (None without the simulator)."""
         if self.params is None or amp_um <= 0:

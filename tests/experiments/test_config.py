@@ -28,10 +28,10 @@ def edit(src: Path, dst: Path, pattern: str, repl: str) -> Path:
 def test_examples_load_and_plan():
     c = load_inchip(INCHIP)
     assert c.locations == ("body", "hip", "knee")
-    assert len(c.freqs_hz) == 60 and c.freqs_hz[0] == 300.0 and abs(c.freqs_hz[-1] - 5000.0) < 1e-9
-    assert np.allclose(np.diff(np.log(c.freqs_hz)), np.log(5000 / 300) / 59)
+    assert len(c.freqs_hz) == 200 and c.freqs_hz[0] == 300.0 and abs(c.freqs_hz[-1] - 5000.0) < 1e-9
+    assert np.allclose(np.diff(np.log(c.freqs_hz)), np.log(5000 / 300) / 199)
     plan = inchip_plan(c)
-    assert plan.points_total == 180 and len(plan.points) == 180
+    assert plan.points_total == 600 and len(plan.points) == 600
     assert [s.spot for s in plan.steps if not hasattr(s, "index")] == ["body", "hip", "knee"]
     s = load_shaker(SHAKER)
     assert s.amplitude_kind == "tray_amp_um" and s.amplitudes == (10.0, 25.0)
@@ -41,10 +41,10 @@ def test_examples_load_and_plan():
 
 def test_resume_plan_skips_done_points():
     c = load_inchip(INCHIP)
-    done = set(range(0, 65))                      # all of body and 5 of hip
+    done = set(range(0, 205))                     # all of body and 5 of hip
     plan = inchip_plan(c, done)
     idx = [p.index for p in plan.points]
-    assert idx[0] == 65 and len(idx) == 115 and not set(idx) & done
+    assert idx[0] == 205 and len(idx) == 395 and not set(idx) & done
     assert plan.steps[0].spot == "hip"
 
 
@@ -52,7 +52,7 @@ def test_resume_plan_skips_done_points():
     (r"^amp_vpp = 4.0", "amp_vpp = 40.0", "drive.amp_vpp", "<= 20 V"),
     (r"^pzt_max_v = 20.0", "pzt_max_v = 3.0", "drive.amp_vpp", "<= 3 V"),
     (r"^spacing = \"log\"", 'spacing = "octave"', "frequencies.spacing", "'lin', 'log'"),
-    (r"^count = 60", "count = 0", "frequencies.count", "an integer >= 1"),
+    (r"^count = 200", "count = 0", "frequencies.count", "an integer >= 1"),
     (r"^settle_s = 0.05", "settle_s = 0.05\nsettle_cycles = 3", "method.settle_s", "one of settle_s or settle_cycles"),
     (r"^settle_s = 0.05", "settle_cycle = 3", "method.settle_cycle", "one of"),
     (r"^kind = \"stepped\"", 'kind = "noise"', "method.kind", "'stepped', 'chirp'"),
