@@ -7,9 +7,11 @@ numbers on a laptop and on a cluster.
 """
 from __future__ import annotations
 
+import atexit
 import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Sequence
 
 from labkit.progress import progress
@@ -52,16 +54,48 @@ def map_tasks(fn: Callable[[Any], Any], items: Sequence[Any], *, scheduler: str 
     return _map_dask(fn, items, scheduler, desc, quiet)
 
 
+_POOLS: dict[int, ProcessPoolExecutor] = {}
+
+
+def _pool(workers: int) -> ProcessPoolExecutor:
+    """A process pool kept for the life of the process: its workers load the simulator once.
+
+    A new pool per call cost ~2 s of worker start-up each time (calibration
+    calls map_tasks once per Jacobian).
+    """
+    pool = _POOLS.get(workers)
+    if pool is None:
+        # forkserver: the parent may hold threads (Dask, the virtual lab) that fork would copy badly.
+        ctx = multiprocessing.get_context("forkserver")
+        pool = _POOLS[workers] = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    return pool
+
+
+@atexit.register
+def _shutdown_pools() -> None:
+    for pool in _POOLS.values():
+        pool.shutdown(wait=False, cancel_futures=True)
+    _POOLS.clear()
+
+
 def _map_local(fn, items, workers, desc, quiet):
-    # forkserver: the parent may hold threads (Dask, the virtual lab) that fork would copy badly.
-    ctx = multiprocessing.get_context("forkserver")
     results: list[Any] = [None] * len(items)
-    with ProcessPoolExecutor(max_workers=min(workers, len(items)), mp_context=ctx) as pool, \
-            progress(len(items), desc, quiet=quiet) as bar:
-        futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
-        for fut in as_completed(futures):
-            results[futures[fut]] = fut.result()
-            bar.update(1)
+    pool = _pool(workers)
+    futures: dict = {}
+    try:
+        with progress(len(items), desc, quiet=quiet) as bar:
+            futures = {pool.submit(fn, item): i for i, item in enumerate(items)}
+            for fut in as_completed(futures):
+                results[futures[fut]] = fut.result()
+                bar.update(1)
+    except BaseException as exc:
+        for fut in futures:
+            fut.cancel()                  # no queued work left behind for the next call
+        if isinstance(exc, BrokenProcessPool) or not isinstance(exc, Exception):
+            # a dead worker, Ctrl-C or SIGTERM: drop the pool; the next call starts a new one
+            _POOLS.pop(workers, None)
+            pool.shutdown(wait=False, cancel_futures=True)
+        raise
     return results
 
 
