@@ -29,16 +29,7 @@ import numpy as np
 CONFIG = """
 [run]
 locations = ["knee"]
-[instruments.funcgen]
-model = "33500B"
-resource = "TCPIP0::192.0.2.1::5025::SOCKET"
-[instruments.scope]
-model = "InfiniiVision"
-resource = "TCPIP0::192.0.2.2::5025::SOCKET"
-[instruments.vibrometer]
-model = "OFV-5000"
-resource = "ASRL/dev/ttyUSB0::INSTR"
-[drive]
+{instruments}[drive]
 amp_vpp = 4.0
 offset_v = 2.0
 [frequencies]
@@ -57,6 +48,7 @@ scale_mm_s_per_v = 25.0
 def measure(points: int, settle_s: float, dwell_cycles: float) -> dict:
     """Run one in-chip sweep on a fresh virtual lab; per-point overhead statistics."""
     from labkit.experiments.config import comparable, load_inchip
+    from labkit.experiments.session import lab_instruments_toml
     from labkit.experiments.plans import inchip_plan
     from labkit.experiments.rig import Rig
     from labkit.experiments.runfile import RunFile
@@ -67,7 +59,7 @@ def measure(points: int, settle_s: float, dwell_cycles: float) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         cfg_path = Path(tmp) / "bench.toml"
         cfg_path.write_text(CONFIG.format(freqs=", ".join(repr(float(f)) for f in freqs), settle_s=settle_s,
-                                          dwell_cycles=dwell_cycles))
+                                          dwell_cycles=dwell_cycles, instruments=lab_instruments_toml()))
         cfg = load_inchip(cfg_path)
         with virtual_lab(cfg) as (lab, cfg):
             plan = inchip_plan(cfg)

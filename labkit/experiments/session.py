@@ -60,6 +60,17 @@ def preflight(cfg: InchipConfig | ShakerConfig) -> None:
 #: the models the virtual lab simulates, by role
 LAB_MODELS = {"funcgen": "33500B", "scope": "InfiniiVision", "vibrometer": "OFV-5000", "control": "LabControl"}
 
+#: placeholder resources (TEST-NET addresses, never reached): ``--lab`` replaces them
+_PLACEHOLDER_RESOURCES = {"funcgen": "TCPIP0::192.0.2.1::5025::SOCKET",
+                          "scope": "TCPIP0::192.0.2.2::5025::SOCKET",
+                          "vibrometer": "ASRL/dev/ttyUSB0::INSTR"}
+
+
+def lab_instruments_toml(roles: tuple[str, ...] = ("funcgen", "scope", "vibrometer")) -> str:
+    """The ``[instruments.*]`` tables of a config meant for ``--lab``: the lab's models, placeholder resources."""
+    return "\n".join(f'[instruments.{role}]\nmodel = "{LAB_MODELS[role]}"\nresource = "{_PLACEHOLDER_RESOURCES[role]}"\n'
+                     for role in roles)
+
 
 @contextlib.contextmanager
 def virtual_lab(cfg: Any, seed: int = 0, lab: Any = None) -> Iterator[tuple[Any, Any]]:

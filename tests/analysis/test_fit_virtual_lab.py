@@ -8,21 +8,10 @@ import numpy as np
 import pytest
 
 from clihelpers import last_json, run_cli
+from labkit.experiments.session import lab_instruments_toml
 from labkit.sim import RobotParams
 
-INSTRUMENTS = """
-[instruments.funcgen]
-model = "33500B"
-resource = "TCPIP0::192.0.2.1::5025::SOCKET"
-
-[instruments.scope]
-model = "InfiniiVision"
-resource = "TCPIP0::192.0.2.2::5025::SOCKET"
-
-[instruments.vibrometer]
-model = "OFV-5000"
-resource = "ASRL/dev/ttyUSB0::INSTR"
-"""
+INSTRUMENTS = "\n" + lab_instruments_toml()
 
 
 def _grid() -> list[float]:

@@ -8,19 +8,9 @@ from typing import Iterable
 import h5py
 import numpy as np
 
-_INSTRUMENTS = """
-[instruments.funcgen]
-model = "33500B"
-resource = "TCPIP0::192.0.2.1::5025::SOCKET"
+from labkit.experiments.session import lab_instruments_toml
 
-[instruments.scope]
-model = "InfiniiVision"
-resource = "TCPIP0::192.0.2.2::5025::SOCKET"
-
-[instruments.vibrometer]
-model = "OFV-5000"
-resource = "ASRL/dev/ttyUSB0::INSTR"
-"""
+_INSTRUMENTS = "\n" + lab_instruments_toml()
 
 
 def inchip_toml(path: Path, freqs_hz: Iterable[float], *, locations=("body", "hip", "knee"),

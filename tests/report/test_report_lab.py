@@ -7,6 +7,7 @@ import json
 import pytest
 
 from clihelpers import last_json, run_cli
+from labkit.experiments.session import lab_instruments_toml
 
 SHAKER_TOML = """# report test: shaker run on the virtual lab, laser on the knee, no video
 [run]
@@ -14,18 +15,7 @@ robot_spot = "knee"
 video_s = 0.0
 on_interlock = "skip"
 
-[instruments.funcgen]
-model = "33500B"
-resource = "TCPIP0::192.0.2.1::5025::SOCKET"
-
-[instruments.scope]
-model = "InfiniiVision"
-resource = "TCPIP0::192.0.2.2::5025::SOCKET"
-
-[instruments.vibrometer]
-model = "OFV-5000"
-resource = "ASRL/dev/ttyUSB0::INSTR"
-
+{instruments}
 [amplifier]
 gain_db = 20.0
 attenuator_db = 0.0
@@ -62,7 +52,7 @@ tray_max_um = 60.0
 @pytest.mark.slow
 def test_report_on_a_virtual_lab_shaker_run(tmp_path):
     cfg = tmp_path / "shaker.toml"
-    cfg.write_text(SHAKER_TOML)
+    cfg.write_text(SHAKER_TOML.format(instruments=lab_instruments_toml()))
     run = tmp_path / "shaker.h5"
     s = last_json(run_cli("shaker", str(cfg), "--lab", "--seed", "1", "--out", str(run), "--json", "--quiet"))
     assert s["points_ok"] == 2
