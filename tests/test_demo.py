@@ -141,3 +141,27 @@ def test_quick_demo_human_summary_names_the_paths_and_figures(quick_demo):
     for r in s["speeds"]:
         assert f"{r['measured_mm_s']:6.2f}" in text
     assert "not measurable in-chip" in text and "--assign 1=#" in text
+
+
+@pytest.mark.slow
+def test_calibration_recovers_a_changed_parameter_on_the_virtual_lab(quick_demo, tmp_path):
+    """The demo's tracked speeds were measured on the virtual robot; calibration started from a
+    robot whose modal participation is 20 % off must come back to the virtual robot's value."""
+    from labkit.sim import RobotParams
+
+    cwd, _, s = quick_demo
+    f = s["files"]
+    truth = RobotParams.from_toml(cwd / f["virtual_robot"])
+    start = tmp_path / "start.toml"
+    truth.replace(modal_participation=truth.modal_participation * 1.2).to_toml(start)
+    out = tmp_path / "calibrated.toml"
+    proc = run_cli("calibrate", str(cwd / f["shaker_run"]), *(str(cwd / t) for t in f["tracks"]),
+                   "--params", str(start), "--fit", "modal_participation",
+                   "--bound", "modal_participation=0.3:0.9", "--duration-s", "1.0",
+                   "--out", str(out), "--json", cwd=cwd, timeout=300)
+    c = last_json(proc)
+    fitted = c["parameters"]["modal_participation"]
+    assert fitted["initial"] == pytest.approx(truth.modal_participation * 1.2)
+    assert abs(fitted["fitted"] - truth.modal_participation) < max(3 * fitted["std"], 0.02 * truth.modal_participation)
+    assert c["after"]["rms_error_mm_s"] < 0.5 * c["before"]["rms_error_mm_s"]
+    assert RobotParams.from_toml(out).modal_participation == pytest.approx(fitted["fitted"])
