@@ -80,6 +80,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    # A shell starts background jobs with SIGINT ignored, and Python keeps that;
+    # the contract is that SIGINT interrupts (outputs off, exit 130), so say so.
+    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         summary = args._run(args)
     except LabkitError as exc:
@@ -91,6 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _exit(EXIT_INTERRUPTED, argv)
     finally:
         signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
     if args.json:
         emit_json(summary if isinstance(summary, dict) else {"result": summary})
     return _exit(0, argv)
