@@ -110,11 +110,8 @@ class Command:
     answers: bool = False   # the (unusual) command form that answers, like the lab's CAM:REC
 
 
-def split_params(text: str) -> list[str]:
-    """Split a parameter list on commas outside quotes; strip blanks."""
-    text = text.strip()
-    if not text:
-        return []
+def _split_outside_quotes(text: str, sep: str) -> tuple[list[str], bool]:
+    """Split on ``sep`` where it is not inside '...' or "..."; also say whether a quote was left open."""
     out, cur, quote = [], [], None
     for c in text:
         if quote:
@@ -124,35 +121,30 @@ def split_params(text: str) -> list[str]:
         elif c in "\"'":
             quote = c
             cur.append(c)
-        elif c == ",":
-            out.append("".join(cur).strip())
-            cur = []
-        else:
-            cur.append(c)
-    if quote:
-        raise ScpiError(-102, "Syntax error;unterminated string")
-    out.append("".join(cur).strip())
-    return out
-
-
-def split_commands(line: str) -> list[str]:
-    """Split a program message on ``;`` outside quotes."""
-    out, cur, quote = [], [], None
-    for c in line:
-        if quote:
-            cur.append(c)
-            if c == quote:
-                quote = None
-        elif c in "\"'":
-            quote = c
-            cur.append(c)
-        elif c == ";":
+        elif c == sep:
             out.append("".join(cur))
             cur = []
         else:
             cur.append(c)
     out.append("".join(cur))
-    return [s.strip() for s in out if s.strip()]
+    return out, quote is not None
+
+
+def split_params(text: str) -> list[str]:
+    """Split a parameter list on commas outside quotes; strip blanks."""
+    text = text.strip()
+    if not text:
+        return []
+    parts, open_quote = _split_outside_quotes(text, ",")
+    if open_quote:
+        raise ScpiError(-102, "Syntax error;unterminated string")
+    return [p.strip() for p in parts]
+
+
+def split_commands(line: str) -> list[str]:
+    """Split a program message on ``;`` outside quotes."""
+    parts, _ = _split_outside_quotes(line, ";")
+    return [p.strip() for p in parts if p.strip()]
 
 
 # ------------------------------------------------------------------------------------------
