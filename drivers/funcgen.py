@@ -121,9 +121,15 @@ class FunctionGenerator(ScpiInstrument):
         """
         f = self._check_freq("freq_hz > 0", freq_hz)
         amp, off = self._check_amplitude(amp_vpp, offset_v)
+        level = [self._src(f"VOLT {_num(amp)}"), self._src(f"VOLT:OFFS {_num(off)}")]
+        old_off = self.state.get("offset_v")
+        if old_off is not None and abs(off) < abs(old_off):
+            # The output may be on: between the two commands the film sees one old and one
+            # new value. Shrinking the offset first keeps that state below the old (checked)
+            # peak; otherwise amplitude first keeps it below the new (checked) peak.
+            level.reverse()
         self._send_all([self._outp(":LOAD INF"), self._src("FUNC SIN"), self._src("VOLT:UNIT VPP"),
-                        self._src(f"FREQ {_num(f)}"), self._src(f"VOLT {_num(amp)}"),
-                        self._src(f"VOLT:OFFS {_num(off)}")])
+                        self._src(f"FREQ {_num(f)}"), *level])
         self.state.update(load="INF", function="SIN", freq_hz=f, amp_vpp=amp, offset_v=off)
         self._amp_checked = True
 
@@ -136,6 +142,10 @@ class FunctionGenerator(ScpiInstrument):
     def set_amplitude(self, amp_vpp: float) -> None:
         """Change only the amplitude (load set to high-Z first), within the limits."""
         amp, _ = self._check_amplitude(amp_vpp, self.state.get("offset_v", 0.0) or 0.0)
+        if "offset_v" not in self.state:
+            # the generator may hold any offset from an earlier session: the peak is unknown
+            raise LimitError("the offset is unknown, so |offset| + amplitude/2 cannot be checked; "
+                             "call set_sine() first; nothing was sent", limit="offset unknown")
         self._send_all([self._outp(":LOAD INF"), self._src("VOLT:UNIT VPP"),
                         self._src(f"VOLT {_num(amp)}")])
         self.state.update(load="INF", amp_vpp=amp)
@@ -233,8 +243,14 @@ class FunctionGenerator(ScpiInstrument):
         The confirmation makes sure the generator has processed the OFF commands
         before the link is closed (no error-queue check: this must be quick).
         """
-        for ch in self.channels:
-            self.write(self._outp(" OFF", channel=ch))
+        failed: InstrumentError | None = None
+        for ch in self.channels:      # every channel is tried, even after one failed
+            try:
+                self.write(self._outp(" OFF", channel=ch))
+            except InstrumentError as exc:
+                failed = failed or exc
+        if failed is not None:
+            raise failed
         self.state["output_on"] = False
         if self.query_int("*OPC?") != 1:
             raise InstrumentError("*OPC? did not confirm the outputs off", instrument=self.name,

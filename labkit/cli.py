@@ -19,7 +19,7 @@ from typing import Any, Sequence
 
 from labkit import __version__
 from labkit.jsonutil import to_jsonable
-from labkit.errors import EXIT_INTERRUPTED, InputError, Interrupted, LabkitError
+from labkit.errors import EXIT_INPUT, EXIT_INTERRUPTED, InputError, Interrupted, LabkitError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -88,6 +88,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except LabkitError as exc:
         _fail(args, str(exc), exc.exit_code)
         return _exit(exc.exit_code, argv)
+    except (FileNotFoundError, NotADirectoryError, IsADirectoryError, PermissionError) as exc:
+        # a path the person gave (an --out folder that does not exist, a read-only place):
+        # bad input, not a crash
+        where = f"{exc.filename}: " if exc.filename else ""
+        _fail(args, f"{where}{exc.strerror or exc}", EXIT_INPUT)
+        return _exit(EXIT_INPUT, argv)
     except (KeyboardInterrupt, Interrupted) as exc:
         name = exc.signame if isinstance(exc, Interrupted) else "SIGINT"
         _fail(args, f"interrupted by {name}; outputs were turned off", EXIT_INTERRUPTED)

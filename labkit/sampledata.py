@@ -72,10 +72,10 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
     say:
         Called with one line per step (progress).
     """
-    import tomllib
 
     from labkit.demo import demo_robots, fit_and_assign, inchip_run, refined_grid
-    from labkit.experiments.config import load_inchip
+    from labkit.experiments.config import load_inchip, load_shaker
+    from labkit.tomlio import load_toml
     from labkit.lab import VirtualLab
 
     out = Path(out)
@@ -85,13 +85,17 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
         if not p.is_file():
             raise InputError("example config not found", file=p, key="--configs",
                              expected="the folder holding the example inchip.toml and shaker.toml")
+    # Parse and validate both configs before anything in --out is removed: a bad config
+    # must leave the existing sample files where they are.
+    inchip_table, _ = load_toml(inchip_cfg)
+    shaker_table, _ = load_toml(shaker_cfg)
+    load_inchip(inchip_cfg)
+    load_shaker(shaker_cfg)
     out.mkdir(parents=True, exist_ok=True)
     say = say or (lambda text: None)
     for name in OUTPUTS:
         if name != "README.md" and (out / name).exists():
             (out / name).unlink()
-    inchip_table = tomllib.loads(inchip_cfg.read_text(encoding="utf-8"))
-    shaker_table = tomllib.loads(shaker_cfg.read_text(encoding="utf-8"))
     truth, base = demo_robots()
     tag = label(seed)
     notes: list[str] = []

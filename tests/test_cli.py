@@ -50,3 +50,11 @@ def test_bad_toml_names_file_and_line(tmp_path):
     bad.write_text("a = [1, 2\n")
     proc = run_cli("info", str(bad), check=2)
     assert "bad.toml" in proc.stderr and "not valid TOML" in proc.stderr
+
+
+def test_output_in_a_missing_folder_is_bad_input_not_a_traceback(tmp_path):
+    out = tmp_path / "no_such_folder" / "run.h5"
+    proc = run_cli("simulate", "shaker", "--freq-hz", "240", "--amp-um", "25", "--duration-s", "0.05",
+                   "--out", str(out), check=2)
+    assert "Traceback" not in proc.stderr
+    assert "no_such_folder" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1

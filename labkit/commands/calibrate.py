@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError
+from labkit.jsonutil import to_jsonable
 
 NAME = "calibrate"
 HELP = "fit uncertain model parameters (c_r, c_ad_n, ...) to measured speeds; write a new parameter file"
@@ -72,7 +73,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     cal.params.to_toml(out, provenance=prov)
     summary = {"out": str(out), **cal.summary()}
     side = out.with_suffix(".calibration.json")
-    side.write_text(json.dumps(summary, indent=1, default=str), encoding="utf-8")
+    side.write_text(json.dumps(to_jsonable(summary, finite=True), indent=1), encoding="utf-8")
     summary["details"] = str(side)
     if not args.json:
         print(f"calibrated {', '.join(cal.names)} on {len(obs.freq_hz)} points ({cal.n_sims} simulations)")

@@ -22,6 +22,7 @@ import json
 from typing import TYPE_CHECKING
 
 from labkit import __version__
+from labkit.jsonutil import to_jsonable
 from labkit.lab.scpi import Call, ScpiError, ScpiInstrument, fmt_num
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -49,7 +50,7 @@ class Control(ScpiInstrument):
         self.add("LAB:FAULT", set=self._fault)
         self.add("LAB:FAULT:CLEar", set=lambda c: self.lab.clear_faults(
             c.params[0].lower() if c.params else None))
-        self.add("LAB:TRUTh", query=lambda c: json.dumps(self.lab.truth, default=str))
+        self.add("LAB:TRUTh", query=lambda c: json.dumps(to_jsonable(self.lab.truth, finite=True)))
         self.add("LAB:OUTPut", query=self._output)
         self.add("CAM:FPS", set=lambda c: setattr(self.lab, "camera_fps", self.num(c.one(), "", 1.0, 1000.0)),
                  query=lambda c: fmt_num(self.lab.camera_fps))

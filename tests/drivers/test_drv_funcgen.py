@@ -217,3 +217,22 @@ def test_snapshot_records_settings_and_state():
 def test_check_errors_can_be_disabled():
     with expected_protocol(Agilent33220A, _w("OUTP:LOAD INF"), check_errors=False) as fg:
         fg.set_load_high_z()
+
+
+def test_set_amplitude_refuses_while_the_offset_is_unknown():
+    with expected_protocol(Keysight33500B, [], max_v=5.0) as fg:     # the peer must see no byte
+        with pytest.raises(LimitError) as ei:
+            fg.set_amplitude(2.0)
+    assert ei.value.limit == "offset unknown"
+
+
+def test_shrinking_offset_is_sent_before_the_amplitude():
+    """Output on at 4 V offset, then 8 Vpp around 0 V with max_v = 5: sending VOLT 8 first would
+    put 4 + 4 = 8 V on the film between the two commands; the offset must go first."""
+    first = _w("OUTP1:LOAD INF", "SOUR1:FUNC SIN", "SOUR1:VOLT:UNIT VPP", "SOUR1:FREQ 1000",
+                  "SOUR1:VOLT 1", "SOUR1:VOLT:OFFS 4") + [(b"SYST:ERR?\n", OK)]
+    second = _w("OUTP1:LOAD INF", "SOUR1:FUNC SIN", "SOUR1:VOLT:UNIT VPP", "SOUR1:FREQ 1000",
+                   "SOUR1:VOLT:OFFS 0", "SOUR1:VOLT 8") + [(b"SYST:ERR?\n", OK)]
+    with expected_protocol(Keysight33500B, first + second, max_v=5.0) as fg:
+        fg.set_sine(1000, 1.0, 4.0)
+        fg.set_sine(1000, 8.0, 0.0)
