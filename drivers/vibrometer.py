@@ -225,9 +225,6 @@ class OFV5000(Vibrometer):
             self._identity = self.query(self.identity_command.format(i=self.decoder_index))
         return self._identity
 
-    def _get(self, prop: str) -> str:
-        return self.query(f"Get,VeloDec,{self.decoder_index},{prop}")
-
     @property
     def scale_mm_s_per_v(self) -> float:
         """Scale factor in mm/s per V (``Get,VeloDec,<i>,Range``); set with a value in mm/s/V."""

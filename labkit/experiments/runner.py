@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from labkit.errors import InstrumentError, Interrupted, LimitError
+from labkit.errors import InputError, InstrumentError, Interrupted, LimitError
 from labkit.experiments import measure
 from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, SinePoint
 from labkit.experiments.runfile import RunFile
@@ -119,7 +119,6 @@ class Runner:
                     bar.update(step.est_s)
                     self.timing[-1]["total_s"] = time.monotonic() - t0
             status = "complete"
-            return status
         except InterlockEnd as exc:
             status = f"aborted: interlock: {exc.message}"
             raise
@@ -133,9 +132,17 @@ class Runner:
             status = f"aborted: {type(exc).__name__}: {exc}"
             raise
         finally:
-            self._shutdown(status)
+            finish_error = self._shutdown(status)
+        if finish_error is not None:
+            # the drive is off and every point is on disk, but the file does not say how the
+            # run ended: do not report "complete"
+            raise InputError(f"could not write the run's final status ({finish_error})",
+                             file=self.file.path) from finish_error
+        return status
 
-    def _shutdown(self, status: str) -> None:
+    def _shutdown(self, status: str) -> Exception | None:
+        """Drive off, then the final status into the file; returns the file's error, if any."""
+        finish_error: Exception | None = None
         with shielded() as arrived:
             try:
                 self.guard.final_off(status)
@@ -145,8 +152,9 @@ class Runner:
                 self._event(f"run ended: {status}")
                 try:
                     self.file.finish(status)
-                except Exception:
-                    pass
+                except Exception as exc:   # another error may be in flight: never mask it
+                    finish_error = exc
+        return finish_error
 
     # -- steps -------------------------------------------------------------------------------
     def _move_spot(self, spot: str, *, drive_off: bool) -> None:

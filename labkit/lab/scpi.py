@@ -353,12 +353,7 @@ class ScpiInstrument:
         """Execute one received line; return the reply (with ``\\n``) or None."""
         replies: list[bytes] = []
         prefix = ""
-        try:
-            parts = split_commands(line)
-        except ScpiError as exc:  # pragma: no cover - split_commands does not raise
-            self.push_error(exc.code, exc.message)
-            return None
-        for part in parts:
+        for part in split_commands(line):
             header, _, rest = part.partition(" ")
             if not header.startswith((":", "*")) and prefix:
                 full = prefix + ":" + header

@@ -1,7 +1,6 @@
 """SimResult: one simulated run, its summary and its HDF5 file (kind ``sim_result``)."""
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -106,14 +105,14 @@ class SimResult:
         """Write the run (kind ``sim_result``): units on every dataset, params as TOML text."""
         import h5py
 
-        from labkit.h5io import put, stamp
+        from labkit.h5io import put, put_json, stamp
 
         path = Path(path)
         with h5py.File(path, "w") as f:
             stamp(f, "sim_result")
             f.attrs["params_toml"] = self.params.to_toml_text()
-            f.attrs["scenario_json"] = json.dumps(self.scenario.to_dict())
-            f.attrs["summary_json"] = json.dumps(self.summary())
+            put_json(f, "scenario_json", self.scenario.to_dict())
+            put_json(f, "summary_json", self.summary())
             f.attrs["contact_codes"] = "0 air, 1 adhesion, 2 rest"
             put(f, "t_s", self.t_s, "s")
             put(f, "body_y_um", self.body_y_um, "um")
@@ -131,5 +130,5 @@ class SimResult:
             put(f, "events", self.events, "mixed",
                 columns="t_s, leg (0-5; -1 body), vrel_pre_m_s, vrel_post_m_s, vy_post_m_s, stuck")
             f.attrs["mean_speed_mm_s"] = float(self.mean_speed_mm_s)
-            f.attrs["patterns"] = json.dumps(list(self.patterns))
+            put_json(f, "patterns", list(self.patterns))
         return path

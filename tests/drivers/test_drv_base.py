@@ -106,12 +106,20 @@ def test_context_manager_safe_off_after_exception():
             d.write("X")                  # closed by the context manager
 
 
+class SafeConfirming(Safe):
+    """safe_off asks for a confirmation, so it fails on a link that has dropped."""
+
+    def safe_off(self) -> None:
+        self.query("OUTP?")
+
+
 def test_context_manager_keeps_original_error_when_safe_off_fails():
-    with expected_protocol(Safe, [(b"Q?\n", Drop())], timeout_s=0.2) as d:
+    with expected_protocol(SafeConfirming, [(b"Q?\n", Drop())], timeout_s=0.2) as d:
         with pytest.raises(InstrumentError) as ei:
             with d:
                 d.query("Q?")
-    assert ei.value.command == "Q?"
+    assert ei.value.command == "Q?"                                   # the original error is kept
+    assert any("safe_off failed as well" in note for note in getattr(ei.value, "__notes__", []))
 
 
 def test_snapshot_is_json():

@@ -167,3 +167,22 @@ def test_person_moves_the_laser_when_asked(tmp_path, capsys):
     with h5py.File(tmp_path / "q.h5", "r") as f:
         assert f.attrs["status"].startswith("aborted: InputError")
         assert list(f["locations/body/freq_hz"][...]) == [830.0, 3400.0]
+
+
+def test_a_final_status_that_cannot_be_written_is_not_reported_complete(tmp_path, monkeypatch):
+    """Disk full at the very end (simulated at the file's edge): the drive still goes off, the
+    points stay on disk, and the run is an error, not "complete"."""
+    from labkit.experiments import runfile
+
+    def disk_full(self, status):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(runfile.RunFile, "finish", disk_full)
+    cfg = inchip_toml(tmp_path / "c.toml", [830.0, 900.0], locations=("body",), settle_s=0.03)
+    out = tmp_path / "run.h5"
+    with VirtualLab(seed=1) as lab:
+        with pytest.raises(InputError, match="final status"):
+            run_session("inchip", cfg, out, lab=lab, quiet=True)
+        assert lab.output_state("funcgen", 1) is False
+    with h5py.File(out, "r") as f:
+        assert f["locations/body/freq_hz"].shape[0] == 2
