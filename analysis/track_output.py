@@ -191,18 +191,29 @@ def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
     pts = np.column_stack([track.u_px, track.v_px])
     fps = info.fps_nominal if info.fps_nominal > 0 else 30.0
 
+    finite = np.isfinite(pts).all(axis=1)
+
     def drawn():
+        # The trajectory grows one segment a frame on a layer of its own, so a long video
+        # costs linear, not quadratic, drawing.
+        trail: np.ndarray | None = None
+        last: np.ndarray | None = None
         for k, (gray, _t) in enumerate(iter_frames(cap, info)):
             if k >= track.frames:
                 break
             img = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
             x, y, w, h = track.roi
             cv2.rectangle(img, (x, y), (x + w - 1, y + h - 1), (128, 128, 128), 1)
-            past = pts[: k + 1]
-            past = past[np.isfinite(past).all(axis=1)]
-            if len(past) > 1:
-                cv2.polylines(img, [np.round(past * 16).astype(np.int32)], False, (255, 160, 0), 1,
-                              cv2.LINE_AA, 4)
+            if trail is None:
+                trail = np.zeros_like(img)
+            if finite[k]:
+                if last is not None:
+                    a, b = np.round(last * 16).astype(np.int32), np.round(pts[k] * 16).astype(np.int32)
+                    cv2.line(trail, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), (255, 160, 0), 1,
+                             cv2.LINE_AA, 4)
+                last = pts[k]
+            on_trail = trail.any(axis=2)
+            img[on_trail] = trail[on_trail]
             q = int(track.quality[k])
             if q != QUALITY_LOST:
                 u, v, hd = track.u_px[k], track.v_px[k], track.heading_rad[k]
