@@ -80,19 +80,23 @@ class _Peer(threading.Thread):
         return True
 
     # ------------------------------------------------------------------------------------------
-    def _read_exact(self, n: int) -> bytes:
+    def _fill(self, n: int | None) -> None:
+        """Receive into the buffer until it holds ``n`` bytes (None: until the driver goes quiet)."""
         deadline = time.monotonic() + PEER_WAIT_S
-        while len(self._buf) < n and time.monotonic() < deadline:
+        while (n is None or len(self._buf) < n) and time.monotonic() < deadline:
             chunk = self._recv_some(0.05)
             if chunk is None:
                 break
             if not chunk and self.driver_closed.is_set():
-                # the driver is gone and nothing more is coming
+                # the driver is gone: take what is left, then stop
                 chunk = self._recv_some(0.0)
                 if not chunk:
                     break
             self._buf += chunk
             self.received += chunk
+
+    def _read_exact(self, n: int) -> bytes:
+        self._fill(n)
         out, self._buf = bytes(self._buf[:n]), self._buf[n:]
         return out
 
@@ -133,18 +137,8 @@ class _Peer(threading.Thread):
                 self.transcript.append(f"peer   -> {reply[:60]!r}"
                                        + (f"... ({len(reply)} bytes)" if len(reply) > 60 else ""))
         # Script done: anything more the driver sends is unexpected.
-        extra = bytearray(self._buf)
-        deadline = time.monotonic() + PEER_WAIT_S
-        while time.monotonic() < deadline:
-            chunk = self._recv_some(0.05)
-            if chunk is None:
-                break
-            if not chunk and self.driver_closed.is_set():
-                chunk = self._recv_some(0.0)
-                if not chunk:
-                    break
-            extra += chunk or b""
-            self.received += chunk or b""
+        self._fill(None)
+        extra, self._buf = bytes(self._buf), bytearray()
         if extra:
             self.transcript.append(f"driver -> {bytes(extra)!r}")
             self.failures.append(f"unexpected bytes after the script: {bytes(extra)!r}")

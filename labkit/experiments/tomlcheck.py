@@ -102,6 +102,14 @@ class Table:
         bound = (f" {'>' if exclusive_minimum else '>='} {minimum:g}" if minimum is not None else "") + (
             f" <= {maximum:g}" if maximum is not None else "")
         expected = f"a non-empty list of numbers{' in ' + unit if unit else ''}{bound}"
+        value = self._list(key, expected, default)
+        if value is default:
+            return default
+        return tuple(self._item(key, i, item, expected, minimum, maximum, exclusive_minimum)
+                     for i, item in enumerate(value))
+
+    def _list(self, key: str, expected: str, default: Any) -> Any:
+        """``data[key]`` as a non-empty list, or ``default`` when absent and optional."""
         if key not in self.data:
             if default is _MISSING:
                 raise self.error(key, "missing", expected)
@@ -109,10 +117,7 @@ class Table:
         value = self.data[key]
         if not isinstance(value, list) or not value:
             raise self.error(key, f"not a non-empty list: {value!r}", expected)
-        out = []
-        for i, item in enumerate(value):
-            out.append(self._item(key, i, item, expected, minimum, maximum, exclusive_minimum))
-        return tuple(out)
+        return value
 
     def _item(self, key: str, i: int, item: Any, expected: str, minimum: float | None,
               maximum: float | None, exclusive_minimum: bool) -> float:
@@ -130,13 +135,9 @@ class Table:
         choices = None if choices is None else tuple(choices)
         expected = "a non-empty list of " + (("names from " + ", ".join(repr(c) for c in choices))
                                              if choices else "strings")
-        if key not in self.data:
-            if default is _MISSING:
-                raise self.error(key, "missing", expected)
+        value = self._list(key, expected, default)
+        if value is default:
             return default
-        value = self.data[key]
-        if not isinstance(value, list) or not value:
-            raise self.error(key, f"not a non-empty list: {value!r}", expected)
         out = []
         for i, item in enumerate(value):
             if not isinstance(item, str):
