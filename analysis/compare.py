@@ -14,11 +14,13 @@ Three comparisons, as in the paper's section 5:
 Every function returns a JSON-able dict holding the numbers *and* a
 ``provenance`` entry (which files, which parameters, which method), so a
 report can say where each number came from. Inputs are plain numpy arrays;
-reading files is :mod:`analysis.report_inputs`' job.
+reading files is :mod:`labkit.analysis.report.inputs`' job.
 """
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -141,6 +143,116 @@ def band_from_draws(speeds_mm_s: np.ndarray, *, k: float = 2.0) -> tuple[np.ndar
     mean = s.mean(axis=1)
     std = s.std(axis=1, ddof=1) if s.shape[1] > 1 else np.zeros(s.shape[0])
     return mean, mean - k * std, mean + k * std
+
+
+def percentile_band(speeds_mm_s: np.ndarray, percentiles: tuple[float, float] = (10.0, 90.0)
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper percentiles over draws of a (points, draws) array (a band that does not
+    assume a normal spread, and cannot run below the smallest draw as ``mean - k std`` can)."""
+    s = np.asarray(speeds_mm_s, float)
+    if s.ndim == 1:
+        s = s[:, None]
+    lo, hi = np.percentile(s, percentiles, axis=1)
+    return lo, hi
+
+
+def draw_percentiles(meas_freq_hz: Sequence[float], meas_value: Sequence[float], sim_freq_hz: Sequence[float],
+                     sim_draws: np.ndarray) -> np.ndarray:
+    """Each observed value's percentile (0-100) within the Monte Carlo draws at its frequency.
+
+    Every draw's curve is interpolated linearly at the measured frequency; the percentile is
+    the mid-rank ``100 (#below + #equal / 2) / draws``. NaN outside the simulated range.
+    A model whose draws describe the spread of real robots puts the observations at uniformly
+    spread percentiles; a biased model piles them near 0 or 100.
+    """
+    mf = np.asarray(meas_freq_hz, float)
+    mv = np.asarray(meas_value, float)
+    sf = np.asarray(sim_freq_hz, float)
+    d = np.asarray(sim_draws, float)
+    if d.ndim == 1:
+        d = d[:, None]
+    order = np.argsort(sf)
+    sf, d = sf[order], d[order]
+    out = np.full(mf.size, np.nan)
+    for i, (f, v) in enumerate(zip(mf, mv)):
+        if not (sf[0] - 1e-9 <= f <= sf[-1] + 1e-9) or not np.isfinite(v):
+            continue
+        at = np.array([np.interp(f, sf, d[:, j]) for j in range(d.shape[1])])
+        out[i] = 100.0 * (np.sum(at < v) + 0.5 * np.sum(at == v)) / at.size
+    return out
+
+
+def coverage(percentiles: Sequence[float], inside: Sequence[bool],
+             band: tuple[float, float] = (10.0, 90.0)) -> dict[str, Any]:
+    """Coverage score: the fraction of observations inside the Monte Carlo percentile band
+    (``inside``, as :func:`speed_agreement` finds it against that band), against the fraction
+    expected if the draws were the observations' distribution, with the observations' median
+    percentile within the draws (:func:`draw_percentiles`; 50 for an unbiased model)."""
+    p = np.asarray(percentiles, float)
+    p = p[np.isfinite(p)]
+    ins = np.asarray(inside, bool)
+    return {"n": int(ins.size), "fraction_inside": _f(ins.mean()) if ins.size else None,
+            "expected_fraction": (band[1] - band[0]) / 100.0,
+            "median_percentile": _f(np.median(p)) if p.size else None,
+            "band_percentiles": list(band)}
+
+
+# --------------------------------------------------------------------------- tolerances and verdicts
+
+@dataclass(frozen=True)
+class Tolerances:
+    """What each comparison is judged against (change any with ``labkit report --tolerance KEY=VALUE``).
+
+    Defaults, and why:
+
+    * ``speed_relative_rms_max = 0.30``: the nominal robot's RMS speed error over the RMS
+      measured speed. The paper's simulated speeds follow the measured ones within about a
+      third at the same drive; a model that misses by more does not reproduce Fig. 8.
+    * ``speed_coverage_min = 0.5``: fraction of measured speeds inside the Monte Carlo
+      ``band_lo_pct``-``band_hi_pct`` percentile band (0.8 expected if the draws describe the
+      robots' spread; 0.5 leaves room for few points and few draws).
+    * ``band_lo_pct = 10``, ``band_hi_pct = 90``: the band drawn and scored.
+    * ``knee_amplitude_ratio_max = 1.33`` (and its inverse as the minimum): simulated over
+      measured knee amplitude at the drive frequency, a third either way.
+    * ``knee_phase_deg_max = 20``: phase of the knee relative to the tray, simulated minus
+      measured (one twentieth of a period is about the vibrometer/scope timing one trusts).
+    * ``knee_correlation_min = 0.9``: correlation of one phase-folded period.
+    * ``pattern_agreement_min = 0.75``: fraction of drives with the same leg pattern.
+    * ``fit_quality_min = 0.95``: the fit's quality (1 - NRMSE^2, worst location).
+    """
+
+    speed_relative_rms_max: float = 0.30
+    speed_coverage_min: float = 0.5
+    band_lo_pct: float = 10.0
+    band_hi_pct: float = 90.0
+    knee_amplitude_ratio_max: float = 1.33
+    knee_phase_deg_max: float = 20.0
+    knee_correlation_min: float = 0.9
+    pattern_agreement_min: float = 0.75
+    fit_quality_min: float = 0.95
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, float] | None) -> Tolerances:
+        """Defaults overridden by ``values``; an unknown key raises ValueError naming the known ones."""
+        names = {f.name for f in fields(cls)}
+        bad = sorted(set(values or {}) - names)
+        if bad:
+            raise ValueError(f"unknown tolerance {', '.join(bad)} (known: {', '.join(sorted(names))})")
+        t = cls(**{k: float(v) for k, v in (values or {}).items()})
+        if not 0 <= t.band_lo_pct < t.band_hi_pct <= 100:
+            raise ValueError("band_lo_pct and band_hi_pct must satisfy 0 <= lo < hi <= 100")
+        return t
+
+    def as_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def verdict(value: float | None, *, at_most: float | None = None, at_least: float | None = None) -> str:
+    """``"pass"`` if ``value`` is within the limit(s), ``"fail"`` if not, ``"n/a"`` without a value."""
+    if value is None or not np.isfinite(value):
+        return "n/a"
+    ok = (at_most is None or value <= at_most) and (at_least is None or value >= at_least)
+    return "pass" if ok else "fail"
 
 
 # --------------------------------------------------------------------------- leg patterns

@@ -23,8 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from analysis.modal import fit_modes  # noqa: E402
-from analysis.modal_synth import synthetic_frf  # noqa: E402
+from labkit.analysis.modal.fit import fit_modes  # noqa: E402
+from labkit.analysis.modal.synth import synthetic_frf  # noqa: E402
 
 TARGET_S = 0.5
 

@@ -3,7 +3,7 @@
 Uses the LAB engineer's :class:`labkit.lab.VirtualLab` InfiniiVision when it
 imports and answers; otherwise (or with ``--own-server``) a minimal
 InfiniiVision-like SCPI server in this script. Either way the client is the
-real driver (:class:`drivers.scope.InfiniiVision`) over a real TCP socket
+real driver (:class:`labkit.drivers.scope.InfiniiVision`) over a real TCP socket
 through pyvisa-py. Prints ONE JSON object; ``server`` says which was used.
 
     python bench/io_bench.py [--points 1000000] [--repeats 5] [--own-server]
@@ -68,7 +68,7 @@ class _Server(threading.Thread):
 def _bench(scope_resource: str, points: int, repeats: int, n_queries: int,
            lab_points: bool = False) -> dict:
     """Time queries and ``read_waveform(1, "WORD")`` on ``scope_resource``."""
-    from drivers.scope import InfiniiVision
+    from labkit.drivers.scope import InfiniiVision
 
     with InfiniiVision.open(scope_resource, timeout_s=30.0, points=points) as sc:
         sc.identity
@@ -121,8 +121,8 @@ def _best_block_s(sc, repeats: int) -> float:
 
 def _virtual_lab(points: int, repeats: int, n_queries: int) -> dict:
     """Acquire one record on the VirtualLab's InfiniiVision, then time transfers of it."""
+    from labkit.drivers.scope import InfiniiVision
     from labkit.lab import VirtualLab
-    from drivers.scope import InfiniiVision
 
     with VirtualLab(seed=0) as lab:
         res = lab.resources["scope"]

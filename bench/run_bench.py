@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 
-
 CONFIG = """
 [run]
 locations = ["knee"]
@@ -48,12 +47,11 @@ scale_mm_s_per_v = 25.0
 def measure(points: int, settle_s: float, dwell_cycles: float) -> dict:
     """Run one in-chip sweep on a fresh virtual lab; per-point overhead statistics."""
     from labkit.experiments.config import comparable, load_inchip
-    from labkit.experiments.session import lab_instruments_toml
     from labkit.experiments.plans import inchip_plan
     from labkit.experiments.rig import Rig
     from labkit.experiments.runfile import RunFile
     from labkit.experiments.runner import Runner
-    from labkit.experiments.session import virtual_lab
+    from labkit.experiments.session import lab_instruments_toml, virtual_lab
 
     freqs = np.geomspace(1000.0, 2000.0, points)
     with tempfile.TemporaryDirectory() as tmp:

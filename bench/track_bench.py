@@ -3,9 +3,9 @@
 A rendered clip (the robot walking a curve with noise, blur and 1 px jitter)
 is written as Motion-JPEG ``.avi`` and tracked twice:
 
-* ``fps_end_to_end``: :func:`analysis.tracking.track_video` on the file --
+* ``fps_end_to_end``: :func:`labkit.analysis.tracking.tracker.track_video` on the file --
   decoding, the static-structure pass, tracking (the figure a user sees);
-* ``fps_tracking_only``: :func:`analysis.tracking.track_frames` on frames
+* ``fps_tracking_only``: :func:`labkit.analysis.tracking.tracker.track_frames` on frames
   already in memory (the tracker's own cost, independent of the codec).
 
 Target: ``fps_end_to_end >= 500`` (wall clock, best of 5). On a shared machine
@@ -30,7 +30,7 @@ def main(frames: int = 600) -> dict:
 
     cv2.setNumThreads(1)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    from analysis.tracking import track_frames, track_video
+    from labkit.analysis.tracking.tracker import track_frames, track_video
     from labkit.lab.render import render_frames, write_video
 
     fps = 60.0

@@ -1,7 +1,7 @@
 """The common base of every instrument driver.
 
 An :class:`Instrument` talks to its instrument through a transport
-(:mod:`drivers.transport`): pyvisa with the pure-Python backend for VISA
+(:mod:`labkit.drivers.transport`): pyvisa with the pure-Python backend for VISA
 resources (``TCPIP0::host::5025::SOCKET``), pyserial for
 ``ASRL/dev/pts/3::INSTR``, ``/dev/...`` paths and pyserial URLs.
 
@@ -18,7 +18,7 @@ Use a driver as a context manager: on exit — normal or by an exception —
 
 Examples
 --------
->>> from drivers.funcgen import Keysight33500B                    # doctest: +SKIP
+>>> from labkit.drivers.funcgen import Keysight33500B                    # doctest: +SKIP
 >>> with Keysight33500B.open("TCPIP0::10.0.0.5::5025::SOCKET", max_amp_vpp=20) as fg:
 ...     fg.set_sine(freq_hz=1000, amp_vpp=2.0)
 ...     fg.output(True)
@@ -32,11 +32,18 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from labkit.drivers.transport import (
+    TRANSPORT_KEYS,
+    SerialTransport,
+    Transport,
+    TransportError,
+    VisaTransport,
+    _Closed,
+    open_transport,
+    resource_manager,
+)
 from labkit.errors import ConfigError, InstrumentError, LimitError
 from labkit.jsonutil import to_jsonable
-
-from drivers.transport import (TRANSPORT_KEYS, SerialTransport, Transport, TransportError,
-                               VisaTransport, _Closed, open_transport, resource_manager)
 
 __all__ = ["Instrument", "ScpiInstrument", "check_range", "check_choice", "Transport",
            "VisaTransport", "SerialTransport", "TransportError", "open_transport",
@@ -48,7 +55,7 @@ log = logging.getLogger(__name__)
 # limits
 
 
-def check_range(limit: str, value: float, lo: float | None = None, hi: float | None = None,
+def check_range(limit: str, value: float | str, lo: float | None = None, hi: float | None = None,
                 unit: str = "") -> float:
     """Return ``float(value)`` if ``lo <= value <= hi``, else raise LimitError naming ``limit``.
 
@@ -138,11 +145,11 @@ class Instrument:
     so an expected-protocol test lists every byte a method sends.
     """
 
-    #: Model name used by :mod:`drivers.registry` and in snapshots.
+    #: Model name used by :mod:`labkit.drivers.registry` and in snapshots.
     model: ClassVar[str] = "instrument"
     #: Transport settings this model needs by default (e.g. a serial baud rate).
     transport_defaults: ClassVar[dict[str, Any]] = {}
-    #: ``"socket"`` or ``"serial"``: how :mod:`drivers.testing` connects a scripted peer.
+    #: ``"socket"`` or ``"serial"``: how :mod:`labkit.drivers.testing` connects a scripted peer.
     link: ClassVar[str] = "socket"
 
     def __init__(self, transport: Transport, *, name: str | None = None, **settings: Any) -> None:

@@ -93,13 +93,14 @@ class Camera:
                     h, w = frame.shape[:2]
                     # frames are streamed to disk, so the container gets the nominal rate;
                     # the true times go to the timestamps file
-                    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*_fourcc_for(path)),
+                    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*_fourcc_for(path)),
                                              self.nominal_fps(), (w, h), frame.ndim == 3)
                     if not writer.isOpened():
                         raise InstrumentError(f"cannot write video {path}", instrument=self.name,
                                               command="record")
                 if t - t0 > duration_s:
                     break
+                assert writer is not None      # opened with the first frame
                 writer.write(frame)
                 times.append(t - t0)
         finally:
@@ -150,7 +151,7 @@ class OpenCVCamera(Camera):
                                   command="open")
         self.requested = {"fourcc": fourcc, "size_px": list(size_px), "fps": fps,
                           "exposure": exposure}
-        self._cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*fourcc))
+        self._cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter.fourcc(*fourcc))
         self._cap.set(cv2.CAP_PROP_FRAME_WIDTH, size_px[0])
         self._cap.set(cv2.CAP_PROP_FRAME_HEIGHT, size_px[1])
         self._cap.set(cv2.CAP_PROP_FPS, fps)

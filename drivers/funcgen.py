@@ -10,7 +10,7 @@ Limits are declared settings checked BEFORE anything is sent:
 
 ``max_amp_vpp``
     the largest peak-to-peak amplitude allowed (the PZT's rating, or the
-    amplifier's input cap, see :attr:`drivers.shaker.Amplifier2718.max_input_vpp`).
+    amplifier's input cap, see :attr:`labkit.drivers.shaker.Amplifier2718.max_input_vpp`).
 ``max_v``
     the largest absolute voltage at the output, ``|offset| + amp/2``.
 ``max_freq_hz``
@@ -23,9 +23,9 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
+from labkit.drivers.base import ScpiInstrument, check_choice, check_range
 from labkit.errors import InstrumentError, LimitError
 
-from drivers.base import ScpiInstrument, check_choice, check_range
 
 def _num(x: float) -> str:
     """SCPI number: shortest exact-enough text (``1000``, ``0.5``, ``1e-05``)."""
@@ -43,7 +43,7 @@ class FunctionGenerator(ScpiInstrument):
         Declared limits (see the module docstring); None = only the model's range.
     check_errors:
         Query the error queue after every setting (default True; see
-        :class:`drivers.base.ScpiInstrument`).
+        :class:`labkit.drivers.base.ScpiInstrument`).
     """
 
     model = "funcgen"

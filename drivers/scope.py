@@ -26,9 +26,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from labkit.drivers.base import ScpiInstrument, check_choice, check_range
 from labkit.errors import InstrumentError
-
-from drivers.base import ScpiInstrument, check_choice, check_range
 
 
 @dataclass
@@ -69,6 +68,8 @@ class Oscilloscope(ScpiInstrument):
     #: ``:WAV:PRE?`` format code per format name
     format_codes: ClassVar[dict[str, int]] = {"BYTE": 0, "WORD": 1}
     poll_s: ClassVar[float] = 0.02
+    #: The query whose reply says the acquisition is complete (each model sets it).
+    _done_command: ClassVar[str]
 
     def __init__(self, transport, *, name: str | None = None, channels: int = 4,
                  max_volts_per_div: float = 10.0, **settings: Any) -> None:
@@ -115,6 +116,14 @@ class Oscilloscope(ScpiInstrument):
         self._send_all([":TRIG:MODE EDGE", f":TRIG:EDGE:SOUR {src}", f":TRIG:EDGE:LEV {lev:.6g}",
                         f":TRIG:EDGE:SLOP {sl}"])
         self.state["trigger"] = {"source": src, "level_v": lev, "slope": sl}
+
+    def set_record_points(self, points: int) -> None:
+        """Samples per record (the base model records what its screen holds: nothing to send)."""
+        self.state["record_points"] = int(check_range("record points", points, 100, 8e6))
+
+    def set_trigger_at_start(self, record_s: float) -> None:
+        """Put the trigger at the record's first sample (the base model keeps its default)."""
+        self.state["trigger_at_start_s"] = float(check_range("record_s", record_s, 1e-9, 5e4, "s"))
 
     def single(self) -> None:
         """Arm one acquisition (``:SING``)."""
@@ -199,6 +208,20 @@ class InfiniiVision(Oscilloscope):
     def settings(self) -> dict[str, Any]:
         return {**super().settings(), "points": self.points}
 
+    def set_record_points(self, points: int) -> None:
+        """Samples per record read back (``:WAV:POIN:MODE RAW``, ``:WAV:POIN n``), sent now."""
+        n = int(check_range("points", points, 100, 8e6))
+        self._send_all([":WAV:POIN:MODE RAW", f":WAV:POIN {n}"])
+        self.points = n
+        self.state["record_points"] = n
+
+    def set_trigger_at_start(self, record_s: float) -> None:
+        """Trigger at the record's first sample: reference LEFT puts it one division (10 %) in,
+        a delay of that much moves it to the start (``:TIM:REF LEFT``, ``:TIM:POS``)."""
+        rec = check_range("record_s", record_s, 1e-9, 5e4, "s")
+        self._send_all([":TIM:REF LEFT", f":TIM:POS {rec / self.divisions:.6g}"])
+        self.state["trigger_at_start_s"] = rec
+
     def _done(self) -> bool:
         # bit 3 (value 8) of the operation status condition register: "Run" (acquiring)
         return not (self.query_int(self._done_command) & 8)
@@ -258,7 +281,7 @@ class RigolDS1000Z(Oscilloscope):
         self._check_format(pre, f)
         width = 2 if f == "WORD" else 1
         per_read = self.max_block_bytes // width
-        n = pre["points"]
+        n = int(pre["points"])
         parts = []
         start = 1
         while start <= n:

@@ -78,13 +78,19 @@ class Amplifier2718:
     @property
     def max_input_vpp(self) -> float:
         """The input cap for a sine, in volts peak-to-peak (``2 sqrt 2 * Vrms``)."""
-        return 2 * SQRT2 * float(self.max_input_vrms)
+        return 2 * SQRT2 * self._cap_vrms
+
+    @property
+    def _cap_vrms(self) -> float:
+        # max_input_vrms is None only until __post_init__ fills in the gain's default.
+        assert self.max_input_vrms is not None
+        return float(self.max_input_vrms)
 
     def check_input(self, amp_vpp: float) -> float:
         """Return ``amp_vpp`` if a sine of that size may be fed to the input, else LimitError."""
         v = float(amp_vpp)
         vrms = v / (2 * SQRT2)
-        if not (v >= 0 and vrms <= self.max_input_vrms * (1 + 1e-12)):
+        if not (v >= 0 and vrms <= self._cap_vrms * (1 + 1e-12)):
             raise LimitError(f"{v:g} Vpp ({vrms:.3g} V rms) exceeds the 2718 input cap "
                              f"{self.max_input_vrms:g} V rms at {self.gain_db:g} dB; "
                              "nothing was sent",

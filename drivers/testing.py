@@ -8,7 +8,7 @@ with an AssertionError that shows the transcript.
 
 Examples
 --------
->>> from drivers.funcgen import Agilent33220A
+>>> from labkit.drivers.funcgen import Agilent33220A
 >>> with expected_protocol(Agilent33220A,
 ...         [(b"*IDN?\\n", b"Agilent Technologies,33220A,MY1,2.0\\n")]) as fg:
 ...     fg.identity
@@ -33,9 +33,13 @@ import socket
 import threading
 import time
 import tty
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Iterator, Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from labkit.drivers.base import Instrument
 
 STALL = None  # no reply: the driver's read must time out
 
@@ -55,6 +59,9 @@ PEER_WAIT_S = 10.0
 
 class _Peer(threading.Thread):
     """Runs the script on one end of a link; collects failures for the test thread."""
+
+    #: The VISA resource (or serial port) a driver opens to reach this peer.
+    resource: str
 
     def __init__(self, exchanges: Sequence[Exchange]) -> None:
         super().__init__(daemon=True, name="expected-protocol-peer")
@@ -171,16 +178,19 @@ class _SocketPeer(_Peer):
         return True
 
     def _recv_some(self, timeout: float) -> bytes | None:
-        r, _, _ = select.select([self._conn], [], [], timeout)
+        conn = self._conn
+        assert conn is not None, "called after _connect() succeeded"
+        r, _, _ = select.select([conn], [], [], timeout)
         if not r:
             return b""
         try:
-            data = self._conn.recv(65536)
+            data = conn.recv(65536)
         except OSError:
             return None
         return data or None
 
     def _send(self, data: bytes) -> None:
+        assert self._conn is not None, "called after _connect() succeeded"
         self._conn.sendall(data)
 
     def _close_link(self) -> None:
@@ -192,9 +202,10 @@ class _SocketPeer(_Peer):
 class _PtyPeer(_Peer):
     def __init__(self, exchanges: Sequence[Exchange]) -> None:
         super().__init__(exchanges)
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)      # no echo, no CR/LF translation: bytes pass untouched
-        self.port = os.ttyname(self.slave)
+        self.master, slave = os.openpty()
+        self.slave: int | None = slave
+        tty.setraw(slave)      # no echo, no CR/LF translation: bytes pass untouched
+        self.port = os.ttyname(slave)
         self.resource = self.port
         self._closed = False
 
@@ -231,7 +242,7 @@ def _report(peer: _Peer) -> str:
 
 
 @contextmanager
-def expected_protocol(driver_cls: type, exchanges: Sequence[Exchange], *, timeout_s: float = 0.3,
+def expected_protocol(driver_cls: type[Instrument], exchanges: Sequence[Exchange], *, timeout_s: float = 0.3,
                       link: str | None = None, resource_format: str = "{}",
                       **settings: Any) -> Iterator[Any]:
     """Yield ``driver_cls`` opened on a scripted peer that asserts every byte.
@@ -239,7 +250,7 @@ def expected_protocol(driver_cls: type, exchanges: Sequence[Exchange], *, timeou
     Parameters
     ----------
     driver_cls:
-        A :class:`drivers.base.Instrument` subclass.
+        A :class:`labkit.drivers.base.Instrument` subclass.
     exchanges:
         ``[(bytes the driver must send, reply), ...]`` in order; see the module
         docstring for reply values. An empty list asserts that nothing is sent.

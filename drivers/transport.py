@@ -8,7 +8,7 @@
   ``/dev/ttyUSB0`` path, or a pyserial URL (``loop://``, ``socket://host:port``).
 
 Transports raise :class:`TransportError` or the library's own exceptions;
-:class:`drivers.base.Instrument` turns every one of them into an
+:class:`labkit.drivers.base.Instrument` turns every one of them into an
 InstrumentError naming the instrument and the command.
 """
 from __future__ import annotations

@@ -14,9 +14,8 @@ from __future__ import annotations
 import re
 from typing import Any, ClassVar
 
+from labkit.drivers.base import Instrument
 from labkit.errors import ConfigError, InstrumentError, LimitError
-
-from drivers.base import Instrument
 
 #: OFV-3001 range number by scale factor (mm/s per V), per velocity decoder.
 OFV3001_RANGES: dict[str, dict[float, int]] = {
@@ -37,6 +36,8 @@ class Vibrometer(Instrument):
 
     link = "serial"
     _scale: float | None = None
+    #: Velocity decoder scale factor (each controller provides it, as a property).
+    scale_mm_s_per_v: float
 
     def to_velocity_mm_s(self, volts):
         """Velocity in mm/s from the analog output's volts (uses the cached scale factor)."""

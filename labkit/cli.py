@@ -3,8 +3,9 @@
 Contract (``shared/docs/architecture.md``): every subcommand accepts ``--json``
 (then the last line of standard output is one JSON object), ``--quiet`` (no
 progress bar), and exits 0 on success, 2 on bad input, 3 on an instrument or
-transport fault, 130 when interrupted (SIGINT or SIGTERM), always with a one-
-line message on standard error.
+transport fault, 4 when a drive output could not be confirmed off (with a
+banner saying which and what to do), 130 when interrupted (SIGINT, SIGTERM,
+SIGHUP or SIGQUIT), always with a one-line message on standard error.
 """
 from __future__ import annotations
 
@@ -12,14 +13,14 @@ import argparse
 import importlib
 import json
 import pkgutil
-import signal
 import sys
+from collections.abc import Sequence
 from types import ModuleType
-from typing import Any, Sequence
+from typing import Any
 
 from labkit import __version__
-from labkit.jsonutil import to_jsonable
-from labkit.errors import EXIT_INPUT, EXIT_INTERRUPTED, InputError, Interrupted, LabkitError
+from labkit.errors import EXIT_INPUT, EXIT_INTERRUPTED, DriveNotOff, InputError, Interrupted, LabkitError
+from labkit.experiments.safety import install_stop_handlers, restore_handlers
 
 
 class _Parser(argparse.ArgumentParser):
@@ -65,26 +66,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _on_sigterm(signum: int, frame: Any) -> None:
-    raise Interrupted("SIGTERM")
-
-
 def emit_json(summary: dict[str, Any]) -> None:
     """Print the summary as one JSON line (NaN becomes null so any parser reads it)."""
+    from labkit.jsonutil import to_jsonable  # imported late: numpy is slow to import
+
     print(json.dumps(to_jsonable(summary, finite=True)), flush=True)
 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``labkit``; returns (and exits with) the process exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    previous = signal.signal(signal.SIGTERM, _on_sigterm)
-    # A shell starts background jobs with SIGINT ignored, and Python keeps that;
-    # the contract is that SIGINT interrupts (outputs off, exit 130), so say so.
-    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
+    """Run ``labkit``; returns (and exits with) the process exit code.
+
+    The stop signals (SIGINT, SIGTERM, SIGHUP, SIGQUIT) are handled from the first
+    line on, before the subcommands are imported: each raises, so the drive is
+    turned off and the run file finished exactly as for Ctrl-C (exit 130). A
+    shell's background job starts with SIGINT and SIGQUIT ignored; this undoes it.
+    """
+    previous = install_stop_handlers()
+    args: argparse.Namespace | None = None
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
         summary = args._run(args)
+        if args.json:
+            emit_json(summary if isinstance(summary, dict) else {"result": summary})
+    except DriveNotOff as exc:
+        _banner(exc)
+        _fail(args, str(exc), exc.exit_code)
+        return _exit(exc.exit_code, argv)
     except LabkitError as exc:
         _fail(args, str(exc), exc.exit_code)
         return _exit(exc.exit_code, argv)
@@ -99,17 +108,39 @@ def main(argv: Sequence[str] | None = None) -> int:
         _fail(args, f"interrupted by {name}; outputs were turned off", EXIT_INTERRUPTED)
         return _exit(EXIT_INTERRUPTED, argv)
     finally:
-        signal.signal(signal.SIGTERM, previous)
-        signal.signal(signal.SIGINT, previous_int)
-    if args.json:
-        emit_json(summary if isinstance(summary, dict) else {"result": summary})
+        restore_handlers(previous)
     return _exit(0, argv)
 
 
-def _fail(args: argparse.Namespace, message: str, code: int) -> None:
-    print(f"labkit {args.command}: error: {message}", file=sys.stderr, flush=True)
+def _banner(exc: DriveNotOff) -> None:
+    """The unmissable console warning: which output may still be on, what to do, and why the run stopped."""
+    bar = "!" * 78
+    lines = [bar, f"!!  DRIVE MAY STILL BE ON: {exc.instrument} ({exc.where})",
+             f"!!  the OFF command could not be confirmed: {exc.fault}",
+             "!!  TURN THE GENERATOR OUTPUT OFF BY HAND NOW (its Output key, or unplug the amplifier),",
+             f"!!  or run: labkit off {exc.config or 'CONFIG'}"]
+    if exc.original:
+        lines.append(f"!!  the run had stopped because: {exc.original}")
+    lines.append(bar)
+    _say("\n".join(lines))
+
+
+def _say(text: str) -> None:
+    """Print to standard error; a vanished terminal (SIGHUP) must not turn a clean stop into a crash."""
+    try:
+        print(text, file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
+
+
+def _fail(args: argparse.Namespace | None, message: str, code: int) -> None:
+    command = getattr(args, "command", None)
+    _say(f"labkit {command}: error: {message}" if command else f"labkit: error: {message}")
     if getattr(args, "json", False):
-        emit_json({"ok": False, "exit_code": code, "error": message})
+        try:
+            emit_json({"ok": False, "exit_code": code, "error": message})
+        except (OSError, ValueError):
+            pass
 
 
 def _exit(code: int, argv: Sequence[str] | None) -> int:

@@ -6,7 +6,8 @@ error                  exit  meaning
 :class:`InputError`    2     bad input: usage, config, parameter file, data file
 :class:`LimitError`    2     a requested setting is outside a declared limit
 :class:`InstrumentError` 3   an instrument or its transport failed
-interrupt (SIGINT/TERM) 130  the run was interrupted; outputs were turned off
+:class:`DriveNotOff`   4     a drive output could NOT be confirmed off: act at the bench
+interrupt              130   SIGINT/SIGTERM/SIGHUP/SIGQUIT; outputs were turned off
 =====================  ====  ==================================================
 
 Drivers and analysis raise these; only :mod:`labkit.cli` turns them into exit
@@ -19,6 +20,7 @@ from pathlib import Path
 EXIT_OK = 0
 EXIT_INPUT = 2
 EXIT_INSTRUMENT = 3
+EXIT_DRIVE_ON = 4
 EXIT_INTERRUPTED = 130
 
 
@@ -95,6 +97,35 @@ class InstrumentError(LabkitError):
         if command is not None:
             text += f" (command {command!r})"
         super().__init__(text)
+
+
+class DriveNotOff(InstrumentError):
+    """The OFF of an output that drives the PZT or the shaker could not be confirmed (exit 4).
+
+    Parameters
+    ----------
+    instrument:
+        The generator's role name (``funcgen``).
+    where:
+        Its model and resource, for the person who must find it.
+    fault:
+        The last error while sending the OFF.
+    original:
+        Why the run was stopping in the first place (its final status), if it was.
+    config:
+        The config file, for the suggested ``labkit off CONFIG``.
+    """
+
+    exit_code = EXIT_DRIVE_ON
+
+    def __init__(self, instrument: str, where: str, fault: str, original: str = "", config: str = "") -> None:
+        self.where = where
+        self.fault = fault
+        self.original = original
+        self.config = config
+        msg = (f"DRIVE OFF NOT CONFIRMED ({where}): {fault}; turn the generator output off by hand"
+               + (f" (the run had stopped because: {original})" if original else ""))
+        super().__init__(msg, instrument=instrument)
 
 
 class Interrupted(BaseException):

@@ -10,9 +10,10 @@ from __future__ import annotations
 import atexit
 import multiprocessing
 import os
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from labkit.progress import progress
 
@@ -101,7 +102,8 @@ def _map_local(fn, items, workers, desc, quiet):
 
 def _map_dask(fn, items, scheduler, desc, quiet):
     try:
-        from distributed import Client, as_completed as dask_completed
+        from distributed import Client
+        from distributed import as_completed as dask_completed
     except ImportError:
         from labkit.errors import InputError
         raise InputError("--scheduler needs dask.distributed: pip install 'labkit[dask]'") from None

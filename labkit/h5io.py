@@ -25,11 +25,13 @@ from labkit.errors import InputError
 from labkit.jsonutil import to_jsonable
 
 SCHEMA_VERSION = 1
+#: the newest layout this labkit reads (run files: 2 adds dimension scales)
+READS_SCHEMA_VERSION = 2
 
 
 def utc_now() -> str:
     """The current time as an ISO 8601 UTC string."""
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
 
 
 def stamp(root: Any, kind: str, schema_version: int = SCHEMA_VERSION) -> None:
@@ -83,8 +85,76 @@ def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None):
             f.close()
             raise InputError(f"this file holds {found!r}", file=path, key="kind", expected=f"a '{kind}' file")
         version = int(f.attrs.get("schema_version", 0))
-        if version > SCHEMA_VERSION:
+        if version > READS_SCHEMA_VERSION:
             f.close()
             raise InputError(f"written by a newer labkit (schema {version})", file=path,
-                             key="schema_version", expected=f"<= {SCHEMA_VERSION}")
+                             key="schema_version", expected=f"<= {READS_SCHEMA_VERSION}")
     return f
+
+
+#: the datasets that are a group's axis, in order of preference: a table's point ``index``
+#: (run files' ``/points``), sample times, frequency lines
+SCALE_NAMES = ("index", "t_s", "freq_hz", "time_unix_s")
+
+
+def label_dimensions(group: Any) -> None:
+    """Make each group's axis a dimension scale and attach it to the group's other datasets.
+
+    So that h5py (``ds.dims``), xarray/h5netcdf and HDFView show coordinates instead of
+    anonymous ``phony_dim`` dimensions. Per group (``group`` and every group below it):
+
+    * the axis is the first of ``index``, ``t_s``, ``freq_hz``, ``time_unix_s`` present as a 1-D dataset;
+      it is attached to every 1-D dataset of the same length (for growing run-file tables,
+      to every growing dataset);
+    * a group with a ``dt_s`` attribute and no ``t_s`` (a point's sampled records) gets a
+      ``t_s`` dataset (s) first;
+    * a simulated sweep's ``values`` gets a copy named after its ``quantity`` (``freq_hz``);
+    * in a point table the other columns name ``freq_hz`` (and ``location``) as
+      coordinates (the CF ``coordinates`` attribute, which xarray reads).
+
+    Idempotent; works on empty growing tables (call it when they are created) and on
+    finished files (older files can be labelled in place).
+    """
+    import h5py
+
+    groups = [group]
+    group.visititems(lambda _name, obj: groups.append(obj) if isinstance(obj, h5py.Group) else None)
+    for g in groups:
+        _label_group(g)
+
+
+def _label_group(g: Any) -> None:
+    import h5py
+
+    ds = {k: v for k, v in g.items() if isinstance(v, h5py.Dataset)}
+    if "t_s" not in ds and "dt_s" in g.attrs and any(v.ndim == 1 for v in ds.values()):
+        n = max(v.shape[0] for v in ds.values() if v.ndim == 1)
+        ds["t_s"] = put(g, "t_s", np.arange(n) * float(g.attrs["dt_s"]), "s")
+    if "values" in ds and "quantity" in ds["values"].attrs:
+        q = str(ds["values"].attrs["quantity"])
+        if q not in ds and q.isidentifier():
+            ds[q] = put(g, q, ds["values"][()], str(ds["values"].attrs.get("units", "")))
+    axis = next((k for k in SCALE_NAMES if k in ds and ds[k].ndim == 1), None)
+    if axis is None and "values" in ds and ds["values"].ndim == 1:
+        axis = str(ds["values"].attrs.get("quantity", "values"))
+        axis = axis if axis in ds else "values"
+    if axis is None:
+        return
+    scale = ds[axis]
+    if not scale.is_scale:
+        scale.make_scale(axis)
+    growing = scale.maxshape[0] is None
+    coords = [c for c in ("freq_hz", "location") if c in ds and c != axis] if axis == "index" else []
+    for name, v in ds.items():
+        # only 1-D datasets: netCDF readers refuse a variable with some dimensions labelled
+        # and others not, and a second axis (draw, leg, location) has no dataset of its own
+        if name == axis or v.ndim != 1:
+            continue
+        fits = v.maxshape[0] is None if growing else v.shape[0] == scale.shape[0]
+        if not fits:
+            continue
+        if not any(s == scale for s in v.dims[0].values()):
+            v.dims[0].attach_scale(scale)
+        others = [c for c in coords if c != name]
+        if others:
+            v.attrs["coordinates"] = " ".join(others)

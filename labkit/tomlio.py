@@ -54,7 +54,8 @@ def get_number(table: dict[str, Any], key: str, *, file: str | Path | None = Non
     name = f"{prefix}.{key}" if prefix else key
     if key not in table:
         if default is _MISSING:
-            raise ConfigError("missing", file=file, key=name, expected=_expect(unit, minimum, maximum, exclusive_minimum))
+            raise ConfigError("missing", file=file, key=name,
+                              expected=_expect(unit, minimum, maximum, exclusive_minimum))
         return default
     value = table[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)):

@@ -108,7 +108,7 @@ def test_demo_refuses_a_folder_it_did_not_write(tmp_path):
 
 
 def test_refine_lines_puts_fine_lines_across_narrow_peaks_only():
-    from labkit.demo_configs import coarse_grid, refine_lines
+    from labkit.demo.configs import coarse_grid, refine_lines
 
     f = coarse_grid(250, 5000, 24)
     w = 2 * np.pi * f
@@ -130,7 +130,7 @@ def test_refine_lines_puts_fine_lines_across_narrow_peaks_only():
 
 @pytest.mark.slow
 def test_quick_demo_human_summary_names_the_paths_and_figures(quick_demo):
-    from labkit.demo_results import format_summary
+    from labkit.demo.results import format_summary
 
     cwd, _, s = quick_demo
     text = format_summary(s)

@@ -34,7 +34,7 @@ def test_hdf5_samples_open_with_labkit_info_and_are_labelled(name):
 
 
 def test_inchip_run_reads_as_three_locations_with_fine_lines_at_the_narrow_peaks():
-    from analysis.modal_io import read_run
+    from labkit.analysis.modal.io import read_run
 
     r = read_run(SAMPLE / "inchip_run.h5")
     assert sorted(r.names) == ["body", "hip", "knee"]
@@ -66,8 +66,8 @@ def test_robot_toml_is_the_fit_of_the_run_with_provenance():
 
 
 def test_video_tracks_to_the_committed_track():
-    from analysis.speed import track_speed
-    from analysis.tracking import track_video
+    from labkit.analysis.tracking.speed import track_speed
+    from labkit.analysis.tracking.tracker import track_video
 
     tr = track_video(SAMPLE / "shaker_240hz.mkv", quiet=True)
     sp = track_speed(tr)

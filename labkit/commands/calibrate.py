@@ -8,6 +8,7 @@ from typing import Any
 
 from labkit.errors import InputError
 from labkit.jsonutil import to_jsonable
+from labkit.outputs import atomic_output, check_outputs
 
 NAME = "calibrate"
 HELP = "fit uncertain model parameters (c_r, c_ad_n, ...) to measured speeds; write a new parameter file"
@@ -30,6 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                         help="comma-separated RobotParams fields to fit, e.g. c_r,c_ad_n,k_per_s2[1]")
     parser.add_argument("--params", metavar="ROBOT.toml", help="starting parameters (default: the defaults)")
     parser.add_argument("--out", required=True, metavar="OUT.toml", help="calibrated parameter file to write")
+    parser.add_argument("--force", action="store_true", help="replace --out and its .calibration.json")
     parser.add_argument("--amp-um", type=float, help="tray amplitude for speed tables (um)")
     parser.add_argument("--bound", dest="bounds", nargs="+", type=_bound, default=[], metavar="NAME=LO:HI",
                         help="bounds (default: 0 to 4x the start value; c_r in 0..1)")
@@ -49,8 +51,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from labkit.calibrate import calibrate, observations_from_files
     from labkit.sim import RobotParams
+    from labkit.sim.calibrate import calibrate, observations_from_files
 
     if not args.duration_s > 0:
         raise InputError("must be > 0", key="--duration-s", expected="a duration in s")
@@ -59,6 +61,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     names = [n.strip() for n in args.names.split(",") if n.strip()]
     if not names:
         raise InputError("no parameter named", key="--fit", expected="e.g. c_r,c_ad_n")
+    out = Path(args.out)
+    side = out.with_suffix(".calibration.json")
+    if out.suffix.lower() != ".toml":
+        raise InputError("not a .toml path", file=out, key="--out", expected="OUT.toml")
+    check_outputs([out, side], force=args.force)         # before any simulation
     params = RobotParams.from_toml(args.params) if args.params else RobotParams()
     obs = observations_from_files(args.measured, amp_um=args.amp_um)
     cal = calibrate(params, names, obs, duration_s=args.duration_s, seed=args.seed, bounds=dict(args.bounds),
@@ -66,14 +73,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                     min_std_mm_s=args.min_std_mm_s, scan=max(0, args.scan), scan_rounds=max(1, args.scan_rounds),
                     scheduler=args.scheduler,
                     workers=args.workers, quiet=args.quiet or args.json)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     prov = cal.provenance()
     prov["calibration"]["start_params"] = args.params or "RobotParams() defaults"
-    cal.params.to_toml(out, provenance=prov)
+    with atomic_output(out) as tmp:
+        cal.params.to_toml(tmp, provenance=prov)
     summary = {"out": str(out), **cal.summary()}
-    side = out.with_suffix(".calibration.json")
-    side.write_text(json.dumps(to_jsonable(summary, finite=True), indent=1), encoding="utf-8")
+    with atomic_output(side) as tmp:
+        tmp.write_text(json.dumps(to_jsonable(summary, finite=True), indent=1), encoding="utf-8")
     summary["details"] = str(side)
     if not args.json:
         print(f"calibrated {', '.join(cal.names)} on {len(obs.freq_hz)} points ({cal.n_sims} simulations)")

@@ -26,8 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from labkit.demo import run_demo
-    from labkit.demo_results import format_summary
+    from labkit.demo.results import format_summary
+    from labkit.demo.run import run_demo
 
     summary = run_demo(args.out, quick=args.quick, seed=args.seed, quiet=args.quiet, force=args.force)
     if not args.json:

@@ -1,50 +1,80 @@
-"""``labkit info FILE``: summarise any file the toolkit writes (HDF5 or TOML)."""
+"""``labkit info FILE``: summarise any file the toolkit writes.
+
+Run files, tracks, fits and simulations (HDF5), robot parameter files and
+experiment configs (TOML), track tables (CSV) and videos (``.mkv``, ``.avi``).
+What a file *means* comes from :func:`labkit.open` (``content``); for HDF5
+files every dataset's shape, dtype and units are listed as well.
+"""
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 from typing import Any
 
-from labkit.errors import InputError
+from labkit.errors import ConfigError, InputError
 
 NAME = "info"
-HELP = "summarise a labkit file: run file, simulation, track (HDF5) or parameter file (TOML)"
+HELP = ("summarise a labkit file: run file, track, fit, simulation (HDF5), parameter file or config (TOML), "
+        "track table (CSV), video (.mkv/.avi)")
 
 
 def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", help="an HDF5 or TOML file written by labkit")
+    parser.add_argument("file", help="a file written by labkit")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    path = Path(args.file)
-    if not path.is_file():
-        raise InputError("no such file", file=path)
-    if path.suffix.lower() == ".toml":
-        summary = summarise_toml(path)
-    else:
-        summary = summarise_h5(path)
+    summary = summarise(args.file)
     if not args.json:
         _print(summary)
     return summary
 
 
+def summarise(path: str | Path) -> dict[str, Any]:
+    """What ``labkit info`` reports about ``path`` (a JSON-able dict; InputError if unreadable)."""
+    from labkit.files import VIDEO_SUFFIXES, open_file
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such file", file=path)
+    suffix = path.suffix.lower()
+    if suffix == ".toml":
+        return summarise_toml(path)
+    if suffix == ".csv":
+        return {"file": str(path), "format": "csv", "content": open_file(path).summary()}
+    if suffix in VIDEO_SUFFIXES:
+        return {"file": str(path), "format": "video", "content": open_file(path).summary()}
+    return summarise_h5(path)
+
+
 def summarise_toml(path: Path) -> dict[str, Any]:
+    """Tables and keys of a TOML file; for a robot parameter file its modes and provenance digest."""
+    from labkit.files.kinds import provenance_digest, read_params
     from labkit.tomlio import load_toml
 
     table, _ = load_toml(path)
-    return {"file": str(path), "format": "toml", "tables": sorted(k for k, v in table.items() if isinstance(v, dict)),
-            "keys": sorted(k for k, v in table.items() if not isinstance(v, dict)),
-            "provenance": table.get("provenance", {})}
+    out: dict[str, Any] = {"file": str(path), "format": "toml",
+                           "tables": sorted(k for k, v in table.items() if isinstance(v, dict)),
+                           "keys": sorted(k for k, v in table.items() if not isinstance(v, dict)),
+                           "provenance": table.get("provenance", {})}
+    if "k_per_s2" in table or "provenance" in table:        # a robot parameter file, not a config
+        try:
+            out["content"] = read_params(path).summary()
+        except ConfigError as exc:
+            out["content"] = {"kind": "robot_params", "error": str(exc)}
+        out["provenance_digest"] = provenance_digest(out["provenance"]) if isinstance(out["provenance"], dict) else {}
+    return out
 
 
 def summarise_h5(path: Path) -> dict[str, Any]:
-    """Root attributes plus every dataset's shape, dtype and units."""
+    """Root attributes, every dataset's shape, dtype and units, and the typed summary of known kinds."""
     import h5py
 
+    from labkit.files import open_file
     from labkit.h5io import open_h5
 
     datasets: list[dict[str, Any]] = []
     groups: list[str] = []
+    dims: dict[str, list[str]] = {}
     with open_h5(path) as f:
         attrs = {k: _attr(v) for k, v in f.attrs.items() if len(str(v)) < 400}
 
@@ -52,13 +82,22 @@ def summarise_h5(path: Path) -> dict[str, Any]:
             if isinstance(obj, h5py.Dataset):
                 datasets.append({"name": name, "shape": list(obj.shape), "dtype": str(obj.dtype),
                                  "units": _attr(obj.attrs.get("units", ""))})
+                names = [d.label or (d[0].name.rsplit("/", 1)[-1] if len(d) else "") for d in obj.dims]
+                if any(names):
+                    dims[name] = names
             else:
                 groups.append(name)
 
         f.visititems(visit)
-    return {"file": str(path), "format": "hdf5", "kind": attrs.get("kind"),
-            "schema_version": attrs.get("schema_version"), "attrs": attrs,
-            "groups": groups, "datasets": datasets}
+    out = {"file": str(path), "format": "hdf5", "kind": attrs.get("kind"),
+           "schema_version": attrs.get("schema_version"), "attrs": attrs,
+           "groups": groups, "datasets": datasets, "dims": dims}
+    if attrs.get("kind") in ("run_inchip", "run_shaker", "track", "modal_fit", "sim_result", "sim_sweep"):
+        try:
+            out["content"] = open_file(path).summary()
+        except InputError as exc:       # a damaged file still gets its listing
+            out["content"] = {"error": str(exc)}
+    return out
 
 
 def _attr(value: Any) -> Any:
@@ -71,13 +110,35 @@ def _attr(value: Any) -> Any:
 
 def _print(summary: dict[str, Any]) -> None:
     print(f"{summary['file']} ({summary['format']})")
+    content = summary.get("content", {})
     if summary["format"] == "toml":
-        print(f"  tables: {', '.join(summary['tables'])}")
+        print(f"  tables: {', '.join(summary['tables']) or '-'}")
+        if "content" in summary:
+            for k in ("modal_freq_hz", "modal_damping_ratio"):
+                if k in content:
+                    print(f"  {k}: {', '.join(f'{v:.6g}' for v in content[k])}")
+            digest = summary.get("provenance_digest", {})
+            for k, v in digest.items():
+                if k == "modes":
+                    for m, where in v.items():
+                        print(f"  provenance: mode {m}: {where}")
+                else:
+                    print(f"  provenance: {k}: {v}")
+        return
+    if summary["format"] != "hdf5":
+        for k, v in content.items():
+            if k != "file":
+                print(f"  {k}: {v}")
         return
     for key, value in summary["attrs"].items():
         print(f"  {key}: {value}")
+    for key, value in content.items():
+        if key != "file" and key not in summary["attrs"]:
+            print(f"  {key}: {value}")
     print(f"  {len(summary['groups'])} groups, {len(summary['datasets'])} datasets")
     for ds in summary["datasets"][:40]:
-        print(f"    {ds['name']}  {tuple(ds['shape'])} {ds['dtype']} [{ds['units']}]")
+        names = summary.get("dims", {}).get(ds["name"])
+        dims = f"  dims ({', '.join(names)})" if names else ""
+        print(f"    {ds['name']}  {tuple(ds['shape'])} {ds['dtype']} [{ds['units']}]{dims}")
     if len(summary["datasets"]) > 40:
         print(f"    ... {len(summary['datasets']) - 40} more")

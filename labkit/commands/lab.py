@@ -28,6 +28,13 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     serve.add_argument("--setup", choices=("inchip", "shaker"), default="inchip", help="initial set-up")
     serve.add_argument("--spot", choices=("body", "hip", "knee", "tray"), default="knee",
                        help="initial laser spot")
+    from labkit.lab.models import FUNCGEN_MODELS, SCOPE_MODELS, VIBROMETER_MODELS
+    serve.add_argument("--funcgen", choices=list(FUNCGEN_MODELS), default="33522B", metavar="MODEL",
+                       help=f"simulated generator: {', '.join(FUNCGEN_MODELS)} (default 33522B)")
+    serve.add_argument("--scope", choices=list(SCOPE_MODELS), default="DSOX3024T", metavar="MODEL",
+                       help=f"simulated oscilloscope: {', '.join(SCOPE_MODELS)} (default DSOX3024T)")
+    serve.add_argument("--vibrometer", choices=list(VIBROMETER_MODELS), default="OFV-5000", metavar="MODEL",
+                       help="simulated vibrometer controller: OFV-5000 (default) or OFV-3001")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
@@ -35,7 +42,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.lab import VirtualLab
 
     robot = require_file(args.robot, "robot parameter file") if args.robot else None
-    lab = VirtualLab(robot=robot, seed=args.seed)
+    lab = VirtualLab(robot=robot, seed=args.seed, funcgen_model=args.funcgen, scope_model=args.scope,
+                     vibrometer_model=args.vibrometer)
     lab.set_setup(args.setup)
     lab.set_spot(args.spot)
     stop = threading.Event()
@@ -43,7 +51,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         lab.start()
         emit_json(lab.resources)   # always: this line is how clients find the lab
         if not args.json:
-            print("virtual lab serving; Ctrl-C to stop", file=sys.stderr, flush=True)
+            models = ", ".join(f"{role}: {model}" for role, model in lab.models.items())
+            print(f"virtual lab serving ({models}); Ctrl-C to stop", file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
     finally:

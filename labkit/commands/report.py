@@ -18,6 +18,14 @@ def _drive(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(f"expected FREQ_HZ:AMP_UM (e.g. 240:25), got {text!r}") from None
 
 
+def _tolerance(text: str) -> tuple[str, float]:
+    try:
+        key, value = text.split("=")
+        return key.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE (e.g. knee_phase_deg_max=15), got {text!r}") from None
+
+
 def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
     parser.add_argument("--runs", nargs="+", default=[], metavar="RUN.h5",
                         help="run files: in-chip sweeps (FRFs) and shaker runs (speeds, knee records)")
@@ -33,28 +41,64 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--knee-duration-s", type=float, default=0.3, help="simulated time per knee drive (s)")
     parser.add_argument("--leg", type=int, default=1, choices=range(1, 7), help="which leg's knee to simulate")
     parser.add_argument("--no-simulate", action="store_true", help="never run the simulator; use --sim files only")
-    parser.add_argument("--band-k", type=float, default=2.0, help="Monte Carlo band: mean +- K std (default 2)")
+    parser.add_argument("--tolerance", dest="tolerances", nargs="+", type=_tolerance, default=[],
+                        metavar="KEY=VALUE",
+                        help="change what a comparison is judged against, e.g. speed_relative_rms_max=0.2 "
+                             "(keys and defaults: labkit.analysis.compare.Tolerances)")
+    parser.add_argument("--compare", nargs=2, metavar=("A_DIR", "B_DIR"),
+                        help="instead of building a report, put two reports' headline numbers side by side")
     parser.add_argument("--scheduler", help="tcp://HOST:PORT of a Dask scheduler for the knee simulations")
     parser.add_argument("--workers", type=int, help="local worker processes for the knee simulations")
     parser.add_argument("--title", default="labkit: model against measurement")
-    parser.add_argument("--out", required=True, metavar="DIR", help="output folder (report.html, fig_*.png)")
+    parser.add_argument("--out", metavar="DIR",
+                        help="output folder (report.html, agreement.json, figure_data.json, fig_*.png and "
+                             "fig_*.svg); created if missing, its parent must exist")
+    parser.add_argument("--force", action="store_true", help="replace a report already in --out")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from analysis.report import build_report
+    import shlex
+    import sys
+    from pathlib import Path
 
+    from labkit.analysis.compare import Tolerances
+    from labkit.analysis.report.build import build_report
+    from labkit.outputs import check_output_dir
+
+    if args.compare:
+        return _compare(args)
+    if not args.out:
+        raise InputError("missing", key="--out", expected="an output folder (or --compare A_DIR B_DIR)")
     if not args.knee_duration_s > 0:
         raise InputError("must be > 0", key="--knee-duration-s", expected="a duration in s")
+    try:
+        tol = Tolerances.from_mapping(dict(args.tolerances))
+    except ValueError as exc:
+        raise InputError(str(exc), key="--tolerance") from None
+    out = Path(args.out)
+    figures = sorted(p.name for p in out.glob("fig_*.*")) if out.is_dir() else []
+    check_output_dir(out, force=args.force, names=["report.html", "agreement.json", "figure_data.json", *figures])
     summary = build_report(args.out, runs=args.runs, tracks=args.tracks, fit=args.fit, sims=args.sim,
                            params=args.params, knee_drives=args.knee_drives, simulate_knee=not args.no_simulate,
-                           knee_duration_s=args.knee_duration_s, leg=args.leg - 1, band_k=args.band_k,
-                           scheduler=args.scheduler, workers=args.workers, title=args.title, quiet=args.quiet or args.json)
+                           knee_duration_s=args.knee_duration_s, leg=args.leg - 1, tolerances=tol,
+                           command=shlex.join(["labkit", *sys.argv[1:]]),
+                           scheduler=args.scheduler, workers=args.workers, title=args.title,
+                           quiet=args.quiet or args.json)
     if not args.json:
         print(f"report: {summary['html']}")
-        for name, status in summary["sections"].items():
+        for name in summary["sections"]:
             note = summary["missing"].get(name, "") or summary["notes"].get(name, "")
-            print(f"  {name:14s} {status:8s} {note}")
+            print(f"  {name:14s} {summary['verdicts'][name]:10s} {note}")
         for row in summary["agreement"]:
-            v = row["value"]
-            print(f"  {row['quantity']}: {'n/a' if v is None else f'{v:.3g}'} {row['units']}")
+            print(f"  [{row['verdict']}] {row['comparison']}: {row['metric']} = {row['value_text']} "
+                  f"(tolerance {row['tolerance']})")
     return summary
+
+
+def _compare(args: argparse.Namespace) -> dict[str, Any]:
+    from labkit.analysis.report.sidebyside import compare_reports, comparison_lines
+
+    result = compare_reports(*args.compare)
+    if not args.json:
+        print("\n".join(comparison_lines(result)))
+    return result

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError
+from labkit.outputs import atomic_output, check_output_dir, check_outputs
 
 NAME = "simulate"
 HELP = "run the hybrid microrobot simulator: shaker or PZT runs, sweeps with Monte Carlo, named scenarios"
@@ -32,6 +33,7 @@ SWEEPABLE = {
 }
 DEFAULTS = {"shaker": {"freq_hz": 240.0, "amp_um": 25.0}, "pzt": {"freq_hz": 1800.0, "voltage_v": 20.0}}
 ABLATIONS = ("none", "no_adhesion", "no_squeeze_film")
+H5_SUFFIXES = (".h5", ".hdf5")
 #: The named scenarios (labkit.sim.scenarios.SCENARIOS; listed here so that
 #: ``labkit --help`` does not import the simulator). A test keeps them equal.
 SCENARIO_NAMES = {
@@ -55,7 +57,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     run_opts.add_argument("--seed", default="0", metavar="N", help="random seed (default 0)")
     run_opts.add_argument("--ablate", choices=ABLATIONS, default="none",
                           help="switch a small-scale force off (paper Fig. 12)")
-    run_opts.add_argument("--out", metavar="FILE.h5", help="write the result as HDF5")
+    run_opts.add_argument("--out", metavar="FILE.h5", help="write the result as HDF5 (its folder must exist)")
+    run_opts.add_argument("--force", action="store_true", help="replace --out if it exists")
 
     shaker = sub.add_parser("shaker", parents=[common, run_opts], help="one run on a vertically vibrating tray")
     shaker.add_argument("--freq-hz", default="240", metavar="HZ", help="tray frequency, Hz (default 240)")
@@ -74,7 +77,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                             help="Monte Carlo draws per point (0: nominal robot only; n: nominal + n-1 drawn)")
     sweep_opts.add_argument("--scheduler", default=None, metavar="URL",
                             help="Dask scheduler tcp://HOST:PORT (default: local processes)")
-    sweep_opts.add_argument("--workers", default=None, metavar="N", help="local worker processes (default: one per core)")
+    sweep_opts.add_argument("--workers", default=None, metavar="N",
+                            help="local worker processes (default: one per core)")
     for kind, opts in SWEEPABLE.items():
         p = swsub.add_parser(kind, parents=[common, run_opts, sweep_opts],
                              help=f"sweep a {kind} run over one of {', '.join(o for o, _, _ in opts)}")
@@ -92,6 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     sc.add_argument("name", choices=list(SCENARIO_NAMES),
                     help="; ".join(f"{k}: {v}" for k, v in SCENARIO_NAMES.items()))
     sc.add_argument("--out", default=".", metavar="DIR", help="folder for the figure and data (default .)")
+    sc.add_argument("--force", action="store_true", help="replace sim_NAME.h5 / .png already in --out")
     sc.add_argument("--params", metavar="FILE", help="robot parameter file (TOML)")
     sc.add_argument("--quick", action="store_true", help="few points, short runs (a smoke test, not the result)")
     sc.add_argument("--draws", default=None, metavar="N", help="override the scenario's Monte Carlo draws")
@@ -202,13 +207,16 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     duration_s = number(args.duration_s, "--duration-s", positive=True)
     seed = integer(args.seed, "--seed")
     params = ablate(load_params(args.params), args.ablate)
+    check_outputs([args.out], force=args.force, suffixes=H5_SUFFIXES)       # before simulating
     r = simulate(params, _scenario_from(kind, values), duration_s=duration_s, seed=seed)
     summary: dict[str, Any] = {"kind": kind, **values, "duration_s": duration_s, "ablate": args.ablate,
                                "seed": seed}
     for key, value in _result_summary(r).items():
         summary.setdefault(key, value)
     if args.out:
-        summary["out"] = str(r.to_h5(args.out) or args.out)
+        with atomic_output(args.out) as tmp:
+            r.to_h5(tmp)
+        summary["out"] = str(args.out)
     if not args.json:
         _print_single(summary)
     return summary
@@ -253,6 +261,7 @@ def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
 
         params, _ = apply_value(params, _scenario_from(kind, base), "mass_mg", fixed["mass_mg"])
     draws = integer(args.draws, "--draws")
+    check_outputs([args.out], force=args.force, suffixes=H5_SUFFIXES)       # before simulating
     workers = None if args.workers is None else integer(args.workers, "--workers", minimum=1)
     accel = getattr(args, "accel_limit_g", None)
     s = sweep(params, _scenario_from(kind, base), quantity=quantity, values=values, draws=draws,
@@ -262,7 +271,9 @@ def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
     summary = s.summary()
     summary["ablate"] = args.ablate
     if args.out:
-        summary["out"] = str(s.to_h5(args.out))
+        with atomic_output(args.out) as tmp:
+            s.to_h5(tmp)
+        summary["out"] = str(args.out)
     if not args.json:
         _print_sweep(summary)
     return summary
@@ -272,6 +283,8 @@ def _run_scenario(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.sim.scenarios import run_scenario
 
     params = load_params(args.params)
+    key = args.name.replace("_", "-")
+    check_output_dir(args.out, force=args.force, names=[f"sim_{key}.h5", f"sim_{key}.png"])
     summary = run_scenario(
         args.name, params=params, out_dir=args.out, quick=args.quick,
         draws=None if args.draws is None else integer(args.draws, "--draws"),

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError
+from labkit.outputs import atomic_output, check_outputs
 
 NAME = "track"
 HELP = "track the robot in a top-view video: path, heading, speed with confidence interval"
@@ -27,11 +28,13 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                         help="smoothing window for the speed (s; default 1 s, >= 7 frames)")
     parser.add_argument("--out", metavar="FILE",
                         help="track HDF5 file (kind 'track'); a .csv and a .png are written beside it")
-    parser.add_argument("--overlay", metavar="FILE", help="overlay video with trajectory and heading (.avi)")
+    parser.add_argument("--overlay", metavar="FILE", help="overlay video with trajectory and heading (.avi or .mkv)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace existing outputs (--out, its .csv and .png, --overlay)")
 
 
 def _scale_bar(text: str):
-    from analysis.tracking import scale_from_bar
+    from labkit.analysis.tracking.tracker import scale_from_bar
 
     try:
         vals = [float(v) for v in text.split(",")]
@@ -45,9 +48,9 @@ def _scale_bar(text: str):
 def run(args: argparse.Namespace) -> dict[str, Any]:
     import numpy as np
 
-    from analysis.speed import track_speed
-    from analysis.track_output import plot_path, save_track_csv, save_track_h5, summary, write_overlay
-    from analysis.tracking import ROBOT_LENGTH_MM, scale_given, track_video
+    from labkit.analysis.tracking.output import plot_path, save_track_csv, save_track_h5, summary, write_overlay
+    from labkit.analysis.tracking.speed import track_speed
+    from labkit.analysis.tracking.tracker import ROBOT_LENGTH_MM, scale_given, track_video
 
     scale = None
     if args.mm_per_px is not None:
@@ -62,21 +65,32 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.window_s is not None and not args.window_s > 0:
         raise InputError(f"bad window {args.window_s}", key="--window-s", expected="a duration > 0 s")
 
-    for target in (args.out, args.overlay):
-        if target and not Path(target).resolve().parent.is_dir():
-            raise InputError("the output's folder does not exist", file=target)
+    # every output, sidecars included, is checked before a frame is read
+    out = Path(args.out) if args.out else None
+    if out is not None:
+        if out.suffix.lower() in (".csv", ".png"):
+            raise InputError("the track file would clash with its own .csv/.png sidecar", file=out,
+                             key="--out", expected="a .h5 file name")
+        check_outputs([out, out.with_suffix(".csv"), out.with_suffix(".png")], force=args.force)
+    check_outputs([args.overlay], force=args.force, key="--overlay", suffixes=(".avi", ".mkv"))
+    if args.overlay and out is not None:
+        check_outputs([out, out.with_suffix(".csv"), out.with_suffix(".png"), args.overlay], force=True)
     track = track_video(args.video, roi=args.roi, mask=args.mask, scale=scale, robot_length_mm=length,
                         quiet=args.quiet)
     speed = track_speed(track, window_s=args.window_s)
     result = summary(track, speed)
     written: dict[str, str] = {}
-    if args.out:
-        out = Path(args.out)
-        written["track_h5"] = str(save_track_h5(out, track, speed))
-        written["track_csv"] = str(save_track_csv(out.with_suffix(".csv"), track, speed))
-        written["path_png"] = str(plot_path(out.with_suffix(".png"), track, speed))
+    if out is not None:
+        for name, target, writer in (("track_h5", out, save_track_h5),
+                                     ("track_csv", out.with_suffix(".csv"), save_track_csv),
+                                     ("path_png", out.with_suffix(".png"), plot_path)):
+            with atomic_output(target) as tmp:      # an old file survives a failed write
+                writer(tmp, track, speed)
+            written[name] = str(target)
     if args.overlay:
-        written["overlay"] = str(write_overlay(args.video, track, args.overlay, speed))
+        with atomic_output(args.overlay) as tmp:
+            write_overlay(args.video, track, tmp, speed)
+        written["overlay"] = str(args.overlay)
     result["written"] = written
     if not args.json:
         lo, hi = speed.speed_ci_mm_s

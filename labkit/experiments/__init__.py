@@ -8,7 +8,7 @@ drives outputs; safe shutdown) -> run files (appended and flushed per point).
 * :mod:`labkit.experiments.runner`   ``Runner``
 * :mod:`labkit.experiments.safety`   drive guard, interlocks, signal handling
 * :mod:`labkit.experiments.rig`      the open instruments, limits handed to the drivers
-* :mod:`labkit.experiments.measure`  acquisition and demodulation (via :mod:`analysis.frf`)
+* :mod:`labkit.experiments.measure`  acquisition and demodulation (via :mod:`labkit.analysis.frf`)
 * :mod:`labkit.experiments.runfile`  the run-file layout (documented there), writer, readers
 * :mod:`labkit.experiments.session`  ``run_session``: what the CLI commands call
 """

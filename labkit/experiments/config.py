@@ -8,7 +8,7 @@ expected (CLI exit 2). See ``sample_data/inchip.toml`` and
 Common tables
 -------------
 ``[instruments.<role>]``
-    ``model`` (a driver name, see :mod:`drivers.registry`), ``resource`` (a VISA
+    ``model`` (a driver name, see :mod:`labkit.drivers.registry`), ``resource`` (a VISA
     resource string or device path); any other key is a driver setting
     (``channel``, ``timeout_s`` ...). Roles: ``funcgen``, ``scope``,
     ``vibrometer``, optional ``control`` (a virtual-lab control channel: the run
@@ -43,7 +43,7 @@ LOCATIONS = ("body", "hip", "knee")
 SPOTS = ("body", "hip", "knee", "tray")
 ON_INTERLOCK = ("skip", "end")
 DEFAULT_PZT_MAX_V = 20.0
-#: overridable fields of the shaker envelope (drivers.shaker.Shaker4809Envelope)
+#: overridable fields of the shaker envelope (labkit.drivers.shaker.Shaker4809Envelope)
 ENVELOPE_KEYS = ("freq_min_hz", "freq_max_hz", "force_peak_n", "stroke_peak_mm", "velocity_peak_m_s",
                  "moving_mass_kg")
 # Analog output of the vibrometer controllers spans +-10 V (OFV-3001/5000 manuals).
@@ -59,7 +59,7 @@ class InstrumentSpec:
     resource: str
     settings: dict[str, Any] = field(default_factory=dict)
 
-    def with_resource(self, resource: str) -> "InstrumentSpec":
+    def with_resource(self, resource: str) -> InstrumentSpec:
         return InstrumentSpec(self.role, self.model, resource, dict(self.settings))
 
 
@@ -114,7 +114,7 @@ class InchipConfig:
 
     kind = "inchip"
 
-    def with_resources(self, resources: dict[str, str]) -> "InchipConfig":
+    def with_resources(self, resources: dict[str, str]) -> InchipConfig:
         return _with_resources(self, resources)
 
 
@@ -155,7 +155,7 @@ class ShakerConfig:
 
     kind = "shaker"
 
-    def with_resources(self, resources: dict[str, str]) -> "ShakerConfig":
+    def with_resources(self, resources: dict[str, str]) -> ShakerConfig:
         return _with_resources(self, resources)
 
 
@@ -307,7 +307,7 @@ def _instruments(t: Table, required: tuple[str, ...], optional: tuple[str, ...])
 
 def _check_driver(spec: Table, model: str, settings: dict[str, Any]) -> None:
     """The model must have a driver, and every extra key must be one of its settings."""
-    from drivers.registry import driver_class, model_names
+    from labkit.drivers.registry import driver_class, model_names
     from labkit.errors import ConfigError
 
     try:

@@ -1,7 +1,7 @@
 """One acquisition and its reduction: scope records -> phasors, FRF and quality.
 
 The runner calls these with the rig's drivers; they never change an output.
-Demodulation and spectral estimates come from :mod:`analysis.frf` (shared
+Demodulation and spectral estimates come from :mod:`labkit.analysis.frf` (shared
 with the fitting code).
 """
 from __future__ import annotations
@@ -68,8 +68,8 @@ def acquire(scope: Any, drive_channel: int, velocity_channel: int, record_s: flo
 
 
 def sine_phasors(rec: Records, freq_hz: float, scale_mm_s_per_v: float) -> SinePhasors:
-    """Least-squares sine fit of both channels at ``freq_hz`` (:func:`analysis.frf.demodulate`)."""
-    from analysis.frf import demodulate
+    """Least-squares sine fit of both channels at ``freq_hz`` (:func:`labkit.analysis.frf.demodulate`)."""
+    from labkit.analysis.frf import demodulate
 
     dem = demodulate(np.vstack([rec.drive_v, rec.velocity_v]), rec.fs_hz, freq_hz)
     return SinePhasors(complex(dem.amplitude[0]), complex(dem.amplitude[1]) * scale_mm_s_per_v,
@@ -84,7 +84,7 @@ def chirp_h1(records: list[Records], scale_mm_s_per_v: float, f_lo_hz: float, f_
     would weight some frequencies less); averaging is over the records.
     Returns ``(freq_hz, frf (mm/s)/V, coherence)`` inside ``[f_lo_hz, f_hi_hz]``.
     """
-    from analysis.frf import estimate_frf
+    from labkit.analysis.frf import estimate_frf
 
     n = min(r.drive_v.size for r in records)
     x = np.concatenate([r.drive_v[:n] for r in records])

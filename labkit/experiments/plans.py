@@ -21,8 +21,8 @@ Steps
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable, Union
 
 from labkit.experiments.config import InchipConfig, ShakerConfig
 
@@ -85,8 +85,8 @@ class ShakerPoint:
         return (tries + 1) * (self.settle_s + self.dwell_s + OVERHEAD_S) + self.video_s
 
 
-Step = Union[MoveSpot, SinePoint, ChirpPoint, ShakerPoint]
-Point = Union[SinePoint, ChirpPoint, ShakerPoint]
+Step = MoveSpot | SinePoint | ChirpPoint | ShakerPoint
+Point = SinePoint | ChirpPoint | ShakerPoint
 
 
 @dataclass(frozen=True)

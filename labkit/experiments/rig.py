@@ -10,13 +10,26 @@ channel) or a :class:`PromptSpot` (asks the person at the terminal).
 """
 from __future__ import annotations
 
-import math
 import sys
-from typing import Any, Callable, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from labkit.errors import InputError, InstrumentError, LimitError
-from labkit.experiments.config import VIB_OUTPUT_MAX_V, InchipConfig, InstrumentSpec, ShakerConfig
-from labkit.experiments.safety import Interlock
+from labkit.experiments import kinds
+from labkit.experiments.config import VIB_OUTPUT_MAX_V, InstrumentSpec
+from labkit.experiments.kinds import Config
+from labkit.experiments.protocols import (
+    Amplifier,
+    Camera,
+    FunctionGenerator,
+    Scope,
+    ShakerEnvelope,
+    SpotMover,
+    Vibrometer,
+)
+from labkit.experiments.safety import DriveGuard, Interlock
+
+if TYPE_CHECKING:  # pragma: no cover
+    from labkit.lab.client import LabControl
 
 #: scope vertical divisions on screen (both supported models have 8)
 VERTICAL_DIVS = 8
@@ -42,7 +55,7 @@ class PromptSpot:
 class LabSpot:
     """Tell the virtual lab where the laser points (``LAB:SPOT``)."""
 
-    def __init__(self, control: Any) -> None:
+    def __init__(self, control: LabControl) -> None:
         self.control = control
 
     def move(self, spot: str) -> None:
@@ -50,7 +63,7 @@ class LabSpot:
 
 
 def _open(spec: InstrumentSpec, **extra: Any) -> Any:
-    from drivers.registry import open_instrument
+    from labkit.drivers.registry import open_instrument
 
     settings = dict(spec.settings)
     for k, v in extra.items():
@@ -62,73 +75,88 @@ def _open(spec: InstrumentSpec, **extra: Any) -> Any:
             settings[k] = v
     try:
         inst = open_instrument(spec.model, spec.resource, name=spec.role, **settings)
+    except LimitError:
+        raise
     except InputError as exc:
         raise type(exc)(exc.message, file=exc.file, key=f"instruments.{spec.role}." + (exc.key or "model"),
-                        expected=exc.expected) if not isinstance(exc, LimitError) else exc
+                        expected=exc.expected) from None
     return inst
 
 
 class Rig:
-    """Open instruments for one run (use as a context manager: everything is closed at exit)."""
+    """Open instruments for one run (use as a context manager: everything is closed at exit).
 
-    def __init__(self, cfg: InchipConfig | ShakerConfig, *, spot: Any | None = None) -> None:
+    The generator belongs to the rig's :class:`DriveGuard` (``rig.guard``): the guard alone
+    turns its output on and off and replaces the connection when the link is lost;
+    ``rig.funcgen`` is always the guard's current connection.
+    """
+
+    def __init__(self, cfg: Config, *, spot: SpotMover | None = None) -> None:
         self.cfg = cfg
-        self.funcgen: Any = None
-        self.scope: Any = None
-        self.vibrometer: Any = None
-        self.control: Any = None
-        self.camera: Any = None
-        self.amplifier: Any = None
-        self.envelope: Any = None
+        self.kind = kinds.of(cfg)
+        self.setup = self.kind.rig_setup(cfg)
+        # guard, scope and vibrometer exist once open() has run (they are needed by every run)
+        self.control: LabControl | None = None
+        self.camera: Camera | None = None
+        self.amplifier: Amplifier | None = None
+        self.envelope: ShakerEnvelope | None = None
+        self.max_drive_vpp: float | None = None
         self.drive_channel = cfg.scope.drive_channel
         self.velocity_channel = cfg.scope.velocity_channel
         self.scale_mm_s_per_v = cfg.scale_mm_s_per_v
         self._spot = spot
-        self._funcgen_limits: dict[str, Any] = {}
+        self._funcgen_limits: dict[str, float] = {}
         self.velocity_vpd = cfg.scope.velocity_volts_per_div or 2 * VIB_OUTPUT_MAX_V / VERTICAL_DIVS
         self.drive_vpd: float | None = None
+        self._points: int | None = None
         self._at: str | None = None                  # where the laser points
         self._range_at: dict[str, float] = {}        # velocity V/div last used per spot
 
+    guard: DriveGuard
+    scope: Scope
+    vibrometer: Vibrometer
+
+    @property
+    def funcgen(self) -> FunctionGenerator:
+        """The generator's current connection (owned by :attr:`guard`)."""
+        return self.guard.funcgen
+
     # -- opening ---------------------------------------------------------------------------
-    def open(self) -> "Rig":
+    def open(self) -> Rig:
         cfg = self.cfg
         inst = cfg.instruments
+        setup = self.setup
         try:
             if "control" in inst:
                 from labkit.lab.client import LabControl
 
                 self.control = LabControl(inst["control"].resource)
-                self.control.set_setup("inchip" if cfg.kind == "inchip" else "shaker")
-            if isinstance(cfg, ShakerConfig):
-                from drivers.shaker import Amplifier2718, Shaker4809Envelope
-
-                self.amplifier = Amplifier2718(gain_db=cfg.gain_db, attenuator_db=cfg.attenuator_db,
-                                               current_limit_a=cfg.current_limit_a,
-                                               max_input_vrms=cfg.max_input_vrms)
+                self.control.set_setup(self.kind.lab_setup)
+            self.amplifier, self.envelope = setup.amplifier, setup.envelope
+            if self.amplifier is not None:
                 self.max_drive_vpp = float(self.amplifier.max_input_vpp)
-                self.envelope = Shaker4809Envelope(**cfg.envelope)
-                self._funcgen_limits = {"max_amp_vpp": self.max_drive_vpp, "max_v": self.max_drive_vpp / 2}
-            else:
-                self._funcgen_limits = {"max_v": min(cfg.pzt_max_v, 10.0)}
-            self.funcgen = _open(inst["funcgen"], **self._funcgen_limits)
+            self._funcgen_limits = dict(setup.funcgen_limits)
+            fg = _open(inst["funcgen"], **self._funcgen_limits)
+            spec = inst["funcgen"]
+            self.guard = DriveGuard(fg, reopen=self.reopen_funcgen, where=f"{spec.model} at {spec.resource}",
+                                    config=cfg.path)
             # A generator may come up with its output on from an earlier session: off first.
-            self.funcgen.safe_off()
-            self.funcgen.set_load_high_z()
-            self.scope = _open(inst["scope"])
-            self.scope.poll_s = 0.002       # completion polls: fine-grained (the record time is slept)
-            self.vibrometer = _open(inst["vibrometer"])
-            self.vibrometer.scale_mm_s_per_v = cfg.scale_mm_s_per_v
-            self.scale_mm_s_per_v = float(self.vibrometer.scale_mm_s_per_v)
-            self.scope.setup_channel(self.velocity_channel, self.velocity_vpd, 0.0, "DC")
+            fg.safe_off()
+            fg.set_load_high_z()
+            scope = self.scope = _open(inst["scope"])
+            scope.poll_s = 0.002       # completion polls: fine-grained (the record time is slept)
+            vib = self.vibrometer = _open(inst["vibrometer"])
+            vib.scale_mm_s_per_v = cfg.scale_mm_s_per_v
+            self.scale_mm_s_per_v = float(vib.scale_mm_s_per_v)
+            scope.setup_channel(self.velocity_channel, self.velocity_vpd, 0.0, "DC")
             trig = cfg.scope.trigger_source
             # EXT: the generator's TTL sync (phase zero of the sine, start of a sweep)
-            level = 1.0 if trig == "EXT" else (getattr(cfg, "offset_v", 0.0) if trig == f"CHAN{self.drive_channel}"
-                                               else 0.0)
-            self.scope.set_trigger(trig, level, "POS")
-            if isinstance(cfg, InchipConfig):
-                self.on_drive_amplitude(cfg.amp_vpp, cfg.offset_v)
-            if isinstance(cfg, ShakerConfig) and cfg.video_s > 0:
+            offset_v = setup.drive[1] if setup.drive is not None else 0.0
+            level = 1.0 if trig == "EXT" else (offset_v if trig == f"CHAN{self.drive_channel}" else 0.0)
+            scope.set_trigger(trig, level, "POS")
+            if setup.drive is not None:
+                self.on_drive_amplitude(*setup.drive)
+            if setup.wants_camera:
                 self.camera = self._open_camera()
             if self._spot is None:
                 self._spot = LabSpot(self.control) if self.control is not None else PromptSpot()
@@ -137,52 +165,42 @@ class Rig:
             raise
         return self
 
-    def _open_camera(self) -> Any:
+    def _open_camera(self) -> Camera:
         spec = self.cfg.instruments.get("camera")
         if spec is None or spec.model == "LabCamera":
             from labkit.lab.client import LabCamera
 
             resource = spec.resource if spec is not None else self.cfg.instruments["control"].resource
             return LabCamera(resource)
-        import drivers.camera as cam
+        import labkit.drivers.camera as cam
 
         if spec.model == "OpenCVCamera":
             return cam.OpenCVCamera(**spec.settings)
         if spec.model == "FileCamera":
-            return cam.FileCamera(spec.resource or spec.settings.get("path"))
+            return cam.FileCamera(spec.resource or str(spec.settings.get("path", "")))
         raise InputError(f"unknown camera model {spec.model!r}", file=self.cfg.path,
                          key="instruments.camera.model", expected="LabCamera, OpenCVCamera or FileCamera")
 
     def set_record_points(self, points: int) -> None:
-        """Points per record (InfiniiVision: ``:WAV:POIN``; sent now so the next record has them)."""
+        """Points per record (sent now so the next record has them; unchanged counts are not resent)."""
         points = int(max(100, min(points, self.cfg.scope.max_points)))
-        if getattr(self, "_points", None) == points:
+        if self._points == points:
             return
-        if hasattr(self.scope, "points"):
-            self.scope.points = points
-            self.scope.write(":WAV:POIN:MODE RAW")
-            self.scope.write(f":WAV:POIN {points}")
+        self.scope.set_record_points(points)
         self._points = points
 
     def chirp_timebase(self, length_s: float) -> None:
-        """Record exactly the sweep: the trigger (sweep start) at the record's first sample.
-
-        InfiniiVision: reference LEFT puts the trigger one division (10 %) in;
-        a delay of that much moves it to the record's start.
-        """
+        """Record exactly the sweep: the trigger (sweep start) at the record's first sample."""
         self.scope.set_timebase(length_s)
-        if hasattr(self.scope, "points"):
-            self.scope.write(":TIM:REF LEFT")
-            self.scope.write(f":TIM:POS {0.1 * length_s:.6g}")
+        self.scope.set_trigger_at_start(length_s)
 
-    def reopen_funcgen(self) -> Any:
-        """A new connection to the generator (the old link was lost)."""
-        self.funcgen = _open(self.cfg.instruments["funcgen"], **self._funcgen_limits)
-        return self.funcgen
+    def reopen_funcgen(self) -> FunctionGenerator:
+        """A new connection to the generator (the old link was lost); the guard adopts it."""
+        return _open(self.cfg.instruments["funcgen"], **self._funcgen_limits)
 
     def close(self) -> None:
-        for name in ("camera", "vibrometer", "scope", "control", "funcgen"):
-            obj = getattr(self, name)
+        for name in ("camera", "vibrometer", "scope", "control", "guard"):
+            obj = self.__dict__.get(name)      # only what open() got to
             if obj is None:
                 continue
             try:
@@ -190,7 +208,7 @@ class Rig:
             except Exception:
                 pass
 
-    def __enter__(self) -> "Rig":
+    def __enter__(self) -> Rig:
         return self.open()
 
     def __exit__(self, *exc: Any) -> None:
@@ -201,6 +219,8 @@ class Rig:
         """Move the laser; the velocity channel gets back the range it last had at that spot."""
         if self._at is not None:
             self._range_at[self._at] = self.velocity_vpd
+        if self._spot is None:      # open() always sets one; a rig used unopened asks the person
+            self._spot = PromptSpot()
         self._spot.move(spot)
         self._at = spot
         want = self._range_at.get(spot)
@@ -240,17 +260,17 @@ class Rig:
 
     def check_drive(self, vpp: float) -> None:
         """Interlock when a drive above the amplifier's input cap would be needed (nothing sent)."""
-        cap = getattr(self, "max_drive_vpp", None)
+        cap = self.max_drive_vpp
         if cap is not None and vpp > cap:
             raise Interlock(f"drive {vpp:.4g} Vpp needed exceeds the amplifier input cap {cap:.4g} Vpp "
-                            f"at {self.cfg.gain_db:g} dB gain")
+                            f"at {self.amplifier.gain_db if self.amplifier else float('nan'):g} dB gain")
 
     def check_envelope(self, freq_hz: float, disp_amp_um: float) -> None:
         """Interlock when the shaker's stroke/velocity/force/frequency envelope would be exceeded."""
         if self.envelope is None:
             return
         try:
-            self.envelope.check(freq_hz, disp_amp_um, payload_kg=self.cfg.payload_kg)
+            self.envelope.check(freq_hz, disp_amp_um, payload_kg=self.setup.payload_kg)
         except LimitError as exc:
             raise Interlock(f"shaker envelope: {exc.message}") from None
 
@@ -261,30 +281,21 @@ class Rig:
 
     def snapshots(self) -> dict[str, tuple[str, str, dict[str, Any]]]:
         """role -> (model, resource, snapshot) for the run file."""
-        out = {}
-        for role in ("funcgen", "scope", "vibrometer"):
-            obj = getattr(self, role)
+        out: dict[str, tuple[str, str, dict[str, Any]]] = {}
+        opened: dict[str, FunctionGenerator | Scope | Vibrometer] = {
+            "funcgen": self.funcgen, "scope": self.scope, "vibrometer": self.vibrometer}
+        for role, obj in opened.items():
             spec = self.cfg.instruments[role]
             out[role] = (spec.model, spec.resource, obj.snapshot())
         if self.control is not None:
             spec = self.cfg.instruments["control"]
             out["control"] = (spec.model, spec.resource, {"resource": spec.resource})
         if self.amplifier is not None:
-            out["amplifier"] = ("2718 (declared)", "", _declared(self.amplifier) | {
+            out["amplifier"] = ("2718 (declared)", "", self.amplifier.snapshot() | {
                 "max_drive_vpp": self.max_drive_vpp})
-            out["shaker"] = ("4809 (declared)", "", _declared(self.envelope) | {"payload_kg": self.cfg.payload_kg})
+        if self.envelope is not None:
+            out["shaker"] = ("4809 (declared)", "", self.envelope.snapshot() | {"payload_kg": self.setup.payload_kg})
         if self.camera is not None:
-            spec = self.cfg.instruments.get("camera")
-            snap = self.camera.snapshot() if hasattr(self.camera, "snapshot") else {"type": type(self.camera).__name__}
-            out["camera"] = (spec.model if spec else "LabCamera", spec.resource if spec else "", snap)
+            cam = self.cfg.instruments.get("camera")
+            out["camera"] = (cam.model if cam else "LabCamera", cam.resource if cam else "", self.camera.snapshot())
         return out
-
-
-def _declared(obj: Any) -> dict[str, Any]:
-    if hasattr(obj, "snapshot"):
-        return obj.snapshot()
-    import dataclasses
-
-    if dataclasses.is_dataclass(obj):
-        return dataclasses.asdict(obj)
-    return {k: v for k, v in vars(obj).items() if not k.startswith("_")}

@@ -76,9 +76,11 @@ from typing import Any
 import numpy as np
 
 from labkit.errors import InputError
-from labkit.h5io import get_json, open_h5, put_json, stamp, utc_now
+from labkit.h5io import get_json, label_dimensions, open_h5, put_json, stamp, utc_now
 
-SCHEMA_VERSION = 1
+#: 1: first layout; 2: dimension scales (``/points/index``, ``freq_hz``, records' ``t_s``),
+#: see docs/file-formats.md. Readers (labkit.files.runs) read both.
+SCHEMA_VERSION = 2
 _STR = "str"
 
 #: name -> (dtype, units). ``index`` is last on purpose: it is written last.
@@ -182,6 +184,49 @@ def _trim(group: Any, n: int) -> None:
             ds.resize((n,))
 
 
+#: free bytes every write leaves untouched: HDF5's metadata, the shutdown's events and final status
+RESERVE_BYTES = 2 * 1024 * 1024
+#: bytes a run file takes before its first point (attributes, config text, empty tables)
+BASE_BYTES = 256 * 1024
+
+
+class DiskFull(InputError):
+    """The disk (or the process's file-size limit) has no room for the next write; nothing was written.
+
+    HDF5 does not survive a failed write (the library crashes the process on the next
+    flush or close), so run files are never written into the last :data:`RESERVE_BYTES`.
+    """
+
+
+def headroom_bytes(path: str | Path) -> float:
+    """Bytes that may still be written to ``path``: free space on its file system for this
+    user, and no more than the soft ``RLIMIT_FSIZE`` allows the file to grow."""
+    import resource
+
+    path = Path(path)
+    folder = path.parent if not path.is_dir() else path
+    st = os.statvfs(folder if folder.exists() else Path.cwd())
+    free = float(st.f_bavail) * st.f_frsize
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    if soft != resource.RLIM_INFINITY:
+        size = path.stat().st_size if path.is_file() else 0
+        free = min(free, float(soft - size))
+    return free
+
+
+def check_room(path: str | Path, need_bytes: float, *, key: str = "--out") -> None:
+    """Pre-flight: DiskFull (exit 2, nothing created) unless a run of about ``need_bytes`` fits."""
+    free = headroom_bytes(path)
+    if free < need_bytes + RESERVE_BYTES:
+        raise DiskFull(f"not enough room for this run: about {_mb(need_bytes)} needed plus {_mb(RESERVE_BYTES)} "
+                       f"kept in reserve, {_mb(free)} free (file system, or the file-size limit); "
+                       "free some space or write elsewhere", file=path, key=key)
+
+
+def _mb(n: float) -> str:
+    return f"{n / 1e6:.3g} MB"
+
+
 class RunFile:
     """Writer of one run file (create with :meth:`create`, continue with :meth:`resume`).
 
@@ -193,6 +238,8 @@ class RunFile:
         self.path = path
         self.kind = str(f.attrs["kind"])
         self._tables: dict[str, _Table] = {}
+        self.full = False                    # a write was refused for want of room
+        self.events_dropped = 0              # events not written for want of room
         self.done: dict[int, str] = {}       # plan index -> status of finished points
         idx = f["points/index"][...]
         st = f["points/status"].asstr()[...] if len(idx) else []
@@ -202,7 +249,7 @@ class RunFile:
     # -- opening ---------------------------------------------------------------------------
     @classmethod
     def create(cls, path: str | Path, cfg: Any, config_json: dict[str, Any], points_planned: int,
-               extra_attrs: dict[str, Any] | None = None) -> "RunFile":
+               extra_attrs: dict[str, Any] | None = None) -> RunFile:
         """A new run file for ``cfg`` (an InchipConfig or ShakerConfig); refuses to overwrite."""
         import h5py
 
@@ -215,8 +262,10 @@ class RunFile:
             f = h5py.File(path, "w")
         except OSError as exc:
             raise InputError(f"cannot create ({exc})", file=path, key="--out") from None
-        kind = "run_inchip" if cfg.kind == "inchip" else "run_shaker"
-        stamp(f, kind, SCHEMA_VERSION)
+        from labkit.experiments import kinds
+
+        kind = kinds.of(cfg)
+        stamp(f, kind.file_kind, SCHEMA_VERSION)
         f.attrs["config_toml"] = cfg.text
         f.attrs["config_path"] = str(cfg.path)
         f.attrs["config_json"] = json.dumps(config_json, sort_keys=True)
@@ -226,22 +275,20 @@ class RunFile:
         f.attrs["status"] = "running"
         f.attrs["points_planned"] = int(points_planned)
         put_json(f, "resumed_utc_json", [])
-        for k, v in (extra_attrs or {}).items():
+        for k, v in (kind.run_attrs(cfg) | (extra_attrs or {})).items():
             f.attrs[k] = v
         f.create_group("instruments")
-        pts = f.create_group("points")
-        _make_table(pts, POINT_FIELDS | (SHAKER_FIELDS if kind == "run_shaker" else {}))
+        point_fields, tables = kind.layout(cfg)
+        _make_table(f.create_group("points"), POINT_FIELDS | point_fields)
         _make_table(f.create_group("events"), EVENT_FIELDS, with_index=False)
-        if kind == "run_inchip":
-            fields = CHIRP_FIELDS if cfg.method.kind == "chirp" else STEPPED_FIELDS
-            f.attrs["method"] = cfg.method.kind
-            for loc in cfg.locations:
-                _make_table(f.require_group(f"locations/{loc}"), fields, with_index=False)
+        for group, fields in tables.items():
+            _make_table(f.require_group(group), fields, with_index=False)
+        label_dimensions(f)             # coordinates for h5py, xarray and HDFView (schema 2)
         f.flush()
         return cls(f, path)
 
     @classmethod
-    def resume(cls, path: str | Path, cfg: Any, config_json: dict[str, Any]) -> "RunFile":
+    def resume(cls, path: str | Path, cfg: Any, config_json: dict[str, Any]) -> RunFile:
         """Reopen a run file to continue it after its last complete point.
 
         Raises
@@ -251,9 +298,10 @@ class RunFile:
         """
         import h5py
 
+        from labkit.experiments import kinds
+
         path = Path(path)
-        kind = "run_inchip" if cfg.kind == "inchip" else "run_shaker"
-        open_h5(path, "r", kind=kind).close()          # kind and schema checks, clear errors
+        open_h5(path, "r", kind=kinds.of(cfg).file_kind).close()          # kind and schema checks, clear errors
         try:
             f = h5py.File(path, "r+")
         except OSError as exc:
@@ -261,7 +309,8 @@ class RunFile:
         stored = json.loads(f.attrs.get("config_json", "{}"))
         if stored != json.loads(json.dumps(config_json, sort_keys=True)):
             diff = sorted(k for k in set(stored) | set(config_json)
-                          if json.dumps(stored.get(k), sort_keys=True) != json.dumps(config_json.get(k), sort_keys=True))
+                          if json.dumps(stored.get(k), sort_keys=True)
+                          != json.dumps(config_json.get(k), sort_keys=True))
             f.close()
             raise InputError("was written with a different config; resume with the run's own config",
                              file=path, key="--resume",
@@ -273,7 +322,8 @@ class RunFile:
         locs = f["points/location"].asstr()[...]
         if "locations" in f:
             for loc, grp in f["locations"].items():
-                ok = {int(i) for i, s, l in zip(f["points/index"][...], status, locs) if s == "ok" and l == loc}
+                ok = {int(i) for i, s, where in zip(f["points/index"][...], status, locs)
+                      if s == "ok" and where == loc}
                 keep = int(np.sum(np.isin(grp["point_index"][...], list(ok)))) if ok else 0
                 _trim(grp, keep)
         for name in ("raw", "records"):
@@ -306,16 +356,43 @@ class RunFile:
             self._tables[name] = _Table(self.f[name])
         return self._tables[name]
 
+    # -- room on the disk (HDF5 must never meet ENOSPC/EFBIG: it crashes the process) ---------
+    def ensure_room(self, need_bytes: float, what: str = "the next point") -> None:
+        """Raise :class:`DiskFull` (nothing written) unless ``need_bytes`` fit with a margin.
+
+        The margin (twice the estimate plus :data:`RESERVE_BYTES`) keeps room for
+        HDF5's own metadata, the events and the final status of a run that stops here.
+        """
+        free = headroom_bytes(self.path)
+        if free < 2 * need_bytes + RESERVE_BYTES:
+            self.full = True
+            raise DiskFull(f"not enough room to write {what} safely ({_mb(free)} free on its file system "
+                           f"or under the file-size limit; about {_mb(need_bytes)} needed plus "
+                           f"{_mb(RESERVE_BYTES)} kept in reserve); the file holds every completed point; "
+                           "free some space, then continue with --resume", file=self.path, key="--out")
+
+    def _floor(self, what: str) -> None:
+        """Every write into the file needs at least half the reserve (events may use the rest)."""
+        if headroom_bytes(self.path) < RESERVE_BYTES / 2:
+            self.full = True
+            raise DiskFull(f"no room left to write {what}", file=self.path, key="--out")
+
     def event(self, text: str, t_unix_s: float | None = None) -> None:
+        """Append a line to ``/events`` and flush; dropped (and counted) when the disk is nearly full."""
+        if headroom_bytes(self.path) < RESERVE_BYTES / 4:
+            self.events_dropped += 1
+            return
         self._table("events").append({"time_unix_s": time.time() if t_unix_s is None else t_unix_s, "text": text})
         self.f.flush()
 
     def add_location_rows(self, location: str, rows: dict[str, Any]) -> None:
         """Append rows to ``/locations/<location>`` (not flushed: :meth:`end_point` flushes)."""
+        self._floor("a point's rows")
         self._table(f"locations/{location}").append(rows)
 
     def add_records(self, group: str, index: int, dt_s: float, arrays: dict[str, tuple[np.ndarray, str]]) -> None:
         """Keep the point's raw records under ``/<group>/p<index>/`` (name -> (data, units))."""
+        self._floor("a point's records")
         g = self.f.require_group(f"{group}/p{index:05d}")
         g.attrs["dt_s"] = float(dt_s)
         for name, (data, units) in arrays.items():
@@ -324,16 +401,25 @@ class RunFile:
             ds = g.create_dataset(name, data=np.asarray(data, dtype=np.float32), compression="gzip",
                                   compression_opts=1, shuffle=True)
             ds.attrs["units"] = units
+        if "t_s" in g:
+            del g["t_s"]
+        label_dimensions(g)             # t_s (s) from dt_s, a dimension scale
 
     def end_point(self, index: int, row: dict[str, Any]) -> None:
         """Append the point's row to ``/points`` (index last) and flush: the point is complete."""
+        self._floor("a point's row")
         self._table("points").append(dict(row, index=index))
         self.f.flush()
         self.done[int(index)] = str(row.get("status", "ok"))
 
     def finish(self, status: str) -> None:
+        """The final status (and end time); needs a quarter of the reserve (kept for it)."""
+        if headroom_bytes(self.path) < RESERVE_BYTES / 8:
+            raise DiskFull("no room left to write the run's final status", file=self.path, key="--out")
         self.f.attrs["status"] = status
         self.f.attrs["ended_utc"] = utc_now()
+        if self.events_dropped:
+            self.f.attrs["events_dropped"] = int(self.events_dropped)
         self.f.flush()
 
     def close(self) -> None:
@@ -342,7 +428,7 @@ class RunFile:
         except Exception:  # pragma: no cover - closing after a failed write
             pass
 
-    def __enter__(self) -> "RunFile":
+    def __enter__(self) -> RunFile:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -373,6 +459,7 @@ def write_lab_record(path: str | Path, timeline: list[tuple], truth: dict[str, A
             kw = {"dtype": h5py.string_dtype()} if data.dtype == object else {}
             ds = tl.create_dataset(name, data=data, **kw)
             ds.attrs["units"] = units
+        label_dimensions(tl)
         if truth is not None:
             put_json(g, "truth_json", truth)
         if t0_monotonic_s is not None:
@@ -380,22 +467,26 @@ def write_lab_record(path: str | Path, timeline: list[tuple], truth: dict[str, A
 
 
 def read_points(path: str | Path) -> dict[str, np.ndarray]:
-    """The ``/points`` table of a run file as arrays (strings decoded)."""
-    with open_h5(path, "r", kind="run") as f:
-        g = f["points"]
-        n = g["index"].shape[0]
-        return {k: (g[k].asstr()[:n] if g[k].dtype.kind == "O" else g[k][:n]) for k in g}
+    """The ``/points`` table of a run file as arrays, complete points only (strings decoded).
+
+    A thin call to :func:`labkit.files.runs.read_run_file`, the one run-file reader.
+    """
+    from labkit.files.runs import read_run_file
+
+    return read_run_file(path).points
 
 
 def summary(path: str | Path) -> dict[str, Any]:
     """A short JSON-able summary of a run file (for the CLI's ``--json`` line)."""
-    with open_h5(path, "r", kind="run") as f:
-        st = f["points/status"].asstr()[...]
-        out: dict[str, Any] = {
-            "file": os.fspath(path), "kind": str(f.attrs["kind"]), "status": str(f.attrs["status"]),
-            "points_planned": int(f.attrs.get("points_planned", 0)), "points_done": int(len(st)),
-            "points_ok": int(np.sum(st == "ok")), "points_interlocked": int(np.sum(st == "interlock")),
-        }
-        if "locations" in f:
-            out["locations"] = {loc: int(g["freq_hz"].shape[0]) for loc, g in f["locations"].items()}
-        return out
+    from labkit.files.runs import InchipRun, read_run_file
+
+    run = read_run_file(path)
+    st = run.points.get("status", np.array([], dtype=str))
+    out: dict[str, Any] = {
+        "file": os.fspath(path), "kind": run.kind, "status": run.status, "points_planned": run.points_planned,
+        "points_done": run.complete_points, "points_ok": int(np.sum(st == "ok")),
+        "points_interlocked": int(np.sum(st == "interlock")),
+    }
+    if isinstance(run, InchipRun) and run.locations:
+        out["locations"] = {loc: int(lg.freq_hz.size) for loc, lg in run.locations.items()}
+    return out

@@ -32,17 +32,19 @@ import math
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
-from labkit.errors import InputError, InstrumentError, Interrupted, LimitError
-from labkit.experiments import measure
+from labkit.errors import DriveNotOff, InputError, InstrumentError, Interrupted, LimitError
+from labkit.experiments import kinds, measure
+from labkit.experiments.config import ShakerConfig
+from labkit.experiments.kinds import POINT_OVERHEAD_BYTES, Config
 from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, SinePoint
+from labkit.experiments.rig import Rig
 from labkit.experiments.runfile import RunFile
-from labkit.experiments.safety import DriveGuard, Interlock, deferred, shielded, sigterm_raises
+from labkit.experiments.safety import DriveGuard, Interlock, deferred, shielded, signals_raise
 from labkit.progress import progress
-
 
 #: how long past twice the record an acquisition may take before the scope counts as lost
 #: (a missing trigger; generous because a simulated robot may be computed meanwhile)
@@ -68,12 +70,14 @@ class Runner:
         No progress bar.
     """
 
-    def __init__(self, rig: Any, runfile: RunFile, cfg: Any, *, quiet: bool = False) -> None:
+    def __init__(self, rig: Rig, runfile: RunFile, cfg: Config, *, quiet: bool = False) -> None:
         self.rig = rig
         self.file = runfile
         self.cfg = cfg
         self.quiet = quiet
-        self.guard = DriveGuard(rig.funcgen, reopen=rig.reopen_funcgen, log=self._event)
+        self.guard: DriveGuard = rig.guard      # the generator's one owner
+        self.guard.log = self._event
+        self.point_bytes = kinds.of(cfg).point_bytes(cfg)
         self.spot: str | None = None
         self.sine_set: tuple[float, float] | None = None   # (amp_vpp, offset_v) programmed
         self.freq_set: float | None = None
@@ -100,7 +104,7 @@ class Runner:
         status = "aborted: unexpected error"
         n_done = plan.points_total - len(plan.points)
         try:
-            with sigterm_raises(), progress(None, f"{plan.kind}", quiet=self.quiet) as bar:
+            with signals_raise(), progress(None, f"{plan.kind}", quiet=self.quiet) as bar:
                 bar.total = plan.est_s
                 bar.bar_format = "{desc} {percentage:3.0f}%|{bar}| {postfix} [{elapsed}<{remaining}]"
                 bar.set_postfix_str(f"point {n_done}/{plan.points_total}", refresh=False)
@@ -143,17 +147,22 @@ class Runner:
     def _shutdown(self, status: str) -> Exception | None:
         """Drive off, then the final status into the file; returns the file's error, if any."""
         finish_error: Exception | None = None
+        drive_error: DriveNotOff | None = None
         with shielded() as arrived:
             try:
                 self.guard.final_off(status)
-            finally:
-                if arrived:
-                    self._event(f"signal(s) {arrived} arrived during shutdown")
-                self._event(f"run ended: {status}")
-                try:
-                    self.file.finish(status)
-                except Exception as exc:   # another error may be in flight: never mask it
-                    finish_error = exc
+            except DriveNotOff as exc:     # reported after the file says so (exit 4, with a banner)
+                drive_error = exc
+                status = f"{status}; DRIVE OFF NOT CONFIRMED"
+            if arrived:
+                self._event(f"signal(s) {arrived} arrived during shutdown")
+            self._event(f"run ended: {status}")
+            try:
+                self.file.finish(status)
+            except Exception as exc:   # another error may be in flight: never mask it
+                finish_error = exc
+        if drive_error is not None:
+            raise drive_error
         return finish_error
 
     # -- steps -------------------------------------------------------------------------------
@@ -168,6 +177,8 @@ class Runner:
 
     def _point(self, p: Any) -> None:
         t_start = time.time()
+        # room for the point before driving it (DiskFull stops the run cleanly: drive off, status written)
+        self.file.ensure_room(self.point_bytes)
         try:
             if isinstance(p, SinePoint):
                 rows, loc_rows, records = self._sine_point(p)
@@ -184,7 +195,6 @@ class Runner:
             self.interlocks.append({"index": p.index, "reason": il.reason})
             rows = self._empty_row(p)
             rows.update(status="interlock", reason=il.reason)
-            loc_rows, records = None, None
             with deferred():
                 self.file.end_point(p.index, rows | {"time_unix_s": time.time(),
                                                     "duration_s": time.time() - t_start})
@@ -193,6 +203,7 @@ class Runner:
                                    limit="interlock") from None
             self.timing.append({"waited_s": 0.0})
             return
+        self.file.ensure_room(_nbytes(loc_rows, records) + POINT_OVERHEAD_BYTES)
         with deferred():      # all of a point's rows, or none
             if loc_rows is not None:
                 self.file.add_location_rows(loc_rows.pop("location"), loc_rows)
@@ -216,7 +227,7 @@ class Runner:
     # -- stepped sine ------------------------------------------------------------------------
     def _set_sine(self, freq_hz: float, amp_vpp: float, offset_v: float) -> None:
         """Program the generator, sending only what changed (fewer round trips per point)."""
-        fg = self.rig.funcgen = self.guard.funcgen
+        fg = self.guard.funcgen
         if self.sine_set is not None and self.sine_set[1] == offset_v and amp_vpp < self.sine_set[0]:
             # Lower the amplitude BEFORE moving the frequency: the old, larger drive must never
             # meet a frequency where it would move the shaker further (x ~ V / f^2).
@@ -234,8 +245,11 @@ class Runner:
         self.freq_set = freq_hz
 
     def _settle_and_acquire(self, freq_hz: float, settle_s: float, dwell_s: float,
-                            t_changed: float) -> measure.Records:
-        """Wait out the settling (from ``t_changed``), record ``dwell_s``; interlock on over-range."""
+                            t_changed: float) -> tuple[measure.Records, float]:
+        """Wait out the settling (from ``t_changed``), record ``dwell_s``; interlock on over-range.
+
+        Returns the record and the time spent waiting for the physics (settle + dwell), s.
+        """
         rig = self.rig
         if self.record_s != dwell_s:
             rig.scope.set_timebase(dwell_s)
@@ -244,7 +258,7 @@ class Runner:
         if left > 0:
             time.sleep(left)
         waited = max(left, 0.0)
-        for attempt in range(4):
+        for _attempt in range(4):
             t_acq = time.monotonic()
             rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
                                   timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
@@ -253,16 +267,15 @@ class Runner:
                 raise Interlock("vibrometer over-range")
             if not rig.velocity_clipped(rec.velocity_v) or not rig.widen_velocity_range():
                 break
-        self._waited = waited
-        return rec
+        return rec, waited
 
     def _sine_point(self, p: SinePoint) -> tuple[dict, dict, Any]:
         self._set_sine(p.freq_hz, p.amp_vpp, p.offset_v)
         t_changed = time.monotonic()
         self.guard.on()
-        rec = self._settle_and_acquire(p.freq_hz, p.settle_s, p.dwell_s, t_changed)
+        rec, waited = self._settle_and_acquire(p.freq_hz, p.settle_s, p.dwell_s, t_changed)
         ph = measure.sine_phasors(rec, p.freq_hz, self.rig.scale_mm_s_per_v)
-        self.timing.append({"waited_s": self._waited, "settle_s": p.settle_s, "dwell_s": p.dwell_s})
+        self.timing.append({"waited_s": waited, "settle_s": p.settle_s, "dwell_s": p.dwell_s})
         rows = {"location": p.location, "freq_hz": p.freq_hz, "reason": ""}
         loc = {"location": p.location, "freq_hz": p.freq_hz, "frf": ph.frf, "quality": ph.quality,
                "drive_v": ph.drive_v, "velocity_mm_s": ph.velocity_mm_s, "point_index": p.index}
@@ -274,7 +287,7 @@ class Runner:
     # -- chirp -------------------------------------------------------------------------------
     def _chirp_point(self, p: ChirpPoint) -> tuple[dict, dict, Any]:
         rig = self.rig
-        fg = rig.funcgen = self.guard.funcgen
+        fg = self.guard.funcgen
         fg.set_sine(p.start_hz, p.amp_vpp, p.offset_v)
         rig.on_drive_amplitude(p.amp_vpp, p.offset_v)
         self.sine_set = None
@@ -314,7 +327,7 @@ class Runner:
 
     # -- shaker ------------------------------------------------------------------------------
     def _shaker_point(self, p: ShakerPoint) -> tuple[dict, None, Any]:
-        cfg, rig = self.cfg, self.rig
+        cfg, rig = cast(ShakerConfig, self.cfg), self.rig     # shaker points come from shaker plans
         f = p.freq_hz
         self._move_spot("tray", drive_off=False)
         waited = 0.0
@@ -323,15 +336,15 @@ class Runner:
             gain = self.gain_um_per_vpp.get(f)
             vpp = p.tray_amp_um / gain if gain else cfg.control.start_vpp
         else:
-            vpp = float(p.drive_vpp)
+            vpp = float(p.drive_vpp or 0.0)    # a shaker point has a tray amplitude or a drive
         iterations = 0
         while True:
             rig.check_drive(vpp)
             self._set_sine(f, vpp, 0.0)
             t_changed = time.monotonic()
             self.guard.on()
-            rec = self._settle_and_acquire(f, p.settle_s, p.dwell_s, t_changed)
-            waited += self._waited
+            rec, w = self._settle_and_acquire(f, p.settle_s, p.dwell_s, t_changed)
+            waited += w
             tray = measure.sine_phasors(rec, f, rig.scale_mm_s_per_v)
             x_um = measure.displacement_um(tray.velocity_mm_s, f)
             iterations += 1
@@ -352,10 +365,10 @@ class Runner:
             vpp *= min(max(ratio, 1 / cfg.control.max_step_ratio), cfg.control.max_step_ratio)
         tray_rec = rec
         self._move_spot(p.robot_spot, drive_off=False)
-        robot_rec = self._settle_and_acquire(f, p.settle_s, p.dwell_s, time.monotonic())
-        waited += self._waited
+        robot_rec, w = self._settle_and_acquire(f, p.settle_s, p.dwell_s, time.monotonic())
+        waited += w
         robot = measure.sine_phasors(robot_rec, f, rig.scale_mm_s_per_v)
-        from analysis.frf import transmissibility
+        from labkit.analysis.frf import transmissibility
 
         T, q = transmissibility(robot.velocity_re_drive, tray.velocity_re_drive,
                                 robot_quality=robot.quality, tray_quality=tray.quality)
@@ -384,3 +397,14 @@ class Runner:
         self._event(f"video {path.name}: {info.get('frames', 0)} frames")
         rel = os.path.relpath(Path(info.get("path", path)), self.file.path.parent)
         return rel, int(info.get("frames", 0))
+
+
+def _nbytes(loc_rows: dict[str, Any] | None, records: Any) -> float:
+    """Bytes a point's rows and records take (records are stored as float32)."""
+    n = 0.0
+    for v in (loc_rows or {}).values():
+        n += np.asarray(v).nbytes if not isinstance(v, str) else len(v)
+    if records is not None:
+        for data, _units in records[2].values():
+            n += np.asarray(data).size * 4
+    return n

@@ -4,9 +4,10 @@ The runner alone owns the outputs that drive the PZT or the shaker (the
 function generator's). :class:`DriveGuard` turns them on and off and, when the
 link to the generator is lost, opens a fresh connection to send ``OUTP OFF``
 (a dropped socket must not leave a shaker running). :func:`shielded` holds
-SIGINT/SIGTERM while the drive is being turned off, so a second Ctrl-C cannot
-cut the shutdown short; :func:`sigterm_raises` makes SIGTERM raise
-:class:`labkit.errors.Interrupted` (as ``labkit.cli`` does) for library use.
+every stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT) while the drive is being
+turned off, so a second Ctrl-C cannot cut the shutdown short; :func:`signals_raise`
+makes them raise (KeyboardInterrupt, or :class:`labkit.errors.Interrupted` naming
+the signal), as ``labkit.cli`` does, for library use.
 """
 from __future__ import annotations
 
@@ -14,9 +15,11 @@ import contextlib
 import signal
 import threading
 import time
-from typing import Any, Callable, Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
-from labkit.errors import InstrumentError, Interrupted
+from labkit.errors import DriveNotOff, InstrumentError, Interrupted
+from labkit.experiments.protocols import FunctionGenerator
 
 
 class Interlock(Exception):
@@ -40,10 +43,12 @@ class DriveGuard:
         Called with a line of text for every on/off event (the run file's /events).
     """
 
-    def __init__(self, funcgen: Any, reopen: Callable[[], Any] | None = None,
-                 log: Callable[[str], None] | None = None) -> None:
+    def __init__(self, funcgen: FunctionGenerator, reopen: Callable[[], FunctionGenerator] | None = None,
+                 log: Callable[[str], None] | None = None, *, where: str = "", config: str = "") -> None:
         self.funcgen = funcgen
         self.reopen = reopen
+        self.where = where or getattr(funcgen, "name", "the generator")
+        self.config = config
         self.log = log or (lambda text: None)
         self.is_on = False          # what we last commanded (assume on after any failure)
         self.maybe_on = False       # True from the first ON until an OFF is confirmed
@@ -72,8 +77,9 @@ class DriveGuard:
     def final_off(self, reason: str, attempts: int = 3) -> bool:
         """Every output of the generator off, whatever the state; reconnect if the link is lost.
 
-        Returns True when an OFF was sent successfully. Raises the last
-        InstrumentError when every attempt failed (the person must act).
+        Returns True when an OFF was sent and confirmed. Raises
+        :class:`labkit.errors.DriveNotOff` (exit 4; chained to the last
+        InstrumentError) when every attempt failed: the person must act.
         """
         last: InstrumentError | None = None
         for attempt in range(attempts):
@@ -96,16 +102,52 @@ class DriveGuard:
                 except InstrumentError as exc2:
                     last = exc2
         self.log(f"DRIVE OFF NOT CONFIRMED ({reason}): {last}; turn the generator output off by hand")
-        assert last is not None
-        raise last
+        raise DriveNotOff("funcgen", self.where, str(last), original=reason, config=self.config) from last
 
 
-_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    def close(self) -> None:
+        """Close the generator's connection (the output state is left as it is)."""
+        try:
+            self.funcgen.close()
+        except Exception:
+            pass
+
+
+#: the signals that end a run like Ctrl-C does: interrupt (Ctrl-C), terminate (kill, systemd),
+#: hang-up (the terminal or SSH session closed) and quit (Ctrl-\\). Each turns the drive off first.
+STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
+
+
+def raise_stop_signal(signum: int, frame: Any) -> None:
+    """Signal handler: SIGINT raises KeyboardInterrupt, the other stop signals :class:`Interrupted`."""
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise Interrupted(signal.Signals(signum).name)
+
+
+def install_stop_handlers() -> dict[int, Any]:
+    """Make every stop signal raise (:func:`raise_stop_signal`) in the main thread; return the old handlers.
+
+    Also ignores SIGXFSZ, so a file-size limit makes a write fail with an error
+    (handled: the drive goes off, the run file is finished) instead of killing the
+    process with the drive on. A shell starts background jobs with SIGINT and
+    SIGQUIT ignored and Python keeps that; installing handlers undoes it.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    previous: dict[int, Any] = {s: signal.signal(s, raise_stop_signal) for s in STOP_SIGNALS}
+    previous[signal.SIGXFSZ] = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    return previous
+
+
+def restore_handlers(previous: dict[int, Any]) -> None:
+    for s, h in previous.items():
+        signal.signal(s, h)
 
 
 @contextlib.contextmanager
 def shielded() -> Iterator[list[int]]:
-    """Hold SIGINT and SIGTERM while the block runs (shutdown must not be cut short).
+    """Hold the stop signals while the block runs (shutdown must not be cut short).
 
     Yields the list of signals that arrived meanwhile; they are not re-raised
     (the caller is shutting down already and reports them).
@@ -118,42 +160,36 @@ def shielded() -> Iterator[list[int]]:
     def hold(signum: int, frame: Any) -> None:
         arrived.append(signum)
 
-    previous = {s: signal.signal(s, hold) for s in _SIGNALS}
+    previous = {s: signal.signal(s, hold) for s in STOP_SIGNALS}
     try:
         yield arrived
     finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
+        restore_handlers(previous)
 
 
 @contextlib.contextmanager
 def deferred() -> Iterator[None]:
-    """Hold SIGINT/SIGTERM during the block (a point's rows being written), then act on them.
+    """Hold the stop signals during the block (a point's rows being written), then act on them.
 
     A signal that arrived meanwhile is raised right after the block, as
-    KeyboardInterrupt (SIGINT) or Interrupted (SIGTERM), so a point's datasets
+    KeyboardInterrupt (SIGINT) or Interrupted (the others), so a point's datasets
     are never left at different lengths by an interrupt.
     """
     with shielded() as arrived:
         yield
     if arrived:
-        if arrived[0] == signal.SIGINT:
-            raise KeyboardInterrupt
-        raise Interrupted("SIGTERM")
-
-
-def _raise_interrupted(signum: int, frame: Any) -> None:
-    raise Interrupted("SIGTERM")
+        raise_stop_signal(arrived[0], None)
 
 
 @contextlib.contextmanager
-def sigterm_raises() -> Iterator[None]:
-    """Make SIGTERM raise :class:`Interrupted` inside the block (then restore the old handler)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGTERM, _raise_interrupted)
+def signals_raise() -> Iterator[None]:
+    """Every stop signal raises inside the block (:func:`install_stop_handlers`), then the old handlers."""
+    previous = install_stop_handlers()
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        restore_handlers(previous)
+
+
+#: the former name (SIGTERM only); now every stop signal
+sigterm_raises = signals_raise

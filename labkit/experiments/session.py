@@ -6,55 +6,28 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
-from labkit.errors import InputError, LimitError
-from labkit.jsonutil import to_jsonable
+from labkit.errors import InputError
+from labkit.experiments import kinds
 from labkit.experiments import runfile as rf
-from labkit.experiments.config import (InchipConfig, InstrumentSpec, ShakerConfig, comparable, load_inchip,
-                                       load_shaker)
-from labkit.experiments.plans import Plan, inchip_plan, shaker_plan
+from labkit.experiments.config import InstrumentSpec, comparable
+from labkit.experiments.kinds import Config
+from labkit.experiments.plans import Plan
 from labkit.experiments.safety import shielded
+from labkit.jsonutil import to_jsonable
 
 
-def load(kind: str, path: str | Path) -> InchipConfig | ShakerConfig:
-    return load_inchip(path) if kind == "inchip" else load_shaker(path)
+def load(kind: str, path: str | Path) -> Config:
+    """Read and validate a config of experiment ``kind`` (``"inchip"``, ``"shaker"``)."""
+    return kinds.get(kind).load(path)
 
 
-def preflight(cfg: InchipConfig | ShakerConfig) -> None:
-    """Check every limit that needs no instrument, before anything is opened.
-
-    Raises
-    ------
-    LimitError
-        Naming the config file and key: a drive above the amplifier's input
-        cap, a requested tray amplitude outside the shaker's envelope.
-    """
-    if not isinstance(cfg, ShakerConfig):
-        return                          # the PZT limit is checked while loading the config
-    from drivers.shaker import Amplifier2718, Shaker4809Envelope
-
-    amp = Amplifier2718(gain_db=cfg.gain_db, attenuator_db=cfg.attenuator_db,
-                        current_limit_a=cfg.current_limit_a, max_input_vrms=cfg.max_input_vrms)
-    env = Shaker4809Envelope(**cfg.envelope)
-    if cfg.amplitude_kind == "drive_vpp":
-        for i, v in enumerate(cfg.amplitudes):
-            try:
-                amp.check_input(v)
-            except LimitError as exc:
-                raise LimitError(exc.message, limit=exc.limit, file=cfg.path, key=f"grid.drive_vpp[{i}]",
-                                 expected=f"<= {amp.max_input_vpp:.4g} Vpp at {cfg.gain_db:g} dB") from None
-    else:
-        for i, f in enumerate(cfg.freqs_hz):
-            for j, a in enumerate(cfg.amplitudes):
-                try:
-                    env.check(f, a, payload_kg=cfg.payload_kg)
-                except LimitError as exc:
-                    raise LimitError(exc.message, limit=exc.limit, file=cfg.path,
-                                     key=f"grid.tray_amp_um[{j}] at grid.freq_hz[{i}]",
-                                     expected=f"<= {env.max_disp_amp_um(f, cfg.payload_kg):.4g} um "
-                                              f"at {f:g} Hz") from None
+def preflight(cfg: Config) -> None:
+    """Check every limit that needs no instrument, before anything is opened (LimitError naming file and key)."""
+    kinds.preflight(cfg)
 
 
 #: the models the virtual lab simulates, by role
@@ -68,7 +41,8 @@ _PLACEHOLDER_RESOURCES = {"funcgen": "TCPIP0::192.0.2.1::5025::SOCKET",
 
 def lab_instruments_toml(roles: tuple[str, ...] = ("funcgen", "scope", "vibrometer")) -> str:
     """The ``[instruments.*]`` tables of a config meant for ``--lab``: the lab's models, placeholder resources."""
-    return "\n".join(f'[instruments.{role}]\nmodel = "{LAB_MODELS[role]}"\nresource = "{_PLACEHOLDER_RESOURCES[role]}"\n'
+    return "\n".join(f'[instruments.{role}]\nmodel = "{LAB_MODELS[role]}"\n'
+                     f'resource = "{_PLACEHOLDER_RESOURCES[role]}"\n'
                      for role in roles)
 
 
@@ -105,17 +79,29 @@ def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: A
     ``lab``: False (the config's instruments), True (start a virtual lab in-process for
     this run), or a running :class:`labkit.lab.VirtualLab` to use.
 
+    Order (each step only when the ones before passed): config and every limit
+    (nothing opened), output paths and free space, the locks on every instrument
+    and on the run file (another run's rig is never touched), the instruments
+    (the generator's outputs are turned off first), the run file, the runner.
+
     Raises
     ------
-    InputError / ConfigError / LimitError
-        Bad config or paths (nothing was opened or sent).
+    InputError / ConfigError / LimitError / DiskFull / RigBusy
+        Bad config, paths, too little room, instruments in use (nothing was opened or sent).
     InstrumentError
         An instrument or its link failed (the drive is off).
+    DriveNotOff
+        The drive could not be confirmed off (exit 4): a person must act.
     KeyboardInterrupt / Interrupted
         Interrupted (the drive is off, the file is finished and readable).
     """
-    cfg = load(kind, config)
-    preflight(cfg)
+    from labkit.experiments.safety import signals_raise
+
+    with signals_raise():
+        return _run_session(kind, config, out, lab=lab, resume=resume, quiet=quiet, seed=seed, stdin=stdin)
+
+
+def _output_path(out: str | Path | None, resume: str | Path | None) -> Path:
     if resume is not None:
         if out is not None and Path(out).resolve() != Path(resume).resolve():
             raise InputError("--out and --resume name different files", key="--out",
@@ -123,20 +109,42 @@ def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: A
         path = Path(resume)
         if not path.is_file():
             raise InputError("no such run file", file=path, key="--resume")
-    elif out is None:
+        return path
+    if out is None:
         raise InputError("no output file", key="--out", expected="--out FILE (or --resume FILE)")
-    else:
-        path = Path(out)
-        if path.exists():
-            raise InputError("already exists; use --resume to continue it, or another --out",
-                             file=path, key="--out")
+    path = Path(out)
+    if path.exists():
+        raise InputError("already exists; use --resume to continue it, or another --out", file=path, key="--out")
+    if not path.parent.is_dir():
+        raise InputError("the folder does not exist", file=path, key="--out")
+    return path
+
+
+def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: Any, resume: str | Path | None,
+                 quiet: bool, seed: int, stdin: Any) -> dict[str, Any]:
+    from labkit.experiments.locks import lock_run
+
+    experiment = kinds.get(kind)
+    cfg = experiment.load(config)
+    experiment.preflight(cfg)
+    path = _output_path(out, resume)
     stack = contextlib.ExitStack()
     with stack:
         lab_obj = None
         if lab is not False and lab is not None:
             lab_obj, cfg = stack.enter_context(virtual_lab(cfg, seed=seed, lab=None if lab is True else lab))
+        # one rig, one run: every instrument and the run file locked before anything is opened
+        stack.enter_context(lock_run(((r, s.resource) for r, s in cfg.instruments.items()), path, str(cfg.path)))
         cfg_json = comparable(cfg)
+        n_left = experiment.plan(cfg, ()).points_total
+        if resume is not None:
+            rf.check_room(path, rf.RESERVE_BYTES, key="--resume")       # resuming writes a little at once
         run = rf.RunFile.resume(path, cfg, cfg_json) if resume is not None else None   # checks the config
+        if run is not None:
+            n_left = len(experiment.plan(cfg, run.done).points)
+        # the whole run must fit (HDF5 cannot survive a full disk); nothing opened yet if not
+        rf.check_room(path, (0 if run is not None else rf.BASE_BYTES) + n_left * experiment.point_bytes(cfg),
+                      key="--resume" if run is not None else "--out")
         runner = None
         try:
             from labkit.experiments.rig import PromptSpot, Rig
@@ -147,9 +155,8 @@ def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: A
             # instruments first (the drive stays off): a rig that cannot be opened leaves no new file
             rig = stack.enter_context(Rig(cfg, spot=spot))
             if run is None:
-                n_total = (inchip_plan(cfg) if kind == "inchip" else shaker_plan(cfg)).points_total
-                run = rf.RunFile.create(path, cfg, cfg_json, n_total, _extra_attrs(cfg))
-            plan: Plan = inchip_plan(cfg, run.done) if kind == "inchip" else shaker_plan(cfg, run.done)
+                run = rf.RunFile.create(path, cfg, cfg_json, experiment.plan(cfg, ()).points_total)
+            plan: Plan = experiment.plan(cfg, run.done)
             for role, (model, resource, snap) in rig.snapshots().items():
                 run.set_instrument(role, model, resource, snap)
             runner = Runner(rig, run, cfg, quiet=quiet)
@@ -162,7 +169,7 @@ def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: A
                     why = f"interrupted: {getattr(exc, 'signame', 'SIGINT')}"
                 else:
                     why = f"aborted: {type(exc).__name__}: {exc}"
-                with shielded():
+                with shielded(), contextlib.suppress(Exception):
                     run.event(f"run not started: {why}")
                     run.finish(why)
             raise
@@ -170,25 +177,13 @@ def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: A
             with shielded():
                 if run is not None:
                     run.close()
-                    if lab_obj is not None:
+                    if lab_obj is not None and rf.headroom_bytes(path) > rf.RESERVE_BYTES / 2:
                         _store_lab_record(path, lab_obj)
     out_summary = rf.summary(path)
     out_summary.update(ok=True, status=status)
     if runner is not None:
         out_summary["interlocks"] = runner.interlocks
     return out_summary
-
-
-def _extra_attrs(cfg: Any) -> dict[str, Any]:
-    import json
-
-    if isinstance(cfg, InchipConfig):
-        return {"drive_amp_vpp": cfg.amp_vpp, "drive_offset_v": cfg.offset_v, "pzt_max_v": cfg.pzt_max_v}
-    return {"robot_spot": cfg.robot_spot, "amplitude_kind": cfg.amplitude_kind,
-            "amplifier_json": json.dumps({"gain_db": cfg.gain_db, "attenuator_db": cfg.attenuator_db,
-                                          "current_limit_a": cfg.current_limit_a,
-                                          "max_input_vrms": cfg.max_input_vrms}),
-            "shaker_json": json.dumps({"payload_kg": cfg.payload_kg, "envelope": cfg.envelope})}
 
 
 def _store_lab_record(path: Path, lab: Any) -> None:

@@ -7,8 +7,9 @@ silently fall back to a default at the bench).
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from labkit.errors import ConfigError
 from labkit.tomlio import get_number
@@ -35,7 +36,7 @@ class Table:
     def __contains__(self, key: str) -> bool:
         return key in self.data
 
-    def table(self, key: str, *, required: bool = True) -> "Table":
+    def table(self, key: str, *, required: bool = True) -> Table:
         """The sub-table ``key`` (an empty one when optional and absent)."""
         if key not in self.data:
             if required:

@@ -11,13 +11,11 @@ In-chip, or with the output off, the robot does not walk.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-
-if TYPE_CHECKING:  # pragma: no cover
-    from labkit.lab.core import VirtualLab
 
 MM_PER_PX = 0.05
 SIZE_PX = (640, 480)
@@ -25,26 +23,46 @@ TURN_DEG_S = 1.5
 FRAME_JITTER_S = 0.002
 
 
-def robot_path(lab: "VirtualLab", t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """(y_mm, heading_rad, mean speed mm/s) of the robot at the frame times ``t_s``."""
-    drive = lab.funcgen.drive(1)
+@dataclass
+class Recording:
+    """One clip the virtual camera filmed: where, the frame times and the robot's true path."""
+
+    path: str
+    frames: int
+    timestamps_s: list[float]
+    speed_mm_s: float
+    y_mm: np.ndarray
+    x_mm: np.ndarray
+    heading_rad: np.ndarray
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"path": self.path, "frames": self.frames, "timestamps_s": self.timestamps_s,
+                "speed_mm_s": self.speed_mm_s, "y_mm": self.y_mm, "x_mm": self.x_mm,
+                "heading_rad": self.heading_rad}
+
+
+def robot_path(sim: Any, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(y_mm, heading_rad, mean speed mm/s) of the robot at the frame times ``t_s``.
+
+    ``sim`` is the hybrid simulator's result for the present shaker drive
+    (``t_s``, ``body_y_um``, ``body_angles_rad``), or None when the robot does
+    not walk (in-chip, output off, no simulator).
+    """
     speed = 0.0
     y_osc = np.zeros(len(t_s))
     yaw = np.zeros(len(t_s))
-    if lab.setup == "shaker" and drive.is_sine():
-        res = lab._simulation(drive.freq_hz, lab.chain.tray_amp_um(drive.freq_hz, drive.amp_v))
-        if res is not None:
-            t_sim = np.asarray(res.t_s, float)
-            y_sim = np.asarray(res.body_y_um, float) * 1e-3
-            yaw_sim = np.asarray(res.body_angles_rad, float)[:, 2]
-            settled = t_sim >= t_sim[-1] / 3
-            ts, ys = t_sim[settled], y_sim[settled]
-            speed = float(np.polyfit(ts, ys, 1)[0]) if len(ts) > 2 else 0.0
-            resid = ys - (ys[0] + speed * (ts - ts[0]))
-            span = ts[-1] - ts[0]
-            phase = ts[0] + np.mod(t_s, span) if span > 0 else np.full(len(t_s), ts[0])
-            y_osc = np.interp(phase, ts, resid)
-            yaw = np.interp(phase, ts, yaw_sim[settled] - yaw_sim[settled][0])
+    if sim is not None:
+        t_sim = np.asarray(sim.t_s, float)
+        y_sim = np.asarray(sim.body_y_um, float) * 1e-3
+        yaw_sim = np.asarray(sim.body_angles_rad, float)[:, 2]
+        settled = t_sim >= t_sim[-1] / 3
+        ts, ys = t_sim[settled], y_sim[settled]
+        speed = float(np.polyfit(ts, ys, 1)[0]) if len(ts) > 2 else 0.0
+        resid = ys - (ys[0] + speed * (ts - ts[0]))
+        span = ts[-1] - ts[0]
+        phase = ts[0] + np.mod(t_s, span) if span > 0 else np.full(len(t_s), ts[0])
+        y_osc = np.interp(phase, ts, resid)
+        yaw = np.interp(phase, ts, yaw_sim[settled] - yaw_sim[settled][0])
     turn = np.deg2rad(TURN_DEG_S) * t_s
     heading = yaw + turn
     # walking follows the heading: integrate the speed along the slowly turning front direction
@@ -52,33 +70,36 @@ def robot_path(lab: "VirtualLab", t_s: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return y, heading, speed
 
 
-def record(lab: "VirtualLab", path: str | Path, duration_s: float) -> dict[str, Any]:
-    """Render ``duration_s`` of video at ``lab.camera_fps`` to ``path``; return the Camera dict."""
+def record(path: str | Path, duration_s: float, *, fps: float, seed: int, take: int, sim: Any,
+           shaking: bool) -> Recording:
+    """Render ``duration_s`` of video at ``fps`` to ``path``.
+
+    Everything the camera needs is passed in (the lab owns the state): ``sim``
+    the simulator's result for the present drive (None: the robot stands),
+    ``shaking`` whether the tray vibrates (vibration blur), ``seed`` and
+    ``take`` (a counter) make the frame jitter and noise reproducible.
+    """
     from labkit.lab.render import render_frames, write_video
 
     path = Path(path)
     if not path.parent.is_dir():
         raise ValueError(f"no such directory: {path.parent}")
-    fps = float(lab.camera_fps)
-    rng = np.random.default_rng([lab.seed, 7, len(lab.log)])
+    fps = float(fps)
+    rng = np.random.default_rng([seed, 7, take])
     n = max(1, int(round(duration_s * fps)))
     t = np.arange(n) / fps + rng.uniform(-FRAME_JITTER_S, FRAME_JITTER_S, n)
     t[0] = 0.0
     t = np.maximum.accumulate(t + np.arange(n) * 1e-6)
-    y, heading, speed = robot_path(lab, t)
+    y, heading, speed = robot_path(sim, t)
     # the front direction is (-sin h, cos h): walking along it
     dy = np.gradient(y, t) if n > 1 else np.zeros(1)
     x = np.concatenate([[0.0], np.cumsum(-np.sin(heading[1:]) * dy[1:] * np.diff(t))]) if n > 1 else np.zeros(1)
     yy = np.concatenate([[0.0], np.cumsum(np.cos(heading[1:]) * dy[1:] * np.diff(t))]) if n > 1 else np.zeros(1)
-    drive = lab.funcgen.drive(1)
-    blur = 1.5 if (lab.setup == "shaker" and drive.on) else 0.0
+    blur = 1.5 if shaking else 0.0
     frames = render_frames(yy, x, heading, t, size_px=SIZE_PX, mm_per_px=MM_PER_PX, noise=2.0,
                            blur_px=blur, jitter_px=0.3 if blur else 0.0, lighting_drift=0.02,
                            texture=0.03, seed=int(rng.integers(0, 2 ** 31)))
     ts = t if path.suffix.lower() == ".mkv" else None
     write_video(path, frames, fps, t_s=ts)
     timestamps = t if ts is not None else np.arange(n) / fps
-    lab.last_recording = {"path": str(path), "frames": int(n), "timestamps_s": [float(v) for v in timestamps],
-                          "speed_mm_s": speed, "y_mm": yy, "x_mm": x, "heading_rad": heading}
-    lab._log("camera", "state", f"recorded {n} frames to {path} (speed {speed:.3f} mm/s)")
-    return {"path": str(path), "frames": int(n), "timestamps_s": lab.last_recording["timestamps_s"]}
+    return Recording(str(path), int(n), [float(v) for v in timestamps], speed, yy, x, heading)

@@ -67,7 +67,7 @@ class LabControl:
                 if not chunk:
                     raise InstrumentError("connection closed", instrument=self.name, command=command)
                 self._buf += chunk
-        except (socket.timeout, TimeoutError):
+        except TimeoutError:
             raise InstrumentError("timeout", instrument=self.name, command=command) from None
         except OSError as exc:
             raise InstrumentError(f"receive failed: {exc}", instrument=self.name, command=command) from None
@@ -126,7 +126,7 @@ class LabControl:
         except OSError:
             pass
 
-    def __enter__(self) -> "LabControl":
+    def __enter__(self) -> LabControl:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -137,7 +137,7 @@ class LabCamera:
     """The drivers' Camera protocol over the lab's control channel (``record`` only).
 
     ``read()`` (live frames) is not offered: the virtual camera films whole
-    clips; replay a recording with ``drivers.camera.FileCamera``.
+    clips; replay a recording with ``labkit.drivers.camera.FileCamera``.
     """
 
     def __init__(self, resource: str | LabControl, timeout_s: float = 5.0) -> None:
@@ -146,6 +146,9 @@ class LabCamera:
     def record(self, path: str | Path, duration_s: float) -> dict[str, Any]:
         return self.control.record_video(path, duration_s)
 
+    def snapshot(self) -> dict[str, Any]:
+        return {"type": type(self).__name__}
+
     def read(self):  # pragma: no cover - documented limitation
         raise InstrumentError("the virtual camera records clips only; use FileCamera to replay",
                               instrument="lab-camera", command="read")
@@ -153,7 +156,7 @@ class LabCamera:
     def close(self) -> None:
         self.control.close()
 
-    def __enter__(self) -> "LabCamera":
+    def __enter__(self) -> LabCamera:
         return self
 
     def __exit__(self, *exc: Any) -> None:

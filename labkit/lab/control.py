@@ -19,14 +19,41 @@ film without Python access:
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import Any, Protocol
 
 from labkit import __version__
 from labkit.jsonutil import to_jsonable
-from labkit.lab.scpi import Call, ScpiError, ScpiInstrument, fmt_num
+from labkit.lab.scpi import Call, ScpiError, SimScpiInstrument, fmt_num
 
-if TYPE_CHECKING:  # pragma: no cover
-    from labkit.lab.core import VirtualLab
+
+class Bench(Protocol):
+    """What the control channel may do to the lab (the lab implements it; no import of the lab here)."""
+
+    camera_fps: float
+    last_recording: dict[str, Any] | None
+
+    @property
+    def spot(self) -> str: ...
+
+    @property
+    def setup(self) -> str: ...
+
+    @property
+    def truth(self) -> dict[str, Any]: ...
+
+    def set_spot(self, spot: str) -> None: ...
+
+    def set_setup(self, setup: str) -> None: ...
+
+    def inject_fault(self, instrument: str, kind: str = "drop", after: int = 0, match: str | None = None,
+                     count: int = 1) -> Any: ...
+
+    def clear_faults(self, instrument: str | None = None) -> None: ...
+
+    def output_state(self, instrument: str = "funcgen", channel: int = 1) -> bool: ...
+
+    def record_video(self, path: str | Path, duration_s: float) -> dict[str, Any]: ...
 
 
 def _unquote(text: str) -> str:
@@ -36,11 +63,11 @@ def _unquote(text: str) -> str:
     return text
 
 
-class Control(ScpiInstrument):
+class SimLabControl(SimScpiInstrument):
     name = "control"
     idn = f"labkit,VirtualLab control,0,{__version__}"
 
-    def __init__(self, lab: "VirtualLab") -> None:
+    def __init__(self, lab: Bench) -> None:
         self.lab = lab
         super().__init__()
 
@@ -96,9 +123,8 @@ class Control(ScpiInstrument):
             raise ScpiError(-109)
         path = _unquote(c.params[0])
         duration = self.num(c.params[1], "S", 0.05, 600.0)
-        from labkit.lab.camera import record
         try:
-            info = record(self.lab, path, duration)
+            info = self.lab.record_video(path, duration)
         except (OSError, ValueError) as exc:
             # always answer (a client waits for the frame count): 0 frames, and the reason queued
             self.push_error(-230, f"Data corrupt or stale;camera: {exc}"[:200])

@@ -27,13 +27,25 @@ from typing import Any
 import numpy as np
 
 from labkit.errors import ConfigError
-from labkit.lab.funcgen import Drive, Keysight33500B
+from labkit.lab import camera
+from labkit.lab.control import SimLabControl
+from labkit.lab.funcgen import Drive, SimAgilent33220A, SimKeysight33500B, SimRigolDG1000Z
+from labkit.lab.models import FUNCGEN_MODELS, SCOPE_MODELS, VIBROMETER_MODELS
 from labkit.lab.physics import SPOTS, ShakerChain, TetheredModel, simulate_linear
-from labkit.lab.scope import InfiniiVision
+from labkit.lab.scope import SimInfiniiVision, SimRigolDS1000Z
 from labkit.lab.transport import Fault, PtyServer, TcpServer
-from labkit.lab.vibrometer import FULL_SCALE_V, OFV5000
+from labkit.lab.vibrometer import FULL_SCALE_V, SimOFV3001, SimOFV5000
 
 SETUPS = ("inchip", "shaker")
+
+
+def _pick(role: str, model: str, table: dict[str, str]) -> str:
+    key = str(model).strip().upper()
+    for name in table:
+        if name.upper() == key:
+            return name
+    raise ConfigError(f"the virtual lab has no {role} {model!r}", key=f"{role}_model",
+                      expected=f"one of {', '.join(table)}")
 
 
 def load_robot(robot: Any) -> Any:
@@ -52,7 +64,14 @@ def load_robot(robot: Any) -> Any:
 
 
 class VirtualLab:
-    """Start the simulated 33500B, InfiniiVision, OFV-5000 and the control channel.
+    """Start the simulated generator, scope, vibrometer controller and the control channel.
+
+    By default a Keysight 33522B, an InfiniiVision DSOX3024T and an OFV-5000;
+    ``funcgen_model`` (:data:`FUNCGEN_MODELS`: 33511B/33512B/33521B/33522B,
+    DG1022Z/DG1032Z/DG1062Z, 33220A), ``scope_model`` (:data:`SCOPE_MODELS`)
+    and ``vibrometer_model`` (OFV-5000, OFV-3001) pick others, so every
+    driver in :mod:`labkit.drivers` has a counterpart; :attr:`models` names
+    the driver model for each role.
 
     Parameters
     ----------
@@ -81,6 +100,11 @@ class VirtualLab:
         ``"rx"`` (a line received), ``"tx"`` (a reply sent; binary blocks
         summarised), ``"fault"`` (an injected fault acted), ``"state"`` (spot,
         set-up, camera) or ``"error"`` (a simulation failed).
+    burst_timeline:
+        ``(start_s, instrument, channel, end_s)`` of every triggered (BUS, EXT)
+        burst: ``end_s`` is when the output fell silent by itself after its
+        cycles, or when the burst was cut short (output off, burst off,
+        ``*RST``, a setting change); inf for ``BURS:NCYC INF``.
     output_timeline:
         ``(t_s, instrument, channel, on)``: the initial states at t = 0, then
         every change (``OUTP``, ``*RST``, ``APPLy``, the lab's shutdown).
@@ -97,14 +121,16 @@ class VirtualLab:
                  shapes_mm_s_per_v: dict[str, tuple[float, float, float]] | None = None,
                  amplifier_gain_db: float = 20.0, shaker_accel_m_s2_per_v: float = 20.0,
                  noise_v_rms: float = 5e-4, noise_mm_s_rms: float = 0.01,
-                 sim_duration_s: float = 1.0, scope_memory_points: int = 1_000_000) -> None:
+                 sim_duration_s: float = 1.0, scope_memory_points: int = 1_000_000,
+                 funcgen_model: str = "33522B", scope_model: str = "DSOX3024T",
+                 vibrometer_model: str = "OFV-5000") -> None:
         self.seed = int(seed)
         self.params = load_robot(robot)
         hip_hz, hip_zeta = 438.0, 0.25
         if self.params is not None:
             hip_hz = float(self.params.modal_freq_hz[0])
             hip_zeta = float(self.params.modal_damping_ratio[0])
-        kw = {} if shapes_mm_s_per_v is None else {"shapes_mm_s_per_v": dict(shapes_mm_s_per_v)}
+        kw: dict[str, Any] = {} if shapes_mm_s_per_v is None else {"shapes_mm_s_per_v": dict(shapes_mm_s_per_v)}
         self.model = TetheredModel(freq_hz=(hip_hz, float(tether_hz), float(knee_hz)),
                                    damping_ratio=(hip_zeta, float(tether_damping), float(knee_damping)), **kw)
         self.chain = ShakerChain(amplifier_gain_db=float(amplifier_gain_db),
@@ -124,18 +150,29 @@ class VirtualLab:
         self.camera_fps = 30.0
         self.last_recording: dict[str, Any] | None = None
 
-        self.funcgen = Keysight33500B(on_output=lambda ch, on: self._output("funcgen", ch, on))
-        self.scope = InfiniiVision(self._signals, self._sync, seed=self.seed,
-                                   memory_points=scope_memory_points)
-        self.vibrometer = OFV5000(self.spot_peak_velocity_mm_s)
-        from labkit.lab.control import Control
-        self.control = Control(self)
-        for ch in (1, 2):
+        self.burst_timeline: list[tuple[float, str, int, float]] = []
+        fg_model = _pick("funcgen", funcgen_model, FUNCGEN_MODELS)
+        sc_model = _pick("scope", scope_model, SCOPE_MODELS)
+        vib_model = _pick("vibrometer", vibrometer_model, VIBROMETER_MODELS)
+        #: driver model names (labkit.drivers) of the simulated instruments, by role
+        self.models = {"funcgen": FUNCGEN_MODELS[fg_model], "scope": SCOPE_MODELS[sc_model],
+                       "vibrometer": VIBROMETER_MODELS[vib_model]}
+        fg_class = {"33500B": SimKeysight33500B, "DG1000Z": SimRigolDG1000Z,
+                    "33220A": SimAgilent33220A}[self.models["funcgen"]]
+        self.funcgen = fg_class(on_output=lambda ch, on: self._output("funcgen", ch, on),
+                                on_burst=lambda ch, t0, t1: self._burst("funcgen", ch, t0, t1), model=fg_model)
+        sc_class = SimRigolDS1000Z if self.models["scope"] == "DS1000Z" else SimInfiniiVision
+        self.scope = sc_class(self._signals, self._sync, seed=self.seed, memory_points=scope_memory_points)
+        self.scope.idn = self.scope.idn.replace("DSOX3024T", sc_model).replace("DS1104Z", sc_model)
+        vib_class = SimOFV3001 if vib_model == "OFV-3001" else SimOFV5000
+        self.vibrometer: SimOFV5000 | SimOFV3001 = vib_class(self.spot_peak_velocity_mm_s)
+        self.control = SimLabControl(self)
+        for ch in self.funcgen.ch:
             self.output_timeline.append((0.0, "funcgen", ch, False))
         self._started = False
 
     # -- lifecycle ----------------------------------------------------------------------------
-    def start(self) -> "VirtualLab":
+    def start(self) -> VirtualLab:
         if self._started:
             return self
         self._warm_simulator()
@@ -152,7 +189,7 @@ class VirtualLab:
 
     def close(self) -> None:
         """Stop every server; outputs are switched off first (logged in the timeline)."""
-        for ch in (1, 2):
+        for ch in list(self.funcgen.ch):
             with self.funcgen.lock:
                 self.funcgen._set_output(ch, False)
         self.scope.close()
@@ -162,7 +199,7 @@ class VirtualLab:
             server.close()
         self._started = False
 
-    def __enter__(self) -> "VirtualLab":
+    def __enter__(self) -> VirtualLab:
         return self.start()
 
     def __exit__(self, *exc: Any) -> None:
@@ -220,6 +257,24 @@ class VirtualLab:
             if instrument in (None, name):
                 server.clear_faults()
 
+    # -- the camera -----------------------------------------------------------------------------
+    def record_video(self, path: str | Path, duration_s: float) -> dict[str, Any]:
+        """Film ``duration_s`` of the robot at :attr:`camera_fps` to ``path``; keep it as :attr:`last_recording`.
+
+        The lab hands the camera what it needs (the simulator's run for the
+        present drive, whether the tray shakes); the camera knows nothing of the lab.
+        """
+        drive = self.funcgen.drive(1)
+        shaker = self.setup == "shaker"
+        sim = None
+        if shaker and drive.is_sine():
+            sim = self._simulation(drive.freq_hz, self.chain.tray_amp_um(drive.freq_hz, drive.amp_v))
+        rec = camera.record(path, duration_s, fps=self.camera_fps, seed=self.seed, take=len(self.log),
+                            sim=sim, shaking=shaker and drive.on)
+        self.last_recording = rec.as_dict()
+        self._log("camera", "state", f"recorded {rec.frames} frames to {rec.path} (speed {rec.speed_mm_s:.3f} mm/s)")
+        return {"path": rec.path, "frames": rec.frames, "timestamps_s": rec.timestamps_s}
+
     # -- records --------------------------------------------------------------------------------
     def now_s(self) -> float:
         return time.monotonic() - self.t0
@@ -229,6 +284,31 @@ class VirtualLab:
 
     def _output(self, instrument: str, channel: int, on: bool) -> None:
         self.output_timeline.append((self.now_s(), instrument, channel, on))
+
+    def _burst(self, instrument: str, channel: int, start: float, end: float) -> None:
+        """A triggered burst started (or, for the same start, was cut short): keep its lab times."""
+        start_s, end_s = start - self.t0, end - self.t0
+        for i in range(len(self.burst_timeline) - 1, -1, -1):
+            t, inst, ch, _ = self.burst_timeline[i]
+            if inst == instrument and ch == channel:
+                if abs(t - start_s) < 1e-9:
+                    self.burst_timeline[i] = (t, inst, ch, end_s)
+                    self._log(instrument, "state", f"burst on channel {channel} cut at {end_s:.6f} s")
+                    return
+                break
+        self.burst_timeline.append((start_s, instrument, channel, end_s))
+        self._log(instrument, "state", f"burst on channel {channel} from {start_s:.6f} s to {end_s:.6f} s")
+
+    def drive_idle_after_s(self, channel: int = 1) -> float:
+        """Lab time (s) after which the generator's ``channel`` carries no signal; inf if it runs on.
+
+        Off: the moment it was switched off. A triggered burst: the end of the
+        last burst, which the generator reaches by itself, whatever happens to
+        the client that triggered it. A continuous or internally repeated
+        waveform: inf.
+        """
+        with self.funcgen.lock:
+            return self.funcgen.drive(channel).idle_after() - self.t0
 
     def output_state(self, instrument: str = "funcgen", channel: int = 1) -> bool:
         """The latest state of one output in :attr:`output_timeline`."""
@@ -333,7 +413,7 @@ class VirtualLab:
             return drive.next_sync(t_min)
         if source == "CHAN1":
             if drive.is_sine() and drive.amp_v > 0:
-                level = self.scope.get("trig_level")
+                level = self.scope.trigger_level("CHAN1")
                 x = (level - drive.offset_v) / drive.amp_v
                 if abs(x) >= 1:
                     return None

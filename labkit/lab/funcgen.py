@@ -16,12 +16,13 @@ output voltage and rescales the displayed amplitude.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 import numpy as np
 
-from labkit.lab.scpi import Call, ScpiError, ScpiInstrument, fmt_num, parse_bool, parse_enum
+from labkit.lab.models import MODELS_33500B, MODELS_DG1000Z
+from labkit.lab.scpi import Call, ScpiError, SimScpiInstrument, parse_bool, parse_enum
 
 MAX_FREQ_HZ = 30e6
 MIN_FREQ_HZ = 1e-6
@@ -53,7 +54,8 @@ class Drive:
     return_s: float = 0.0
     log_spacing: bool = False
     burst: bool = False
-    ncycles: int = 1
+    burst_gated: bool = False
+    ncycles: float = 1      # cycles per burst; inf: until the burst mode or the output is switched off
     burst_period_s: float = 0.01
     trig_source: str = "IMM"
     trig_times: tuple[float, ...] = field(default=())
@@ -62,6 +64,28 @@ class Drive:
     def is_sine(self) -> bool:
         """A plain continuous sine (the analytic steady state applies)."""
         return self.on and self.func == "SIN" and not self.sweep and not self.burst
+
+    def burst_length_s(self) -> float:
+        """Duration of one burst (inf for ``BURS:NCYC INF``)."""
+        return float(self.ncycles) / self.freq_hz
+
+    def idle_after(self) -> float:
+        """Absolute time after which the output carries no signal (inf: it never stops by itself).
+
+        Off: since the change that switched it off (``t_epoch``). A triggered
+        (BUS/EXT) burst: the end of the last burst. A gated burst with no gate
+        signal wired: idle. Anything else runs on.
+        """
+        if not self.on:
+            return self.t_epoch
+        if self.burst and self.burst_gated:
+            return self.t_epoch
+        if self.burst and self.trig_source != "IMM":
+            if not self.trig_times:
+                return self.t_epoch
+            last = self.trig_times[-1]
+            return self.t_epoch if last < self.t_epoch else last + self.burst_length_s()
+        return float("inf")
 
     def freq_range_hz(self) -> tuple[float, float]:
         if self.sweep:
@@ -110,9 +134,12 @@ class Drive:
             return self.offset_v + self.amp_v * np.sin(phase)
         phase = 2 * np.pi * self.freq_hz * (t - self.t_epoch) + self.phase_rad
         wave = _shape(self.func, phase)
+        if self.burst and self.burst_gated:
+            # gated bursts follow the rear-panel Ext Trig input: nothing is wired to it in the lab
+            return np.full_like(t, self.offset_v)
         if self.burst:
             gate = np.zeros(t.shape, dtype=bool)
-            length = self.ncycles / self.freq_hz
+            length = self.burst_length_s()
             for s in self.starts(float(t.min()), float(t.max())):
                 gate |= (t >= s) & (t < s + length)
             local = np.zeros_like(t)
@@ -164,6 +191,29 @@ def _sweep_phase(tau: np.ndarray, f0: float, f1: float, T: float, H: float, R: f
     return out
 
 
+def yes_no(value: object) -> str:
+    """A boolean reply: ``1`` or ``0``."""
+    return "1" if value else "0"
+
+
+def _vpp_to_dbm(vpp: float, load_ohm: float) -> float:
+    """Sine power into ``load_ohm`` in dBm for ``vpp`` volts peak-to-peak at the load."""
+    vrms = vpp / (2 * 2 ** 0.5)
+    return float(10 * np.log10(vrms ** 2 / load_ohm / 1e-3))
+
+
+def _dbm_to_vpp(dbm: float, load_ohm: float) -> float:
+    return float(2 * 2 ** 0.5 * np.sqrt(load_ohm * 1e-3 * 10 ** (dbm / 10)))
+
+
+def _quoted(text: str) -> str:
+    """A string parameter, kept in the instrument's reply form (double quotes)."""
+    text = text.strip()
+    if len(text) >= 2 and text[0] == text[-1] and text[0] in "\"'":
+        return '"' + text[1:-1].replace('"', '""') + '"'
+    raise ScpiError(-151, "Invalid string data")
+
+
 def _shape(func: str, phase: np.ndarray) -> np.ndarray:
     if func == "SQU":
         return np.where(np.sin(phase) >= 0, 1.0, -1.0)
@@ -175,20 +225,49 @@ def _shape(func: str, phase: np.ndarray) -> np.ndarray:
     return np.sin(phase)
 
 
-class Keysight33500B(ScpiInstrument):
-    """The simulated two-channel generator; ``drive(ch)`` is its output for the physics."""
+
+BurstFn = Callable[[int, float, float], None]
+
+
+class SimKeysight33500B(SimScpiInstrument):
+    """The simulated 33500B generator (33522B by default); ``drive(ch)`` is its output for the physics.
+
+    Parameters
+    ----------
+    model:
+        One of :data:`MODELS_33500B`: the identity and the number of channels
+        (``SOUR2``/``OUTP2`` on a one-channel model: ``-114``).
+    on_output:
+        Called with (channel, on) whenever an output is switched.
+    on_burst:
+        Called with (channel, start, end) (absolute clock times) when a
+        triggered burst starts, and again with the shortened end when one is
+        cut short (output or burst mode off, ``*RST``).
+    """
 
     name = "funcgen"
     idn = "Keysight Technologies,33522B,MY5740LAB1,4.03-1.19-2.00-52-00"
+    models: dict[str, int] = MODELS_33500B
+    idn_format = "Keysight Technologies,{model},MY5740LAB1,4.03-1.19-2.00-52-00"
 
     def __init__(self, clock: Callable[[], float] = time.monotonic,
-                 on_output: Callable[[int, bool], None] | None = None) -> None:
+                 on_output: Callable[[int, bool], None] | None = None, *, model: str = "33522B",
+                 on_burst: BurstFn | None = None) -> None:
+        if model not in self.models:
+            raise ValueError(f"{type(self).__name__} model must be one of {', '.join(self.models)}, "
+                             f"not {model!r}")
+        self.model = model
+        self.n_channels = self.models[model]
+        self.idn = self.idn_format.format(model=model)
+        self.suffix_limits = {"SOUR": self.n_channels, "OUTP": self.n_channels, "TRIG": self.n_channels}
         self.clock = clock
         self.on_output = on_output or (lambda ch, on: None)
-        self.ch = {1: self._default(), 2: self._default()}
-        self.load = {1: SOURCE_OHM, 2: SOURCE_OHM}   # declared load, ohm (inf for high Z)
-        self.vunit = {1: "VPP", 2: "VPP"}
-        self.sync = {1: True, 2: False}
+        self.on_burst = on_burst or (lambda ch, start, end: None)
+        chans = range(1, self.n_channels + 1)
+        self.ch = {n: self._default() for n in chans}
+        self.load = {n: SOURCE_OHM for n in chans}   # declared load, ohm (inf for high Z)
+        self.vunit = {n: "VPP" for n in chans}
+        self.sync = {n: n == 1 for n in chans}
         super().__init__()
 
     def _default(self) -> Drive:
@@ -197,13 +276,24 @@ class Keysight33500B(ScpiInstrument):
 
     def reset(self) -> None:
         super().reset()
-        for n in (1, 2):
+        for n in self.ch:
             was_on = self.ch[n].on
+            self._cut_burst(n)
             self.ch[n] = self._default()
             self.load[n] = SOURCE_OHM
             self.vunit[n] = "VPP"
+            self.sync[n] = n == 1
             if was_on:
                 self.on_output(n, False)
+
+    def _cut_burst(self, n: int) -> None:
+        """A running triggered burst ends now (output, burst mode or configuration changed)."""
+        d = self.ch[n]
+        if d.burst and d.trig_times and d.trig_source != "IMM":
+            end = d.trig_times[-1] + d.burst_length_s()
+            now = self.clock()
+            if d.trig_times[-1] >= d.t_epoch and end > now:
+                self.on_burst(n, d.trig_times[-1], now)
 
     def drive(self, channel: int = 1) -> Drive:
         with self.lock:
@@ -212,14 +302,15 @@ class Keysight33500B(ScpiInstrument):
     # -- helpers ------------------------------------------------------------------------------
     def _chan(self, c: Call, i: int = 0) -> int:
         n = c.suffix(i)
-        if n not in (1, 2):
-            raise ScpiError(-113, "Undefined header;channel suffix")
+        if n not in self.ch:
+            raise ScpiError(-114)
         return n
 
-    def _update(self, n: int, new_epoch: bool = True, **kw) -> None:
+    def _update(self, n: int, new_epoch: bool = True, **kw: object) -> None:
         if new_epoch:
+            self._cut_burst(n)
             kw["t_epoch"] = self.clock()
-        self.ch[n] = replace(self.ch[n], **kw)
+        self.ch[n] = replace(self.ch[n], **kw)  # type: ignore[arg-type]
 
     def _factor(self, n: int) -> float:
         """Open-circuit volts per programmed volt for the declared load."""
@@ -235,6 +326,10 @@ class Keysight33500B(ScpiInstrument):
         if self.vunit[n] == "VRMS":
             value = self.num(text, "V", 1e-3 / (2 * 2 ** 0.5), limit / (2 * 2 ** 0.5), 0.1 / (2 * 2 ** 0.5))
             vpp = value * 2 * 2 ** 0.5
+        elif self.vunit[n] == "DBM":
+            dbm = self.num(text, "", _vpp_to_dbm(1e-3, self.load[n]), _vpp_to_dbm(limit, self.load[n]),
+                           _vpp_to_dbm(0.1, self.load[n]))
+            vpp = _dbm_to_vpp(dbm, self.load[n])
         else:
             vpp = self.num(text, "V", 1e-3, limit, 0.1)
         # amplitude and offset together must stay inside the output's +-10 V (open circuit)
@@ -247,11 +342,13 @@ class Keysight33500B(ScpiInstrument):
         if c.params:
             word = c.params[0].upper()[:3]
             if word == "MAX":
-                return fmt_num(MAX_VPP_OPEN / self._factor(n))
+                return self.fnum(MAX_VPP_OPEN / self._factor(n))
             if word == "MIN":
-                return fmt_num(1e-3)
+                return self.fnum(1e-3)
         vpp = self._display_vpp(n)
-        return fmt_num(vpp / (2 * 2 ** 0.5) if self.vunit[n] == "VRMS" else vpp)
+        if self.vunit[n] == "DBM":
+            return self.fnum(_vpp_to_dbm(vpp, self.load[n]))
+        return self.fnum(vpp / (2 * 2 ** 0.5) if self.vunit[n] == "VRMS" else vpp)
 
     def _set_output(self, n: int, on: bool) -> None:
         if self.ch[n].on != on:
@@ -273,10 +370,10 @@ class Keysight33500B(ScpiInstrument):
             def do(c: Call) -> str:
                 n = self._chan(c)
                 if c.params and c.params[0].upper().startswith("MIN"):
-                    return fmt_num(lo)
+                    return self.fnum(lo)
                 if c.params and c.params[0].upper().startswith("MAX"):
-                    return fmt_num(hi)
-                return fmt_num(getattr(self.ch[n], key))
+                    return self.fnum(hi)
+                return self.fnum(getattr(self.ch[n], key))
             return do
 
         add(S + "FUNCtion[:SHAPe]",
@@ -292,14 +389,12 @@ class Keysight33500B(ScpiInstrument):
         add(S + "VOLTage[:LEVel][:IMMediate][:AMPLitude]",
             set=lambda c: self._set_amp(self._chan(c), c.one()),
             query=lambda c: self._amp_query(self._chan(c), c))
-        add(S + "VOLTage:UNIT",
-            set=lambda c: self.vunit.__setitem__(self._chan(c), parse_enum(c.one(), ["VPP", "VRMS"])),
-            query=lambda c: self.vunit[self._chan(c)])
+        add(S + "VOLTage:UNIT", set=self._set_unit, query=lambda c: self.vunit[self._chan(c)])
         add(S + "VOLTage[:LEVel][:IMMediate]:OFFSet", set=self._set_offset,
-            query=lambda c: fmt_num(self.ch[self._chan(c)].offset_v / self._factor(self._chan(c))))
+            query=lambda c: self.fnum(self.ch[self._chan(c)].offset_v / self._factor(self._chan(c))))
         add(S + "PHASe[:ADJust]",
             set=lambda c: self._update(self._chan(c), phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
-            query=lambda c: fmt_num(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
+            query=lambda c: self.fnum(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
         add(S + "APPLy:SINusoid", set=self._apply_sin, query=None)
         add(S + "APPLy", query=lambda c: self._apply_query(self._chan(c)))
         add(S + "SWEep:STATe", set=lambda c: self._update(self._chan(c), sweep=parse_bool(c.one())),
@@ -315,16 +410,16 @@ class Keysight33500B(ScpiInstrument):
             query=fget("return_s", 0.0, 3600.0))
         add(S + "BURSt:STATe", set=lambda c: self._update(self._chan(c), burst=parse_bool(c.one())),
             query=lambda c: "1" if self.ch[self._chan(c)].burst else "0")
-        add(S + "BURSt:MODE", set=lambda c: parse_enum(c.one(), ["TRIGgered", "GATed"]),
-            query=lambda c: "TRIG")
-        add(S + "BURSt:NCYCles",
-            set=lambda c: self._update(self._chan(c), ncycles=int(self.num(c.one(), "", 1, 1e8, 1))),
-            query=lambda c: fmt_num(self.ch[self._chan(c)].ncycles))
+        add(S + "BURSt:MODE",
+            set=lambda c: self._update(self._chan(c), burst_gated=parse_enum(
+                c.one(), ["TRIGgered", "GATed"]) == "GAT"),
+            query=lambda c: "GAT" if self.ch[self._chan(c)].burst_gated else "TRIG")
+        add(S + "BURSt:NCYCles", set=self._set_ncycles, query=self._ncycles_query)
         add(S + "BURSt:INTernal:PERiod", set=fset("burst_period_s", "S", 1e-6, 8000.0, 0.01),
             query=fget("burst_period_s", 1e-6, 8000.0))
         add(S + "BURSt:PHASe",
             set=lambda c: self._update(self._chan(c), phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
-            query=lambda c: fmt_num(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
+            query=lambda c: self.fnum(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
         add("OUTPut#[:STATe]", set=lambda c: self._set_output(self._chan(c), parse_bool(c.one())),
             query=lambda c: "1" if self.ch[self._chan(c)].on else "0")
         add("OUTPut#:LOAD", set=self._set_load, query=self._load_query)
@@ -335,7 +430,121 @@ class Keysight33500B(ScpiInstrument):
                 c.one(), ["IMMediate", "EXTernal", "BUS", "TIMer"])),
             query=lambda c: self.ch[self._chan(c)].trig_source)
         add("TRIGger#[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
-        add("*TRG", set=lambda c: self._trigger([1, 2], force=False))
+        add("*TRG", set=lambda c: self._trigger(list(self.ch), force=False))
+        self._build_more()
+
+    def _set_ncycles(self, c: Call) -> None:
+        n = self._chan(c)
+        word = c.one().strip().upper()
+        cycles = float("inf") if word in ("INF", "INFINITY") else float(int(self.num(word, "", 1, 1e8, 1)))
+        self._update(n, ncycles=cycles)
+
+    def _ncycles_query(self, c: Call) -> str:
+        n = self._chan(c)
+        if c.params:
+            return self.fnum(self.query_limit(c, (1.0, 1e8), 1.0))
+        cycles = self.ch[n].ncycles
+        return "+9.9E+37" if np.isinf(cycles) else self.fnum(cycles)
+
+    # -- high/low levels and dBm ---------------------------------------------------------------
+    def _levels(self, n: int) -> tuple[float, float]:
+        """(high, low) as displayed for the declared load."""
+        vpp = self._display_vpp(n)
+        off = self.ch[n].offset_v / self._factor(n)
+        return off + vpp / 2, off - vpp / 2
+
+    def _set_level(self, c: Call, which: str) -> None:
+        n = self._chan(c)
+        f = self._factor(n)
+        high, low = self._levels(n)
+        limit = (MAX_VPP_OPEN / 2) / f
+        value = self.num(c.one(), "V", -limit, limit, 0.05 if which == "HIGH" else -0.05)
+        if which == "HIGH":
+            high = value
+        else:
+            low = value
+        if high <= low:
+            raise ScpiError(-221, "Settings conflict;high level must be above low level")
+        self._update(n, amp_v=(high - low) * f / 2, offset_v=(high + low) / 2 * f)
+
+    def _set_unit(self, c: Call) -> None:
+        n = self._chan(c)
+        unit = parse_enum(c.one(), ["VPP", "VRMS", "DBM"])
+        if unit == "DBM" and np.isinf(self.load[n]):
+            # dBm needs a finite load (Operating and Service Guide, VOLTage:UNIT)
+            raise ScpiError(-221, "Settings conflict;dBm units not allowed with high impedance load")
+        self.vunit[n] = unit
+
+    def _build_more(self) -> None:
+        """Documented commands third-party drivers send (PyMeasure Agilent33500, QCoDeS): stored,
+        answered, reset by ``*RST`` to the Operating and Service Guide's defaults."""
+        S = "[SOURce#:]"
+        add = self.add
+        add(S + "VOLTage[:LEVel][:IMMediate]:HIGH", set=lambda c: self._set_level(c, "HIGH"),
+            query=lambda c: self.fnum(self._levels(self._chan(c))[0]))
+        add(S + "VOLTage[:LEVel][:IMMediate]:LOW", set=lambda c: self._set_level(c, "LOW"),
+            query=lambda c: self.fnum(self._levels(self._chan(c))[1]))
+        self.setting(S + "FUNCtion:SQUare:DCYCle", "square_dcyc", 50.0,
+                     lambda t: self.num(t, "", 0.01, 99.99), self.fnum, True, (0.01, 99.99))
+        self.setting(S + "FUNCtion:RAMP:SYMMetry", "ramp_symm", 100.0,
+                     lambda t: self.num(t, "", 0.0, 100.0), self.fnum, True, (0.0, 100.0))
+        self.setting(S + "FUNCtion:PULSe:WIDTh", "pulse_width", 1e-4,
+                     lambda t: self.num(t, "S", 16e-9, 1e6), self.fnum, True, (16e-9, 1e6))
+        self.setting(S + "FUNCtion:PULSe:PERiod", "pulse_period", 1e-3,
+                     lambda t: self.num(t, "S", 33e-9, 1e6), self.fnum, True, (33e-9, 1e6))
+        self.setting(S + "FUNCtion:PULSe:DCYCle", "pulse_dcyc", 10.0,
+                     lambda t: self.num(t, "", 0.0, 100.0), self.fnum, True, (0.0, 100.0))
+        self.setting(S + "FUNCtion:PULSe:HOLD", "pulse_hold", "WIDT",
+                     lambda t: parse_enum(t, ["WIDTh", "DCYCle"]), str, True)
+        self.setting(S + "FUNCtion:PULSe:TRANsition[:BOTH]", "pulse_edge", 1e-8,
+                     lambda t: self.num(t, "S", 8.4e-9, 1e-6), self.fnum, True, (8.4e-9, 1e-6))
+        self.setting(S + "FUNCtion:ARBitrary", "arb_name", '"INT:\\BUILTIN\\EXP_RISE.ARB"',
+                     lambda t: t.strip(), str, True)
+        self.setting(S + "FUNCtion:ARBitrary:SRATe", "arb_srate", 4e4,
+                     lambda t: self.num(t, "", 1e-6, 250e6), self.fnum, True, (1e-6, 250e6))
+        self.setting(S + "FUNCtion:ARBitrary:FILTer", "arb_filter", "STEP",
+                     lambda t: parse_enum(t, ["NORMal", "STEP", "OFF"]), str, True)
+        self.setting(S + "FUNCtion:ARBitrary:ADVance", "arb_advance", "SRAT",
+                     lambda t: parse_enum(t, ["TRIGger", "SRATe"]), str, True)
+        self.setting(S + "FREQuency:MODE", "freq_mode", "CW",
+                     lambda t: parse_enum(t, ["CW", "FIXed", "LIST", "SWEep"]), lambda v: "CW" if v == "FIX" else v,
+                     True)
+        self.setting(S + "BURSt:GATE:POLarity", "gate_pol", "NORM",
+                     lambda t: parse_enum(t, ["NORMal", "INVerted"]), str, True)
+        self.setting("OUTPut#:POLarity", "polarity", "NORM", lambda t: parse_enum(t, ["NORMal", "INVerted"]),
+                     str, True)
+        self.setting("OUTPut:SYNC:SOURce", "sync_source", "CH1", lambda t: parse_enum(t, ["CH1", "CH2"]), str)
+        self.setting("OUTPut:SYNC:MODE", "sync_mode", "NORM",
+                     lambda t: parse_enum(t, ["NORMal", "CARRier", "MARKer"]), str)
+        self.setting("OUTPut:TRIGger[:STATe]", "trig_out", False, parse_bool, yes_no)
+        self.setting("OUTPut:TRIGger:SLOPe", "trig_out_slope", "POS",
+                     lambda t: parse_enum(t, ["POSitive", "NEGative"]), str)
+        self.setting("OUTPut:TRIGger:SOURce", "trig_out_source", "CH1", lambda t: parse_enum(t, ["CH1", "CH2"]), str)
+        self.setting("TRIGger#:SLOPe", "trig_slope", "POS", lambda t: parse_enum(t, ["POSitive", "NEGative"]),
+                     str, True)
+        self.setting("TRIGger#:COUNt", "trig_count", 1.0,
+                     lambda t: float("inf") if t.strip().upper() in ("INF", "INFINITY")
+                     else self.num(t, "", 1, 1e6), lambda v: "+9.9E+37" if np.isinf(v) else self.fnum(v),
+                     True, (1.0, 1e6))
+        self.setting("TRIGger#:DELay", "trig_delay", 0.0, lambda t: self.num(t, "S", 0.0, 1000.0), self.fnum,
+                     True, (0.0, 1000.0))
+        self.setting("TRIGger#:TIMer", "trig_timer", 1.0, lambda t: self.num(t, "S", 1e-6, 8000.0), self.fnum,
+                     True, (1e-6, 8000.0))
+        self.setting("TRIGger#:LEVel", "trig_level", 1.0, lambda t: self.num(t, "V", 0.9, 3.8), self.fnum,
+                     True, (0.9, 3.8))
+        self.setting("DISPlay:TEXT[:DATA]", "display_text", '""', _quoted, str)
+        self.add("DISPlay:TEXT:CLEar", set=lambda c: self.settings.__setitem__("display_text", '""'))
+        self.setting("DISPlay[:STATe]", "display", True, parse_bool, yes_no)
+        self.add("SYSTem:BEEPer[:IMMediate]", set=lambda c: None)
+        self.add(S + "PHASe:SYNChronize", set=lambda c: self._phase_sync())
+        self.add(S + "DATA:VOLatile:CLEar", set=lambda c: None)
+        self.add(S + "DATA:VOLatile:CATalog", query=lambda c: '"INT:\\BUILTIN\\EXP_RISE.ARB"')
+
+    def _phase_sync(self) -> None:
+        """``PHASe:SYNChronize``: both channels restart at their programmed phase now."""
+        now = self.clock()
+        for n in self.ch:
+            self.ch[n] = replace(self.ch[n], t_epoch=now)
 
     def _set_offset(self, c: Call) -> None:
         n = self._chan(c)
@@ -358,7 +567,7 @@ class Keysight33500B(ScpiInstrument):
 
     def _load_query(self, c: Call) -> str:
         load = self.load[self._chan(c)]
-        return "+9.9E+37" if np.isinf(load) else fmt_num(load)
+        return "+9.9E+37" if np.isinf(load) else self.fnum(load)
 
     def _apply_sin(self, c: Call) -> None:
         n = self._chan(c)
@@ -378,9 +587,103 @@ class Keysight33500B(ScpiInstrument):
         d = self.ch[n]
         return f'"{d.func} {d.freq_hz:+.15E},{self._display_vpp(n):+.15E},{d.offset_v / self._factor(n):+.15E}"'
 
-    def _trigger(self, channels: list[int], force: bool) -> None:
+    def _trigger(self, channels: list[int], force: bool, source: str = "BUS") -> None:
+        """A trigger event: each channel waiting for ``source`` (or any, with ``force``) starts.
+
+        As on the instrument, a trigger that arrives while a burst is still
+        being output is ignored.
+        """
         now = self.clock()
         for n in channels:
             d = self.ch[n]
-            if force or d.trig_source == "BUS":
-                self.ch[n] = replace(d, trig_times=(d.trig_times + (now,))[-64:])
+            if not (force or d.trig_source == source):
+                continue
+            if d.burst and d.trig_times and d.trig_times[-1] >= d.t_epoch and \
+                    now < d.trig_times[-1] + d.burst_length_s():
+                continue
+            self.ch[n] = replace(d, trig_times=(d.trig_times + (now,))[-64:])
+            if d.burst and d.on and not d.burst_gated:
+                self.on_burst(n, now, now + d.burst_length_s())
+
+    def external_trigger(self) -> None:
+        """A rising edge at the rear-panel Ext Trig input (channels with ``TRIG:SOUR EXT``)."""
+        with self.lock:
+            self._trigger(list(self.ch), force=False, source="EXT")
+
+#: Rigol trigger-source words and the simulation's (INTernal, EXTernal, MANual = *TRG)
+_RIGOL_TRIG = {"INT": "IMM", "EXT": "EXT", "MAN": "BUS"}
+
+
+class SimRigolDG1000Z(SimKeysight33500B):
+    """The simulated Rigol DG1000Z (DG1062Z by default): the same output physics, Rigol's dialect.
+
+    DG1000Z Programming Guide facts used: ``:SOURce<n>:`` and ``:OUTPut<n>``
+    prefixes; the output state answers ``ON``/``OFF``; ``:OUTPut<n>:LOAD``
+    (also ``:IMPedance``) ``<ohm>|INFinity``, answering ``INFINITY``;
+    numbers answer as ``1.000000E+03``; integers without a sign; the empty
+    error queue answers ``0,"No error"``; bursts ``:SOURce<n>:BURSt[:STATe]
+    ON|OFF``, ``:BURSt:MODE TRIGgered|GATed|INFinity``, ``:BURSt:NCYCles``,
+    trigger sources ``:SOURce<n>:BURSt:TRIGger:SOURce INTernal|EXTernal|MANual``
+    and ``:SOURce<n>:SWEep:TRIGger:SOURce`` (same words), ``*TRG`` or
+    ``:SOURce<n>:BURSt:TRIGger[:IMMediate]``.
+    """
+
+    name = "funcgen"
+    int_sign = False
+    no_error = '0,"No error"'
+    models = MODELS_DG1000Z
+    idn_format = "Rigol Technologies,{model},DG1ZA000000001,00.01.14"
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic,
+                 on_output: Callable[[int, bool], None] | None = None, *, model: str = "DG1062Z",
+                 on_burst: BurstFn | None = None) -> None:
+        super().__init__(clock, on_output, model=model, on_burst=on_burst)
+
+    def fnum(self, value: float) -> str:
+        return f"{value:E}"
+
+    def build(self) -> None:
+        super().build()
+        S = ":SOURce#:"
+        add = self.add
+        # Rigol answers ON/OFF for the output state (the table is searched in order: first wins)
+        self.commands = [cmd for cmd in self.commands if cmd.pattern not in ("OUTPut#[:STATe]",)]
+        add("OUTPut#[:STATe]", set=lambda c: self._set_output(self._chan(c), parse_bool(c.one())),
+            query=lambda c: "ON" if self.ch[self._chan(c)].on else "OFF")
+        add("OUTPut#:IMPedance", set=self._set_load, query=self._load_query)
+        add(S + "BURSt[:STATe]", set=lambda c: self._update(self._chan(c), burst=parse_bool(c.one())),
+            query=lambda c: "ON" if self.ch[self._chan(c)].burst else "OFF")
+        add(S + "BURSt:TRIGger:SOURce", set=self._set_rigol_trig, query=self._rigol_trig_query)
+        add(S + "SWEep:TRIGger:SOURce", set=self._set_rigol_trig, query=self._rigol_trig_query)
+        add(S + "BURSt:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
+        add(S + "SWEep:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
+
+    def _load_query(self, c: Call) -> str:
+        load = self.load[self._chan(c)]
+        return "INFINITY" if np.isinf(load) else self.fnum(load)
+
+    def _set_rigol_trig(self, c: Call) -> None:
+        word = parse_enum(c.one(), ["INTernal", "EXTernal", "MANual"])
+        self._update(self._chan(c), False, trig_source=_RIGOL_TRIG[word])
+
+    def _rigol_trig_query(self, c: Call) -> str:
+        src = self.ch[self._chan(c)].trig_source
+        return {v: k for k, v in _RIGOL_TRIG.items()}.get(src, "INT")
+
+
+class SimAgilent33220A(SimKeysight33500B):
+    """The simulated Agilent 33220A: one channel, commands without ``SOURce``/``OUTPut`` suffixes.
+
+    The 33500B's command set is the 33220A's with channel suffixes, so the
+    same table serves (33220A User's Guide, chapter 4: ``FUNC``, ``FREQ``,
+    ``VOLT``, ``VOLT:OFFS``, ``OUTP:LOAD``, ``OUTP``, ``BURS:...``,
+    ``TRIG:SOUR``, ``*TRG``); a suffix 2 is ``-114``.
+    """
+
+    models = {"33220A": 1}
+    idn_format = "Agilent Technologies,{model},MY44000000,2.07-2.06-22-2"
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic,
+                 on_output: Callable[[int, bool], None] | None = None, *, model: str = "33220A",
+                 on_burst: BurstFn | None = None) -> None:
+        super().__init__(clock, on_output, model=model, on_burst=on_burst)

@@ -31,8 +31,8 @@ The robot's response to the tray motion is the hybrid simulator's.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 from scipy import signal

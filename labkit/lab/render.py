@@ -27,12 +27,12 @@ centroid matches the truth to ~1e-3 px.
 from __future__ import annotations
 
 import itertools
-
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 SUPERSAMPLE = 8
 ROBOT_LENGTH_MM = 5.0
@@ -170,8 +170,8 @@ def _coverage(u: float, v: float, heading: float, polys_px: list[np.ndarray],
     return patch, (r0, c0)
 
 
-def render_frames(y_mm: Sequence[float], x_mm: Sequence[float] | None, heading_rad: Sequence[float] | float,
-                  t_s: Sequence[float], *, size_px: tuple[int, int] = (640, 480), mm_per_px: float = 0.05,
+def render_frames(y_mm: ArrayLike, x_mm: ArrayLike | None, heading_rad: ArrayLike,
+                  t_s: ArrayLike, *, size_px: tuple[int, int] = (640, 480), mm_per_px: float = 0.05,
                   noise: float = 2.0, blur_px: float = 0.0, blur_angle_rad: float = 0.0,
                   jitter_px: float = 0.0, lighting_drift: float = 0.0, texture: float = 0.0,
                   occlusion: Sequence[tuple[float, float]] | None = None,
@@ -276,7 +276,7 @@ def render_frames(y_mm: Sequence[float], x_mm: Sequence[float] | None, heading_r
     for k in range(n):
         if pad and (jit[k] != 0).any():
             # shift the scene: output(p) = refl(p - jit) in frame coordinates
-            m = np.float32([[1, 0, pad - jit[k, 0]], [0, 1, pad - jit[k, 1]]])
+            m = np.array([[1, 0, pad - jit[k, 0]], [0, 1, pad - jit[k, 1]]], np.float32)
             bg = cv2.warpAffine(refl, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REFLECT)
         else:
@@ -316,7 +316,7 @@ def render_frames(y_mm: Sequence[float], x_mm: Sequence[float] | None, heading_r
 
 
 def write_video(path: str | Path, frames: np.ndarray | Iterable[np.ndarray], fps: float, *,
-                t_s: Sequence[float] | None = None, lossless: bool = False, quality: int = 100) -> Path:
+                t_s: ArrayLike | None = None, lossless: bool = False, quality: int = 100) -> Path:
     """Write frames (grey ``(H,W)`` or BGR ``(H,W,3)`` uint8, an array or any iterable) to a video.
 
     * Default: Motion-JPEG at ``quality`` in the container the suffix names
@@ -348,7 +348,7 @@ def write_video(path: str | Path, frames: np.ndarray | Iterable[np.ndarray], fps
             raise ValueError("write_video: t_s must increase by at least 1 ms per frame")
         # raw mode: we hand over encoded JPEG packets and set each one's presentation time in
         # units of 1/fps, so fps = 1000 gives a 1 ms time base
-        vw = cv2.VideoWriter(str(path), cv2.CAP_FFMPEG, cv2.VideoWriter_fourcc(*"MJPG"), 1000.0, (w, h),
+        vw = cv2.VideoWriter(str(path), cv2.CAP_FFMPEG, cv2.VideoWriter.fourcc(*"MJPG"), 1000.0, (w, h),
                              [cv2.VIDEOWRITER_PROP_RAW_VIDEO, 1])
         if not vw.isOpened():
             raise OSError(f"write_video: cannot open {path} for writing")
@@ -367,7 +367,7 @@ def write_video(path: str | Path, frames: np.ndarray | Iterable[np.ndarray], fps
             raise ValueError(f"write_video: {n} frames but {pts.size} timestamps")
         return path
     fourcc = "FFV1" if lossless else "MJPG"
-    vw = cv2.VideoWriter(str(path), cv2.CAP_FFMPEG, cv2.VideoWriter_fourcc(*fourcc), float(fps), (w, h), color)
+    vw = cv2.VideoWriter(str(path), cv2.CAP_FFMPEG, cv2.VideoWriter.fourcc(*fourcc), float(fps), (w, h), color)
     if not vw.isOpened():
         raise OSError(f"write_video: cannot open {path} for writing ({fourcc})")
     try:

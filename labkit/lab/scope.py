@@ -19,13 +19,12 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
-from labkit.lab.scpi import (Call, ScpiError, ScpiInstrument, definite_block, fmt_int, fmt_num,
-                             parse_bool, parse_enum)
+from labkit.lab.scpi import Call, ScpiError, SimScpiInstrument, fmt_int, parse_bool, parse_enum
 
 NORMAL_MAX_POINTS = 62_500
 RAW_MAX_POINTS = 8_000_000
@@ -34,6 +33,22 @@ MAX_SRATE_SA_S = 5e9
 
 
 # render(t_abs, rng, channels) -> {channel: volts}: the lab's physics, frozen at one moment
+def yes_no(value: object) -> str:
+    """A boolean reply: ``1`` or ``0``."""
+    return "1" if value else "0"
+
+
+def _label(text: str) -> str:
+    """A channel label: a quoted string of at most 10 characters, kept upper-cased (as the scope shows it)."""
+    text = text.strip()
+    if len(text) < 2 or text[0] != text[-1] or text[0] not in "\"'":
+        raise ScpiError(-151, "Invalid string data")
+    body = text[1:-1]
+    if len(body) > 10:
+        raise ScpiError(-150, "String data error;label longer than 10 characters")
+    return '"' + body.upper() + '"'
+
+
 RenderFn = Callable[[np.ndarray, np.random.Generator, tuple[int, ...]], dict[int, np.ndarray]]
 # signals() -> a RenderFn for the lab's present state; sync(source, t_min) -> trigger time or None
 SignalFn = Callable[[], RenderFn]
@@ -79,9 +94,13 @@ class Acquisition:
             return self.volts[step]
 
 
-class InfiniiVision(ScpiInstrument):
+class SimInfiniiVision(SimScpiInstrument):
     name = "scope"
     idn = "KEYSIGHT TECHNOLOGIES,DSOX3024T,MY5842LAB2,07.50.2021102830"
+    #: ":WAVeform:DATA? ... the block header "#800001000" would be sent" (3000 X-Series
+    #: Programmer's Guide, :WAVeform Commands, "Data Format for Transfer")
+    block_digits = 8
+    suffix_limits = {"CHAN": 4}
 
     def __init__(self, signals: SignalFn, sync: SyncFn, seed: int = 0,
                  clock: Callable[[], float] = time.monotonic, memory_points: int = 1_000_000) -> None:
@@ -95,26 +114,27 @@ class InfiniiVision(ScpiInstrument):
         self.run_state = "RUN"
         self.triggered = False
         self._cond = threading.Condition()
+        self.trig_levels: dict[str, float] = {}
         super().__init__()
 
     # -- settings -------------------------------------------------------------------------------
     def build(self) -> None:
         pos = lambda lo, hi: (lambda t: self.num(t, "", lo, hi))  # noqa: E731
-        self.setting(":CHANnel#:SCALe", "scale", 1.0, lambda t: self.num(t, "V", 1e-3, 50.0), fmt_num, True)
-        self.setting(":CHANnel#:OFFSet", "offset", 0.0, lambda t: self.num(t, "V", -400.0, 400.0), fmt_num, True)
+        self.setting(":CHANnel#:SCALe", "scale", 1.0, lambda t: self.num(t, "V", 1e-3, 50.0), self.fnum, True)
+        self.setting(":CHANnel#:OFFSet", "offset", 0.0, lambda t: self.num(t, "V", -400.0, 400.0), self.fnum, True)
         self.setting(":CHANnel#:COUPling", "coupling", "DC", lambda t: parse_enum(t, ["DC", "AC"]), str, True)
         self.setting(":CHANnel#:DISPlay", "display", False, parse_bool, lambda v: "1" if v else "0", True)
         self.settings["display"][1] = True   # power-on: channel 1 only
-        self.setting(":CHANnel#:PROBe", "probe", 1.0, pos(1e-3, 1e4), fmt_num, True)
+        self.setting(":CHANnel#:PROBe", "probe", 1.0, pos(1e-3, 1e4), self.fnum, True)
         self.setting(":CHANnel#:IMPedance", "impedance", "ONEM", lambda t: parse_enum(t, ["ONEMeg", "FIFTy"]),
                      str, True)
         self.setting(":CHANnel#:BWLimit", "bwlimit", False, parse_bool, lambda v: "1" if v else "0", True)
-        self.add(":CHANnel#:RANGe", set=lambda c: self._chan_range(c), query=lambda c: fmt_num(
+        self.add(":CHANnel#:RANGe", set=lambda c: self._chan_range(c), query=lambda c: self.fnum(
             8 * self.get("scale", self._ch(c))))
-        self.setting(":TIMebase:RANGe", "range", 1e-3, lambda t: self.num(t, "S", 2e-8, 500.0), fmt_num)
+        self.setting(":TIMebase:RANGe", "range", 1e-3, lambda t: self.num(t, "S", 2e-8, 500.0), self.fnum)
         self.add(":TIMebase:SCALe", set=lambda c: self.settings.__setitem__(
-            "range", 10 * self.num(c.one(), "S", 2e-9, 50.0)), query=lambda c: fmt_num(self.get("range") / 10))
-        self.setting(":TIMebase:POSition", "position", 0.0, lambda t: self.num(t, "S", -500.0, 500.0), fmt_num)
+            "range", 10 * self.num(c.one(), "S", 2e-9, 50.0)), query=lambda c: self.fnum(self.get("range") / 10))
+        self.setting(":TIMebase:POSition", "position", 0.0, lambda t: self.num(t, "S", -500.0, 500.0), self.fnum)
         self.setting(":TIMebase:REFerence", "reference", "CENT",
                      lambda t: parse_enum(t, ["LEFT", "CENTer", "RIGHt"]), str)
         self.setting(":TIMebase:MODE", "tb_mode", "MAIN", lambda t: parse_enum(t, ["MAIN", "WINDow", "XY", "ROLL"]),
@@ -126,7 +146,7 @@ class InfiniiVision(ScpiInstrument):
         self.setting(":TRIGger[:EDGE]:SOURce", "trig_source", "CHAN1",
                      lambda t: parse_enum(t, ["CHANnel1", "CHANnel2", "CHANnel3", "CHANnel4", "EXTernal", "LINE"]),
                      str)
-        self.setting(":TRIGger[:EDGE]:LEVel", "trig_level", 0.0, lambda t: self.num(t, "V", -400.0, 400.0), fmt_num)
+        self.add(":TRIGger[:EDGE]:LEVel", set=self._set_trig_level, query=self._trig_level_query)
         self.setting(":TRIGger[:EDGE]:SLOPe", "trig_slope", "POS",
                      lambda t: parse_enum(t, ["POSitive", "NEGative", "EITHer", "ALTernate"]), str)
         self.setting(":TRIGger:SWEep", "trig_sweep", "AUTO", lambda t: parse_enum(t, ["AUTO", "NORMal"]), str)
@@ -142,13 +162,13 @@ class InfiniiVision(ScpiInstrument):
         self.setting(":WAVeform:UNSigned", "unsigned", True, parse_bool, lambda v: "1" if v else "0")
         self.add(":WAVeform:PREamble", query=lambda c: self._preamble())
         self.add(":WAVeform:DATA", query=lambda c: self._data())
-        self.add(":WAVeform:XINCrement", query=lambda c: fmt_num(self._scaling()[0]))
-        self.add(":WAVeform:XORigin", query=lambda c: fmt_num(self._scaling()[1]))
-        self.add(":WAVeform:YINCrement", query=lambda c: fmt_num(self._scaling()[2]))
-        self.add(":WAVeform:YORigin", query=lambda c: fmt_num(self._scaling()[3]))
+        self.add(":WAVeform:XINCrement", query=lambda c: self.fnum(self._scaling()[0]))
+        self.add(":WAVeform:XORigin", query=lambda c: self.fnum(self._scaling()[1]))
+        self.add(":WAVeform:YINCrement", query=lambda c: self.fnum(self._scaling()[2]))
+        self.add(":WAVeform:YORigin", query=lambda c: self.fnum(self._scaling()[3]))
         self.add(":WAVeform:YREFerence", query=lambda c: fmt_int(self._scaling()[4]))
         self.add(":ACQuire:POINts", query=lambda c: fmt_int(self._last_acq().points))
-        self.add(":ACQuire:SRATe", query=lambda c: fmt_num(self._record_geometry()[0] / self.get("range")))
+        self.add(":ACQuire:SRATe", query=lambda c: self.fnum(self._record_geometry()[0] / self.get("range")))
         self.add(":DIGitize", set=self._digitize)
         self.add(":SINGle", set=lambda c: self._arm("SING"))
         self.add(":RUN", set=lambda c: self._run())
@@ -160,9 +180,84 @@ class InfiniiVision(ScpiInstrument):
         self.add(":TER", query=lambda c: self._ter())
         self.add(":OPERegister:CONDition", query=lambda c: fmt_int(0 if self._stopped() else 8))
         self.add(":OPERegister[:EVENt]", query=lambda c: fmt_int(0 if self._stopped() else 8))
+        self._build_more()
+
+    def _build_more(self) -> None:
+        """Documented commands third-party drivers send (PyMeasure's KeysightDSOX1102G, QCoDeS):
+        stored, answered, and back to the programmer's guide defaults after ``*RST``."""
+        self.setting(":CHANnel#:INVert", "invert", False, parse_bool, yes_no, True)
+        self.labels: dict[int, str] = {}
+        self.add(":CHANnel#:LABel", set=lambda c: self.labels.__setitem__(self._ch(c), _label(c.one())),
+                 query=lambda c: self.labels.get(self._ch(c), f'"{self._ch(c)}"'))
+        self.setting(":CHANnel#:UNITs", "units", "VOLT", lambda t: parse_enum(t, ["VOLT", "AMPere"]), str, True)
+        self.setting(":CHANnel#:PROBe:SKEW", "skew", 0.0, lambda t: self.num(t, "S", -100e-9, 100e-9), self.fnum,
+                     True)
+        self.setting(":CHANnel#:PROBe:STYPe", "stype", "SING", lambda t: parse_enum(t, ["DIFFerential", "SINGle"]),
+                     str, True)
+        self.setting(":CHANnel#:VERNier", "vernier", False, parse_bool, yes_no, True)
+        self.add(":CHANnel#", query=self._channel_summary)
+        self.add(":TIMebase", query=lambda c: self._timebase_summary())
+        self.add(":TIMebase:MAIN:RANGe", set=lambda c: self.settings.__setitem__(
+            "range", self.num(c.one(), "S", 2e-8, 500.0)), query=lambda c: self.fnum(self.get("range")))
+        self.add(":TIMebase:MAIN:SCALe", set=lambda c: self.settings.__setitem__(
+            "range", 10 * self.num(c.one(), "S", 2e-9, 50.0)), query=lambda c: self.fnum(self.get("range") / 10))
+        self.setting(":ACQuire:MODE", "acq_mode", "RTIM",
+                     lambda t: parse_enum(t, ["RTIMe", "ETIMe", "SEGMented"]), str)
+        self.add(":WAVeform:XREFerence", query=lambda c: fmt_int(0))
+        self.add(":WAVeform:COUNt", query=lambda c: fmt_int(
+            self.get("acq_count") if self.get("acq_type") == "AVER" else 1))
+        self.add(":WAVeform:TYPE", query=lambda c: {"NORM": "NORM", "PEAK": "PEAK", "AVER": "AVER",
+                                                     "HRES": "HRES"}[self.get("acq_type")])
+        self.add(":WAVeform:VIEW", set=lambda c: parse_enum(c.one(), ["MAIN"]), query=lambda c: "MAIN")
+        self.add(":SYSTem:PRESet", set=lambda c: self.reset())
+        self.setting(":TRIGger:HFReject", "hf_reject", False, parse_bool, yes_no)
+        self.setting(":TRIGger:NREJect", "n_reject", False, parse_bool, yes_no)
+        self.setting(":TRIGger[:EDGE]:COUPling", "trig_coupling", "DC",
+                     lambda t: parse_enum(t, ["AC", "DC", "LFReject"]), str)
+        self.setting(":TRIGger:HOLDoff", "holdoff", 40e-9, lambda t: self.num(t, "S", 40e-9, 10.0), self.fnum)
+        self.setting(":DISPlay:LABel", "display_label", False, parse_bool, yes_no)
+
+    def _channel_summary(self, c: Call) -> str:
+        """``:CHANnel<n>?``: every channel setting, with headers (the form PyMeasure parses)."""
+        n = self._ch(c)
+        label = self.labels.get(n, f'"{n}"')
+        return (f":CHAN{n}:RANG {self.fnum(8 * self.get('scale', n))};OFFS {self.fnum(self.get('offset', n))};"
+                f"COUP {self.get('coupling', n)};IMP {self.get('impedance', n)};"
+                f"DISP {int(bool(self.get('display', n)))};BWL {int(self.get('bwlimit', n))};"
+                f"INV {int(self.get('invert', n))};LAB {label};UNIT {self.get('units', n)};"
+                f"PROB {self.fnum(self.get('probe', n))};PROB:SKEW {self.fnum(self.get('skew', n))};"
+                f"STYP {self.get('stype', n)}")
+
+    def _timebase_summary(self) -> str:
+        """``:TIMebase?``: mode, reference, range and position, with headers."""
+        return (f":TIM:MODE {self.get('tb_mode')};REF {self.get('reference')};"
+                f"MAIN:RANG {self.fnum(self.get('range'))};POS {self.fnum(self.get('position'))}")
+
+    def trigger_level(self, source: str | None = None) -> float:
+        """The edge trigger level (V) of ``source`` (default: the trigger source now)."""
+        src = source or self.get("trig_source")
+        return float(self.trig_levels.get(src, 0.0))
+
+    def _set_trig_level(self, c: Call) -> None:
+        if not c.params:
+            raise ScpiError(-109)
+        if len(c.params) > 2:
+            raise ScpiError(-108)
+        src = self.get("trig_source")
+        if len(c.params) == 2:
+            src = parse_enum(c.params[1], ["CHANnel1", "CHANnel2", "CHANnel3", "CHANnel4", "EXTernal"])
+        self.trig_levels[src] = self.num(c.params[0], "V", -400.0, 400.0)
+
+    def _trig_level_query(self, c: Call) -> str:
+        src = None
+        if c.params:
+            src = parse_enum(c.one(), ["CHANnel1", "CHANnel2", "CHANnel3", "CHANnel4", "EXTernal"])
+        return self.fnum(self.trigger_level(src))
 
     def reset(self) -> None:
         super().reset()
+        self.trig_levels = {}
+        self.labels = {}
         self._cancel()
         self.acq = None
         self.run_state = "RUN"
@@ -215,8 +310,11 @@ class InfiniiVision(ScpiInstrument):
 
     def _step_for(self, acq: Acquisition | None) -> int:
         """Decimation step a transfer with today's ``:WAVeform:POINts`` settings uses."""
-        want = min(self.settings.get("points", 1000),
-                   NORMAL_MAX_POINTS if self.get("points_mode") == "NORM" else RAW_MAX_POINTS)
+        # RAW/MAXimum reach the whole acquisition record only when the scope is stopped; a
+        # running scope serves the measurement record (3000 X-Series Programmer's Guide,
+        # :WAVeform:POINts:MODE)
+        raw = self.get("points_mode") != "NORM" and self._stopped()
+        want = min(self.settings.get("points", 1000), RAW_MAX_POINTS if raw else NORMAL_MAX_POINTS)
         depth = acq.points if acq is not None else self._record_geometry()[0]
         return max(1, depth // max(1, want))
 
@@ -377,7 +475,7 @@ class InfiniiVision(ScpiInstrument):
         full = 5 * self.get("scale", ch)   # the ADC spans +-5 divisions about the offset
         if fmt == "ASC":
             text = ",".join(f"{v:+.6E}" for v in np.clip(volts, yorig - full, yorig + full))
-            return definite_block(text.encode("ascii"))
+            return self.block(text.encode("ascii"))
         span = 65536 if fmt == "WORD" else 256
         lo = 0 if self.get("unsigned") else -span // 2
         codes = np.clip(np.rint((volts - yorig) / yinc + yref), lo, lo + span - 1)
@@ -387,7 +485,126 @@ class InfiniiVision(ScpiInstrument):
             payload = codes.astype(order + kind).tobytes()
         else:
             payload = codes.astype("u1" if self.get("unsigned") else "i1").tobytes()
-        return definite_block(payload)
+        return self.block(payload)
 
     def close(self) -> None:
         self._cancel()
+
+
+#: DS1000Z: bytes one :WAVeform:DATA? sends at most, per format (DS1000Z Programming Guide,
+#: :WAVeform:STARt: "BYTE 250000, WORD 125000, ASCii 15625" points)
+RIGOL_MAX_POINTS = {"BYTE": 250_000, "WORD": 125_000, "ASC": 15_625}
+RIGOL_SCREEN_POINTS = 1200
+
+
+class SimRigolDS1000Z(SimInfiniiVision):
+    """The simulated Rigol DS1000Z (DS1104Z by default): the same acquisitions, Rigol's dialect.
+
+    DS1000Z Programming Guide facts used (chapter 2): 12 horizontal divisions
+    (``:TIMebase[:MAIN]:SCALe``, ``:OFFSet``); ``:WAVeform:MODE
+    NORMal|MAXimum|RAW`` (NORMal: the 1200 screen points; RAW: the memory,
+    read only when stopped, so a running scope serves the screen);
+    ``:WAVeform:STARt``/``:STOP`` (1-based, inclusive) select the points of one
+    read, at most 250 000 in BYTE (125 000 WORD, 15 625 ASCii), else
+    ``-222`` and an empty block; ``:WAVeform:DATA?`` answers a TMC block
+    ``#9000001200...`` (nine digits); ``:WAVeform:PREamble?`` answers
+    ``format,type,points,count,xinc,xorig,xref,yinc,yorig,yref`` with format
+    0 BYTE / 1 WORD / 2 ASC and type 0 NORM / 1 MAX / 2 RAW, volts
+    ``(d - yorigin - yreference) * yincrement`` with 25 codes per division
+    about ``yreference`` 127; WORD points are two bytes, low byte first,
+    the high byte 0; ``:TRIGger:STATus?`` answers TD, WAIT, RUN, AUTO or
+    STOP; the empty error queue answers ``0,"No error"``.
+    """
+
+    idn = "RIGOL TECHNOLOGIES,DS1104Z,DS1ZA000000001,00.04.04.SP3"
+    block_digits = 9
+    int_sign = False
+    no_error = '0,"No error"'
+    divisions = 12
+
+    def fnum(self, value: float) -> str:
+        return f"{value:e}"
+
+    def build(self) -> None:
+        super().build()
+        drop = {":TIMebase:SCALe", ":TIMebase:MAIN:SCALe", ":WAVeform:FORMat"}
+        self.commands = [cmd for cmd in self.commands if cmd.pattern not in drop]
+        self.settings["range"] = 12 * 1e-6   # *RST: 1 us/div
+        self.setting_defaults["range"] = (12e-6, False)
+        self.add(":TIMebase[:MAIN]:SCALe", set=lambda c: self.settings.__setitem__(
+            "range", self.divisions * self.num(c.one(), "S", 5e-9, 50.0)),
+            query=lambda c: self.fnum(self.get("range") / self.divisions))
+        self.add(":TIMebase[:MAIN]:OFFSet", set=lambda c: self.settings.__setitem__(
+            "position", self.num(c.one(), "S", -500.0, 500.0)), query=lambda c: self.fnum(self.get("position")))
+        self.setting(":WAVeform:FORMat", "wav_format", "BYTE", lambda t: parse_enum(t, ["WORD", "BYTE", "ASCii"]),
+                     str)
+        self.setting(":WAVeform:MODE", "wav_mode", "NORM", lambda t: parse_enum(t, ["NORMal", "MAXimum", "RAW"]),
+                     str)
+        self.setting(":WAVeform:STARt", "wav_start", 1, lambda t: int(self.num(t, "", 1, 24_000_000)),
+                     self.fmt_int)
+        self.setting(":WAVeform:STOP", "wav_stop", RIGOL_SCREEN_POINTS,
+                     lambda t: int(self.num(t, "", 1, 24_000_000)), self.fmt_int)
+        self.add(":TRIGger:STATus", query=lambda c: self._trigger_status())
+        self.add(":ACQuire:MDEPth", set=lambda c: None, query=lambda c: self.fmt_int(self._record_geometry()[0]))
+
+    def _trigger_status(self) -> str:
+        if self._stopped():
+            return "STOP"
+        if self.run_state == "RUN":
+            return "AUTO" if self.get("trig_sweep") == "AUTO" else "RUN"
+        return "TD" if self.acq is not None and self.acq.t_trig is not None else "WAIT"
+
+    def _raw(self) -> bool:
+        """Memory (not screen) points: RAW, or MAXimum on a stopped scope; only when stopped."""
+        return self.get("wav_mode") in ("RAW", "MAX") and self._stopped()
+
+    def _step_for(self, acq: Acquisition | None) -> int:
+        depth = acq.points if acq is not None else self._record_geometry()[0]
+        if self._raw():
+            return 1
+        return max(1, depth // RIGOL_SCREEN_POINTS)
+
+    def _scaling(self, acq: Acquisition | None = None) -> tuple[float, float, float, float, int, int]:
+        acq = acq or self.acq
+        ch = self._source()
+        points, xinc, xorig = ((acq.points, acq.xinc_s, acq.xorig_s) if acq is not None
+                               else self._record_geometry())
+        step = self._step_for(acq)
+        points = len(range(0, points, step))
+        yinc = self.get("scale", ch) / 25.0
+        yorig = float(round(self.get("offset", ch) / yinc))
+        return xinc * step, xorig, yinc, yorig, 127, points
+
+    def _preamble(self) -> str:
+        acq = self._last_acq()
+        xinc, xorig, yinc, yorig, yref, points = self._scaling(acq)
+        fmt = {"BYTE": 0, "WORD": 1, "ASC": 2}[self.get("wav_format")]
+        typ = {"NORM": 0, "MAX": 1, "RAW": 2}[self.get("wav_mode")]
+        return (f"{fmt},{typ},{points},1,{xinc:e},{xorig:e},0,{yinc:e},{int(yorig)},{yref}")
+
+    def _data(self) -> bytes:
+        acq = self._last_acq()
+        ch = self._source()
+        if not self.get("display", ch):
+            raise ScpiError(-221, "Settings conflict;waveform source channel is off")
+        if acq.error:
+            raise ScpiError(-300, f"Device-specific error;{acq.error}"[:200])
+        xinc, xorig, yinc, yorig, yref, points = self._scaling(acq)
+        fmt = self.get("wav_format")
+        start, stop = self.get("wav_start"), min(self.get("wav_stop"), points)
+        if start > stop:
+            raise ScpiError(-221, "Settings conflict;start after stop")
+        if stop - start + 1 > RIGOL_MAX_POINTS[fmt]:
+            self.push_error(-222, f"Data out of range;more than {RIGOL_MAX_POINTS[fmt]} points in one read")
+            return self.block(b"")
+        volts = acq.get(self._step_for(acq)).get(ch)
+        if volts is None:
+            raise ScpiError(-230, "Data corrupt or stale;channel was off during the acquisition")
+        volts = volts[start - 1:stop]
+        if fmt == "ASC":
+            full = 4 * self.get("scale", ch)
+            off = yorig * yinc
+            return self.block(",".join(f"{v:e}" for v in np.clip(volts, -off - full, -off + full)).encode())
+        codes = np.clip(np.rint(volts / yinc + yorig + yref), 0, 255)
+        payload = codes.astype("<u2" if fmt == "WORD" else "u1").tobytes()
+        return self.block(payload)

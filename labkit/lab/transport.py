@@ -1,7 +1,7 @@
 """Real transports for the simulated instruments: raw TCP sockets and pseudo-terminals.
 
 Both carry ``\\n``-terminated lines to an object with ``handle(line) ->
-bytes | None`` (a :class:`labkit.lab.scpi.ScpiInstrument`, the vibrometer,
+bytes | None`` (a :class:`labkit.lab.scpi.SimScpiInstrument`, the vibrometer,
 the control channel) and send its reply back with one ``sendall``/``write``
 (a 2 MB waveform block leaves in one call). Every line in and every reply out
 goes to ``on_log(instrument, "rx"|"tx", text)``.
@@ -18,8 +18,9 @@ import select
 import socket
 import threading
 import tty
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -134,8 +135,7 @@ class _Endpoint:
             self.on_log(self.name, "fault", f"stall: reply to {line!r} withheld")
             return None, "stall"
         if fault.kind == "garbage":
-            junk = self._rng.integers(128, 256, size=max(8, min(len(reply), 64)), dtype=np.uint8)
-            junk = bytes(junk) + b"\n"
+            junk = bytes(self._rng.integers(128, 256, size=max(8, min(len(reply), 64)), dtype=np.uint8)) + b"\n"
             self.on_log(self.name, "fault", f"garbage: {junk[:-1]!r} instead of the reply to {line!r}")
             return junk, "garbage"
         part = reply[: max(1, len(reply) // 2)]
@@ -167,7 +167,7 @@ class TcpServer(_Endpoint):
         while not self._stop.is_set():
             try:
                 conn, _ = self.sock.accept()
-            except (socket.timeout, TimeoutError):
+            except TimeoutError:
                 continue
             except OSError:
                 return
@@ -186,7 +186,7 @@ class TcpServer(_Endpoint):
             while not self._stop.is_set():
                 try:
                     chunk = conn.recv(65536)
-                except (socket.timeout, TimeoutError):
+                except TimeoutError:
                     continue
                 if not chunk:
                     return

@@ -16,7 +16,7 @@ here; the drivers make the query a setting).
 from __future__ import annotations
 
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 RANGES_MM_S_PER_V = (1.0, 5.0, 25.0, 125.0, 1000.0)
 FULL_SCALE_V = 10.0
@@ -26,7 +26,7 @@ def range_text(scale: float) -> str:
     return f"{scale:g}mm/s/V"
 
 
-class OFV5000:
+class SimOFV5000:
     """The controller's state and line protocol; ``peak_velocity_mm_s()`` comes from the lab."""
 
     name = "vibrometer"
@@ -107,3 +107,55 @@ class OFV5000:
             if key in self.props:
                 self.props[key] = value
         return None
+
+
+#: OFV-3001 with an OVD-01 decoder: range number -> scale factor, mm/s per V (docs/instruments.md)
+OFV3001_OVD01 = {5: 1.0, 1: 5.0, 2: 25.0, 3: 125.0, 4: 1000.0}
+
+
+class SimOFV3001:
+    """A simulated Polytec OFV-3001 controller with an OVD-01 velocity decoder.
+
+    Protocol (RS-232, ``\\n``): ``REN`` puts it under remote control (no
+    answer); ``VELO?`` answers the range number; ``VELOn`` sets it (no
+    answer); ``OVR`` answers ``0`` or ``1`` (over range). As on the
+    controller, invalid settings, and settings before ``REN``, are ignored
+    silently; unknown commands get no answer.
+    """
+
+    name = "vibrometer"
+
+    def __init__(self, peak_velocity_mm_s: Callable[[], float] = lambda: 0.0) -> None:
+        self.peak_velocity_mm_s = peak_velocity_mm_s
+        self.lock = threading.RLock()
+        self.range_number = 3
+        self.remote = False
+        self.clipped = False
+
+    @property
+    def scale_mm_s_per_v(self) -> float:
+        return OFV3001_OVD01[self.range_number]
+
+    @property
+    def full_scale_mm_s(self) -> float:
+        return self.scale_mm_s_per_v * FULL_SCALE_V
+
+    def over_range(self) -> bool:
+        return self.clipped or self.peak_velocity_mm_s() > self.full_scale_mm_s
+
+    def handle(self, line: str) -> bytes | None:
+        word = line.strip().upper()
+        with self.lock:
+            if word == "REN":
+                self.remote = True
+                return None
+            if word == "VELO?":
+                return f"{self.range_number}\n".encode("ascii")
+            if word == "OVR":
+                return b"1\n" if self.over_range() else b"0\n"
+            if word.startswith("VELO") and word[4:].isdigit():
+                n = int(word[4:])
+                if self.remote and n in OFV3001_OVD01:
+                    self.range_number = n
+                    self.clipped = False
+            return None

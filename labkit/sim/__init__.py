@@ -35,10 +35,10 @@ Switches for ablations and checks (all plain RobotParams fields or
 * ``simulate(..., engine="numba" | "reference")``, ``dt_s``, ``record_dt_s``,
   ``seed`` (small random start of the free modes), ``transient_s``.
 """
-from labkit.sim.params import RobotParams
-from labkit.sim.excitation import PZT, Shaker
-from labkit.sim.result import SimResult
 from labkit.sim.core import ABLATIONS, simulate
+from labkit.sim.excitation import PZT, Shaker
+from labkit.sim.params import RobotParams
+from labkit.sim.result import SimResult
 
 __all__ = ["RobotParams", "Shaker", "PZT", "simulate", "SimResult", "ABLATIONS", "sweep", "SweepResult"]
 

@@ -67,16 +67,27 @@ def ablate(params: RobotParams, ablation: str | None) -> RobotParams:
 
 
 def default_dt(params: RobotParams, scenario: Shaker | PZT) -> float:
-    """:data:`STEPS_PER_PERIOD` steps per period of the fastest mode or drive."""
+    """:data:`STEPS_PER_PERIOD` steps per period of the fastest mode or drive; for the PZT
+    rounded down so that a half period of the square wave is a whole number of steps
+    (its edges fall on step boundaries)."""
     f_top = max(max(params.modal_freq_hz), scenario.freq_hz)
-    return 1.0 / (STEPS_PER_PERIOD * f_top)
+    dt = 1.0 / (STEPS_PER_PERIOD * f_top)
+    return align_dt(dt, scenario)
+
+
+def align_dt(dt: float, scenario: Shaker | PZT) -> float:
+    """The largest step <= dt that puts the PZT square wave's edges on step boundaries."""
+    if isinstance(scenario, PZT):
+        half = 0.5 / scenario.freq_hz
+        return half / math.ceil(half / dt - 1e-9)
+    return dt
 
 
 def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.0, dt_s: float | None = None,
              record_dt_s: float | None = None, seed: int | None = None, *, engine: str = "numba",
              ablation: str | None = None, transient_s: float | None = None,
-             jitter_um: float = JITTER_UM) -> SimResult:
-    """Simulate the robot under one excitation, starting on its six feet, riding the ground.
+             jitter_um: float = JITTER_UM, start_height_um: float | None = None) -> SimResult:
+    """Simulate the robot under one excitation.
 
     Parameters
     ----------
@@ -87,11 +98,12 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     duration_s:
         Simulated time.
     dt_s:
-        Fixed step (default :func:`default_dt`).
+        Step (default :func:`default_dt`); for the PZT it is shortened so the
+        square wave's edges fall on step boundaries (:func:`align_dt`).
     record_dt_s:
         Sampling interval of the recorded arrays (rounded to a multiple of the step).
     seed:
-        ``None``: start exactly at rest. An integer: the free modes start with a
+        ``None``: start exactly at rest. An integer: every leg mode starts with a
         small random deviation (RMS ``jitter_um``), reproducibly.
     engine:
         ``"numba"`` (compiled kernel) or ``"reference"`` (plain Python, slow).
@@ -100,6 +112,10 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     transient_s:
         Start-up time excluded from speed and contact statistics (default
         ``min(0.2 s, duration/4)``).
+    start_height_um:
+        ``None``: start resting on the six feet, riding the tray. A number H:
+        start at rest in the air, the body's underside H um above its resting
+        gap, the legs at their in-air equilibrium (drop tests, free flight).
     """
     if not isinstance(params, RobotParams):
         raise InputError(f"params must be a RobotParams, not {type(params).__name__}", key="params")
@@ -113,6 +129,7 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     dt = default_dt(p, scenario) if dt_s is None else float(dt_s)
     if not (dt > 0 and dt <= duration_s):
         raise InputError(f"out of range: {dt_s!r}", key="dt_s", expected=f"a number in s, > 0, <= {duration_s}")
+    dt = align_dt(dt, scenario)
     if record_dt_s is None:
         record_dt_s = min(RECORD_DT_MAX_S, 1.0 / (RECORD_PER_PERIOD * scenario.freq_hz))
     if not (record_dt_s > 0 and record_dt_s <= duration_s / 2):
@@ -123,20 +140,29 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     if transient_s is None:
         transient_s = min(TRANSIENT_MAX_S, TRANSIENT_FRACTION * duration_s)
     n_skip = min(int(round(transient_s / dt)), n_steps - 1)
-    n_rec = n_steps // every + 1
 
     mdl = M.build_model(p, scenario)
-    state = M.rest_state()
-    # The robot starts riding the tray: resting on its feet and moving with the
-    # ground (z_g' at t = 0), so a shaker run does not begin with a jolt.
-    state[M.S_U + 1] = mdl.amp_m * mdl.omega if mdl.kind == 0 else 0.0
-    mode = np.full(6, M.REST, np.int8)
+    if start_height_um is None:
+        state = M.rest_state(mdl)
+        # The robot starts riding the tray: resting on its feet and moving with the
+        # ground (z_g' at t = 0), so a shaker run does not begin with a jolt.
+        state[M.S_V + 1] = mdl.amp_m * mdl.omega if mdl.kind == 0 else 0.0
+        mode = np.full(7, M.REST, np.int8)
+        mode[6] = M.AIR
+    else:
+        h = float(start_height_um)
+        drop_um = M.lowest_foot_drop_m(mdl) * 1e6
+        amp_um = mdl.amp_m * 1e6
+        if not (math.isfinite(h) and h > drop_um + amp_um):
+            raise InputError(f"out of range: {start_height_um!r}", key="start_height_um",
+                             expected=f"a number in um, > {drop_um + amp_um:.3g} (the unloaded legs hang "
+                                      f"{drop_um:.3g} um lower; tray amplitude {amp_um:g} um)")
+        state = M.air_state(mdl, h * 1e-6)
+        mode = np.full(7, M.AIR, np.int8)
     if seed is not None and jitter_um > 0:
         rng = np.random.default_rng(seed)
-        free = [i for i in range(3) if i not in (mdl.iv, mdl.il)]
-        for j in range(6):
-            for i in free:
-                state[M.S_XI + 3 * j + i] = jitter_um * 1e-6 * rng.standard_normal()
+        for k in range(18):
+            state[M.S_Q + M.NB + k] += jitter_um * 1e-6 * rng.standard_normal()
 
     t0 = time.perf_counter()
     out = run_model(mdl, state, mode, n_steps, dt, every, n_skip, engine=engine)
@@ -146,23 +172,25 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
 
 def run_model(mdl: M.Model, state: np.ndarray, mode: np.ndarray, n_steps: int, dt: float, every: int = 1,
               n_skip: int = 0, *, engine: str = "numba", ev_cap: int = EVENT_LOG_CAP) -> dict[str, np.ndarray]:
-    """Low level: integrate a built model from any state (layouts in :mod:`labkit.sim.model`).
+    """Low level: integrate a built model from any state (layouts in :mod:`labkit.sim.scheme`).
 
-    Returns the raw output arrays (SI): ``rec`` (samples x :data:`~labkit.sim.model.REC_COLS`),
-    ``rec_contact``, ``frac`` (time per foot and contact mode after ``n_skip`` steps),
-    ``max_air``, ``count``, ``events``, and the final ``state`` and ``mode``.
+    ``mode``: contact mode of the 6 feet and (7th, optional) the body. Returns
+    the raw output arrays (SI): ``rec`` (samples x ``REC_COLS``),
+    ``rec_contact``, ``frac`` (time per foot and contact mode after ``n_skip``
+    steps), ``max_air``, ``max_h`` (highest flight per foot), ``count``,
+    ``events``, and the final ``state`` and ``mode``.
     """
     n_rec = n_steps // every + 1
+    P, A = mdl.pack(dt)
+    mode7 = np.full(7, M.AIR, np.int8)
+    mode7[:min(7, len(mode))] = np.asarray(mode)[:7]
     if engine == "numba":
         from labkit.sim.kernel import run as kernel_run
 
-        return kernel_run(mdl.pack(), state, mode, n_steps, dt, every, n_skip, n_rec, ev_cap)
-    from labkit.sim import reference
+        return kernel_run(P, A, state, mode7, n_steps, dt, every, n_skip, n_rec, ev_cap)
+    from labkit.sim.reference import run as reference_run
 
-    ref = reference.RefOutputs(n_rec, ev_cap)
-    final, fmode = reference.integrate(mdl, state, mode, n_steps, dt, every, n_skip, ref)
-    return {"rec": ref.rec, "rec_contact": ref.rec_contact, "frac": ref.frac, "max_air": ref.max_air,
-            "count": ref.count, "events": ref.events, "state": final, "mode": fmode}
+    return reference_run(P, A, state, mode7, n_steps, dt, every, n_skip, n_rec, ev_cap)
 
 
 def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engine, wall, seed, ablation):

@@ -1,48 +1,49 @@
-"""From (RobotParams, scenario) to the SI constants both integrators use.
+"""From (RobotParams, scenario) to the matrices and constants of the coupled system.
 
-Coordinates (model.md sections 3-6), all SI inside the integrators:
+docs/model.md (sections 3-6 and 10, equations M1-M12) is the specification this
+module implements; the equation numbers below refer to it.
 
-* body: ``y`` (forward), ``z`` = body-underside height *minus its rest value*,
-  angles ``phi_x, phi_y, phi_z``, and their rates;
-* legs: per leg ``j`` and mode ``i`` the modal coordinate ``xi_ij`` is the
-  deviation of ``x_ij`` from its value with the robot at rest on still
-  ground, and ``v_ij`` its rate.
+Generalised coordinates (M1): ``q = (y_b, z_b, phi_x, phi_y, phi_z, x_11, ..., x_63)``:
+the body's forward and vertical translation and small rotations, then for
+leg ``j`` and mode ``i`` the modal coordinate ``x_ij`` (foot displacement
+along the mode's direction ``C_i = (Cy_i, Cz_i)`` relative to the leg's
+attachment). All are *deviations from the robot at rest on still ground*
+(the static equilibrium on six pinned feet), so the resting robot is q = 0.
 
-Writing the state as deviations from the exact static equilibrium (robot
-resting on its six feet: body weight ``m_b g`` shared equally, zero lateral
-leg force) makes "at rest on still ground" the all-zero state, whose every
-force term is an exact floating-point zero — so a resting robot does not
-drift, not even by rounding. The static parts cancel analytically:
-``6 F0 = m_b g``, sum of ``y_j F0`` and ``x_j F0`` = 0 (the leg layout is
-symmetric), zero static lateral force per leg. What is left of gravity in
-air is the constant modal acceleration ``R_i`` (``-k_i x_eq,i`` + gravity on
-leg and foot), zero for the modes that are free at rest.
+Kinetic energy (M2): the body's, plus for every mode the modal mass ``M_i``
+moving along ``C_i`` with the attachment: ``T = 1/2 m_b (y_b'^2 + z_b'^2) +
+1/2 sum I phi'^2 + sum_ij 1/2 M_i (C_i . r_att,j' + x_ij')^2``. Hence one
+constant symmetric positive definite mass matrix ``M = diag(m_b, m_b, I_x,
+I_y, I_z, 0...) + sum_ij M_i w_ij w_ij^T`` with ``w_ij = C_i^T A_j + e_ij``
+(``A_j`` the attachment's 2x5 kinematic matrix). The leg's base excitation
+by the body's acceleration and its reaction on the body are the two
+off-diagonal blocks of the same matrix, so they are consistent by
+construction, and with no external force every linear and angular momentum
+``M[:5] q'`` is conserved.
 
-Choices where model.md is silent (each a RobotParams field or a constant here):
+Potential and forces (M3, M4): modal springs and dampers ``M_i k_i``,
+``M_i b_i`` on the modal coordinates; gravity ``-g (m_b e_z + sum M_i Cz_i
+w_ij)`` (so a falling robot does not deform); the PZT actuator as the
+generalised force ``M_i G_i V(t)`` on ``x_ij`` alone: a force pair between
+leg and body, it changes no momentum.
 
-* legs: leg ``n`` (1-based) sits at ``x = +w`` for odd ``n``, ``-w`` for even
-  ``n``; ``y = +p`` for legs 1-2, 0 for 3-4, ``-p`` for 5-6 (so {1, 4, 5} is a
-  tripod); ``w = leg_half_width_mm``, ``p = leg_pitch_mm``, ``z = leg_z_mm``;
-* masses: the legs' mass ``mass_mg - body_mass_mg`` split over six legs, a
-  ``foot_mass_fraction`` of it at the foot; modal mass ``M_i =
-  modal_participation x leg mass``; ``m_imp,i = m_imp_factor M_i``,
-  ``m_dis,i = m_dis_factor M_i``; a PZT payload rides on the body;
-* the first vertical / first lateral mode (the pinned pair and the impact
-  redistribution) are the lowest-frequency modes with ratio < 1 / > 1;
-* base excitation: ``-Gamma_i (Cz_i a_z + Cy_i a_y)`` with ``Gamma_i`` the
-  participation of gravity (``base_participation = 0``) or a given value;
-* the body touches the ground at the centre of its underside (tilt ignored
-  for contact), gap ``body_gap_um`` at rest; a body impact restitutes its
-  vertical velocity (``c_r_body``) and, with ``body_no_slip``, stops its
-  lateral velocity;
-* air drag acts on the feet in both directions (absolute velocity, still
-  air), on the body vertically and laterally;
-* the release test adds the foot's own inertia (``m_f a_g``) to the pull, so
-  that with no adhesion a rigid robot leaves exactly when the tray's
-  acceleration exceeds g;
-* friction (``mu`` finite): the normal load of a pinned foot is its
-  compression plus the adhesion holding it; a slipping foot stays on the
-  ground vertically and feels ``mu N`` laterally.
+Choices where model.md is silent (each a RobotParams field or named here):
+
+* legs: leg ``n`` (1-based) at ``x = +w`` for odd ``n``, ``-w`` for even; ``y =
+  +p`` for legs 1-2, 0 for 3-4, ``-p`` for 5-6 ({1, 4, 5} is a tripod);
+  ``w = leg_half_width_mm``, ``p = leg_pitch_mm``, ``z = leg_z_mm``;
+* modal mass ``M_i = modal_participation x leg mass`` (leg mass = (mass_mg -
+  body_mass_mg) / 6); a PZT payload rides on the body;
+* one mass matrix means one effective mass per mode: ``m_imp_factor`` and
+  ``m_dis_factor`` must be 1 and ``base_participation`` 0 or 1 (both mean the
+  mass matrix's own coupling); ``foot_mass_fraction`` no longer enters (gravity
+  acts through the modal masses);
+* the body touches the ground at the centre of its underside (``body_gap_um``
+  at rest);
+* air drag acts on the feet in air (both directions, absolute velocity) and on
+  the body (y and z);
+* ``impact_modes``: which leg modes take part in an impact (1) or are held
+  rigid during it (0); ``v_stick_mm_s``: the sticking threshold.
 """
 from __future__ import annotations
 
@@ -51,132 +52,147 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from labkit.errors import InputError
+from labkit.sim import scheme as K
 from labkit.sim.excitation import PZT, TRIPOD_A, Shaker
 from labkit.sim.params import RobotParams
 
-AIR, ADHESION, REST = 0, 1, 2
+AIR, ADHESION, REST = K.AIR, K.ADHESION, K.REST
 MODE_NAMES = ("air", "adhesion", "rest")
+NQ, NB, NR = K.NQ, K.NB, K.NR
 
-# Layout of the flat constant vector P (the kernel cannot take Python objects).
-_SCALARS = ("MB", "IX", "IY", "IZ", "G", "F0", "MF", "BGF", "BGB", "AD", "HMIN", "H0",
-            "CAD", "CADT", "CR", "CRB", "MU", "KIND", "AMP", "OMEGA", "FREQ", "VOLT", "IV", "IL",
-            "QSQ", "NSUB", "SQSTIFF", "GAPTOL", "MAXEV", "BNS")
-_MODE_ARRAYS = ("K", "B", "CZ", "CY", "M", "MIMP", "MDIS", "R", "GACT", "KTF", "GAM", "WZ")
-_LEG_ARRAYS = ("XJ", "YJ", "ZJ", "PH", "YFEQ")
-IDX: dict[str, int] = {}
-_n = 0
-for _name in _SCALARS:
-    IDX[_name] = _n
-    _n += 1
-for _name in _MODE_ARRAYS:
-    IDX[_name] = _n
-    _n += 3
-for _name in _LEG_ARRAYS:
-    IDX[_name] = _n
-    _n += 6
-IDX["PINV"] = _n        # 2x2 inverse of the pinned pair's coupling matrix, row-major
-_n += 4
-P_SIZE = _n
+# Re-exported layouts (the scheme owns them).
+S_Q, S_V, S_TC, S_YPIN, S_LAM, S_SLIP, S_SIZE = K.S_Q, K.S_V, K.S_TC, K.S_YPIN, K.S_LAM, K.S_SLIP, K.S_SIZE
+REC_T, REC_Y, REC_Z, REC_PH, REC_ZG, REC_FZ, REC_FY, REC_KV = (K.REC_T, K.REC_Y, K.REC_Z, K.REC_PH, K.REC_ZG,
+                                                              K.REC_FZ, K.REC_FY, K.REC_KV)
+REC_COLS = K.REC_COLS
+EV_T, EV_LEG, EV_VPRE, EV_VPOST, EV_VYPOST, EV_STUCK = (K.EV_T, K.EV_LEG, K.EV_VPRE, K.EV_VPOST, K.EV_VYPOST,
+                                                        K.EV_STUCK)
+EV_COLS = K.EV_COLS
+CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED, CNT_RELEASES = (K.CNT_BODY, K.CNT_EVENTS, K.CNT_LOST, K.CNT_FORCED,
+                                                            K.CNT_RELEASES)
+CNT_SIZE = K.CNT_SIZE
+
+#: An event is located when the gap is within this of zero (m): 0.1 nm.
+POS_TOL_M = 1e-10
+#: Impacts handled inside one step before the step is accepted as is (counted).
+MAX_EVENTS_PER_STEP = 32
 
 
-def layout_signature() -> str:
-    """A text fingerprint of the array layouts (the kernel checks it: see kernel.py)."""
-    return repr((sorted(IDX.items()), S_SIZE, REC_COLS, EV_COLS, CNT_SIZE))
-
-# Layout of the flat state vector S.
-S_Q = 0        # body y, z, phx, phy, phz
-S_U = 5        # their rates
-S_XI = 10      # 6 x 3 modal deviations (leg-major)
-S_V = 28       # 6 x 3 modal rates
-S_TC = 46      # time in contact per leg
-S_YPIN = 52    # pinned lateral foot position (deviation part) per leg
-S_SIZE = 58
+def xi(j: int, i: int) -> int:
+    """Index of the modal coordinate x_ij (leg j, mode i, 0-based) in q."""
+    return NB + 3 * j + i
 
 
 @dataclass
 class Model:
-    """Every constant of one simulation, SI units (see the module docstring)."""
+    """The coupled system of one simulation (SI): matrices, rows, scalars."""
 
     m_b: float
-    inertia: np.ndarray          # (3,) I_x, I_y, I_z
-    g: float
-    f0: float                    # static load per leg, N
-    m_f: float                   # foot mass
-    b_g_foot: float
-    b_g_body: float
-    a_drag: float
-    h_min: float
-    h0: float                    # body gap at rest
-    c_ad: float
-    c_ad_t: float
-    c_r: float
-    c_r_body: float
-    body_no_slip: bool
-    mu: float
-    kind: int                    # 0 shaker, 1 PZT
-    amp_m: float
-    freq_hz: float
-    volt: float
-    iv: int                      # first vertical mode
-    il: int                      # first lateral mode
-    k: np.ndarray                # (3,)
-    b: np.ndarray
+    inertia: np.ndarray           # (3,)
+    k: np.ndarray                 # (3,) 1/s^2
+    b: np.ndarray                 # (3,) 1/s
     cz: np.ndarray
     cy: np.ndarray
-    m_modal: np.ndarray
-    m_imp: np.ndarray
-    m_dis: np.ndarray
-    r: np.ndarray                # residual modal acceleration in air, m/s^2
-    g_act: np.ndarray            # modal acceleration per volt, m/s^2/V
-    ktf: np.ndarray
-    gamma: np.ndarray            # participation of the attachment's acceleration per mode
-    xj: np.ndarray               # (6,)
+    m_modal: np.ndarray           # (3,) kg
+    xj: np.ndarray
     yj: np.ndarray
     zj: np.ndarray
-    phase: np.ndarray            # +1 tripod A, -1 tripod B
-    y_foot_eq: np.ndarray        # y_j + static lateral foot offset
+    phase: np.ndarray             # +1 tripod A, -1 tripod B
+    mass: np.ndarray              # (NQ, NQ) M
+    stiff: np.ndarray             # (NQ,) diagonal of K
+    damp: np.ndarray              # (NQ,) diagonal of D
+    f_const: np.ndarray           # (NQ,) constant forces in deviation coordinates
+    f_act: np.ndarray             # (NQ,) actuator forces per volt
+    rows: np.ndarray              # (NQ, NR) contact rows (columns)
+    knee: np.ndarray              # (6, NQ) knee vertical velocity rows
+    held: np.ndarray              # (18,) 1 = mode held rigid in impacts
+    y_foot_eq: np.ndarray         # (6,) lateral foot position at rest (body frame origin)
+    x_air: np.ndarray             # (18,) modal deviations of the in-air equilibrium
+    lam_rest: np.ndarray          # (NR,) contact forces at rest
+    scal: dict
 
-    def pair_inverse(self) -> np.ndarray:
-        """Maps foot changes (dz, dy) to (lateral, vertical) modal changes: paper eq. 8.
+    @property
+    def kind(self) -> int:
+        return int(self.scal["KIND"])
 
-        Row-major 2x2; when the lateral row vanishes (``cy_sign`` 0) the
-        minimum-norm solution of the vertical equation alone.
-        """
-        a, bb = self.cz[self.il], self.cz[self.iv]
-        c, d = self.cy[self.il], self.cy[self.iv]
-        det = a * d - bb * c
-        if abs(det) > 1e-12:
-            return np.array([d / det, -bb / det, -c / det, a / det])
-        n2 = a * a + bb * bb
-        return np.array([a / n2, 0.0, bb / n2, 0.0])
+    @property
+    def amp_m(self) -> float:
+        return float(self.scal["AMP"])
 
     @property
     def omega(self) -> float:
-        return 2 * math.pi * self.freq_hz
+        return float(self.scal["OMEGA"])
 
-    def pack(self) -> np.ndarray:
-        """The flat float64 vector the numba kernel reads (layout :data:`IDX`)."""
-        p = np.zeros(P_SIZE)
-        scal = dict(MB=self.m_b, IX=self.inertia[0], IY=self.inertia[1], IZ=self.inertia[2], G=self.g,
-                    F0=self.f0, MF=self.m_f, BGF=self.b_g_foot, BGB=self.b_g_body, AD=self.a_drag,
-                    HMIN=self.h_min, H0=self.h0, CAD=self.c_ad, CADT=self.c_ad_t, CR=self.c_r,
-                    CRB=self.c_r_body, MU=self.mu, KIND=self.kind, AMP=self.amp_m, OMEGA=self.omega,
-                    FREQ=self.freq_hz, VOLT=self.volt, IV=self.iv, IL=self.il,
-                    QSQ=float(np.sum(self.cz * self.cz / self.m_imp)), NSUB=SQUEEZE_SUBSTEPS,
-                    SQSTIFF=SQUEEZE_STIFF, GAPTOL=GAP_TOL_M, MAXEV=MAX_EVENTS_PER_STEP,
-                    BNS=1.0 if self.body_no_slip else 0.0)
-        for k, v in scal.items():
-            p[IDX[k]] = v
-        arrays = dict(WZ=self.cz / self.m_imp, PINV=self.pair_inverse(), K=self.k, B=self.b, CZ=self.cz, CY=self.cy, M=self.m_modal, MIMP=self.m_imp,
-                      MDIS=self.m_dis, R=self.r, GACT=self.g_act, KTF=self.ktf, GAM=self.gamma, XJ=self.xj, YJ=self.yj,
-                      ZJ=self.zj, PH=self.phase, YFEQ=self.y_foot_eq)
-        for k, v in arrays.items():
-            p[IDX[k]:IDX[k] + len(v)] = v
-        return p
+    @property
+    def h0(self) -> float:
+        return float(self.scal["H0"])
+
+    def pack(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(P, A): the flat scalar and matrix vectors the scheme reads, for step ``dt``."""
+        P = np.zeros(K.P_SIZE)
+        s = dict(self.scal)
+        s["DT"] = dt
+        for key, value in s.items():
+            P[getattr(K, "P_" + key)] = value
+        A = np.zeros(K.A_SIZE)
+        M = self.mass
+        Minv = np.linalg.inv(M)
+        Minv = 0.5 * (Minv + Minv.T)
+        S = 2 * M + dt * np.diag(self.damp) + 0.5 * dt * dt * np.diag(self.stiff)
+        Sinv = np.linalg.inv(S)
+        RI = np.zeros((NQ, K.NI))
+        RI[:, :NR] = self.rows
+        for k in range(18):
+            RI[NB + k, NR + k] = 1.0
+        MRI = Minv @ RI
+        WI = RI.T @ MRI
+        Z = Sinv @ self.rows
+        Q = self.rows.T @ Z
+        for off, arr in ((K.OFF_M, M), (K.OFF_MINV, Minv), (K.OFF_SINV, Sinv), (K.OFF_RI, RI), (K.OFF_MRI, MRI),
+                         (K.OFF_WI, WI), (K.OFF_Z, Z), (K.OFF_Q, Q), (K.OFF_K, self.stiff), (K.OFF_D, self.damp),
+                         (K.OFF_FC, self.f_const), (K.OFF_FA, self.f_act), (K.OFF_KV, self.knee),
+                         (K.OFF_YFEQ, self.y_foot_eq), (K.OFF_HELD, self.held)):
+            flat = np.ascontiguousarray(arr, dtype=float).ravel()
+            A[off:off + flat.size] = flat
+        return P, A
+
+    # ---------------------------------------------------------------- invariants
+    def momentum(self, state: np.ndarray) -> np.ndarray:
+        """Generalised momenta of the body coordinates, ``M[:5] q'`` (M12): linear momentum
+        along y and z (kg m/s) and angular momentum about x, y, z (kg m^2/s) of the whole
+        robot (body and legs), small angles."""
+        return self.mass[:NB] @ state[S_V:S_V + NQ]
+
+    def energy(self, state: np.ndarray) -> float:
+        """Mechanical energy (J): kinetic + modal springs - work of the constant forces (M12).
+
+        Conserved without damping, air, drive and contact (the constant forces are
+        gravity minus the static support, both conservative)."""
+        q = state[S_Q:S_Q + NQ]
+        v = state[S_V:S_V + NQ]
+        return float(0.5 * v @ self.mass @ v + 0.5 * q @ (self.stiff * q) - self.f_const @ q)
+
+    def foot_gap(self, state: np.ndarray) -> np.ndarray:
+        """Height of each foot above the ground's rest level (m)."""
+        return self.rows[:, :6].T @ state[S_Q:S_Q + NQ]
+
+
+def _check_single_mass(params: RobotParams) -> None:
+    for key in ("m_imp_factor", "m_dis_factor"):
+        if getattr(params, key) != 1.0:
+            raise InputError(f"{key} = {getattr(params, key)} is not 1: the coupled model has one mass "
+                             "matrix, hence one effective mass per mode (docs/model.md M2)", key=key,
+                             expected="1")
+    if params.base_participation not in (0.0, 1.0):
+        raise InputError(f"base_participation = {params.base_participation}: the base excitation follows "
+                         "from the mass matrix (docs/model.md M2)", key="base_participation",
+                         expected="0 or 1")
 
 
 def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
-    """The SI constants for ``params`` driven by ``scenario`` (static equilibrium included)."""
+    """The coupled system for ``params`` driven by ``scenario`` (static equilibrium included)."""
+    _check_single_mass(params)
     mg = 1e-6  # mg -> kg
     g = params.g_m_s2
     leg_mass = params.leg_mass_mg * mg
@@ -185,12 +201,9 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
         # The payload rides on the body (the legs keep their mass).
         m_b = scenario.mass_mg * mg - 6 * leg_mass
         if m_b <= 0:
-            from labkit.errors import InputError
             raise InputError(f"total mass {scenario.mass_mg} mg is not above the legs' "
                              f"{6 * params.leg_mass_mg:g} mg", key="mass_mg",
                              expected=f"a number in mg, > {6 * params.leg_mass_mg:g}")
-    m_f = params.foot_mass_fraction * leg_mass
-    m_l = leg_mass - m_f
     L = params.body_length_mm * 1e-3
     W = params.body_width_mm * 1e-3
     # Thin plate: rotation about x (across the width) sees the length, etc.
@@ -201,88 +214,121 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
     r = np.array(params.ratio, float)
     s = np.array(params.cy_sign, float)
     norm = np.sqrt(1 + r * r)
-    cz = 1 / norm
+    cz = 1 / norm                                     # model.md section 2
     cy = s * r / norm
     m_modal = np.full(3, params.modal_participation * leg_mass)
-    m_imp = m_modal * params.m_imp_factor
-    m_dis = m_modal * params.m_dis_factor
-    iv, il = params.vertical_mode, params.lateral_mode
-    free = [i for i in range(3) if i not in (iv, il)]
-
-    grav = cz * (-m_f * g) / m_imp + cz * (-m_l * g) / m_dis   # modal acceleration from gravity
-    # Participation of the attachment's acceleration: by default the same as
-    # gravity's (m_f/m_imp + m_l/m_dis), so that gravity and acceleration are
-    # equivalent and a robot in free fall does not deform (see RobotParams).
-    if params.base_participation > 0:
-        gamma = np.full(3, params.base_participation)
-    else:
-        gamma = m_f / m_imp + m_l / m_dis
-    x_eq = grav / k                                             # in-air equilibrium
-    f0 = m_b * g / 6
-    # Resting: the pinned pair carries the leg's share of the body, with zero lateral force.
-    fk = m_modal * k
-    rhs_y = -sum(fk[i] * x_eq[i] * cy[i] for i in free)
-    rhs_z = f0 - sum(fk[i] * x_eq[i] * cz[i] for i in free)
-    a11, a12 = fk[il] * cy[il], fk[iv] * cy[iv]
-    a21, a22 = fk[il] * cz[il], fk[iv] * cz[iv]
-    det = a11 * a22 - a12 * a21
-    if abs(det) > 1e-12 * (abs(a11 * a22) + abs(a12 * a21)):
-        x_eq[il] = (rhs_y * a22 - a12 * rhs_z) / det
-        x_eq[iv] = (a11 * rhs_z - a21 * rhs_y) / det
-    else:   # no lateral coupling (cy_sign 0): the lateral mode hangs at its in-air equilibrium
-        x_eq[iv] = (rhs_z - a21 * x_eq[il]) / a22
-    r_air = grav - k * x_eq
-    for i in free:
-        r_air[i] = 0.0          # exactly: these modes are at their own equilibrium at rest
-    y_fb_eq = float(np.dot(cy, x_eq))
 
     w = params.leg_half_width_mm * 1e-3
     p = params.leg_pitch_mm * 1e-3
-    # Leg n (1-based): odd on +x, even on -x; 1-2 front (+p), 3-4 middle, 5-6 rear (-p).
     xj = np.array([w, -w, w, -w, w, -w])
     yj = np.array([p, p, 0.0, 0.0, -p, -p])
     zj = np.full(6, params.leg_z_mm * 1e-3)
     phase = np.array([1.0 if (n + 1) in TRIPOD_A else -1.0 for n in range(6)])
 
+    # Attachment kinematics (M1): z_att = z_b + y_j phx - x_j phy, y_att = y_b - z_j phx + x_j phz.
+    att_z = np.zeros((6, NB))
+    att_y = np.zeros((6, NB))
+    for j in range(6):
+        att_z[j] = (0.0, 1.0, yj[j], -xj[j], 0.0)
+        att_y[j] = (1.0, 0.0, -zj[j], 0.0, xj[j])
+    rows = np.zeros((NQ, NR))          # foot z, foot y, body z, body y (M1)
+    for j in range(6):
+        rows[:NB, j] = att_z[j]
+        rows[:NB, 6 + j] = att_y[j]
+        for i in range(3):
+            rows[xi(j, i), j] = cz[i]
+            rows[xi(j, i), 6 + j] = cy[i]
+    rows[1, K.ROW_BZ] = 1.0
+    rows[0, K.ROW_BY] = 1.0
+
+    # Mass matrix (M2).
+    mass = np.zeros((NQ, NQ))
+    mass[0, 0] = mass[1, 1] = m_b
+    mass[2, 2], mass[3, 3], mass[4, 4] = inertia
+    f_grav = np.zeros(NQ)
+    f_grav[1] = -m_b * g
+    for j in range(6):
+        for i in range(3):
+            wv = np.zeros(NQ)
+            wv[:NB] = cy[i] * att_y[j] + cz[i] * att_z[j]
+            wv[xi(j, i)] = 1.0
+            mass += m_modal[i] * np.outer(wv, wv)
+            f_grav += -g * m_modal[i] * cz[i] * wv          # M4: gravity on the modal masses
+    mass = 0.5 * (mass + mass.T)
+    stiff = np.zeros(NQ)
+    damp = np.zeros(NQ)
+    f_act = np.zeros(NQ)
+    g_act = k * np.array(params.act_um_per_v) * 1e-6       # static modal deflection per volt
+    for j in range(6):
+        for i in range(3):
+            stiff[xi(j, i)] = m_modal[i] * k[i]
+            damp[xi(j, i)] = m_modal[i] * b[i]
+            f_act[xi(j, i)] = m_modal[i] * g_act[i] * phase[j]   # M4: internal force pair
+
+    # Static equilibrium on six pinned feet (absolute coordinates, legs unstretched at 0):
+    #   K q = f_grav + R12 lam,  R12^T q = 0.
+    R12 = rows[:, :12]
+    kkt = np.zeros((NQ + 12, NQ + 12))
+    kkt[:NQ, :NQ] = np.diag(stiff)
+    kkt[:NQ, NQ:] = -R12
+    kkt[NQ:, :NQ] = R12.T
+    sol = np.linalg.solve(kkt, np.concatenate([f_grav, np.zeros(12)]))
+    q_eq = sol[:NQ]
+    lam_rest = np.zeros(NR)
+    lam_rest[:12] = sol[NQ:]
+    f_const = f_grav - stiff * q_eq
+    # In-air equilibrium of the legs relative to the body (M4): M_i k_i x = -M_i g Cz_i.
+    x_air = np.zeros(18)
+    for j in range(6):
+        for i in range(3):
+            x_air[3 * j + i] = -g * cz[i] / k[i] - q_eq[xi(j, i)]
+    y_foot_eq = yj + np.array([cy @ q_eq[xi(j, 0):xi(j, 0) + 3] for j in range(6)]) \
+        + np.array([att_y[j] @ q_eq[:NB] for j in range(6)])
+
+    ktf = np.array(params.knee_to_foot, float)
+    knee = np.zeros((6, NQ))
+    for j in range(6):
+        knee[j, :NB] = att_z[j]
+        for i in range(3):
+            knee[j, xi(j, i)] = ktf[i] * cz[i]
+    held = np.zeros(18)
+    for j in range(6):
+        for i in range(3):
+            held[3 * j + i] = 0.0 if params.impact_modes[i] else 1.0
+
     if isinstance(scenario, Shaker):
         kind, amp, freq, volt = 0, scenario.amp_um * 1e-6, scenario.freq_hz, 0.0
     else:
         kind, amp, freq, volt = 1, 0.0, scenario.freq_hz, scenario.voltage_v
-    g_act = k * np.array(params.act_um_per_v) * 1e-6     # F/m_dis = k * static deflection per volt
-
-    return Model(m_b=m_b, inertia=inertia, g=g, f0=f0, m_f=m_f,
-                 b_g_foot=params.b_g_foot_n_m2_s, b_g_body=params.b_g_body_n_m2_s,
-                 a_drag=params.a_drag_n_s2_m2, h_min=params.h_min_um * 1e-6, h0=params.body_gap_um * 1e-6,
-                 c_ad=params.c_ad_n, c_ad_t=params.c_ad_t_n_s, c_r=params.c_r, c_r_body=params.c_r_body,
-                 body_no_slip=params.body_no_slip, mu=params.mu, kind=kind, amp_m=amp, freq_hz=freq, volt=volt, iv=iv, il=il,
-                 k=k, b=b, cz=cz, cy=cy, m_modal=m_modal, m_imp=m_imp, m_dis=m_dis, r=r_air, g_act=g_act,
-                 ktf=np.array(params.knee_to_foot, float), gamma=gamma, xj=xj, yj=yj, zj=zj, phase=phase,
-                 y_foot_eq=yj + y_fb_eq)
-
-# Columns of the recorded trajectory (SI; converted to the result's units later).
-REC_T, REC_Y, REC_Z, REC_PH, REC_ZG, REC_FZ, REC_FY, REC_KV = 0, 1, 2, 3, 6, 7, 13, 19
-REC_COLS = 25
-# Columns of the impact log.
-EV_T, EV_LEG, EV_VPRE, EV_VPOST, EV_VYPOST, EV_STUCK = range(6)
-EV_COLS = 6
-# Integer counters.
-CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED = 6, 7, 8, 9   # 0..5: impacts per foot
-CNT_SIZE = 10
-#: A foot whose gap is within this of zero at the start of a step counts as touching
-#: (a femtometre: the rounding level of the 1e-4 m quantities in the gap), so a
-#: decision never hangs on the sign of a rounding error.
-GAP_TOL_M = 1e-15
-#: A foot in the air whose squeeze film is stiff over the step (dt * c * sum Cz^2/m_imp
-#: above SQUEEZE_STIFF) has its modes and squeeze correction sub-cycled in
-#: SQUEEZE_SUBSTEPS sub-steps: the operator splitting between the modes' exact
-#: propagation and the implicit squeeze correction is first order, and the
-#: constant is large when the film glues the foot (see the convergence test).
-SQUEEZE_SUBSTEPS = 8
-SQUEEZE_STIFF = 1.0
-#: Events (impacts) handled inside one step before the step is accepted as is.
-MAX_EVENTS_PER_STEP = 24
+    scal = dict(H0=params.body_gap_um * 1e-6, HMIN=params.h_min_um * 1e-6, BGF=params.b_g_foot_n_m2_s,
+                BGB=params.b_g_body_n_m2_s, AD=params.a_drag_n_s2_m2, CAD=params.c_ad_n, CADT=params.c_ad_t_n_s,
+                CR=params.c_r, CRB=params.c_r_body, VSTICK=params.v_stick_mm_s * 1e-3,
+                MU=params.mu if math.isfinite(params.mu) else 1e308, BNS=1.0 if params.body_no_slip else 0.0,
+                KIND=kind, AMP=amp, OMEGA=2 * math.pi * freq, FREQ=freq, VOLT=volt, GAPTOL=0.0,
+                MAXEV=MAX_EVENTS_PER_STEP, NHELD=float(held.sum()), POSTOL=POS_TOL_M)
+    return Model(m_b=m_b, inertia=inertia, k=k, b=b, cz=cz, cy=cy, m_modal=m_modal, xj=xj, yj=yj, zj=zj,
+                 phase=phase, mass=mass, stiff=stiff, damp=damp, f_const=f_const, f_act=f_act, rows=rows,
+                 knee=knee, held=held, y_foot_eq=y_foot_eq, x_air=x_air, lam_rest=lam_rest, scal=scal)
 
 
-def rest_state() -> np.ndarray:
-    """The robot at rest on still ground: the all-zero state (module docstring)."""
-    return np.zeros(S_SIZE)
+def rest_state(mdl: Model | None = None) -> np.ndarray:
+    """The robot at rest on still ground: all-zero coordinates, the static contact forces."""
+    s = np.zeros(S_SIZE)
+    if mdl is not None:
+        s[S_LAM:S_LAM + NR] = mdl.lam_rest
+    return s
+
+
+def air_state(mdl: Model, height_m: float) -> np.ndarray:
+    """At rest in the air: body underside ``height_m`` above its resting height, legs at
+    their in-air equilibrium (so nothing moves relative to the body in free fall)."""
+    s = np.zeros(S_SIZE)
+    s[S_Q + 1] = height_m
+    s[S_Q + NB:S_Q + NQ] = mdl.x_air
+    return s
+
+
+def lowest_foot_drop_m(mdl: Model) -> float:
+    """How far below its resting height the lowest foot hangs when the legs are unloaded (m)."""
+    s = air_state(mdl, 0.0)
+    return float(max(0.0, -mdl.foot_gap(s).min()))

@@ -32,7 +32,7 @@ class _Spec:
     lo_open: bool = False            # exclusive lower bound
     hi: float | None = None
     n: int = 1                       # 1 scalar, 3 per-mode tuple
-    kind: str = "float"              # float | bool | sign
+    kind: str = "float"              # float | bool | sign | flag
     doc: str = ""
 
 
@@ -74,6 +74,12 @@ _SPECS: dict[str, _Spec] = {
     "body_gap_um": _Spec("um", 0, True, doc="gap under the body at rest on still ground"),
     "h_min_um": _Spec("um", 0, True, doc="minimum gap in the squeeze-film law"),
     "mu": _Spec("1", 0, False, doc="Coulomb friction of a pinned foot; inf = no slip (paper)"),
+    "v_stick_mm_s": _Spec("mm/s", 0, False, doc="sticking threshold: an impact whose rebound (c_r times the "
+                          "approach speed) is slower than this pins the foot (body) instead; ends chattering "
+                          "in finitely many impacts (docs/model.md M11)"),
+    "impact_modes": _Spec("1 (0 or 1)", n=3, kind="flag",
+                          doc="1: the mode takes part in impacts (light-foot law, paper eq. 8 limit); "
+                              "0: held rigid during an impact (stiff-leg limit: the robot rebounds as a whole)"),
     "g_m_s2": _Spec("m/s^2", 0, False, doc="gravity"),
 }
 
@@ -118,6 +124,8 @@ class RobotParams:
     body_gap_um: float = 50.0
     h_min_um: float = 1.0
     mu: float = math.inf
+    v_stick_mm_s: float = 1.0
+    impact_modes: tuple[float, float, float] = (1.0, 1.0, 1.0)
     g_m_s2: float = G_M_S2
     provenance: dict = field(default_factory=dict, compare=False, hash=False, repr=False)
 
@@ -161,14 +169,14 @@ class RobotParams:
         return (self.mass_mg - self.body_mass_mg) / 6.0
 
     # ------------------------------------------------------------------ editing
-    def replace(self, **changes: Any) -> "RobotParams":
+    def replace(self, **changes: Any) -> RobotParams:
         """A copy with some fields changed (validated). Unknown names -> ConfigError."""
         for k in changes:
             if k not in _SPECS and k != "provenance":
                 raise ConfigError("unknown parameter", key=k, expected="one of " + ", ".join(_SPECS))
         return dataclasses.replace(self, **changes)
 
-    def with_modes(self, freq_hz=None, damping_ratio=None) -> "RobotParams":
+    def with_modes(self, freq_hz=None, damping_ratio=None) -> RobotParams:
         """A copy with modal stiffness/damping from identified frequencies and damping ratios.
 
         ``k_i = (2 pi f_i)^2``, ``b_i = 2 zeta_i (2 pi f_i)``; a missing argument
@@ -212,7 +220,7 @@ class RobotParams:
         return path
 
     @classmethod
-    def from_dict(cls, table: dict[str, Any], *, file: str | Path | None = None) -> "RobotParams":
+    def from_dict(cls, table: dict[str, Any], *, file: str | Path | None = None) -> RobotParams:
         """Validated parameters from a TOML-like table; missing keys keep their defaults."""
         table = dict(table)
         prov = table.pop("provenance", {})
@@ -232,7 +240,7 @@ class RobotParams:
             raise
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> "RobotParams":
+    def from_toml(cls, path: str | Path) -> RobotParams:
         """Read a parameter file; errors name the file, the key and what was expected."""
         from labkit.tomlio import load_toml
 
@@ -245,6 +253,8 @@ def _expected(spec: _Spec) -> str:
         return "true or false"
     if spec.kind == "sign":
         return "3 numbers, each -1, 0 or +1"
+    if spec.kind == "flag":
+        return "3 numbers, each 0 or 1"
     text = ("3 numbers" if spec.n == 3 else "a number") + f" in {spec.unit}"
     rng = []
     if spec.lo is not None:
@@ -277,6 +287,10 @@ def _num(key: str, value: Any, spec: _Spec, file, exp: str) -> float:
         raise ConfigError(f"not a number: {value!r}", file=file, key=key, expected=exp) from None
     if spec.kind == "sign":
         if v not in (-1.0, 0.0, 1.0):
+            raise ConfigError(f"out of range: {v!r}", file=file, key=key, expected=exp)
+        return v
+    if spec.kind == "flag":
+        if v not in (0.0, 1.0):
             raise ConfigError(f"out of range: {v!r}", file=file, key=key, expected=exp)
         return v
     bad = v != v or (spec.lo is not None and (v <= spec.lo if spec.lo_open else v < spec.lo)) \

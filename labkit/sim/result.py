@@ -105,7 +105,7 @@ class SimResult:
         """Write the run (kind ``sim_result``): units on every dataset, params as TOML text."""
         import h5py
 
-        from labkit.h5io import put, put_json, stamp
+        from labkit.h5io import label_dimensions, put, put_json, stamp
 
         path = Path(path)
         with h5py.File(path, "w") as f:
@@ -131,4 +131,5 @@ class SimResult:
                 columns="t_s, leg (0-5; -1 body), vrel_pre_m_s, vrel_post_m_s, vy_post_m_s, stuck")
             f.attrs["mean_speed_mm_s"] = float(self.mean_speed_mm_s)
             put_json(f, "patterns", list(self.patterns))
+            label_dimensions(f)     # t_s as the coordinate (xarray, HDFView)
         return path

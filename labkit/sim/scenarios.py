@@ -21,9 +21,10 @@ short runs): its numbers are not the result.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -45,7 +46,8 @@ def ablate(params: Any, what: str) -> Any:
     to 0) or ``"no_squeeze_film"`` (``b_g_body_n_m2_s`` and
     ``b_g_foot_n_m2_s`` set to 0) — :data:`labkit.sim.core.ABLATIONS`.
     """
-    from labkit.sim.core import ABLATIONS, ablate as core_ablate
+    from labkit.sim.core import ABLATIONS
+    from labkit.sim.core import ablate as core_ablate
 
     name = what.replace("-", "_")
     if name not in ABLATIONS:
@@ -193,10 +195,16 @@ def run_scenario(name: str, params: Any = None, out_dir: str | Path | None = "."
     data = result.pop("_data", None)
     summary = {"name": key, "title": sc.title, "expectation": sc.expectation, "quick": quick, **result}
     if out is not None:
+        from labkit.outputs import atomic_output
+
         if data is not None:
-            summary["data"] = str(data(out / f"sim_{key}.h5"))
+            with atomic_output(out / f"sim_{key}.h5") as tmp:     # an old file survives a failed write
+                data(tmp)
+            summary["data"] = str(out / f"sim_{key}.h5")
         if figure and plot is not None:
-            summary["figure"] = str(_save_figure(plot, out / f"sim_{key}.png"))
+            with atomic_output(out / f"sim_{key}.png") as tmp:
+                _save_figure(plot, tmp)
+            summary["figure"] = str(out / f"sim_{key}.png")
     return summary
 
 

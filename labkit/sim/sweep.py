@@ -21,9 +21,10 @@ Draw 0 is always the nominal robot; draws ``1..n-1`` are perturbed. With
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -144,7 +145,7 @@ class SweepResult:
         """Write the sweep as an HDF5 file of kind ``"sim_sweep"``; returns the path."""
         import h5py
 
-        from labkit.h5io import stamp
+        from labkit.h5io import label_dimensions, stamp
 
         path = Path(path)
         if path.parent and not path.parent.exists():
@@ -152,6 +153,7 @@ class SweepResult:
         with h5py.File(path, "w") as f:
             stamp(f, "sim_sweep")
             self.write_group(f)
+            label_dimensions(f)     # the swept quantity (freq_hz, ...) as the coordinate
         return path
 
     def write_group(self, g: Any) -> None:
@@ -176,7 +178,7 @@ class SweepResult:
             labels=",".join(PATTERNS))
 
     @classmethod
-    def from_h5(cls, path: str | Path) -> "SweepResult":
+    def from_h5(cls, path: str | Path) -> SweepResult:
         """Read back a file written by :meth:`to_h5`."""
         from labkit.h5io import get_json, open_h5
 

@@ -34,7 +34,8 @@ keys and between the modes of a per-mode key.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 

@@ -1,13 +1,13 @@
 """Small synthetic run files in the interfaces.md layout, for the fit tests (written by the tests)."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import h5py
 import numpy as np
 
-from analysis.modal_synth import synthetic_frf
+from labkit.analysis.modal.synth import synthetic_frf
 from labkit.h5io import stamp
 
 #: tethered-robot-like modes: hip (heavily damped), tether, knee
@@ -46,7 +46,7 @@ def write_inchip(path: Path, freq_hz: np.ndarray, *, modes_hz: Sequence[float] =
 def write_shaker(path: Path, freq_hz: np.ndarray, *, fn_hz: float = 240.0, zeta: float = 0.1,
                  noise: float = 0.01, seed: int = 0) -> Path:
     """A shaker run file with a one-mode base-excitation transmissibility."""
-    from analysis.frf import sdof_transmissibility
+    from labkit.analysis.frf import sdof_transmissibility
 
     rng = np.random.default_rng(seed)
     T = sdof_transmissibility(freq_hz, fn_hz, zeta)

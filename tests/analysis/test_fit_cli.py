@@ -7,12 +7,11 @@ import math
 import h5py
 import numpy as np
 import pytest
-
 from fit_runfiles import TRUE_HZ, TRUE_ZETA, write_inchip, write_shaker
-from labkit.cli import main
-from labkit.sim import RobotParams
 
 from clihelpers import last_json, run_cli
+from labkit.cli import main
+from labkit.sim import RobotParams
 
 
 def _fit(capsys, *args: str) -> tuple[int, dict, str]:

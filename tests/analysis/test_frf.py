@@ -1,11 +1,11 @@
-"""analysis.frf: demodulation, H1/H2/coherence, the sign convention, conversions."""
+"""labkit.analysis.frf: demodulation, H1/H2/coherence, the sign convention, conversions."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from scipy import signal as ss
 
-from analysis import frf
+from labkit.analysis import frf
 from labkit.errors import InputError
 
 

@@ -1,12 +1,12 @@
-"""analysis.modal: accuracy, overlapping modes, honest uncertainties, common poles, bad input."""
+"""labkit.analysis.modal.fit: accuracy, overlapping modes, honest uncertainties, common poles, bad input."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from analysis.frf import sdof_transmissibility
-from analysis.modal import fit_modes
-from analysis.modal_synth import synthetic_frf
+from labkit.analysis.frf import sdof_transmissibility
+from labkit.analysis.modal.fit import fit_modes
+from labkit.analysis.modal.synth import synthetic_frf
 from labkit.errors import InputError
 
 FN = np.array([438.0, 1200.0, 1800.0])

@@ -1,11 +1,11 @@
-"""analysis.modal_refine: the structured solver against scipy, the analytic Jacobian, the covariance."""
+"""labkit.analysis.modal.refine: the structured solver against scipy, the analytic Jacobian, the covariance."""
 from __future__ import annotations
 
 import numpy as np
 
-from analysis.modal_lscf import modal_to_pole
-from analysis.modal_refine import Channel, _channel_terms, _dense, refine
-from analysis.modal_synth import synthetic_frf
+from labkit.analysis.modal.lscf import modal_to_pole
+from labkit.analysis.modal.refine import Channel, _channel_terms, _dense, refine
+from labkit.analysis.modal.synth import synthetic_frf
 
 FN = np.array([438.0, 1200.0])
 ZETA = np.array([0.05, 0.02])

@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from drivers.base import Instrument, ScpiInstrument, check_range, open_transport, SerialTransport
-from drivers.testing import STALL, Drop, expected_protocol
+from labkit.drivers.base import Instrument, ScpiInstrument, SerialTransport, check_range, open_transport
+from labkit.drivers.testing import STALL, Drop, expected_protocol
 from labkit.errors import ConfigError, InstrumentError, LimitError
 
 

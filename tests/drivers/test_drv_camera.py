@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from drivers.camera import CameraProtocol, FileCamera, OpenCVCamera, timestamps_path
+from labkit.drivers.camera import CameraProtocol, FileCamera, OpenCVCamera, timestamps_path
 from labkit.errors import InputError, InstrumentError
 
 

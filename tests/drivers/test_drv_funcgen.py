@@ -6,8 +6,8 @@ import time
 
 import pytest
 
-from drivers.funcgen import Agilent33220A, Keysight33500B, RigolDG1000Z
-from drivers.testing import STALL, Drop, expected_protocol
+from labkit.drivers.funcgen import Agilent33220A, Keysight33500B, RigolDG1000Z
+from labkit.drivers.testing import STALL, Drop, expected_protocol
 from labkit.errors import ConfigError, InstrumentError, LimitError
 
 OK = b'+0,"No error"\n'

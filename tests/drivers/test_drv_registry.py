@@ -5,11 +5,11 @@ import socket
 
 import pytest
 
-from drivers.funcgen import Keysight33500B, RigolDG1000Z
-from drivers.registry import driver_class, model_names, open_instrument
-from drivers.scope import InfiniiVision
-from drivers.testing import _SocketPeer
-from drivers.vibrometer import OFV5000
+from labkit.drivers.funcgen import Keysight33500B, RigolDG1000Z
+from labkit.drivers.registry import driver_class, model_names, open_instrument
+from labkit.drivers.scope import InfiniiVision
+from labkit.drivers.testing import _SocketPeer
+from labkit.drivers.vibrometer import OFV5000
 from labkit.errors import ConfigError, InstrumentError
 
 

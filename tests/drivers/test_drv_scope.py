@@ -6,8 +6,8 @@ import time
 import numpy as np
 import pytest
 
-from drivers.scope import InfiniiVision, RigolDS1000Z
-from drivers.testing import STALL, Drop, expected_protocol
+from labkit.drivers.scope import InfiniiVision, RigolDS1000Z
+from labkit.drivers.testing import STALL, Drop, expected_protocol
 from labkit.errors import InstrumentError, LimitError
 
 OK = b'+0,"No error"\n'

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from drivers.shaker import Amplifier2718, Shaker4809Envelope
+from labkit.drivers.shaker import Amplifier2718, Shaker4809Envelope
 from labkit.errors import ConfigError, LimitError
 
 

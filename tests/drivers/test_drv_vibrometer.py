@@ -7,8 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from drivers.testing import STALL, Drop, expected_protocol
-from drivers.vibrometer import OFV3001, OFV5000, parse_range_text
+from labkit.drivers.testing import STALL, Drop, expected_protocol
+from labkit.drivers.vibrometer import OFV3001, OFV5000, parse_range_text
 from labkit.errors import ConfigError, InstrumentError, LimitError
 
 

@@ -73,7 +73,8 @@ def test_bad_inchip_values(tmp_path, pattern, repl, key, expected):
 
 def test_missing_table_and_chirp_list(tmp_path):
     text = INCHIP.read_text()
-    (tmp_path / "a.toml").write_text(text.replace("[vibrometer]\nscale_mm_s_per_v = 25.0  # velocity decoder range\n", ""))
+    table = "[vibrometer]\nscale_mm_s_per_v = 25.0  # velocity decoder range\n"
+    (tmp_path / "a.toml").write_text(text.replace(table, ""))
     with pytest.raises(ConfigError, match="key 'vibrometer'.*missing table"):
         load_inchip(tmp_path / "a.toml")
     chirp = re.sub(r"\[method\][^\[]*", '[method]\nkind = "chirp"\nlength_s = 0.5\naverages = 2\n\n', text)

@@ -6,8 +6,8 @@ import json
 import h5py
 import numpy as np
 import pytest
-
 from labcfg import inchip_toml, lab_timeline
+
 from labkit.errors import InputError, InstrumentError, LimitError
 from labkit.experiments.session import run_session
 from labkit.lab import VirtualLab

@@ -16,9 +16,9 @@ import time
 import h5py
 import numpy as np
 import pytest
+from labcfg import inchip_toml, lab_timeline, wait_points
 
 from clihelpers import REPO, last_json, run_cli
-from labcfg import inchip_toml, lab_timeline, wait_points
 from labkit.commands.info import summarise_h5
 from labkit.experiments.session import run_session
 

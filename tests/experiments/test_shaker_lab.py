@@ -6,8 +6,8 @@ import json
 import h5py
 import numpy as np
 import pytest
-
 from labcfg import lab_timeline, shaker_toml
+
 from labkit.errors import LimitError
 from labkit.experiments.session import run_session
 from labkit.lab import VirtualLab

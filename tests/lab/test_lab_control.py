@@ -7,8 +7,7 @@ import cv2
 import numpy as np
 import pytest
 import pyvisa
-from labhelpers import drive_sine, fit_sine, read_word
-from labhelpers import lab, raw  # noqa: F401  (fixtures)
+from labhelpers import drive_sine, fit_sine, lab, raw, read_word  # noqa: F401  (fixtures)
 
 from labkit.errors import InstrumentError
 from labkit.lab import VirtualLab

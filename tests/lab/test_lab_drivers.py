@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from labhelpers import fit_sine, lab, settle  # noqa: F401  (lab is a fixture)
 
-from drivers.funcgen import Keysight33500B
-from drivers.scope import InfiniiVision
-from drivers.vibrometer import OFV5000
+from labkit.drivers.funcgen import Keysight33500B
+from labkit.drivers.scope import InfiniiVision
+from labkit.drivers.vibrometer import OFV5000
 from labkit.errors import InstrumentError
 
 

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 import pyvisa
 import serial
-from labhelpers import Raw
-from labhelpers import lab, raw  # noqa: F401  (fixtures)
+from labhelpers import Raw, lab, raw  # noqa: F401  (fixtures)
 
 from labkit.lab.transport import Fault
 
@@ -71,7 +70,7 @@ def test_garbage_reply_through_pyvisa(lab):
 
 def test_plain_pyvisa_gives_up_on_a_drop_mid_block_within_its_timeout(lab, raw):
     """pyvisa-py cannot tell a dropped socket from a stall: it raises at its own timeout, not
-    earlier (drivers.base wraps this in one InstrumentError; see tests/lab/test_lab_drivers.py)."""
+    earlier (labkit.drivers.base wraps this in one InstrumentError; see tests/lab/test_lab_drivers.py)."""
     _arm_big_record(raw("scope"))
     rm = pyvisa.ResourceManager("@py")
     sc = rm.open_resource(lab.resources["scope"], read_termination="\n", write_termination="\n",

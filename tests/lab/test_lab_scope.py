@@ -5,8 +5,7 @@ import time
 
 import numpy as np
 import pytest
-from labhelpers import drive_sine, fit_sine, read_word, settle
-from labhelpers import lab, raw  # noqa: F401  (fixtures)
+from labhelpers import drive_sine, fit_sine, lab, raw, read_word, settle  # noqa: F401  (fixtures)
 
 
 def _acquire(sc, record_s: float, points: int, channels=(1, 2)) -> None:

@@ -2,10 +2,9 @@
 from __future__ import annotations
 
 import pytest
-
 from labhelpers import lab, raw  # noqa: F401  (fixtures)
 
-from labkit.lab.scpi import ScpiInstrument, compile_pattern, definite_block, parse_number, split_commands
+from labkit.lab.scpi import SimScpiInstrument, compile_pattern, definite_block, parse_number, split_commands
 
 
 def test_pattern_accepts_short_and_long_forms_only():
@@ -28,7 +27,7 @@ def test_numbers_units_and_limits():
 
 
 def test_error_queue_overflow_keeps_first_entries():
-    inst = ScpiInstrument()
+    inst = SimScpiInstrument()
     for _ in range(25):
         assert inst.handle("NOPE") is None
     replies = [inst.handle("SYST:ERR?").decode().strip() for _ in range(21)]

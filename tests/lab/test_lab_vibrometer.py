@@ -2,8 +2,7 @@
 from __future__ import annotations
 
 import serial
-from labhelpers import drive_sine
-from labhelpers import lab, raw  # noqa: F401  (fixtures)
+from labhelpers import drive_sine, lab, raw  # noqa: F401  (fixtures)
 
 
 def _port(lab) -> serial.Serial:

@@ -4,9 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-from report_data import (SHAKER_SPEED, write_fit, write_inchip, write_shaker, write_sim_result, write_sweep,
-                         write_track)
+from report_data import SHAKER_SPEED, write_fit, write_inchip, write_shaker, write_sim_result, write_sweep, write_track
 
 
 @pytest.fixture

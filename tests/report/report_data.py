@@ -40,7 +40,7 @@ def write_inchip(path: Path) -> Path:
 
 
 def write_fit(path: Path) -> Path:
-    """A modal_fit file in the layout of analysis.modal_io (groups inchip and shaker)."""
+    """A modal_fit file in the layout of labkit.analysis.modal.io (groups inchip and shaker)."""
     f = np.linspace(200, 3000, 120)
     rng = np.random.default_rng(1)
     with h5py.File(path, "w") as h:
@@ -129,7 +129,7 @@ def write_track(path: Path, speed: float, ci: tuple[float, float], video: str | 
         h.attrs["mm_per_px"] = 0.01
         h.attrs["mm_per_px_std"] = 0.0001
         if video is not None:
-            h.attrs["source_video"] = video      # as analysis.track_output writes it
+            h.attrs["source_video"] = video      # as labkit.analysis.tracking.output writes it
         if freq_hz is not None:
             h.attrs["freq_hz"] = freq_hz
     return path
@@ -170,3 +170,44 @@ def write_sim_result(path: Path, freq_hz: float, amp_um: float, pattern: str) ->
         put(h, "contact", contact, "label")
         h.attrs["patterns"] = json.dumps([pattern] * 6)
     return path
+
+
+KNEE_DRIVES_HZ = (150.0, 170.0, 190.0, 210.0, 230.0, 250.0, 270.0, 290.0, 310.0)
+
+
+def write_shaker_knees(path: Path, freqs_hz=KNEE_DRIVES_HZ, amp_um: float = 25.0) -> Path:
+    """A knee-spot run_shaker file with a knee record at every one of ``freqs_hz`` (no video)."""
+    freq = np.asarray(freqs_hz, float)
+    with h5py.File(path, "w") as h:
+        stamp(h, "run_shaker")
+        h.attrs.update(status="complete", robot_spot="knee", amplitude_kind="tray_amp_um")
+        pts = h.create_group("points")
+        put(pts, "freq_hz", freq, "Hz")
+        put(pts, "tray_amp_um", np.full(freq.size, amp_um), "um")
+        pts.create_dataset("status", data=["ok"] * freq.size, dtype=h5py.string_dtype()).attrs["units"] = "label"
+        put(pts, "index", np.arange(1, freq.size + 1), "1")
+        for i, f in enumerate(freq):
+            t, k, tr = knee_record(f, amp_um, "firm_contact")
+            g = h.create_group(f"records/p{i + 1:05d}")
+            g.attrs["dt_s"] = t[1] - t[0]
+            put(g, "robot_velocity_mm_s", k.astype(np.float32), "mm/s")
+            put(g, "tray_velocity_mm_s", tr.astype(np.float32), "mm/s")
+    return path
+
+
+def write_real_fit(path: Path, lines: int = 60):
+    """A modal_fit file written by labkit's own fit (fit_modes + write_fit_h5) on the FRFs of a
+    two-mode structure whose body location has an anti-resonance between the modes, measured on
+    a grid too coarse to resolve it. Returns ``(path, fit)``."""
+    from labkit.analysis.modal.fit import fit_modes
+    from labkit.analysis.modal.io import write_fit_h5
+    from labkit.analysis.modal.synth import synthetic_frf
+
+    f = np.geomspace(200.0, 3000.0, lines)
+    wn = 2 * np.pi * np.array([450.0, 1500.0])
+    # body: residues of the same sign -> a zero between the modes; hip: opposite signs -> none
+    shapes = np.array([[1.0, 1.0], [1.0, -0.6]]) * wn[None, :] ** 2
+    h = synthetic_frf(f, [450.0, 1500.0], [0.03, 0.02], shapes, noise=0.002, seed=3)
+    fit = fit_modes(f, {"body": h[0], "hip": h[1]}, n_modes=2, kind="mobility")
+    write_fit_h5(path, {"inchip": fit}, {"inchip": []}, {}, {"inchip": fit.summary()})
+    return path, fit

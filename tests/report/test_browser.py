@@ -24,7 +24,8 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHECK = """<script>
 window.__errs = [];
 window.addEventListener('error', function (e) {
-  window.__errs.push('error: ' + (e.message || ('failed to load ' + ((e.target && (e.target.src || e.target.href)) || '?')).slice(0, 80)));
+  window.__errs.push('error: ' + (e.message ||
+    ('failed to load ' + ((e.target && (e.target.src || e.target.href)) || '?')).slice(0, 80)));
 }, true);
 ['error', 'warn'].forEach(function (k) { var o = console[k]; console[k] = function () {
   window.__errs.push('console.' + k + ': ' + Array.from(arguments).join(' ')); o.apply(console, arguments); }; });
@@ -81,7 +82,7 @@ def test_chromium_is_installed():
 
 @pytest.mark.slow
 def test_report_renders_in_chromium(inputs, tmp_path):
-    from analysis.report import build_report
+    from labkit.analysis.report.build import build_report
 
     tracks = [str(inputs[f"track{i}"]) for i in range(5)]
     s = build_report(tmp_path / "rep", runs=[str(inputs["inchip"]), str(inputs["shaker"])], tracks=tracks,

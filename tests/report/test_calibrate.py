@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from labkit.calibrate import Observations, calibrate, parse_names, set_values, speed_task
-from labkit.errors import InputError
 from clihelpers import last_json, run_cli
+from labkit.errors import InputError
+from labkit.sim.calibrate import Observations, calibrate, parse_names, set_values, speed_task
 
 # The deliberately changed parameter: the hip (lateral) mode's stiffness, +10 %. The paper
 # ties shaker locomotion to that mode, and the speed below it varies smoothly with it.

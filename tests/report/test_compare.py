@@ -1,10 +1,10 @@
-"""analysis.compare: metrics on arrays with known answers."""
+"""labkit.analysis.compare: metrics on arrays with known answers."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from analysis import compare
+from labkit.analysis import compare
 
 
 def test_speed_agreement_known_errors():
@@ -85,3 +85,29 @@ def test_classify_knee_pattern():
     jump = tray + 5.0 * np.sin(2 * np.pi * f / 3 * t)      # slow, large excursions: > 1 period away
     assert compare.classify_knee_pattern(t, jump, tray, f)["pattern"] == "jumping"
     assert compare.dominant_pattern(np.array([["jumping", "firm_contact"], ["jumping", "x"]])) == "jumping"
+
+
+def test_draw_percentiles_and_coverage():
+    # 4 draws at two frequencies, linear in between
+    sim_f = np.array([100.0, 200.0])
+    draws = np.array([[1.0, 2.0, 3.0, 4.0], [3.0, 4.0, 5.0, 6.0]])
+    pct = compare.draw_percentiles([100.0, 150.0, 200.0, 250.0], [2.5, 0.0, 6.0, 5.0], sim_f, draws)
+    # 2.5 beats two of four draws; 0 beats none; 6 ties the largest (mid-rank 3.5 of 4); 250 Hz is outside
+    assert pct[:3].tolist() == [50.0, 0.0, 87.5] and np.isnan(pct[3])
+    cov = compare.coverage(pct, [True, False, True], (10.0, 90.0))
+    assert cov["fraction_inside"] == pytest.approx(2 / 3) and cov["expected_fraction"] == pytest.approx(0.8)
+    assert cov["median_percentile"] == pytest.approx(50.0)
+    lo, hi = compare.percentile_band(draws, (10.0, 90.0))
+    assert lo.tolist() == pytest.approx([1.3, 3.3]) and hi.tolist() == pytest.approx([3.7, 5.7])
+
+
+def test_tolerances_and_verdicts():
+    t = compare.Tolerances.from_mapping({"knee_phase_deg_max": 15})
+    assert t.knee_phase_deg_max == 15.0 and t.speed_relative_rms_max == 0.30
+    with pytest.raises(ValueError, match="unknown tolerance nope"):
+        compare.Tolerances.from_mapping({"nope": 1})
+    with pytest.raises(ValueError, match="band_lo_pct"):
+        compare.Tolerances.from_mapping({"band_lo_pct": 95})
+    assert compare.verdict(0.2, at_most=0.3) == "pass" and compare.verdict(0.4, at_most=0.3) == "fail"
+    assert compare.verdict(1.0, at_least=0.75, at_most=1.33) == "pass"
+    assert compare.verdict(None, at_most=1) == "n/a" and compare.verdict(float("nan"), at_least=0) == "n/a"

@@ -8,9 +8,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from report_data import SHAKER_SPEED
 
 from clihelpers import last_json, run_cli
-from report_data import SHAKER_SPEED
 
 
 def _all_inputs(inputs):
@@ -26,39 +26,84 @@ def test_full_report_is_self_contained_and_numbers_agree(inputs, tmp_path):
     proc = run_cli("report", *_all_inputs(inputs), "--out", str(out), "--json")
     summary = last_json(proc)
     assert summary["sections"] == {"frf": "ok", "stabilisation": "ok", "speed": "ok", "knee": "ok",
-                                   "agreement": "ok"}
+                                   "patterns": "ok", "tracks": "ok", "agreement": "ok"}
     html = (out / "report.html").read_text()
-    # self-contained: no external URL, no script, every image inline
+    # self-contained: no external URL, no script, no stylesheet link, every figure inline as SVG
     assert not re.search(r"(src|href)\s*=\s*\"(https?:|//|file:)", html)
-    assert "<script" not in html.lower() and "<link" not in html.lower()
-    imgs = re.findall(r"<img [^>]*src=\"([^\"]+)\"", html)
-    assert len(imgs) == len(summary["figures"]) == 7   # frf + stab for 2 fit groups, speed, 2 knee drives
-    assert all(s.startswith("data:image/png;base64,") for s in imgs)
+    assert "<script" not in html.lower() and "<link" not in html.lower() and "<img" not in html.lower()
+    # frf + stabilisation for 2 fit groups, speed, knee (all drives in one), tracked paths (no video here)
+    assert html.count("<svg ") == len(summary["figures"]) == len(summary["svgs"]) == 7
     for fig in summary["figures"]:
         assert Path(fig).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    # speed agreement against the sweep: measured 3.0, 4.2, 2.5, 2.9, 0.0 at 150..600 Hz;
-    # simulated mean 3.5, 5.0, 3.0, 3.5, and 0.5 + (0 - 0.5) * 200/400 = 0.25 at 600 Hz
+    # speed against the sweep: measured 3.0, 4.2, 2.5, 2.9, 0.0 at 150..600 Hz; the Monte Carlo mean
+    # 3.5, 5.0, 3.0, 3.5, and 0.5 + (0 - 0.5) * 200/400 = 0.25 at 600 Hz
     err = np.array([0.5, 0.8, 0.5, 0.6, 0.25])
-    agreement = {r["quantity"]: r["value"] for r in summary["agreement"]}
-    assert agreement["speed RMS error"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-9)
     assert summary["speed_rms_error_mm_s"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-9)
-    # the nominal robot (draw 0 = 0.9 x base): 3.15, 4.5, 2.7, 3.15, 0.225 at 150..600 Hz
-    err_nominal = np.array([3.15, 4.5, 2.7, 3.15, 0.225]) - np.array([3.0, 4.2, 2.5, 2.9, 0.0])
-    assert agreement["speed RMS error (nominal robot)"] == pytest.approx(np.sqrt(np.mean(err_nominal ** 2)))
+    # the nominal robot (draw 0 = 0.9 x base): 3.15, 4.5, 2.7, 3.15, 0.225, judged relative to RMS measured
+    meas = np.array([3.0, 4.2, 2.5, 2.9, 0.0])
+    err_nominal = np.array([3.15, 4.5, 2.7, 3.15, 0.225]) - meas
+    rel = np.sqrt(np.mean(err_nominal ** 2)) / np.sqrt(np.mean(meas ** 2))
+    rows = {(r["comparison"], r["metric"]): r for r in summary["agreement"]}
+    nominal = rows[("speed, nominal robot vs sweep.h5", "relative RMS error (RMS error / RMS measured)")]
+    assert nominal["value"] == pytest.approx(rel) and nominal["verdict"] == "pass"       # 0.08 <= 0.30
+    assert summary["speed_rms_error_nominal_mm_s"] == pytest.approx(np.sqrt(np.mean(err_nominal ** 2)))
+    # draws are 0.9..1.1 x base: the 10-90 % band is 0.92..1.08 x base and every measured speed lies below
+    # every draw: coverage 0 (expected 0.8), median percentile 0 -> the band comparison fails
+    band = rows[("speed, Monte Carlo band vs sweep.h5", "fraction of measured speeds inside the 10\u201390 % band")]
+    assert band["value"] == 0.0 and band["verdict"] == "fail"
+    assert "median percentile of the measured speeds within the draws: 0 " in band["band_statistic"]
     # knee: 200 Hz measured firm (1.05 x tray), simulated firm (1.1 x tray) -> ratio 1.1/1.05, in phase
-    assert agreement["knee amplitude ratio (sim/meas) @ 200 Hz, 25 um"] == pytest.approx(1.1 / 1.05, rel=1e-3)
-    assert abs(agreement["knee phase difference (sim - meas) @ 200 Hz, 25 um"]) < 1.0
-    assert agreement["leg-pattern agreement (knee records)"] == pytest.approx(1.0)   # firm/firm, jumping/jumping
-    # the sweep says partial contact at 200 and 300 Hz; the knee records say firm and jumping
-    assert agreement["leg-pattern agreement (sweep)"] == pytest.approx(0.0)
-    # every number has its provenance, naming the files
+    ratio = rows[("knee @ 200 Hz, 25 um", "amplitude ratio (sim/meas)")]
+    assert ratio["value"] == pytest.approx(1.1 / 1.05, rel=1e-3) and ratio["verdict"] == "pass"
+    assert abs(rows[("knee @ 200 Hz, 25 um", "phase difference (sim - meas)")]["value"]) < 1.0
+    # patterns: knee records firm/firm and jumping/jumping; the sweep says partial at 200 and 300 Hz
+    assert rows[("leg pattern (knee records)", "fraction of drives with the same pattern")]["value"] == 1.0
+    sweep_pat = rows[("leg pattern (sweeps)", "fraction of drives with the same pattern")]
+    assert sweep_pat["value"] == 0.0 and sweep_pat["verdict"] == "fail"
+    assert summary["verdicts"]["frf"] == "pass" and summary["verdicts"]["speed"] == "fail"
+    assert summary["verdicts"]["agreement"] == "fail"
+    # the sweep is described by its range, not by its base scenario's frequency
+    assert "freq_hz 100\u2013800 Hz (7 points), amp_um 25, 5 draws of 1 s" in html
+    assert "freq_hz: 240" not in html and "freq_hz 240" not in html
+    # provenance once per section: each input file's checksum appears once in each section that used it
     data = json.loads((out / "agreement.json").read_text())
-    for row in data["agreement"]:
-        assert row["provenance"], row
-    speed_row = next(r for r in data["agreement"] if r["quantity"] == "speed RMS error")
-    assert str(inputs["sweep"]) == speed_row["provenance"]["simulated"]
-    assert any("track0.h5" in s for s in speed_row["provenance"]["measured"])
-    assert "track0.h5" in html and "sweep.h5" in html
+    sweep_sha = next(f["sha256"] for f in data["sections"]["speed"]["provenance"]["files"]
+                     if f["path"] == str(inputs["sweep"]))
+    assert html.count(sweep_sha) == sum(str(inputs["sweep"]) in [f["path"] for f in sec["provenance"]["files"]]
+                                        for sec in data["sections"].values() if sec["provenance"])
+    assert html.count('<div class="provenance">') == 7
+    assert data["meta"]["command"].startswith("labkit report --runs")
+    assert data["meta"]["tolerances"]["speed_relative_rms_max"] == 0.30
+    # headline numbers for --compare
+    assert data["headline"]["inchip_mode1_freq_hz"]["value"] == pytest.approx(438.0)
+    assert data["headline"]["speed_band_coverage"]["value"] == 0.0
+
+
+def test_tolerance_option_changes_the_verdict(inputs, tmp_path):
+    args = ["--runs", str(inputs["shaker"]), "--sim", str(inputs["sim_200"]), "--no-simulate"]
+    s = last_json(run_cli("report", *args, "--out", str(tmp_path / "a"), "--json"))
+    assert s["verdicts"]["knee"] == "pass"                   # ratio 1.1 / 1.05 = 1.048 within 1.33
+    s = last_json(run_cli("report", *args, "--tolerance", "knee_amplitude_ratio_max=1.02",
+                          "--out", str(tmp_path / "b"), "--json"))
+    assert s["verdicts"]["knee"] == "fail"
+    proc = run_cli("report", *args, "--tolerance", "nope=1", "--out", str(tmp_path / "c"), check=2)
+    assert "nope" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_compare_two_reports(inputs, tmp_path):
+    args = ["--runs", str(inputs["shaker"]), "--sim", str(inputs["sim_200"]), "--no-simulate"]
+    run_cli("report", *args, "--out", str(tmp_path / "a"), "--json")
+    run_cli("report", *args, "--fit", str(inputs["fit"]), "--out", str(tmp_path / "b"), "--json")
+    c = last_json(run_cli("report", "--compare", str(tmp_path / "a"), str(tmp_path / "b"), "--json"))
+    rows = {r["key"]: r for r in c["rows"]}
+    assert rows["knee_amplitude_ratio_median"]["a"] == pytest.approx(1.1 / 1.05, rel=1e-3)
+    assert rows["knee_amplitude_ratio_median"]["change"] == pytest.approx(0.0, abs=1e-12)
+    assert rows["inchip_mode1_freq_hz"]["a"] is None and rows["inchip_mode1_freq_hz"]["b"] == 438.0
+    assert rows["inchip_mode1_freq_hz"]["b_text"] == "438 \u00b1 3"
+    text = run_cli("report", "--compare", str(tmp_path / "a"), str(tmp_path / "b")).stdout
+    assert "inchip mode 1 frequency (Hz)" in text and "438 \u00b1 3" in text
+    proc = run_cli("report", "--compare", str(tmp_path / "a"), str(tmp_path), check=2)
+    assert "agreement.json" in proc.stderr
 
 
 def test_missing_inputs_are_reported_not_fatal(inputs, tmp_path):
@@ -71,12 +116,14 @@ def test_missing_inputs_are_reported_not_fatal(inputs, tmp_path):
     assert s["sections"]["agreement"] == "missing"
     html = (out / "report.html").read_text()
     assert "No fit given" in html and "Nothing to compare" in html
+    assert html.count('class="verdict') == 7                 # every section says what it concluded
     # an in-chip run alone: its measured FRFs are drawn, without a model curve
     proc = run_cli("report", "--runs", str(inputs["inchip"]), "--out", str(tmp_path / "rep2"), "--json")
     s = last_json(proc)
     assert s["sections"]["frf"] == "ok" and "no model curve" in s["notes"]["frf"]
     assert s["sections"]["speed"] == "missing" and s["sections"]["knee"] == "missing"
     assert [Path(f).name for f in s["figures"]] == ["fig_frf_run1.png"]
+    assert s["verdicts"]["frf"] == "not judged" and s["verdicts"]["speed"] == "missing"
 
 
 def test_unreadable_input_exits_2_naming_the_file(inputs, tmp_path):
@@ -117,12 +164,15 @@ def test_report_with_the_real_simulator(inputs, tmp_path):
     knee = data["details"]["knee"]
     assert set(knee) >= {"200Hz_25um", "300Hz_25um"}
     assert "No measured knee record at 240 Hz, 40 um" in s["notes"]["knee"]      # drawn, simulated only
-    assert len([f for f in s["figures"] if "fig_knee_" in f]) == 3
+    drawn = json.loads((out / "figure_data.json").read_text())["fig_knee"]["drives"]
+    assert [(d["freq_hz"], d["measured"], d["simulated"]) for d in drawn] == [
+        (200.0, True, True), (240.0, False, True), (300.0, True, True)]
     assert knee["200Hz_25um"]["provenance"]["simulated"] == str(res_h5)          # from the file
-    assert knee["300Hz_25um"]["provenance"]["simulated"].startswith(f"simulate({params}")   # simulated here
+    assert knee["300Hz_25um"]["provenance"]["simulated"].startswith("simulated here (300 Hz")   # simulated here
+    assert str(params) in json.dumps(data["sections"]["knee"]["provenance"])
     for k in ("200Hz_25um", "300Hz_25um"):
         assert knee[k]["amplitude_sim_mm_s"] > 0 and knee[k]["amplitude_meas_mm_s"] > 0
-    speed = data["details"]["speed"][str(sweep_h5)]
+    speed = data["details"]["speed"][str(sweep_h5)]["monte_carlo_mean"]
     # measured 150..300 Hz points against the sweep's nominal+draw mean, by hand
     mean = np.abs(sw.speeds_mm_s).mean(axis=1)          # magnitudes: measured speed has no sign
     sim_at = np.interp([150.0, 200.0, 250.0, 300.0], sw.values, mean)

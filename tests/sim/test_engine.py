@@ -31,7 +31,7 @@ def test_walking_run_shape_and_summary(walking):
     assert r.contact.dtype == np.int8 and set(np.unique(r.contact)) <= {0, 1, 2}
     assert r.mean_speed_mm_s > 1.0                 # it walks, forward (+y)
     assert r.impacts.min() > 0
-    for foot, fr in r.contact_fraction.items():
+    for fr in r.contact_fraction.values():
         assert set(fr) == {"air", "adhesion", "rest"} and sum(fr.values()) == pytest.approx(1.0)
     assert set(r.patterns) <= {"firm_contact", "partial_contact", "jumping"}
     s = json.loads(json.dumps(r.summary()))

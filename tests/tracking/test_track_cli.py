@@ -10,8 +10,8 @@ import pytest
 from trackhelpers import MM_PER_PX, make_video, true_speed_mm_s
 
 from labkit.cli import main
-from tests.conftest import last_json
 from labkit.lab.render import write_video
+from tests.conftest import last_json
 
 
 @pytest.mark.slow
@@ -40,7 +40,7 @@ def test_track_cli_writes_everything(video_dir, tmp_path, cli):
         assert f.attrs["mm_per_px"] == MM_PER_PX and f.attrs["mm_per_px_std"] == 0.0
         assert int(np.sum(f["quality"][()] == 2)) == lost
         assert np.isnan(f["x_mm"][()][~truth.visible]).all()
-    from analysis.track_output import load_track_h5
+    from labkit.analysis.tracking.output import load_track_h5
     back = load_track_h5(out)
     assert back.lost_frames == lost and back.mm_per_px == MM_PER_PX
     lines = (tmp_path / "track.csv").read_text().splitlines()

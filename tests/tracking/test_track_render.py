@@ -5,8 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from labkit.lab.render import (ROBOT_REFLECTANCE, TEFLON_LEVEL, render_frames, robot_polygons_mm,
-                               write_video)
+from labkit.lab.render import ROBOT_REFLECTANCE, TEFLON_LEVEL, render_frames, robot_polygons_mm, write_video
 
 
 def _polygon_area_mm2() -> float:

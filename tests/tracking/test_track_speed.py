@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.signal import savgol_filter
 
-from analysis.speed import block_bootstrap_means, local_poly_fit, speed_analysis
+from labkit.analysis.tracking.speed import block_bootstrap_means, local_poly_fit, speed_analysis
 from labkit.errors import InputError
 
 

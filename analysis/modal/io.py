@@ -1,0 +1,223 @@
+"""Run files in, modal-fit files out: what ``labkit fit`` reads and writes.
+
+Reads in-chip run files (``kind = "run_inchip"``: ``/locations/<loc>/freq_hz``,
+``frf``, ``quality``) and shaker run files (``kind = "run_shaker"``:
+``/points`` rows with ``status == "ok"``, ``freq_hz``, ``transmissibility``,
+``quality``; root attribute ``robot_spot``), layout in
+:mod:`labkit.experiments.runfile`.
+
+Writes ``*.fit.h5`` (``kind = "modal_fit"``)::
+
+    /                      attrs: runs_json, assignment_json, summary_json
+    /groups/<group>/       group = "inchip" (tethered robot) | "shaker" (released robot)
+        attrs: method, frf_kind, band_hz, quality, warnings_json, locations_json
+        locations/<loc>/   freq_hz (Hz), frf (measured), model (fitted, same lines), quality (1)
+        modes/             freq_hz, freq_hz_std (Hz), damping_ratio, damping_ratio_std (1),
+                           amplitude (modes x locations, complex residue), amplitude_std,
+                           peak (modes x locations: |R| / (zeta wn)), dominant_location (label)
+        stabilisation/     order (1), freq_hz (Hz), damping_ratio (1), status (label codes
+                           0 new, 1 stable frequency, 2 stable frequency and damping), chosen_hz (Hz)
+        covariance         parameter covariance of the refinement (mixed units)
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labkit.errors import InputError
+
+__all__ = ["RunChannels", "read_run", "read_frf", "write_fit_h5", "write_uff"]
+
+FRF_UNITS = {"inchip": "(mm/s)/V", "shaker": "1"}
+
+
+@dataclass
+class RunChannels:
+    """The FRF channels of one run file."""
+
+    path: str
+    kind: str                       # "run_inchip" | "run_shaker"
+    group: str                      # "inchip" | "shaker"
+    status: str
+    names: list[str] = field(default_factory=list)
+    freq_hz: list[np.ndarray] = field(default_factory=list)
+    frf: list[np.ndarray] = field(default_factory=list)
+    quality: list[np.ndarray] = field(default_factory=list)
+    dropped: int = 0
+    warnings: list[str] = field(default_factory=list)
+    frf_kind: str = ""              # mobility | transmissibility | receptance | accelerance | scattering
+    units: str = ""                 # of the FRF, for figures and the fit file
+
+    def __post_init__(self) -> None:
+        if not self.frf_kind:
+            self.frf_kind = {"inchip": "mobility", "shaker": "transmissibility"}.get(self.group, "mobility")
+        if not self.units:
+            self.units = FRF_UNITS.get(self.group, "")
+
+
+def _clean(path: str, key: str, f: np.ndarray, h: np.ndarray, q: np.ndarray, min_quality: float):
+    if not (f.shape == h.shape == q.shape):
+        raise InputError(f"freq_hz, frf and quality have lengths {f.size}, {h.size}, {q.size}",
+                         file=path, key=key, expected="equal lengths")
+    ok = np.isfinite(f) & np.isfinite(h) & (f > 0) & (np.nan_to_num(q, nan=0.0) >= min_quality)
+    return f[ok], h[ok], q[ok], int(np.sum(~ok))
+
+
+def read_run(path: str | Path, *, min_quality: float = 0.0) -> RunChannels:
+    """The FRF channels of an in-chip or shaker run file (bad or low-quality lines dropped).
+
+    Reads through :func:`labkit.files.runs.read_run_file`, the one run-file reader
+    (complete points only).
+    """
+    from labkit.files.runs import InchipRun, read_run_file
+
+    path = str(path)
+    run = read_run_file(path)
+    status = run.status
+    if isinstance(run, InchipRun):
+        out = RunChannels(path, run.kind, "inchip", status)
+        if not run.locations:
+            raise InputError("no /locations group with data", file=path, key="locations",
+                             expected="an in-chip run with at least one location")
+        for loc, lg in run.locations.items():
+            if "freq_hz" not in lg.columns or "frf" not in lg.columns:
+                name = "freq_hz" if "freq_hz" not in lg.columns else "frf"
+                raise InputError("missing dataset", file=path, key=f"locations/{loc}/{name}")
+            fr, h, q, bad = _clean(path, f"locations/{loc}", lg.freq_hz.astype(float), lg.frf.astype(complex),
+                                   lg.quality.astype(float), min_quality)
+            out.dropped += bad
+            if fr.size == 0:
+                out.warnings.append(f"{path}: location {loc} has no usable lines")
+                continue
+            out.names.append(loc)
+            out.freq_hz.append(fr)
+            out.frf.append(h)
+            out.quality.append(q)
+    else:
+        out = RunChannels(path, run.kind, "shaker", status)
+        pts = run.points
+        if "transmissibility" not in pts:
+            raise InputError("missing dataset", file=path, key="points/transmissibility",
+                             expected="a shaker run file")
+        n = run.complete_points
+        fr = np.asarray(pts["freq_hz"], dtype=float)
+        h = np.asarray(pts["transmissibility"], dtype=complex)
+        q = np.asarray(pts["quality"], dtype=float) if "quality" in pts else np.ones(n)
+        sel = run.ok
+        fr, h, q, bad = _clean(path, "points", fr[sel], h[sel], q[sel], min_quality)
+        out.dropped += bad + int(np.sum(~sel))
+        if fr.size:
+            out.names.append(run.robot_spot if run.robot_spot != "?" else "robot")
+            out.freq_hz.append(fr)
+            out.frf.append(h)
+            out.quality.append(q)
+    if not out.names:
+        raise InputError("no usable FRF lines (all NaN, interlocked or below --min-quality)", file=path)
+    if not status.startswith("complete"):
+        out.warnings.append(f"{path}: run status is {status!r}; fitting the points it holds")
+    return out
+
+
+def read_frf(path: str | Path, *, min_quality: float = 0.0, kind: str | None = None,
+             columns: str | None = None) -> RunChannels:
+    """The FRF channels of any file ``labkit fit`` reads, chosen by suffix.
+
+    ``.h5`` run files (:func:`read_run`), UFF 58 (``.uff``, ``.unv``), CSV
+    (``.csv``, ``.txt``, ``.tsv``) and Touchstone (``.s1p``, ``.s2p``, ...);
+    see :mod:`labkit.analysis.modal.formats`.  ``kind`` and ``columns``
+    apply to the files other than run files.
+    """
+    from labkit.analysis.modal import formats
+
+    path = str(path)
+    if not Path(path).is_file():
+        raise InputError("no such file", file=path)
+    which = formats.suffix_kind(path)
+    if which == "uff":
+        return formats.read_uff(path, kind=kind)
+    if which == "csv":
+        return formats.read_csv(path, columns=columns, kind=kind)
+    if which == "touchstone":
+        return formats.read_touchstone(path, columns=columns, kind=kind)
+    return read_run(path, min_quality=min_quality)
+
+
+def write_uff(path: str | Path, fits: dict[str, Any]) -> Path:
+    """The fitted modes as UFF 55 and the fitted FRFs as UFF 58.
+
+    See :func:`labkit.analysis.modal.formats.write_uff`.
+    """
+    from labkit.analysis.modal.formats import write_uff as _write
+
+    return _write(path, fits)
+
+
+def write_fit_h5(path: str | Path, fits: dict[str, Any], runs: dict[str, list[str]],
+                 assignment: dict[str, Any], summary: dict[str, Any]) -> Path:
+    """Write the ``modal_fit`` file (layout in the module docstring)."""
+    import h5py
+
+    from labkit.h5io import label_dimensions, put, put_json, stamp
+
+    path = Path(path)
+    with h5py.File(path, "w") as f:
+        stamp(f, "modal_fit")
+        put_json(f, "runs_json", runs)
+        put_json(f, "assignment_json", assignment)
+        put_json(f, "summary_json", summary)
+        for group, fit in fits.items():
+            g = f.create_group(f"groups/{group}")
+            g.attrs["method"] = fit.method
+            g.attrs["frf_kind"] = fit.kind
+            g.attrs["band_hz"] = np.asarray(fit.band_hz, dtype=float)
+            g.attrs["quality"] = float(fit.quality)
+            put_json(g, "warnings_json", fit.warnings)
+            put_json(g, "locations_json", fit.locations)
+            units = FRF_UNITS.get(group, "1")
+            for k, loc in enumerate(fit.locations):
+                lg = g.create_group(f"locations/{loc.replace('/', '_')}")
+                lg.attrs["name"] = loc
+                put(lg, "freq_hz", fit.freq_hz[k], "Hz")
+                put(lg, "frf", fit.frf[k], units)
+                put(lg, "model", fit.model(fit.freq_hz[k], k), units)
+            mg = g.create_group("modes")
+            md = fit.modes
+            put(mg, "freq_hz", [m.freq_hz for m in md], "Hz")
+            put(mg, "freq_hz_std", [m.freq_hz_std for m in md], "Hz")
+            put(mg, "damping_ratio", [m.damping_ratio for m in md], "1")
+            put(mg, "damping_ratio_std", [m.damping_ratio_std for m in md], "1")
+            shape = (len(md), len(fit.locations))
+            put(mg, "amplitude", np.array([m.amplitude for m in md]).reshape(shape), f"{units} * rad/s")
+            put(mg, "amplitude_std", np.array([m.amplitude_std for m in md]).reshape(shape), f"{units} * rad/s")
+            put(mg, "peak", np.array([m.peak for m in md]).reshape(shape), units)
+            mg.create_dataset("dominant_location", data=np.array([m.dominant_location for m in md], dtype=object),
+                              dtype=h5py.string_dtype()).attrs["units"] = "label"
+            if fit.stabilisation is not None:
+                s = fit.stabilisation
+                sg = g.create_group("stabilisation")
+                put(sg, "order", s.order, "1")
+                put(sg, "freq_hz", s.freq_hz, "Hz")
+                put(sg, "damping_ratio", s.damping_ratio, "1")
+                put(sg, "status", s.status, "label", codes="0 new, 1 stable frequency, 2 stable frequency+damping")
+                put(sg, "chosen_hz", s.chosen_hz, "Hz")
+            if fit.covariance is not None:
+                put(g, "covariance", fit.covariance, "mixed",
+                    order="f_1, zeta_1, ..., then per location Re R_i, Im R_i ..., Re c_q, Im c_q")
+        label_dimensions(f)         # freq_hz as the coordinate (xarray, HDFView)
+    return path
+
+
+def runs_json(runs: list[RunChannels]) -> dict[str, list[str]]:
+    """``{group: [paths]}`` for the provenance and the fit file."""
+    out: dict[str, list[str]] = {}
+    for r in runs:
+        out.setdefault(r.group, []).append(r.path)
+    return out
+
+
+def dumps(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True)

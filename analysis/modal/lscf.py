@@ -1,0 +1,246 @@
+"""Poles by the least-squares complex-frequency (LSCF) method, and the stabilisation diagram.
+
+Common-denominator model for every channel ``o`` (location):
+``H_o(w) = N_o(z) / D(z)``, ``z = exp(j w dt)``, ``dt = 1 / (2 f_max)``, with real
+polynomial coefficients (so the model respects ``H(-w) = conj H(w)``).  The
+linearised equations ``N_o(z_k) - H_o(w_k) D(z_k) = 0`` are reduced to the
+denominator alone (Guillaume, Verboven, Vanlanduit et al., "A poly-reference
+implementation of the least-squares complex frequency-domain estimator",
+IMAC 2003; the single-reference case here).  The normal-equation blocks for
+the highest order hold those of every lower order as leading sub-matrices, so
+the whole stabilisation diagram costs one pass over the data.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Stabilisation", "lscf_poles", "stabilisation", "pole_to_modal", "modal_to_pole"]
+
+#: A pole is "stable" at an order when one of the previous order lies within these.
+FREQ_TOL = 0.01
+DAMP_TOL = 0.05
+
+
+def pole_to_modal(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(freq_hz, damping_ratio)`` of poles ``lam = -zeta wn + j wn sqrt(1 - zeta^2)``."""
+    lam = np.asarray(lam, dtype=complex)
+    wn = np.abs(lam)
+    return wn / (2 * np.pi), -lam.real / np.where(wn > 0, wn, 1.0)
+
+
+def modal_to_pole(freq_hz: np.ndarray, damping_ratio: np.ndarray) -> np.ndarray:
+    """The upper-half-plane pole of a mode (inverse of :func:`pole_to_modal`)."""
+    wn = 2 * np.pi * np.asarray(freq_hz, dtype=float)
+    z = np.asarray(damping_ratio, dtype=float)
+    return wn * (-z + 1j * np.sqrt(np.clip(1 - z ** 2, 0.0, None)))
+
+
+@dataclass
+class Stabilisation:
+    """A stabilisation diagram, as data.
+
+    Attributes (one entry per pole, poles of all orders flattened)
+    ----------
+    order:
+        Model (denominator polynomial) order the pole came from.
+    freq_hz, damping_ratio:
+        The pole's modal values.
+    status:
+        0 new, 1 frequency stable (within ``FREQ_TOL`` of a pole of the previous
+        order), 2 frequency and damping stable (also within ``DAMP_TOL``).
+    orders:
+        The orders computed.
+    chosen_hz:
+        Frequencies of the poles chosen from the diagram (filled by the fit).
+    """
+
+    order: np.ndarray
+    freq_hz: np.ndarray
+    damping_ratio: np.ndarray
+    status: np.ndarray
+    orders: np.ndarray
+    chosen_hz: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    band_hz: tuple[float, float] = (0.0, np.inf)
+    poles_by_order: dict = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict:
+        return {"orders": self.orders.tolist(), "n_poles": int(self.order.size),
+                "n_stable": int(np.sum(self.status == 2)), "chosen_hz": self.chosen_hz.tolist()}
+
+
+def _mapping(channels) -> tuple[float, float]:
+    """Zoom: centre ``wc`` and sampling step ``dt`` mapping the data's band onto an arc of the unit circle.
+
+    ``z = exp(j (w - wc) dt)`` sends ``[w_lo, w_hi]`` to angles ``[-ZOOM pi, ZOOM pi]``
+    whatever the unit, the band's width or its offset from zero: a +-1 %
+    band around 1 GHz is conditioned exactly like a decade around 1 kHz.
+    The model's coefficients are then complex (the band no longer contains
+    its own mirror image at negative frequencies).
+    """
+    w_lo = min(float(np.min(c[0])) for c in channels)
+    w_hi = max(float(np.max(c[0])) for c in channels)
+    wc = 0.5 * (w_lo + w_hi)
+    hw = max(0.5 * (w_hi - w_lo), 1e-300)
+    return wc, ZOOM * np.pi / hw
+
+
+#: Fraction of the half circle the band is mapped onto (the rest keeps its two ends apart).
+ZOOM = 0.8
+
+
+def _blocks(channels: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], n_max: int, wc: float, dt: float):
+    """Reduced normal matrix pieces R_o, S_o, T_o (complex) for order ``n_max``."""
+    out = []
+    powers = np.arange(n_max + 1)
+    for w, H, wt in channels:
+        E = np.exp(1j * np.outer((w - wc) * dt, powers))              # (N, n+1): z_k^i
+        X = E * wt[:, None]
+        Y = E * -(H * wt)[:, None]
+        XH = X.conj().T
+        out.append((XH @ X, XH @ Y, Y.conj().T @ Y))
+    return out
+
+
+def _poles_for_order(blocks, n: int, wc: float, dt: float) -> np.ndarray:
+    m = n + 1
+    M = np.zeros((m, m), dtype=complex)
+    for R, S, T in blocks:
+        Rn, Sn, Tn = R[:m, :m], S[:m, :m], T[:m, :m]
+        try:
+            M += Tn - Sn.conj().T @ np.linalg.solve(Rn, Sn)
+        except np.linalg.LinAlgError:
+            M += Tn - Sn.conj().T @ np.linalg.lstsq(Rn, Sn, rcond=None)[0]
+    # Constraint: highest coefficient = 1.
+    alpha = np.ones(m, dtype=complex)
+    alpha[:n] = np.linalg.lstsq(M[:n, :n], -M[:n, n], rcond=None)[0]
+    roots = np.roots(alpha[::-1]).astype(complex)
+    roots = roots[np.abs(roots) > 0]
+    return np.log(roots) / dt + 1j * wc
+
+
+def _physical(lam: np.ndarray, band_w: tuple[float, float], max_damping: float) -> np.ndarray:
+    f, z = pole_to_modal(lam)
+    w = 2 * np.pi * f
+    keep = (lam.imag > 0) & (lam.real < 0) & (w >= band_w[0]) & (w <= band_w[1]) & (z < max_damping)
+    return lam[keep]
+
+
+def lscf_poles(channels, n: int, band_hz: tuple[float, float], *, max_damping: float = 0.9) -> np.ndarray:
+    """Physical poles (upper half plane, stable, in band) of an order-``n`` LSCF model.
+
+    ``channels`` is a sequence of ``(omega_rad_s, frf, weight)`` triples.
+    """
+    wc, dt = _mapping(channels)
+    blocks = _blocks(channels, n, wc, dt)
+    return _physical(_poles_for_order(blocks, n, wc, dt), (2 * np.pi * band_hz[0], 2 * np.pi * band_hz[1]),
+                     max_damping)
+
+
+def stabilisation(channels, n_max: int, band_hz: tuple[float, float], *, n_min: int = 1, step: int = 1,
+                  max_damping: float = 0.9, freq_tol: float = FREQ_TOL, damp_tol: float = DAMP_TOL
+                  ) -> Stabilisation:
+    """Poles for every order ``n_min, n_min + step, ..., n_max`` and their stability status.
+
+    Frequency stability is judged relative to ``min(f, band width)``, so a
+    narrow (zoomed) band is held to the same standard as a wide one.
+    """
+    wc, dt = _mapping(channels)
+    blocks = _blocks(channels, n_max, wc, dt)
+    band_w = (2 * np.pi * band_hz[0], 2 * np.pi * band_hz[1])
+    width_hz = band_hz[1] - band_hz[0]
+    orders = np.arange(n_min, n_max + 1, step)
+    rec_o, rec_f, rec_z, rec_s = [], [], [], []
+    by_order: dict[int, np.ndarray] = {}
+    prev_f = prev_z = None
+    for n in orders:
+        lam = _physical(_poles_for_order(blocks, int(n), wc, dt), band_w, max_damping)
+        f, z = pole_to_modal(lam)
+        order_ix = np.argsort(f)
+        lam, f, z = lam[order_ix], f[order_ix], z[order_ix]
+        by_order[int(n)] = lam
+        status = np.zeros(f.size, dtype=np.int8)
+        if prev_f is not None and prev_f.size and f.size:
+            k = np.argmin(np.abs(f[:, None] - prev_f[None, :]), axis=1)
+            df = np.abs(f - prev_f[k]) / np.minimum(f, width_hz)
+            dz = np.abs(z - prev_z[k]) / np.maximum(z, 1e-12)
+            status[df < freq_tol] = 1
+            status[(df < freq_tol) & (dz < damp_tol)] = 2
+        rec_o.append(np.full(f.size, n))
+        rec_f.append(f)
+        rec_z.append(z)
+        rec_s.append(status)
+        prev_f, prev_z = f, z
+    def cat(xs: list[np.ndarray], dt_: type) -> np.ndarray:
+        return np.concatenate(xs).astype(dt_) if xs else np.zeros(0, dt_)
+
+    return Stabilisation(cat(rec_o, int), cat(rec_f, float), cat(rec_z, float), cat(rec_s, np.int8),
+                         orders, band_hz=(float(band_hz[0]), float(band_hz[1])), poles_by_order=by_order)
+
+
+def choose_poles(stab: Stabilisation, n_modes: int | None, *, band_hz: tuple[float, float] | None = None,
+                 min_fraction: float = 0.3, cluster_tol: float = 0.005) -> np.ndarray:
+    """Pick physical poles from a stabilisation diagram.
+
+    Poles that are frequency-stable are clustered in frequency (relative
+    tolerance ``cluster_tol``, at most one pole per order in a cluster); a
+    cluster's weight is the number of orders it spans.  With ``n_modes`` the
+    ``n_modes`` heaviest clusters are taken, otherwise every cluster seen in at
+    least ``min_fraction`` of the orders (and at least 3).  Returns the clusters'
+    median poles, sorted by frequency.
+    """
+    keep = stab.status >= 1
+    f, z, o = stab.freq_hz[keep], stab.damping_ratio[keep], stab.order[keep]
+    lo, hi = band_hz if band_hz is not None else stab.band_hz
+    width = hi - lo if np.isfinite(hi - lo) else np.inf
+    ix = np.argsort(f)
+    f, z, o = f[ix], z[ix], o[ix]
+    clusters: list[list[int]] = []
+    for i in range(f.size):
+        if clusters:
+            c = clusters[-1]
+            fc = np.median(f[c])
+            if abs(f[i] - fc) / min(fc, width) < max(cluster_tol, 0.25 * np.median(z[c]) * fc / min(fc, width)) \
+                    and o[i] not in o[c]:
+                c.append(i)
+                continue
+        clusters.append([i])
+    # Poles within 1 % (of the frequency or of the band's width) of a band edge, or whose half-power
+    # band reaches past it, stand in for modes outside the band.
+    def inside(c: list[int]) -> bool:
+        fc, zc = float(np.median(f[c])), float(np.median(z[c]))
+        margin = max(0.01 * min(fc, width), zc * fc) if np.isfinite(width) else 0.0
+        return lo + margin < fc < hi - margin
+
+    # A physical pole settles as the order grows; one that keeps drifting (typically towards a band
+    # edge, standing in for what lies outside) does not: judge the spread over the higher half of orders.
+    def settled(c: list[int]) -> bool:
+        oc = o[c]
+        top = [i for i, oo in zip(c, oc) if oo >= np.median(oc)]
+        fc, zc = float(np.median(f[c])), float(np.median(z[c]))
+        return float(np.ptp(f[top])) <= max(0.001 * min(fc, width), 0.5 * zc * fc)
+
+    clusters = [c for c in clusters if inside(c) and settled(c)]
+    n_orders = max(len(stab.orders), 1)
+    counts = np.array([len(c) for c in clusters])
+    cand = [(counts[k], k) for k in range(len(clusters))]
+    if n_modes is None:
+        thresh = max(3, int(np.ceil(min_fraction * n_orders)))
+        picked = [k for cnt, k in cand if cnt >= thresh]
+    else:
+        picked = [k for _, k in sorted(cand, key=lambda t: -t[0])[:n_modes]]
+    fz = [(float(np.median(f[clusters[k]])), float(np.median(z[clusters[k]]))) for k in picked]
+    fz = _merge(sorted(fz))
+    return modal_to_pole(np.array([a for a, _ in fz]), np.array([b for _, b in fz]))
+
+
+def _merge(fz: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Merge picks closer than a quarter of their damping (a heavily damped mode that wandered)."""
+    out: list[tuple[float, float]] = []
+    for f, z in fz:
+        if out and abs(f - out[-1][0]) / f < min(0.03, 0.5 * min(z, out[-1][1])):
+            continue
+        out.append((f, z))
+    return out

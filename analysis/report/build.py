@@ -1,0 +1,770 @@
+"""Build the model-against-measurement report: one self-contained HTML page (figures inline
+as SVG), each figure also as PNG (200 dpi) and SVG, ``agreement.json`` (every number, the
+tolerances and the headline) and ``figure_data.json`` (what each figure shows).
+
+Sections (paper figure numbers in brackets): FRFs with the fitted model [5/6], stabilisation
+diagram, speed against shaker frequency [8], knee motion at every drive with the contact
+timeline [10/11], leg-motion patterns, tracked paths with a video frame, and the agreement
+table. Every section ends in a verdict against :class:`~labkit.analysis.compare.Tolerances`
+and carries its provenance once (input files with SHA-256, software, command). A section
+whose inputs were not given says so; an input that cannot be read raises
+:class:`labkit.errors.InputError` naming it.
+"""
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labkit.analysis import compare
+from labkit.analysis.compare import Tolerances, verdict
+from labkit.analysis.report import figures as figs
+from labkit.analysis.report import html as rh
+from labkit.analysis.report import inputs as ri
+from labkit.analysis.report.numbers import format_uncertain, format_value
+from labkit.errors import InputError
+
+
+@dataclass
+class Section:
+    """One section of the page, as data (rendered by :func:`labkit.analysis.report.html.render`)."""
+
+    id: str
+    title: str
+    status: str = "ok"                  # "ok" or "missing"
+    message: str = ""
+    figures: list[tuple[figs.FigureFiles, str, str]] = field(default_factory=list)   # files, caption, key
+    html: list[str] = field(default_factory=list)
+    rows: list[dict[str, Any]] = field(default_factory=list)                        # judged comparisons
+    files: list[str] = field(default_factory=list)                                  # inputs, for provenance
+    notes: dict[str, Any] = field(default_factory=dict)
+    verdict: dict[str, Any] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+    summarises: list[dict[str, Any]] | None = None    # the agreement section judges other sections' rows
+
+    def figure(self, files: figs.FigureFiles, caption: str) -> None:
+        self.figures.append((files, caption, files.png.stem))
+
+
+def _missing(sid: str, title: str, message: str) -> Section:
+    return Section(sid, title, status="missing", message=message)
+
+
+def _row(comparison: str, metric: str, value: float | None, units: str, tolerance: str, result: str, *,
+         band: str = "", n: int = 1, text: str | None = None) -> dict[str, Any]:
+    """One judged comparison: the metric's value, the tolerance it is judged against, the verdict."""
+    return {"comparison": comparison, "metric": metric, "value": value, "units": units,
+            "value_text": text if text is not None else format_value(value),
+            "tolerance": tolerance, "verdict": result, "band_statistic": band, "n": n}
+
+
+def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Sequence[str] = (),
+                 fit: str | None = None, sims: Sequence[str] = (), params: str | None = None,
+                 knee_drives: Sequence[tuple[float, float]] | None = None, simulate_knee: bool = True,
+                 knee_duration_s: float = 0.3, leg: int = 0,
+                 tolerances: Tolerances | Mapping[str, float] | None = None, command: str | None = None,
+                 scheduler: str | None = None, workers: int | None = None,
+                 title: str = "labkit: model against measurement", quiet: bool = True) -> dict[str, Any]:
+    """Read the inputs, compare, draw, and write ``report.html``, the figures, ``agreement.json``
+    and ``figure_data.json`` into ``out_dir``.
+
+    Parameters
+    ----------
+    runs:
+        Run files (``run_inchip`` and/or ``run_shaker``).
+    tracks:
+        Track files (``kind = "track"``).
+    fit:
+        A ``modal_fit`` file (``robot.fit.h5``).
+    sims:
+        ``sim_sweep`` files (speed against ``freq_hz``) and/or ``sim_result`` files
+        (knee motion at one drive).
+    params:
+        Robot parameter file for simulating the knee at the drives no ``sim_result`` covers
+        (default: the TOML beside the fit, else the first sweep's parameters, else the defaults).
+    knee_drives:
+        ``(freq_hz, amp_um)`` pairs shown in the knee section in addition to every drive
+        with a measured knee record or a ``sim_result``.
+    simulate_knee:
+        Simulate drives no ``sim_result`` covers (through :func:`labkit.executor.map_tasks`).
+    leg:
+        Which leg's knee (0..5) the simulated record shows.
+    tolerances:
+        What each comparison is judged against (:class:`~labkit.analysis.compare.Tolerances`,
+        or a mapping of its field names to values; defaults documented there).
+    command:
+        The command line that made the report, for the provenance (default: this call).
+    scheduler, workers:
+        Passed to :func:`labkit.executor.map_tasks` for the knee simulations.
+
+    Returns
+    -------
+    dict
+        Paths written, per-section status and verdict, the headline numbers and every
+        judged comparison.
+    """
+    from labkit import __version__
+    from labkit.h5io import utc_now
+    from labkit.outputs import atomic_output
+
+    tol = tolerances if isinstance(tolerances, Tolerances) else Tolerances.from_mapping(tolerances)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    software = f"labkit {__version__}"
+    if command is None:
+        command = (f"labkit.analysis.report.build_report({str(out)!r}, runs={list(map(str, runs))}, "
+                   f"tracks={list(map(str, tracks))}, fit={fit!r}, sims={list(map(str, sims))}, params={params!r})")
+    # ---- read everything first: a bad file fails before any figure is drawn
+    inchip, shaker = [], []
+    for path in runs:
+        kind = ri.file_kind(path)
+        if kind == "run_inchip":
+            inchip.append(ri.load_inchip_run(path))
+        elif kind == "run_shaker":
+            shaker.append(ri.load_shaker_run(path))
+        else:
+            raise InputError(f"this file holds {kind!r}", file=path, key="kind",
+                             expected="a 'run_inchip' or 'run_shaker' run file")
+    track_data = [ri.load_track(p) for p in tracks]
+    fit_data = ri.load_fit(fit) if fit else None
+    sim_data = [ri.load_sim(p) for p in sims]
+    sweeps = [s for s in sim_data if s["kind"] == "sim_sweep"]
+    results = [s for s in sim_data if s["kind"] == "sim_result"]
+
+    details: dict[str, Any] = {}
+    pattern_pairs: list[dict[str, Any]] = []
+    sections = [_frf_section(out, inchip, fit_data, tol),
+                _stab_section(out, fit_data),
+                _speed_section(out, shaker, track_data, sweeps, tol, details, pattern_pairs),
+                _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simulate_knee,
+                              knee_duration_s, leg, scheduler, workers, quiet, tol, details, pattern_pairs),
+                _pattern_section(pattern_pairs, tol, details),
+                _tracks_section(out, track_data)]
+    rows = [dict(r, section=s.id) for s in sections for r in s.rows]
+    sections.append(_agreement_section(rows, tol, sections))
+    for s in sections:
+        s.verdict = _section_verdict(s)
+        if s.status == "ok":
+            s.provenance = _provenance(s.files, software, command, s.notes)
+
+    created = utc_now()
+    headline = _headline(fit_data, details, sections)
+    meta = {"created_utc": created, "software": software, "command": command,
+            "inputs": {"runs": list(map(str, runs)), "tracks": list(map(str, tracks)), "fit": fit,
+                       "sims": list(map(str, sims)), "params": params},
+            "tolerances": tol.as_dict()}
+    html_path = out / "report.html"
+    with atomic_output(html_path) as tmp:       # an old report survives a failed write
+        tmp.write_text(rh.render(title, sections, meta), encoding="utf-8")
+    agreement_path = out / "agreement.json"
+    payload = {"meta": meta, "headline": headline, "agreement": rows,
+               "sections": {s.id: {"status": s.status, "verdict": s.verdict, "provenance": s.provenance}
+                            for s in sections},
+               "details": details}
+    with atomic_output(agreement_path) as tmp:
+        tmp.write_text(json.dumps(_jsonable(payload), indent=1), encoding="utf-8")
+    figure_data_path = out / "figure_data.json"
+    with atomic_output(figure_data_path) as tmp:
+        tmp.write_text(json.dumps(_jsonable({key: {"png": str(f.png), "svg": str(f.svg), "caption": cap, **f.data}
+                                             for s in sections for f, cap, key in s.figures}), indent=1),
+                       encoding="utf-8")
+    mc = details.get("speed_mc_mean_rms_error_mm_s")
+    return {"html": str(html_path), "figures": [str(f.png) for s in sections for f, _, _ in s.figures],
+            "svgs": [str(f.svg) for s in sections for f, _, _ in s.figures],
+            "agreement_json": str(agreement_path), "figure_data_json": str(figure_data_path),
+            "sections": {s.id: s.status for s in sections},
+            "verdicts": {s.id: s.verdict["result"] for s in sections},
+            "missing": {s.id: s.message for s in sections if s.status != "ok"},
+            "notes": {s.id: s.message for s in sections if s.status == "ok" and s.message},
+            "headline": headline,
+            "speed_rms_error_mm_s": mc,
+            "speed_rms_error_nominal_mm_s": headline.get("speed_rms_error_nominal_mm_s", {}).get("value"),
+            "agreement": [{k: r[k] for k in ("section", "comparison", "metric", "value", "value_text", "units",
+                                             "tolerance", "verdict", "band_statistic", "n")} for r in rows]}
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if np.isfinite(v) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, Path):
+        return str(x)
+    return x
+
+
+def _provenance(files: list[str], software: str, command: str, notes: dict[str, Any]) -> dict[str, Any]:
+    from labkit.analysis.report.provenance import section_provenance
+
+    return section_provenance(files, software=software, command=command, notes=notes)
+
+
+def _section_verdict(s: Section) -> dict[str, Any]:
+    if s.status != "ok":
+        return {"result": "missing", "text": f"Verdict: not judged (missing input). {s.message}"}
+    judged = [r for r in (s.rows if s.summarises is None else s.summarises) if r["verdict"] in ("pass", "fail")]
+    if not judged:
+        why = s.notes.get("verdict_note", "nothing in this section is judged against a tolerance; shown for "
+                                          "inspection")
+        return {"result": "not judged", "text": f"Verdict: not judged ({why})."}
+    failed = [r for r in judged if r["verdict"] == "fail"]
+    if failed:
+        names = "; ".join(f"{r['comparison']}: {r['metric']} {r['value_text']} (tolerance {r['tolerance']})"
+                          for r in failed[:4])
+        more = f"; and {len(failed) - 4} more" if len(failed) > 4 else ""
+        return {"result": "fail", "passed": len(judged) - len(failed), "judged": len(judged),
+                "text": f"Verdict: FAIL: {len(failed)} of {len(judged)} comparisons outside tolerance ({names}{more})."}
+    return {"result": "pass", "passed": len(judged), "judged": len(judged),
+            "text": f"Verdict: PASS: {'the' if len(judged) == 1 else f'all {len(judged)}'} comparison"
+                    f"{'' if len(judged) == 1 else 's'} within tolerance."}
+
+
+# --------------------------------------------------------------------------- FRF and stabilisation
+
+GROUP_TITLES = {"inchip": "tethered robot, in-chip sweep: FRF (paper Fig. 5)",
+                "shaker": "released robot on the shaker: transmissibility (paper Fig. 6)"}
+
+
+def _minima(f: np.ndarray, mag: np.ndarray) -> list[list[float]]:
+    """Interior local minima of a curve: ``[[freq_hz, value], ...]``."""
+    i = np.flatnonzero((mag[1:-1] < mag[:-2]) & (mag[1:-1] <= mag[2:])) + 1
+    return [[float(f[k]), float(mag[k])] for k in i]
+
+
+def _frf_section(out: Path, inchip: list[dict], fit: dict | None, tol: Tolerances) -> Section:
+    from labkit.analysis.report.model import rebuild_model
+
+    title = "Frequency responses with the fitted model (paper Fig. 5/6)"
+    groups = {k: g for k, g in (fit["groups"].items() if fit else []) if g["locations"]}
+    if not groups and not inchip:
+        return _missing("frf", title, "No in-chip run file (--runs RUN.h5) or fit (--fit robot.fit.h5) given.")
+    sec = Section("frf", title)
+    if not groups:
+        sec.message = "No fit given (--fit robot.fit.h5): measured FRFs only, no model curve."
+        sec.notes["verdict_note"] = "no fit to judge"
+        for k, run in enumerate(inchip):
+            sec.files.append(run["file"])
+            ff = figs.frf_figure(run["locations"], [], out / f"fig_frf_run{k + 1}", units="(mm/s)/V",
+                                 title=GROUP_TITLES["inchip"])
+            sec.figure(ff, f"Measured FRF per location (markers) from {run['file']}.")
+        return sec
+    assert fit is not None
+    sec.files.append(fit["file"])
+    sec.files += [r["file"] for r in inchip]
+    for name, g in groups.items():
+        modes = g["modes"]
+        fine: dict[str, Any] = {}
+        lines_only = []
+        for loc, d in g["locations"].items():
+            fm = (rebuild_model(d["freq_hz"], d["model_frf"], [m["freq_hz"] for m in modes],
+                                [m.get("damping_ratio", np.nan) for m in modes])
+                  if d.get("model_frf") is not None and modes else None)
+            if fm is None:
+                lines_only.append(loc)
+                continue
+            fine[loc] = {"freq_hz": fm.freq_hz, "frf": fm.frf}
+            sec.notes[f"model {name}/{loc}"] = (f"pole-residue model rebuilt on {fm.freq_hz.size} log-spaced lines "
+                                                f"(residual powers {list(fm.residual_powers)}, reproduces the stored "
+                                                f"model to {fm.rebuild_error:.1e})")
+        ff = figs.frf_figure(g["locations"], modes, out / f"fig_frf_{name}", fine=fine, units=g["units"],
+                             title=GROUP_TITLES.get(name, name))
+        for loc, d in g["locations"].items():
+            entry = ff.data["locations"][loc]
+            if loc in fine:
+                mag = np.abs(fine[loc]["frf"])
+                entry["fit_minima"] = _minima(fine[loc]["freq_hz"], mag)
+                entry["fit_maxima"] = [[a, -b] for a, b in _minima(fine[loc]["freq_hz"], -mag)]
+            if d.get("model_frf") is not None:
+                entry["lines_model_minima"] = _minima(np.asarray(d["freq_hz"]), np.abs(d["model_frf"]))
+        caption = (f"{GROUP_TITLES.get(name, name)}: measured lines (markers, one colour per location) and the "
+                   f"fitted model ({g['method']}) on a fine grid (lines); modes marked with frequency and damping "
+                   f"ratio, ± one standard uncertainty.")
+        if lines_only:
+            caption += f" Model at the measured lines only for {', '.join(lines_only)} (could not be rebuilt)."
+        sec.figure(ff, caption)
+        if modes:
+            sec.html.append(f"<h3>Modes ({rh.e(name)})</h3>")
+            sec.html.append(rh.table(["mode", "frequency", "damping ratio", "dominant location"],
+                                     [[i + 1, format_uncertain(m["freq_hz"], m.get("freq_hz_std"), "Hz"),
+                                       format_uncertain(m.get("damping_ratio"), m.get("damping_ratio_std")),
+                                       m.get("dominant_location", "")] for i, m in enumerate(modes)],
+                                     num_cols={0, 1, 2}))
+        q = g.get("quality")
+        sec.rows.append(_row(f"fit quality ({name})", "1 - NRMSE² (worst location)", q, "1",
+                             f"≥ {tol.fit_quality_min:g}", verdict(q, at_least=tol.fit_quality_min),
+                             n=len(g["locations"]), text=format_value(q, 6)))
+    return sec
+
+
+def _stab_section(out: Path, fit: dict | None) -> Section:
+    title = "Stabilisation diagram"
+    if fit is None:
+        return _missing("stabilisation", title, "No fit given (--fit robot.fit.h5).")
+    groups = {k: g for k, g in fit["groups"].items() if g.get("stabilisation")}
+    if not groups:
+        return _missing("stabilisation", title, f"{fit['file']} holds no stabilisation data.")
+    sec = Section("stabilisation", title, files=[fit["file"]])
+    sec.notes["verdict_note"] = "the diagram shows how the poles were chosen; the fit itself is judged above"
+    for name, g in groups.items():
+        ff = figs.stabilisation_figure(g["stabilisation"], out / f"fig_stabilisation_{name}", g["locations"],
+                                       title=f"stabilisation diagram: {name}")
+        sec.figure(ff, f"Poles by model order ({name}); the chosen poles marked (red), the measured |FRF| of "
+                       f"each location behind them (right axis).")
+    return sec
+
+
+# --------------------------------------------------------------------------- speed
+
+def describe_sweep(sw: Any) -> str:
+    """What a sweep covers, e.g. ``freq_hz 150-290 Hz (15 points), tray 25 um, 8 draws of 1 s``
+    (the base scenario's own ``freq_hz`` is not what a frequency sweep ran at)."""
+    from labkit.sim.sweep import units_of
+
+    v = np.asarray(sw.values, float)
+    unit = units_of(sw.quantity)
+    scen = {k: x for k, x in (sw.scenario or {}).items() if k not in (sw.quantity, "type")}
+    fixed = ", ".join(f"{k} {x:g}" if isinstance(x, (int, float)) else f"{k} {x}" for k, x in scen.items())
+    dur = (sw.meta or {}).get("duration_s")
+    return (f"{sw.quantity} {v.min():g}\u2013{v.max():g} {unit} ({v.size} points)"
+            + (f", {fixed}" if fixed else "")
+            + f", {sw.draws} draws" + (f" of {dur:g} s" if isinstance(dur, (int, float)) else ""))
+
+
+def _sim_curves(sweeps: list[dict], tol: Tolerances) -> list[dict[str, Any]]:
+    curves = []
+    for s in sweeps:
+        sw = s["sweep"]
+        if sw.quantity != "freq_hz":
+            continue
+        # measured speed is unsigned (the paper compares speed, not velocity: the robot turns),
+        # the simulator's is signed along +y: compare magnitudes, draw by draw
+        draws = np.abs(np.asarray(sw.speeds_mm_s, float))
+        order = np.argsort(sw.values)
+        p10, p90 = compare.percentile_band(draws, (tol.band_lo_pct, tol.band_hi_pct))
+        mean, lo, hi = compare.band_from_draws(draws, k=2.0)
+        curves.append({"file": s["file"], "label": Path(s["file"]).name, "freq_hz": np.asarray(sw.values)[order],
+                       "draws_mm_s": draws[order], "draws": int(sw.draws), "p10_mm_s": p10[order],
+                       "p90_mm_s": p90[order], "mean_mm_s": mean[order], "lo_mm_s": lo[order],
+                       "hi_mm_s": hi[order], "nominal_mm_s": draws[order, 0],
+                       "patterns": [sw.dominant_pattern(int(i)) for i in order],
+                       "describe": describe_sweep(sw), "sweep": sw})
+    return curves
+
+
+def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: list[dict], tol: Tolerances,
+                   details: dict[str, Any], pattern_pairs: list[dict[str, Any]]) -> Section:
+    title = "Speed against shaker frequency (paper Fig. 8)"
+    measured = ri.measured_speeds(shaker, tracks) if (shaker or tracks) else None
+    curves = _sim_curves(sweeps, tol)
+    have_meas = measured is not None and measured["freq_hz"].size > 0
+    if not have_meas and not curves:
+        return _missing("speed", title, "No measured speeds (--runs SHAKER_RUN.h5 / --tracks TRACK.h5) and no "
+                        "simulated frequency sweep (--sim SWEEP.h5) given.")
+    sec = Section("speed", title)
+    sec.files += [r["file"] for r in shaker] + [t["file"] for t in tracks] + [c["file"] for c in curves]
+    band = f"{tol.band_lo_pct:g}\u2013{tol.band_hi_pct:g} %"
+    ff = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed")
+    sec.figure(ff, f"Measured speed (markers, 95 % confidence interval) against the simulated nominal robot "
+                   f"(line) and the Monte Carlo {band} band over draws; below, the leg pattern (simulated: the "
+                   f"dominant one over draws and feet; measured: where a knee record or label gives it).")
+    for c in curves:
+        sec.notes[f"sweep {c['label']}"] = c["describe"]
+    msgs = []
+    if not have_meas:
+        msgs.append("No measured speeds given: simulation only.")
+        sec.notes["verdict_note"] = "no measured speed to judge the simulation against"
+    if measured is not None and measured["unmatched"]:
+        msgs.append("Tracks with no known shaker frequency or no speed (left out): "
+                    f"{', '.join(measured['unmatched'])}.")
+    other = [f"{s['file']} (over {s['sweep'].quantity})" for s in sweeps if s["sweep"].quantity != "freq_hz"]
+    if other:
+        msgs.append(f"Sweeps not over freq_hz are not drawn here: {', '.join(other)}.")
+    if not curves:
+        msgs.append("No simulated frequency sweep (--sim SWEEP.h5): no model curve.")
+        sec.notes["verdict_note"] = "no simulated sweep to judge"
+    if have_meas and curves:
+        assert measured is not None
+        for c in curves:
+            # compare only points measured at the sweep's tray amplitude (or of unknown amplitude)
+            amp = float(c["sweep"].scenario.get("amp_um", np.nan))
+            mask = ~np.isfinite(measured["amp_um"]) | ~np.isfinite(amp) | \
+                (np.abs(measured["amp_um"] - amp) <= 0.1 * abs(amp))
+            m = ri.select(measured, mask)
+            if not m["freq_hz"].size:
+                msgs.append(f"No measured point at the tray amplitude of {c['file']} ({amp:.3g} um).")
+                continue
+            _judge_speed(sec, m, c, tol, details, band)
+            pattern_pairs += _sweep_pattern_pairs(m, c)
+    sec.message = " ".join(msgs)
+    return sec
+
+
+def _judge_speed(sec: Section, m: dict[str, Any], c: dict[str, Any], tol: Tolerances, details: dict[str, Any],
+                 band: str) -> None:
+    p = {"measured": sorted(set(m["sources"])), "simulated": c["file"], "sweep": c["describe"]}
+    a_nom = compare.speed_agreement(m["freq_hz"], m["speed_mm_s"], m["lo_mm_s"], m["hi_mm_s"], c["freq_hz"],
+                                    c["nominal_mm_s"], c["p10_mm_s"], c["p90_mm_s"], provenance=p)
+    a_mc = compare.speed_agreement(m["freq_hz"], m["speed_mm_s"], m["lo_mm_s"], m["hi_mm_s"], c["freq_hz"],
+                                   c["mean_mm_s"], c["p10_mm_s"], c["p90_mm_s"], provenance=p)
+    pct = compare.draw_percentiles(m["freq_hz"], m["speed_mm_s"], c["freq_hz"], c["draws_mm_s"])
+    cov = compare.coverage(pct, [q["inside_band"] for q in a_nom["points"]], (tol.band_lo_pct, tol.band_hi_pct))
+    details.setdefault("speed", {})[c["file"]] = {"nominal": a_nom, "monte_carlo_mean": a_mc, "coverage": cov,
+                                                  "percentiles": pct.tolist()}
+    details.setdefault("speed_mc_mean_rms_error_mm_s", a_mc["rms_error_mm_s"])
+    details.setdefault("speed_nominal", a_nom)
+    details.setdefault("speed_coverage", cov)
+    rel = a_nom["relative_rms_error"]
+    tag = f" vs {c['label']}"
+    med = cov["median_percentile"]
+    band_text = (f"median percentile of the measured speeds within the draws: {format_value(med, 3)} "
+                 f"(50 if unbiased; {c['draws']} draws)")
+    sec.rows.append(_row(f"speed, nominal robot{tag}", "relative RMS error (RMS error / RMS measured)", rel, "1",
+                         f"≤ {tol.speed_relative_rms_max:g}", verdict(rel, at_most=tol.speed_relative_rms_max),
+                         band=band_text, n=a_nom["n_points"],
+                         text=f"{format_value(rel, 3)} (RMS error {format_value(a_nom['rms_error_mm_s'], 3)} mm/s)"))
+    fr = cov["fraction_inside"]
+    sec.rows.append(_row(f"speed, Monte Carlo band{tag}", f"fraction of measured speeds inside the {band} band",
+                         fr, "1", f"≥ {tol.speed_coverage_min:g} (expected {cov['expected_fraction']:g})",
+                         verdict(fr, at_least=tol.speed_coverage_min), band=band_text, n=cov["n"]))
+    sec.html.append(f"<h3>Measured against {rh.e(c['label'])}: {rh.e(c['describe'])}</h3>")
+    table_rows = []
+    for q, pc in zip(a_nom["points"], pct):
+        std = None
+        if q["measured_lo_mm_s"] is not None and q["measured_hi_mm_s"] is not None:
+            std = (q["measured_hi_mm_s"] - q["measured_lo_mm_s"]) / (2 * 1.96)
+        table_rows.append([q["freq_hz"], format_uncertain(q["measured_mm_s"], std),
+                           format_value(q["simulated_mm_s"], 3),
+                           f"{format_value(q['band_lo_mm_s'], 3)} \u2013 {format_value(q['band_hi_mm_s'], 3)}",
+                           format_value(float(pc), 3), "yes" if q["inside_band"] else "no"])
+    sec.html.append(rh.table(["freq_hz", "measured (mm/s, ± std)", "nominal robot (mm/s)", f"band {band} (mm/s)",
+                              "percentile in draws", "inside band"], table_rows, num_cols={0, 1, 2, 3, 4}))
+
+
+def _sweep_pattern_pairs(measured: dict[str, Any], c: dict[str, Any]) -> list[dict[str, Any]]:
+    """Leg patterns of the measured points (labels in the run, or classified from knee records)
+    against the sweep's dominant pattern at the nearest frequency (within 2 %)."""
+    pairs = []
+    values = np.asarray(c["freq_hz"], float)
+    for fz, lab, src in zip(measured["freq_hz"], measured["patterns"], measured["sources"]):
+        if lab not in compare.PATTERNS:
+            continue
+        i = int(np.argmin(np.abs(values - fz)))
+        if abs(values[i] - fz) > 0.02 * fz:
+            continue
+        pairs.append({"source": "sweep", "drive": f"{fz:.4g} Hz", "measured": lab, "simulated": c["patterns"][i],
+                      "measured_file": src, "simulated_file": c["file"]})
+    return pairs
+
+
+# --------------------------------------------------------------------------- knee motion
+
+def _sim_knee_task(task: tuple) -> dict[str, Any]:
+    """Simulate one shaker drive and keep what the knee figure needs (module-level: picklable)."""
+    from labkit.sim import Shaker, simulate
+
+    params, freq_hz, amp_um, duration_s, seed = task
+    r = simulate(params, Shaker(freq_hz=freq_hz, amp_um=amp_um), duration_s=duration_s, seed=seed)
+    return {"t_s": np.asarray(r.t_s), "knee_vz_mm_s": np.asarray(r.knee_vz_mm_s),
+            "ground_z_um": np.asarray(r.ground_z_um), "contact": np.asarray(r.contact),
+            "patterns": [str(p) for p in r.patterns]}
+
+
+def _knee_params(fit: str | None, params: str | None, sweeps: list[dict]) -> tuple[Any, str]:
+    from labkit.sim import RobotParams
+
+    if params:
+        return RobotParams.from_toml(params), params
+    if fit:
+        sibling = Path(fit).with_name(Path(fit).name.replace(".fit.h5", ".toml"))
+        if sibling.is_file() and sibling != Path(fit):
+            return RobotParams.from_toml(sibling), str(sibling)
+    if sweeps and sweeps[0]["sweep"].params_toml:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            p = Path(tmp) / "robot.toml"
+            p.write_text(sweeps[0]["sweep"].params_toml)
+            return RobotParams.from_toml(p), f"parameters of {sweeps[0]['file']}"
+    return RobotParams(), "RobotParams() defaults (paper Tables 1-2)"
+
+
+def _same(d: tuple[float, float], f: float, a: float) -> bool:
+    return bool(abs(d[0] - f) <= 0.01 * abs(f) and (not np.isfinite(a) or not np.isfinite(d[1])
+                                                    or abs(d[1] - a) <= 0.1 * abs(a) + 1e-9))
+
+
+def knee_drives_of(records: list[dict[str, Any]], results: list[dict[str, Any]],
+                   extra: Sequence[tuple[float, float]] | None) -> list[tuple[float, float]]:
+    """Every drive to show: each measured knee record's, each sim_result's and the extra ones,
+    once each (same frequency within 1 %, amplitude within 10 %), sorted by frequency."""
+    drives: list[tuple[float, float]] = []
+    cands = [(float(r["freq_hz"]), float(r["tray_amp_um"])) for r in records]
+    cands += [(float(s["scenario"].get("freq_hz", np.nan)), float(s["scenario"].get("amp_um", np.nan)))
+              for s in results]
+    cands += [(float(f), float(a)) for f, a in (extra or [])]
+    for d in cands:
+        if np.isfinite(d[0]) and not any(_same(x, *d) for x in drives):
+            drives.append(d)
+    return sorted(drives)
+
+
+def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simulate_knee, duration_s, leg,
+                  scheduler, workers, quiet, tol: Tolerances, details: dict[str, Any],
+                  pattern_pairs: list[dict[str, Any]]) -> Section:
+    title = "Knee vertical motion, measured against simulated (paper Fig. 10/11)"
+    records = [dict(r, file=run["file"]) for run in shaker for r in run["knee"]]
+    drives = knee_drives_of(records, results, knee_drives)
+    if not drives:
+        return _missing("knee", title, "No measured knee records (shaker run files with waveforms), no "
+                        "sim_result files (--sim) and no --knee-drive given.")
+    sims: dict[int, dict[str, Any]] = {}
+    for i, d in enumerate(drives):
+        hit = next((s for s in results if _same(d, float(s["scenario"].get("freq_hz", np.nan)),
+                                                float(s["scenario"].get("amp_um", np.nan)))), None)
+        if hit is not None:
+            sims[i] = dict(hit, source=hit["file"])
+    todo = [i for i, d in enumerate(drives) if i not in sims and np.isfinite(d[1])]
+    sec = Section("knee", title)
+    sec.files += sorted({r["file"] for r in records}) + [s["file"] for s in results]
+    if simulate_knee and todo:
+        from labkit.executor import map_tasks
+
+        p, param_src = _knee_params(fit, params, sweeps)
+        sec.files.append(param_src)
+        sec.notes["simulated here"] = (f"simulate({param_src}, Shaker(freq_hz, amp_um), duration_s={duration_s:g}, "
+                                       f"seed=0) at {len(todo)} drive(s); the settled second half is compared")
+        outs = map_tasks(_sim_knee_task, [(p, drives[i][0], drives[i][1], duration_s, 0) for i in todo],
+                         scheduler=scheduler, workers=workers, desc="knee sims", quiet=quiet)
+        for i, o in zip(todo, outs):
+            sims[i] = dict(o, source=f"simulated here ({drives[i][0]:.4g} Hz, {drives[i][1]:.3g} um)")
+    sec.notes["leg"] = f"simulated knee of leg {leg + 1}"
+    cases, table_rows, msgs = [], [], []
+    for i, (freq, amp) in enumerate(drives):
+        meas = next((r for r in records if _same((freq, amp), r["freq_hz"], r["tray_amp_um"])), None)
+        sim = sims.get(i)
+        case: dict[str, Any] = {"freq_hz": freq, "tray_amp_um": amp}
+        if meas is not None:
+            meas = dict(meas, **compare.classify_knee_pattern(meas["t_s"], meas["knee_vz_mm_s"],
+                                                              meas.get("tray_vz_mm_s"), freq))
+            case["measured"] = meas
+        if sim is not None:
+            t = np.asarray(sim["t_s"])
+            tray_v = np.gradient(np.asarray(sim["ground_z_um"]), t) * 1e-3        # um/s -> mm/s
+            knee = np.asarray(sim["knee_vz_mm_s"])
+            knee = knee[:, leg] if knee.ndim == 2 else knee
+            pats = sim.get("patterns") or []
+            # the settled second half of the run is what gets compared with the measured record
+            settle = t >= t[0] + 0.5 * (t[-1] - t[0])
+            # label the simulated knee record with the same classifier as the measured one: the
+            # same observable on both sides (the simulator's own per-foot label is shown beside it)
+            knee_label = compare.classify_knee_pattern(t[settle], knee[settle], tray_v[settle], freq)["pattern"]
+            case["simulated"] = {"t_s": t[settle], "knee_vz_mm_s": knee[settle], "tray_vz_mm_s": tray_v[settle],
+                                 "contact": np.asarray(sim["contact"])[settle], "knee_pattern": knee_label,
+                                 "foot_pattern": pats[leg] if len(pats) > leg else "?", "source": sim["source"]}
+        cases.append(case)
+        key = f"{freq:.4g}Hz_{amp:.3g}um"
+        if meas is not None and sim is not None:
+            s = case["simulated"]
+            pv = {"measured": meas["file"], "measured_point": meas["point"], "simulated": s["source"],
+                  "leg": leg + 1}
+            a = compare.knee_motion_agreement(meas["t_s"], meas["knee_vz_mm_s"], s["t_s"], s["knee_vz_mm_s"], freq,
+                                              ref_meas=meas.get("tray_vz_mm_s"), ref_sim=s["tray_vz_mm_s"],
+                                              provenance=pv)
+            details.setdefault("knee", {})[key] = a
+            drive = f"{freq:.4g} Hz, {amp:.3g} um"
+            r_lo, r_hi = 1.0 / tol.knee_amplitude_ratio_max, tol.knee_amplitude_ratio_max
+            ratio, phase, corr = a["amplitude_ratio"], a["phase_diff_deg"], a["correlation"]
+            sec.rows.append(_row(f"knee @ {drive}", "amplitude ratio (sim/meas)", ratio, "1",
+                                 f"{r_lo:.2f}\u2013{r_hi:.2f}", verdict(ratio, at_least=r_lo, at_most=r_hi),
+                                 text=format_value(ratio, 3)))
+            sec.rows.append(_row(f"knee @ {drive}", "phase difference (sim - meas)", phase, "deg",
+                                 f"|Δφ| ≤ {tol.knee_phase_deg_max:g} deg",
+                                 verdict(abs(phase) if phase is not None else None, at_most=tol.knee_phase_deg_max),
+                                 text=format_value(phase, 3)))
+            sec.rows.append(_row(f"knee @ {drive}", "waveform correlation (one folded period)", corr, "1",
+                                 f"≥ {tol.knee_correlation_min:g}", verdict(corr, at_least=tol.knee_correlation_min),
+                                 text=format_value(corr, 3)))
+            table_rows.append([freq, amp, format_value(a["amplitude_meas_mm_s"], 3),
+                               format_value(a["amplitude_sim_mm_s"], 3), format_value(ratio, 3),
+                               format_value(phase, 3), format_value(corr, 3),
+                               meas.get("pattern", "?"), s["knee_pattern"], s["foot_pattern"]])
+            if meas.get("pattern") in compare.PATTERNS:
+                pattern_pairs.append({"source": "knee record", "drive": drive, "measured": meas["pattern"],
+                                      "simulated": s["knee_pattern"], "measured_file": meas["file"],
+                                      "simulated_file": s["source"]})
+        elif meas is None:
+            msgs.append(f"No measured knee record at {freq:.4g} Hz, {amp:.3g} um.")
+        else:
+            msgs.append(f"No simulation at {freq:.4g} Hz, {amp:.3g} um (give --sim SIM_RESULT.h5 or allow simulation).")
+    ff = figs.knee_figure(cases, out / "fig_knee")
+    sec.figure(ff, f"Knee vertical velocity at all {len(cases)} drives: measured (solid) and simulated (dashed, "
+                   f"leg {leg + 1}, settled part) on one time axis whose zero is the tray's phase zero, the tray "
+                   f"behind them (grey); below each, the simulated contact mode of the six feet.")
+    if table_rows:
+        sec.html.append(rh.table(["freq_hz", "tray_amp_um", "measured amp (mm/s)", "simulated amp (mm/s)",
+                                  "ratio", "phase diff (deg)", "correlation", "measured pattern (knee)",
+                                  "simulated pattern (knee)", f"simulated foot contact (leg {leg + 1})"],
+                                 table_rows, num_cols={0, 1, 2, 3, 4, 5, 6}))
+    if not table_rows:
+        sec.notes["verdict_note"] = "no drive has both a measured and a simulated knee record"
+    sec.message = " ".join(msgs)
+    return sec
+
+
+# --------------------------------------------------------------------------- leg patterns
+
+def _pattern_section(pairs: list[dict[str, Any]], tol: Tolerances, details: dict[str, Any]) -> Section:
+    title = "Leg-motion patterns, observed against simulated (paper Fig. 9-11)"
+    if not pairs:
+        return _missing("patterns", title, "No drive with both an observed leg pattern (a knee record or a "
+                        "pattern label in the run file) and a simulated one.")
+    sec = Section("patterns", title)
+    sec.files += sorted({p["measured_file"].split(" (")[0] for p in pairs} | {p["simulated_file"] for p in pairs})
+    sec.notes["observed"] = "run file label, or classify_knee_pattern on the knee record"
+    sec.notes["simulated (sweep)"] = "dominant foot-contact pattern over draws and feet"
+    sec.notes["simulated (knee record)"] = "classify_knee_pattern on the simulated knee record"
+    for source in ("knee record", "sweep"):
+        ps = [p for p in pairs if p["source"] == source]
+        if not ps:
+            continue
+        a = compare.pattern_agreement([p["measured"] for p in ps], [p["simulated"] for p in ps],
+                                      keys=[p["drive"] for p in ps])
+        details.setdefault("patterns", {})[source] = a
+        fr = a["fraction_agree"]
+        agree = sum(q["agree"] for q in a["pairs"])
+        sec.rows.append(_row(f"leg pattern ({source}s)", "fraction of drives with the same pattern", fr, "1",
+                             f"≥ {tol.pattern_agreement_min:g}", verdict(fr, at_least=tol.pattern_agreement_min),
+                             n=a["n"], text=f"{format_value(fr, 3)} ({agree} of {a['n']})"))
+    sec.html.append(rh.table(["compared with", "drive", "observed", "simulated", "same"],
+                             [[p["source"], p["drive"], p["measured"].replace("_", " "),
+                               p["simulated"].replace("_", " "), "yes" if p["measured"] == p["simulated"] else "no"]
+                              for p in pairs]))
+    return sec
+
+
+# --------------------------------------------------------------------------- tracks
+
+def _tracks_section(out: Path, tracks: list[dict[str, Any]]) -> Section:
+    from labkit.analysis.report.tracks import load_track_path, read_frame_at
+
+    title = "Tracked paths and a video frame"
+    if not tracks:
+        return _missing("tracks", title, "No track files (--tracks TRACK.h5) given.")
+    sec = Section("tracks", title, files=[t["file"] for t in tracks])
+    sec.notes["verdict_note"] = "the tracked speeds are judged in the speed section"
+    paths = []
+    for t in tracks:
+        p = load_track_path(t["file"])
+        lo, hi = t["speed_ci_mm_s"]
+        label = f"{Path(t['file']).name}: {format_value(t['mean_speed_mm_s'], 3)} mm/s " \
+                f"[{format_value(float(lo), 3)}, {format_value(float(hi), 3)}]"
+        paths.append(dict(p, label=label, videos=t.get("videos", [])))
+    ff = figs.tracks_figure(paths, out / "fig_tracks")
+    sec.figure(ff, f"Paths of all {len(paths)} tracks in the camera's world frame (mm); legend: mean speed and "
+                   f"its confidence interval.")
+    # the frame shows the track that moved furthest in the image (the most visible one)
+    cands = [(float(np.nansum(np.hypot(np.diff(p["u_px"]), np.diff(p["v_px"])))), k, p, v)
+             for k, p in enumerate(paths) if "u_px" in p and p["u_px"].size
+             for v in [next((x for x in p["videos"] if Path(x).is_file()), None)] if v]
+    framed = max(cands, key=lambda c: (c[0], -c[1]))[2:] if cands else None
+    if framed is None:
+        sec.message = "No track's video was found (or no track holds pixel coordinates): no frame drawn."
+        return sec
+    p, video = framed
+    frame = read_frame_at(video, float(p["t_s"][-1]))
+    sec.files.append(video)
+    ff = figs.frame_figure(frame, p["u_px"], p["v_px"], out / "fig_frame",
+                           title=f"{Path(video).name} at t = {float(p['t_s'][-1]):.2f} s, with the track")
+    sec.figure(ff, f"The last tracked frame of {video} with the track of {p['file']} drawn on it "
+                   f"(of the tracks whose video was found, the one that moved furthest in the image).")
+    return sec
+
+
+# --------------------------------------------------------------------------- agreement table
+
+def _agreement_section(rows: list[dict[str, Any]], tol: Tolerances, sections: list[Section]) -> Section:
+    title = "Agreement between model and measurement"
+    if not rows:
+        return _missing("agreement", title, "Nothing to compare: needs measured and simulated data of the same "
+                        "kind (speeds and a frequency sweep, knee records and simulations) or a fit.")
+    sec = Section("agreement", title)
+    sec.files = [f for s in sections for f in s.files]
+    sec.summarises = rows          # the rows belong to their sections; this one summarises them
+    judged = [r for r in rows if r["verdict"] in ("pass", "fail")]
+    failed = [r for r in judged if r["verdict"] == "fail"]
+    sec.html.append(rh.table(["section", "comparison", "metric", "value", "tolerance", "verdict",
+                              "band statistic", "n"],
+                             [[r["section"], r["comparison"], r["metric"], r["value_text"], r["tolerance"],
+                               ("html", rh.verdict_badge(r["verdict"])), r["band_statistic"], r["n"]]
+                              for r in rows], num_cols={3, 7}))
+    sec.html.append(f"<p>{len(judged) - len(failed)} of {len(judged)} judged comparisons within tolerance. "
+                    "Tolerances (change with <code>--tolerance KEY=VALUE</code>): "
+                    + ", ".join(f"<code>{rh.e(k)}={v:g}</code>" for k, v in tol.as_dict().items())
+                    + ". Every number is also in <code>agreement.json</code> beside this page.</p>")
+    return sec
+
+
+# --------------------------------------------------------------------------- headline numbers
+
+def _headline(fit: dict | None, details: dict[str, Any], sections: list[Section]) -> dict[str, Any]:
+    """The numbers two reports are compared by (``labkit report --compare``)."""
+    h: dict[str, Any] = {}
+    if fit:
+        for name, g in fit["groups"].items():
+            for i, m in enumerate(g["modes"]):
+                h[f"{name}_mode{i + 1}_freq_hz"] = {"label": f"{name} mode {i + 1} frequency",
+                                                    "value": m["freq_hz"], "std": m.get("freq_hz_std"),
+                                                    "units": "Hz"}
+                h[f"{name}_mode{i + 1}_damping_ratio"] = {"label": f"{name} mode {i + 1} damping ratio",
+                                                          "value": m.get("damping_ratio"),
+                                                          "std": m.get("damping_ratio_std"), "units": "1"}
+            h[f"{name}_fit_quality"] = {"label": f"{name} fit quality", "value": g.get("quality"), "units": "1"}
+    nom = details.get("speed_nominal")
+    if nom:
+        h["speed_rms_error_nominal_mm_s"] = {"label": "speed RMS error, nominal robot",
+                                             "value": nom["rms_error_mm_s"], "units": "mm/s"}
+        h["speed_relative_rms_error_nominal"] = {"label": "speed relative RMS error, nominal robot",
+                                                 "value": nom["relative_rms_error"], "units": "1"}
+    if details.get("speed_mc_mean_rms_error_mm_s") is not None:
+        h["speed_rms_error_mc_mean_mm_s"] = {"label": "speed RMS error, Monte Carlo mean",
+                                             "value": details["speed_mc_mean_rms_error_mm_s"], "units": "mm/s"}
+    cov = details.get("speed_coverage")
+    if cov:
+        h["speed_band_coverage"] = {"label": "measured speeds inside the Monte Carlo band",
+                                    "value": cov["fraction_inside"], "units": "1"}
+        h["speed_median_percentile"] = {"label": "median percentile of measured speeds in the draws",
+                                        "value": cov["median_percentile"], "units": "%"}
+    knee = details.get("knee", {})
+    if knee:
+        ratios = [a["amplitude_ratio"] for a in knee.values() if a.get("amplitude_ratio") is not None]
+        phases = [abs(a["phase_diff_deg"]) for a in knee.values() if a.get("phase_diff_deg") is not None]
+        corrs = [a["correlation"] for a in knee.values() if a.get("correlation") is not None]
+        if ratios:
+            h["knee_amplitude_ratio_median"] = {"label": "knee amplitude ratio (median over drives)",
+                                                "value": float(np.median(ratios)), "units": "1"}
+        if phases:
+            h["knee_phase_diff_max_deg"] = {"label": "knee |phase difference| (largest)", "value": max(phases),
+                                            "units": "deg"}
+        if corrs:
+            h["knee_correlation_min"] = {"label": "knee waveform correlation (smallest)", "value": min(corrs),
+                                         "units": "1"}
+    for source, a in details.get("patterns", {}).items():
+        h[f"pattern_agreement_{source.replace(' ', '_')}"] = {"label": f"leg-pattern agreement ({source}s)",
+                                                              "value": a["fraction_agree"], "units": "1"}
+    rows = [r for s in sections for r in s.rows if r["verdict"] in ("pass", "fail")]
+    h["comparisons_passed"] = {"label": "comparisons within tolerance",
+                               "value": sum(r["verdict"] == "pass" for r in rows), "of": len(rows), "units": ""}
+    return h

@@ -1,0 +1,152 @@
+"""A self-contained HTML page: inline CSS (with a print style sheet), figures as inline SVG,
+no scripts, no external URLs. It opens offline in any browser, can be mailed as one file,
+and prints to a clean PDF ("print to PDF": no navigation, figures not split across pages).
+"""
+from __future__ import annotations
+
+import html
+import json
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from labkit.analysis.report.numbers import format_value
+
+if TYPE_CHECKING:
+    from labkit.analysis.report.build import Section
+
+CSS = """
+body { font-family: system-ui, -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 2em auto;
+       max-width: 1150px; color: #222; line-height: 1.4; padding: 0 1em; }
+h1 { border-bottom: 2px solid #444; padding-bottom: .2em; }
+h2 { margin-top: 2em; border-bottom: 1px solid #bbb; }
+section.missing p.status { color: #8a4b00; background: #fff4e0; padding: .5em; border-left: 4px solid #e69500; }
+p.status { color: #555; }
+p.verdict { font-weight: 600; padding: .45em .7em; border-left: 5px solid #999; background: #f6f6f6; }
+p.verdict.pass { border-color: #1e8449; background: #eafaf1; }
+p.verdict.fail { border-color: #c0392b; background: #fdedec; }
+p.verdict.missing { border-color: #e69500; background: #fff4e0; }
+figure { margin: 1em 0; }
+figure svg { max-width: 100%; height: auto; display: block; border: 1px solid #ddd; }
+figcaption { font-size: .9em; color: #444; margin-top: .3em; }
+figcaption .files { color: #777; font-family: ui-monospace, Menlo, Consolas, monospace; font-size: .9em; }
+table { border-collapse: collapse; margin: 1em 0; font-size: .88em; }
+th, td { border: 1px solid #ccc; padding: .3em .6em; text-align: left; vertical-align: top; }
+th { background: #f0f0f0; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+.badge { font-weight: 700; padding: 0 .4em; border-radius: 3px; }
+.badge.pass { color: #1e8449; } .badge.fail { color: #c0392b; } .badge.na { color: #777; }
+div.provenance { font-size: .8em; color: #444; background: #fafafa; border: 1px solid #e2e2e2; padding: .5em .8em;
+                 margin: 1em 0; }
+div.provenance table { font-size: 1em; margin: .3em 0; }
+div.provenance code, .mono { font-family: ui-monospace, Menlo, Consolas, monospace; word-break: break-all; }
+footer { margin-top: 3em; font-size: .8em; color: #777; }
+@media print {
+  @page { size: A4; margin: 14mm 12mm; }
+  body { max-width: none; margin: 0; padding: 0; font-size: 10pt; color: #000; }
+  nav { display: none; }
+  h2 { break-before: page; margin-top: 0; }
+  section:first-of-type h2 { break-before: auto; }
+  h2, h3 { break-after: avoid; }
+  figure, table, div.provenance, p.verdict { break-inside: avoid; }
+  figure svg { border: none; max-height: 235mm; width: auto; max-width: 100%; }
+  p.verdict { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
+  a { color: #000; text-decoration: none; }
+}
+"""
+
+
+def e(x: Any) -> str:
+    """HTML-escaped text."""
+    return html.escape(str(x), quote=True)
+
+
+_e = e          # the name earlier code used
+
+
+def inline_svg(path: Path, label: str) -> str:
+    """An SVG file's ``<svg>`` element for inlining (XML declaration and DOCTYPE dropped), with
+    ``role="img"`` and an accessible label."""
+    text = Path(path).read_text(encoding="utf-8")
+    start = text.find("<svg")
+    if start < 0:
+        raise ValueError(f"{path} holds no <svg> element")
+    svg = text[start:]
+    return re.sub(r"^<svg\b", f'<svg role="img" aria-label="{e(label)}"', svg, count=1)
+
+
+def fmt(value: Any, digits: int = 4) -> str:
+    if isinstance(value, float) or value is None:
+        return format_value(value, digits)
+    return str(value)
+
+
+def table(headers: list[str], rows: list[list[Any]], num_cols: set[int] | None = None) -> str:
+    num_cols = num_cols or set()
+    head = "".join(f"<th>{e(h)}</th>" for h in headers)
+    body = []
+    for row in rows:
+        cells = []
+        for i, v in enumerate(row):
+            cls = ' class="num"' if i in num_cols else ""
+            if isinstance(v, tuple) and v and v[0] == "html":
+                cells.append(f"<td{cls}>{v[1]}</td>")
+            else:
+                cells.append(f"<td{cls}>{e(fmt(v))}</td>")
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+
+
+def verdict_badge(result: str) -> str:
+    cls = {"pass": "pass", "fail": "fail"}.get(result, "na")
+    return f'<span class="badge {cls}">{e(result.upper() if cls != "na" else result)}</span>'
+
+
+def provenance_block(p: dict[str, Any]) -> str:
+    """One section's provenance: its files with SHA-256 and size, the software, the command, notes."""
+    rows = [[("html", f'<span class="mono">{e(f["path"])}</span>'),
+             ("html", f'<span class="mono">{e(f.get("sha256", "(not a file)"))}</span>'),
+             f.get("bytes", "")] for f in p.get("files", [])]
+    parts = ['<div class="provenance"><b>Provenance</b>']
+    if rows:
+        parts.append(table(["input", "SHA-256", "bytes"], rows, num_cols={2}))
+    parts.append(f'<div>software: <code>{e(p.get("software", ""))}</code></div>')
+    parts.append(f'<div>command: <code>{e(p.get("command", ""))}</code></div>')
+    for k, v in (p.get("notes") or {}).items():
+        if k == "verdict_note":
+            continue
+        text = v if isinstance(v, str) else json.dumps(v, sort_keys=True, default=str)
+        parts.append(f"<div>{e(k)}: {e(text)}</div>")
+    parts.append("</div>")
+    return "".join(parts)
+
+
+def render(title: str, sections: list[Section], meta: dict[str, Any]) -> str:
+    """The whole page."""
+    parts = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
+             f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+             f"<title>{e(title)}</title><style>{CSS}</style></head><body>",
+             f"<h1>{e(title)}</h1>",
+             f"<p>Generated {e(meta.get('created_utc', ''))} by {e(meta.get('software', 'labkit'))}.</p>",
+             "<nav><ul>" + "".join(f'<li><a href="#{e(s.id)}">{e(s.title)}</a>: '
+                                   f'{verdict_badge(s.verdict.get("result", "n/a"))}</li>'
+                                   for s in sections) + "</ul></nav>"]
+    for s in sections:
+        cls = "ok" if s.status == "ok" else "missing"
+        parts.append(f'<section id="{e(s.id)}" class="{cls}"><h2>{e(s.title)}</h2>')
+        v = s.verdict
+        parts.append(f'<p class="verdict {e(v.get("result", "").replace(" ", "-"))}">{e(v.get("text", ""))}</p>')
+        if s.message and s.status == "ok":
+            parts.append(f'<p class="status">{e(s.message)}</p>')
+        for files, caption, _key in s.figures:
+            parts.append(f"<figure>{inline_svg(files.svg, caption)}<figcaption>{e(caption)} "
+                         f'<span class="files">({e(files.png.name)} at 200 dpi, {e(files.svg.name)})</span>'
+                         f"</figcaption></figure>")
+        parts.extend(s.html)
+        if s.status == "ok" and s.provenance:
+            parts.append(provenance_block(s.provenance))
+        parts.append("</section>")
+    parts.append("<footer><p>Tolerances: " + e(json.dumps(meta.get("tolerances", {}), sort_keys=True))
+                 + "</p></footer>")
+    parts.append("</body></html>")
+    return "\n".join(parts)

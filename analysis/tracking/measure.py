@@ -1,0 +1,442 @@
+"""Measuring the robot in one frame: threshold, component, coverage-weighted moments; the static scene.
+
+Used by :mod:`labkit.analysis.tracking.tracker` (which explains the method); kept apart so each
+module stays small. Coordinates: image ``u`` right, ``v`` down, pixel centres at
+integers.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def _otsu(hist: np.ndarray) -> tuple[int, float, float]:
+    """Otsu threshold of a 256-bin histogram; returns (threshold, dark mean, light mean)."""
+    p = hist.astype(np.float64).ravel()
+    tot = p.sum()
+    omega = np.cumsum(p)
+    mu = np.cumsum(p * np.arange(256))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sb = (mu[-1] * omega - mu * tot) ** 2 / (omega * (tot - omega))
+    sb[~np.isfinite(sb)] = -1
+    k = int(np.argmax(sb))
+    if sb[k] <= 0:
+        return k, float("nan"), float("nan")
+    return k, mu[k] / omega[k], (mu[-1] - mu[k]) / (tot - omega[k])
+
+
+_KERNELS: dict[int, np.ndarray] = {}
+
+
+def _square(r: int) -> np.ndarray:
+    """A (2r+1)^2 square structuring element (separable, so dilation is cheap)."""
+    if r not in _KERNELS:
+        _KERNELS[r] = np.ones((2 * r + 1, 2 * r + 1), np.uint8)
+    return _KERNELS[r]
+
+
+@dataclass
+class _Blob:
+    u: float
+    v: float
+    theta: float          # image axis angle (rad), from +u towards +v, modulo pi
+    area: float           # area of the dark component's outline (px)
+    coverage: float       # weighted area (px)
+    major_px: float       # sqrt(12 * variance along the axis): a rectangle's length
+    minor_px: float
+    border: bool          # cut by the ROI border
+    weights: np.ndarray | None = None
+    origin: tuple[int, int] = (0, 0)
+
+
+def smooth_background(win: np.ndarray, cell_px: int, kernel_cells: int) -> np.ndarray:
+    """The tray's smooth brightness under a window (float32, the window's shape).
+
+    The window is averaged down to cells of ``cell_px`` (sensor noise and texture
+    fall by ``cell_px``), closed (a grey maximum then minimum filter of
+    ``kernel_cells`` cells, wider than the chip: a dark object narrower than the
+    kernel vanishes, a smooth gradient stays as it is) and interpolated back.
+    Dividing a frame by it removes the ring light's unevenness and a frame's
+    flicker without knowing either.
+    """
+    import cv2
+
+    h, w = win.shape
+    sh, sw = max(int(round(h / cell_px)), 1), max(int(round(w / cell_px)), 1)
+    small = cv2.resize(win, (sw, sh), interpolation=cv2.INTER_AREA).astype(np.float32)
+    r = max(kernel_cells // 2, 1)
+    closed = cv2.morphologyEx(small, cv2.MORPH_CLOSE, _square(r))
+    return cv2.resize(closed, (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+@dataclass
+class Segmentation:
+    """How dark objects are told from the tray (see :func:`smooth_background`)."""
+
+    cell_px: int
+    kernel_cells: int
+    min_contrast: float            # (tray - object) / tray a robot must have
+    noise: float = float("nan")    # the tray's pixel noise, relative to its level
+    auto: bool = True              # min_contrast derived from the noise
+    body_width_px: float = 40.0    # the chip's expected width (or a guess from the frame's size)
+
+    @classmethod
+    def for_frame(cls, width: int, height: int, body_width_px: float | None, min_contrast: float | None,
+                  noise: float = float("nan")) -> Segmentation:
+        # kernel: wider than the chip with its legs (about 1.5 body widths), else a sixth of the frame
+        k_px = 1.8 * body_width_px if body_width_px else max(min(width, height) / 6, 24)
+        cell = max(int(k_px // 6), 2)
+        kernel = max(int(np.ceil(k_px / cell)) | 1, 3)
+        auto = min_contrast is None
+        if auto:
+            # 5 noise sigmas of one pixel: the mean of a chip-sized object is then far beyond noise
+            min_contrast = max(5 * noise, 0.04) if np.isfinite(noise) else 0.08
+        return cls(cell, kernel, float(min_contrast), float(noise), auto, k_px / 1.8)
+
+    def ratio(self, win: np.ndarray, flat: np.ndarray | None = None) -> np.ndarray:
+        """The window relative to the tray's local level (1 = tray, the chip's reflectance inside)."""
+        f = win.astype(np.float32)
+        if flat is not None:
+            f /= flat
+        bg = smooth_background(f, self.cell_px, self.kernel_cells)
+        return f / np.maximum(bg, np.float32(1.0))
+
+
+class _Finder:
+    """Find and measure the robot in one (ROI-cropped) grey frame."""
+
+    def __init__(self, valid: np.ndarray | None, margin_px: int, seg: Segmentation, min_area_px: int,
+                 flat: np.ndarray | None = None):
+        self.valid = None if valid is None else valid.astype(np.uint8)  # 0 = never the robot
+        self.flat = flat  # tray texture (float32, ~1), ROI-sized, or None
+        self.margin = margin_px
+        self.seg = seg
+        self.min_area = min_area_px
+        self.best_contrast = 0.0     # the strongest dark object's contrast seen (for messages)
+        self.ambiguous = 0           # searches with more than one robot-like candidate
+
+    def find(self, img: np.ndarray, x0: int, y0: int, x1: int, y1: int, *, pred: tuple[float, float] | None,
+             area_ref: float | None, keep_weights: bool = False, gate_px: float | None = None,
+             area_tol: tuple[float, float] = (0.45, 1.7)) -> tuple[_Blob | None, bool]:
+        """Search the window [x0:x1, y0:y1]; returns (blob or None, touched the window's edge).
+
+        ``gate_px``: a candidate farther than this from ``pred`` is not the robot
+        (a jump no robot makes between two frames)."""
+        import cv2
+
+        flat = None if self.flat is None else self.flat[y0:y1, x0:x1]
+        ratio = self.seg.ratio(img[y0:y1, x0:x1], flat)
+        # 8-bit copy for the histogram and the threshold (200 = the tray)
+        q = cv2.convertScaleAbs(ratio, alpha=200.0)
+        vmask = None if self.valid is None else self.valid[y0:y1, x0:x1]
+        # Otsu on every other pixel: the histogram's shape, at a quarter of the cost
+        sub = q[::2, ::2]
+        hist = np.bincount(sub[vmask[::2, ::2] > 0] if vmask is not None else sub.ravel(), minlength=256)
+        thr, dark, light = _otsu(hist)
+        if not np.isfinite(dark) or light <= 0:
+            return None, False
+        contrast = (light - dark) / light
+        self.best_contrast = max(self.best_contrast, float(contrast))
+        if contrast < self.seg.min_contrast:
+            return None, False
+        binary = (q <= thr).astype(np.uint8)
+        if vmask is not None:
+            binary &= vmask
+        contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        lo, hi = area_tol
+        cands = []
+        for c in contours:
+            if len(c) < 4:
+                continue
+            a = cv2.contourArea(c)
+            if a < self.min_area or (area_ref and not lo * area_ref < a < hi * area_ref):
+                continue
+            bx, by, bw, bh = cv2.boundingRect(c)
+            cx, cy = bx + bw / 2 + x0, by + bh / 2 + y0
+            if pred is not None and gate_px is not None and np.hypot(cx - pred[0], cy - pred[1]) > gate_px:
+                continue
+            if pred is None:
+                # acquisition: an elongated object (the chip is 5 x 2 mm), not a round speck or a long prong
+                m = cv2.moments(c)
+                if m["m00"] > 0:
+                    a20, a02, a11 = m["mu20"] / m["m00"], m["mu02"] / m["m00"], m["mu11"] / m["m00"]
+                    com = np.sqrt(((a20 - a02) / 2) ** 2 + a11 ** 2)
+                    l1, l2 = (a20 + a02) / 2 + com, max((a20 + a02) / 2 - com, 1e-9)
+                    touches = bx == 0 or by == 0 or bx + bw == x1 - x0 or by + bh == y1 - y0
+                    if not touches and not 1.4 < np.sqrt(l1 / l2) < 5.0:
+                        continue
+            cands.append((a, cx - x0, cy - y0, c, (bx, by, bw, bh)))
+        if not cands:
+            return None, False
+        if pred is not None:
+            score = [np.hypot(cx + x0 - pred[0], cy + y0 - pred[1])
+                     + (20.0 * abs(np.log(a / area_ref)) if area_ref else 0.0) for a, cx, cy, _, _ in cands]
+        elif area_ref:
+            score = [abs(np.log(a / area_ref)) for a, *_ in cands]
+        else:
+            score = [-a for a, *_ in cands]
+        order = np.argsort(score)
+        if len(cands) > 1 and area_ref:
+            # a second candidate of the robot's size within reach: the choice may be wrong
+            a2 = cands[int(order[1])][0]
+            if 0.8 < a2 / area_ref < 1.25:
+                self.ambiguous += 1
+        area, _, _, contour, (bx, by, bw, bh) = cands[int(order[0])]
+        h, w = ratio.shape
+        touched = bx == 0 or by == 0 or bx + bw == w or by + bh == h
+        H, W = img.shape
+        border = bx + x0 == 0 or by + y0 == 0 or bx + bw + x0 == W or by + bh + y0 == H
+        # measure in the component's box grown by the band and the background ring
+        g = self.margin + 4
+        cx0, cy0 = max(bx - g, 0), max(by - g, 0)
+        cx1, cy1 = min(bx + bw + g, w), min(by + bh + g, h)
+        comp = np.zeros((cy1 - cy0, cx1 - cx0), np.uint8)
+        cv2.drawContours(comp, [contour], -1, 1, thickness=-1, offset=(-cx0, -cy0))
+        blob = self._measure(ratio[cy0:cy1, cx0:cx1], comp, binary[cy0:cy1, cx0:cx1],
+                             None if vmask is None else vmask[cy0:cy1, cx0:cx1], keep_weights, None)
+        if blob is None:
+            return None, bool(touched)
+        ox, oy = x0 + cx0, y0 + cy0
+        blob.u += ox
+        blob.v += oy
+        blob.origin = (ox, oy)
+        blob.area = float(area)
+        blob.border = bool(border)
+        return blob, bool(touched and not border)
+
+    def _measure(self, win: np.ndarray, comp: np.ndarray, binary: np.ndarray, vmask: np.ndarray | None,
+                 keep_weights: bool, flat: np.ndarray | None = None) -> _Blob | None:
+        import cv2
+
+        m = self.margin
+        band = cv2.dilate(comp, _square(m))
+        outer = cv2.dilate(comp, _square(m + 3))
+        others = binary & (1 - comp)
+        if others.any():
+            band &= 1 - others
+            ring = outer & (1 - band) & (1 - cv2.dilate(others, _square(m)))
+        else:
+            ring = outer & (1 - band)
+        if vmask is not None:
+            band &= vmask
+            ring &= vmask
+        f = win.astype(np.float32)
+        if flat is not None:
+            f /= flat   # flat-field: divides out the Teflon's texture
+        # background under the robot: least-squares plane through the ring around it
+        # (lighting gradients), from the ring's moments: no pixel lists needed
+        mr = cv2.moments(ring, binaryImage=True)
+        if mr["m00"] < 12:
+            return None
+        mf = cv2.moments(f * ring)
+        n, su, sv = mr["m00"], mr["m10"], mr["m01"]
+        ata = np.array([[n, su, sv], [su, mr["m20"], mr["m11"]], [sv, mr["m11"], mr["m02"]]])
+        atb = np.array([mf["m00"], mf["m10"], mf["m01"]])
+        # a plane only when the ring surrounds the robot; a ring cut on one side (the tray's rim,
+        # the frame's edge) would let the slope extrapolate freely over the robot: a constant then
+        mc = cv2.moments(comp, binaryImage=True)
+        off = np.hypot(su / n - mc["m10"] / max(mc["m00"], 1), sv / n - mc["m01"] / max(mc["m00"], 1))
+        spread = np.sqrt(max((mr["mu20"] + mr["mu02"]) / n, 1e-9))
+        coef = np.array([mf["m00"] / n, 0.0, 0.0])
+        if off < 0.1 * spread:
+            try:
+                coef = np.linalg.solve(ata, atb)
+            except np.linalg.LinAlgError:
+                pass
+        hh, ww = win.shape
+        uu = np.arange(ww, dtype=np.float32)
+        vv = np.arange(hh, dtype=np.float32)
+        bg = np.float32(coef[0]) + np.float32(coef[1]) * uu[None, :] + np.float32(coef[2]) * vv[:, None]
+        ratio = f / np.maximum(bg, np.float32(1e-3))
+        inner = cv2.erode(comp, _square(2))
+        if cv2.countNonZero(inner) < 5:
+            inner = comp
+        rho = float(cv2.mean(ratio, mask=inner)[0])
+        if 1.0 - rho < 0.5 * self.seg.min_contrast:
+            return None
+        # weight = darkness / the robot's darkness = area coverage of each pixel (1 inside)
+        w = np.clip((1.0 - ratio) * np.float32(1.0 / (1.0 - rho)), -0.5, 1.5)
+        w *= band
+        mo = cv2.moments(w)
+        if mo["m00"] <= 0:
+            return None
+        cu, cv_ = mo["m10"] / mo["m00"], mo["m01"] / mo["m00"]
+        a, b, c = mo["mu20"] / mo["m00"], mo["mu02"] / mo["m00"], mo["mu11"] / mo["m00"]
+        theta = 0.5 * np.arctan2(2 * c, a - b)
+        common = np.sqrt(((a - b) / 2) ** 2 + c ** 2)
+        lam1, lam2 = (a + b) / 2 + common, max((a + b) / 2 - common, 0.0)
+        return _Blob(cu, cv_, theta, 0.0, mo["m00"], float(np.sqrt(12 * lam1)), float(np.sqrt(12 * lam2)),
+                     False, w if keep_weights else None)
+
+
+def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> float:
+    """The body's end-to-end length (px) from its darkness profile along the long axis.
+
+    The weights are projected onto the axis; the ends are where the profile falls
+    to half its level near the ends (a symmetric blur leaves that crossing in
+    place). The leg stubs stick out of the long sides, not the ends, so they do not
+    move it.
+    """
+    vv, uu = np.nonzero(weights != 0)
+    wt = weights[vv, uu].astype(np.float64)
+    s = (uu - cu) * np.cos(theta) + (vv - cv_) * np.sin(theta)
+    binw = 0.5
+    lo = np.floor(s.min() / binw) - 2
+    idx = (np.floor(s / binw) - lo).astype(int)
+    prof = np.bincount(idx, wt, minlength=idx.max() + 3) / binw
+    prof = np.convolve(prof, np.ones(3) / 3, mode="same")
+    centres = (np.arange(prof.size) + lo + 0.5) * binw
+    half_len = 0.5 * float(np.ptp(centres[prof > 0.5 * prof.max()]))
+    ends = []
+    for sign in (1, -1):
+        # just inside the end, clear of the leg stubs (at 0.68 of the half length)
+        sel = (sign * centres > 0.76 * half_len) & (sign * centres < 0.9 * half_len)
+        if sel.sum() < 3:
+            return float("nan")
+        level = np.median(prof[sel])
+        order = np.argsort(sign * centres)
+        c_sorted, p_sorted = sign * centres[order], prof[order]
+        beyond = np.flatnonzero((c_sorted > 0.9 * half_len) & (p_sorted < 0.5 * level))
+        if beyond.size == 0:
+            return float("nan")
+        j = beyond[0]
+        # linear interpolation of the half-level crossing between bins j-1 and j
+        p0, p1 = p_sorted[j - 1], p_sorted[j]
+        frac = (p0 - 0.5 * level) / (p0 - p1) if p0 != p1 else 0.5
+        ends.append(c_sorted[j - 1] + frac * (c_sorted[j] - c_sorted[j - 1]))
+    return float(ends[0] + ends[1])
+
+
+# ----------------------------------------------------------------------------- static structure
+@dataclass
+class StaticScene:
+    """What does not move over the video, from frames spread over it (:func:`background_model`)."""
+
+    rim: np.ndarray | None            # dark structure reaching the border (the tray's wall), grown 1 px
+    flat: np.ndarray | None           # the static scene's brightness (float32, ~1), divided out first
+    noise: float                      # pixel noise relative to the tray's level
+    objects: np.ndarray | None        # static dark objects inside the frame (dust), grown by a margin
+    object_boxes: list[tuple[int, int, int, int]]   # (x, y, w, h) of each static object
+    samples: int = 0
+
+
+def background_model(samples: list[np.ndarray], seg: Segmentation | None = None, grow_px: int = 8,
+                     dark_ratio: float = 0.6) -> StaticScene:
+    """Static structure from frames spread over the video.
+
+    Each sample is divided by its own smooth background (:func:`smooth_background`:
+    the ring light's unevenness and the frame's flicker go). Then:
+
+    * ``noise``: the pixel noise, from the difference of two samples where both
+      show bare tray (the tray's texture cancels in it), as a robust sigma;
+    * dark = darker than the tray by more than the segmentation's contrast
+      threshold (or 6 noise sigmas while that is not known);
+    * dark in *every* sample and reaching the frame's border: the tray's rim,
+      masked (a robot touching it must not merge with it);
+    * dark in every sample inside the frame, and dark in *any* sample over
+      hardly more area (< 1.3 x): a static object (dust, a scratch): masked.
+      A robot that moves even slowly darkens far more area in some sample than
+      in all of them, so it is never taken for dust; a robot that never moves
+      at all cannot be told from dust and is masked too (the tracker then says
+      so);
+    * the flat field is the static scene's brightness (ring light, texture,
+      rim, dust), relative to its median: the per-pixel mean of the samples
+      (scaled for flicker) where nothing moving is dark within ``grow_px``;
+      where the robot covered a pixel in every sample, the smooth background
+      of the samples' mean. Dividing a frame by it leaves only what moves.
+    """
+    import cv2
+
+    if len(samples) < 5:
+        return StaticScene(None, None, float("nan"), None, [], len(samples))
+    h, w = samples[0].shape
+    if seg is None:
+        seg = Segmentation.for_frame(w, h, None, None)
+    # the rim: dark (< dark_ratio of the tray's level) in every sample and reaching the border;
+    # each sample relative to its bright tray (lighting drift); the per-pixel maximum removes
+    # anything that moves
+    peak = None
+    for smp in samples:
+        sub = smp[::4, ::4]
+        level = float(np.median(sub[sub > 0.75 * np.percentile(sub, 99)]))
+        nrm = smp.astype(np.float32) * np.float32(1.0 / max(level, 1.0))
+        peak = nrm if peak is None else np.maximum(peak, nrm)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats((peak < dark_ratio).view(np.uint8), connectivity=8)
+    rim = np.zeros((h, w), bool)
+    for i in range(1, n):
+        x, y, bw, bh, _a = stats[i]
+        if x == 0 or y == 0 or x + bw == w or y + bh == h:
+            rim |= labels == i
+    rim_g = cv2.dilate(rim.view(np.uint8), _square(grow_px)) if rim.any() else np.zeros((h, w), np.uint8)
+    # smaller things relative to the local tray (smooth background: ring light, flicker)
+    ratios = [seg.ratio(s) for s in samples]
+    # noise from two samples far apart (least shared robot); robust sigma of their difference
+    a, b = ratios[0], ratios[len(ratios) // 2]
+    both = (a > 0.9) & (b > 0.9)
+    diff = (a - b)[both][::7]
+    noise = float(1.4826 * np.median(np.abs(diff - np.median(diff))) / np.sqrt(2)) if diff.size > 100 else 0.01
+    thr = seg.min_contrast if not seg.auto else max(6 * noise, 0.04)
+    darks = [(r < 1 - thr).view(np.uint8) & (1 - rim_g) for r in ratios]
+    inter = np.bitwise_and.reduce(darks)
+    union = np.bitwise_or.reduce(darks)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(inter, connectivity=8)
+    objects = np.zeros((h, w), np.uint8)
+    boxes = []
+    if n > 1:
+        nu, ulabels, ustats, _ = cv2.connectedComponentsWithStats(union, connectivity=8)
+        for i in range(1, n):
+            x, y, bw, bh, area = stats[i]
+            if area < 0.5 * seg.body_width_px ** 2:
+                continue      # texture, a speck: never robot-sized, needs no mask
+            # the union's component that holds it: as large = it never moved
+            ys, xs = np.nonzero(labels[y:y + bh, x:x + bw] == i)
+            j = ulabels[y + ys[0], x + xs[0]]
+            if ustats[j, cv2.CC_STAT_AREA] < 1.3 * area:
+                objects[ulabels == j] = 1
+                ux, uy, uw, uh = (int(v) for v in ustats[j, :4])
+                boxes.append((ux, uy, uw, uh))
+    # the static scene's brightness B: each pixel's mean over the samples where nothing moving is
+    # dark within grow_px (static structure -- rim, dust, texture, the ring light's shape -- stays in
+    # it); each sample scaled to a common brightness first (flicker)
+    static = rim | (objects > 0)
+    gains = np.array([float(np.median(smp[::4, ::4])) for smp in samples])
+    gains /= np.median(gains)
+    total = np.zeros((h, w), np.float32)
+    count = np.zeros((h, w), np.float32)
+    grow = _square(grow_px)
+    # what moves is judged at a higher darkness than the noise (texture dimples are static and must
+    # stay in B; a robot's blurred edge below it is covered by the growth)
+    thr_b = max(thr, min(0.12, 0.5 * (seg.min_contrast if not seg.auto else 0.24)))
+    for smp, g, r in zip(samples, gains, ratios):
+        moving = (r < 1 - thr_b).view(np.uint8) & ~static.view(np.uint8)
+        clear = 1 - cv2.dilate(moving, grow)
+        total += smp.astype(np.float32) * np.float32(1 / g) * clear
+        count += clear
+    # the rim (static, never walked on) keeps its mean over all samples
+    flat = np.mean([smp.astype(np.float32) / g for smp, g in zip(samples, gains)], axis=0)
+    np.divide(total, count, out=flat, where=count > 0)
+    holes = (count == 0) & ~rim
+    if holes.any():
+        # the robot covered these in every sample: fill from the tray around them (a normalised
+        # Gaussian average of the known tray, widening until every hole is reached; the rim is
+        # never a source: it would darken the tray beside it)
+        known = ((count > 0) & ~rim).astype(np.float32)
+        src = flat * known
+        sigma = max(seg.body_width_px / 2, 4.0)
+        todo = holes.copy()
+        for _ in range(6):
+            num = cv2.GaussianBlur(src, (0, 0), sigma)
+            den = cv2.GaussianBlur(known, (0, 0), sigma)
+            ok = todo & (den > 1e-3)
+            flat[ok] = num[ok] / den[ok]
+            todo &= ~ok
+            if not todo.any():
+                break
+            sigma *= 2
+        flat[todo] = float(np.median(flat[~holes]))
+    flat /= np.float32(np.median(flat[::4, ::4]))
+    rim_m = cv2.dilate(rim.view(np.uint8), _square(1)).astype(bool) if rim.any() else None
+    # static objects grown by the measuring band, so the robot passing by is cut off them
+    obj_m = cv2.dilate(objects, _square(3)).astype(bool) if boxes else None
+    return StaticScene(rim_m, flat, noise, obj_m, boxes, len(samples))

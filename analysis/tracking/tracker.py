@@ -1,0 +1,465 @@
+"""Track the robot in top-view video: sub-pixel centroid and heading from image moments.
+
+Method, per frame (the functions' docstrings say why):
+
+1. A window around the predicted position (the whole region of interest when
+   the robot is not yet found or was lost) is split into dark and light by
+   Otsu's threshold computed on that frame's window alone, so a slow lighting
+   drift never needs a fixed threshold. A dark/light contrast check rejects a
+   window holding only Teflon.
+2. The dark connected component of the robot's size nearest the prediction is
+   the robot. The static scene is modelled beforehand from 15 frames spread
+   over the video (:func:`labkit.analysis.tracking.measure.background_model`): dark
+   structure present in all of them and reaching the border (the tray's rim
+   beyond its edge) is excluded, so a robot touching the edge does not merge
+   with it, and the Teflon's texture is divided out (a flat field).
+3. Around that component (a band of ``margin_px``) each pixel gets a weight =
+   its darkness relative to a plane fitted to the surrounding background ring
+   (a constant when the ring is cut on one side), divided by the robot's own
+   darkness: for an anti-aliased or blurred edge this is the pixel's area
+   coverage, so the weighted moments give the centroid to a small fraction of
+   a pixel (a binary mask would quantise it).
+4. Orientation from the second central moments (``0.5 atan2(2 mu11, mu20 -
+   mu02)``; never ``minAreaRect``, whose angle convention changed in OpenCV 5).
+   The axis is defined modulo 180 degrees: it is unwrapped by continuity and
+   the robot's front chosen, per stretch between losses, as the end it moves
+   towards.
+
+Conventions are those of :mod:`labkit.lab.render`: image ``u`` right, ``v``
+down, pixel centres at integers; world ``x_mm`` right, ``y_mm`` up, measured
+from the frame's bottom-left corner; ``heading_rad`` 0 = front towards +y,
+counter-clockwise positive.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labkit.analysis.tracking.measure import Segmentation, _Finder, background_model, body_length_px
+from labkit.errors import InputError
+
+QUALITY_OK = 0        # robot fully seen: position and heading trusted
+QUALITY_DEGRADED = 1  # seen but cut by the frame/ROI border or of an unexpected area: biased
+QUALITY_LOST = 2      # not found (occluded, out of view): position is NaN
+QUALITY_LABELS = "0 ok, 1 degraded (partly out of view or odd area), 2 lost"
+
+ROBOT_LENGTH_MM = 5.0
+
+
+@dataclass
+class Scale:
+    """Image scale and its standard uncertainty, with how it was obtained."""
+
+    mm_per_px: float
+    mm_per_px_std: float
+    method: str
+    detail: dict = field(default_factory=dict)
+
+
+@dataclass
+class Track:
+    """Per-frame robot pose. ``u_px``/``v_px`` are full-frame image coordinates."""
+
+    t_s: np.ndarray
+    u_px: np.ndarray
+    v_px: np.ndarray
+    heading_rad: np.ndarray
+    quality: np.ndarray
+    area_px: np.ndarray
+    frame_size: tuple[int, int]
+    roi: tuple[int, int, int, int]
+    scale: Scale | None = None
+    source: str = ""
+    timestamps_source: str = "container"
+    heading_sense: str = "motion"
+    length_px: float = float("nan")
+    length_px_std: float = float("nan")
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def frames(self) -> int:
+        return int(self.t_s.size)
+
+    @property
+    def lost_frames(self) -> int:
+        return int(np.sum(self.quality == QUALITY_LOST))
+
+    @property
+    def mm_per_px(self) -> float:
+        return float("nan") if self.scale is None else self.scale.mm_per_px
+
+    @property
+    def x_mm(self) -> np.ndarray:
+        """World x (mm) from the frame's left edge."""
+        return (self.u_px + 0.5) * self.mm_per_px
+
+    @property
+    def y_mm(self) -> np.ndarray:
+        """World y (mm, up) from the frame's bottom edge."""
+        return (self.frame_size[1] - 0.5 - self.v_px) * self.mm_per_px
+
+
+# ----------------------------------------------------------------------------- scale
+def scale_given(mm_per_px: float, mm_per_px_std: float = 0.0) -> Scale:
+    """A scale the user knows (calibration slide): recorded as given."""
+    if not (mm_per_px > 0 and np.isfinite(mm_per_px)):
+        raise InputError(f"bad scale {mm_per_px!r}", key="mm_per_px", expected="a number > 0")
+    return Scale(float(mm_per_px), float(mm_per_px_std), "given")
+
+
+def scale_from_bar(x1: float, y1: float, x2: float, y2: float, distance_mm: float,
+                   click_std_px: float = 0.5) -> Scale:
+    """Two points on a scale bar ``distance_mm`` apart; each point uncertain by ``click_std_px``."""
+    d_px = float(np.hypot(x2 - x1, y2 - y1))
+    if d_px < 5 or not distance_mm > 0:
+        raise InputError(f"scale bar points {d_px:.1f} px apart, {distance_mm} mm", key="scale_bar",
+                         expected="two points >= 5 px apart and a distance > 0 mm")
+    s = distance_mm / d_px
+    # the distance between two clicked points has std sqrt(2) * click_std
+    return Scale(s, s * np.sqrt(2) * click_std_px / d_px, "scale_bar",
+                 {"points_px": [x1, y1, x2, y2], "distance_mm": distance_mm, "click_std_px": click_std_px})
+
+
+def scale_from_robot_length(track: Track, length_mm: float = ROBOT_LENGTH_MM,
+                            length_std_mm: float = 0.05) -> Scale:
+    """Scale from the robot's known body length and its length measured in the image."""
+    if not np.isfinite(track.length_px) or track.length_px <= 0:
+        raise InputError("cannot measure the robot's length in the image (too few clear frames)",
+                         file=track.source, expected="a scale: --mm-per-px or --scale-bar")
+    s = length_mm / track.length_px
+    rel = np.hypot(length_std_mm / length_mm, track.length_px_std / track.length_px)
+    return Scale(float(s), float(s * rel), "robot_length", {"length_mm": length_mm, "length_std_mm": length_std_mm,
+                                              "length_px": track.length_px, "length_px_std": track.length_px_std})
+
+
+# ----------------------------------------------------------------------------- the tracker
+def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[int, int], *,
+                 roi: tuple[int, int, int, int] | None = None, valid: np.ndarray | None = None,
+                 flat: np.ndarray | None = None, seg: Segmentation | None = None,
+                 margin_px: int = 4, min_area_px: int = 20,
+                 expected_area_px: float | None = None, max_speed_px_s: float | None = None,
+                 max_speed_body_s: float = 5.0, reacquire_s: float = 1.0,
+                 progress: Any = None) -> dict:
+    """Track over ``(grey frame, t_s)`` pairs (full frames); returns raw per-frame arrays.
+
+    ``valid`` (bool, full frame) marks where the robot may be. The motion model
+    (constant velocity) predicts the next position; a candidate farther from it
+    than the robot can go (``max_speed_px_s``, or ``max_speed_body_s`` body
+    lengths per second while the scale is unknown, plus the vibration jitter)
+    is not the robot: the frame is lost (an occlusion), and the gate grows with
+    the time since the last good frame until, after ``reacquire_s``, the robot
+    may be found anywhere. See :func:`track_video` for the public entry point.
+    """
+    W, H = frame_size
+    rx, ry, rw, rh = roi or (0, 0, W, H)
+    seg = seg or Segmentation.for_frame(rw, rh, None, None)
+    vroi = None if valid is None else np.ascontiguousarray(valid[ry:ry + rh, rx:rx + rw])
+    froi = None if flat is None else np.ascontiguousarray(flat[ry:ry + rh, rx:rx + rw])
+    finder = _Finder(vroi, margin_px, seg, min_area_px, froi)
+    ts, us, vs, ths, qs, areas, lengths = [], [], [], [], [], [], []
+    area_hist: list[float] = []
+    area_ref = expected_area_px
+    # with only the expected area (from the scale) the tolerance is wide: blur and legs vary it
+    tol_first = (0.5, 2.0)
+    major = None
+    last: tuple[float, float, float] | None = None   # u, v, t of the last good frame (ROI coords)
+    vel = (0.0, 0.0)
+    jumps = 0
+    raw_area: list[float] = []     # each found component's area (px), for re-checking the first frames
+
+    def gate(dt: float) -> float | None:
+        if major is None or dt > reacquire_s:
+            return None
+        vmax = max_speed_px_s if max_speed_px_s else max_speed_body_s * major
+        # jitter of a vibrating robot (a tenth of its length) + what it can walk in dt
+        return 3.0 + 0.1 * major + vmax * dt
+
+    for k, (frame, t) in enumerate(frames):
+        img = frame[ry:ry + rh, rx:rx + rw] if roi else frame
+        blob = None
+        pred = None
+        tol = tol_first if len(area_hist) < 5 else (0.45, 1.7)
+        g = None
+        if last is not None and major is not None:
+            dt = t - last[2]
+            pred = (last[0] + vel[0] * dt, last[1] + vel[1] * dt)
+            g = gate(dt)
+            half = int(0.65 * major + 3 * margin_px + 10 + 1.5 * np.hypot(vel[0] * dt, vel[1] * dt))
+            for grow in (1, 2):
+                hw = half * grow
+                x0, y0 = max(int(pred[0]) - hw, 0), max(int(pred[1]) - hw, 0)
+                x1, y1 = min(int(pred[0]) + hw + 1, rw), min(int(pred[1]) + hw + 1, rh)
+                if x1 - x0 < 8 or y1 - y0 < 8:
+                    break
+                blob, touched = finder.find(img, x0, y0, x1, y1, pred=pred, area_ref=area_ref,
+                                            keep_weights=len(lengths) < 100 and k % 3 == 0, gate_px=g,
+                                            area_tol=tol)
+                if blob is None or not touched:
+                    break
+        if blob is None:
+            # acquisition or re-acquisition over the whole region of interest (within the gate)
+            blob, _ = finder.find(img, 0, 0, rw, rh, pred=pred if g is not None else None, area_ref=area_ref,
+                                  keep_weights=True, gate_px=g, area_tol=tol)
+            if blob is not None and pred is not None and g is not None and np.hypot(blob.u - pred[0],
+                                                                                     blob.v - pred[1]) > g:
+                blob = None
+            if blob is None and g is not None:
+                jumps += int(finder.find(img, 0, 0, rw, rh, pred=None, area_ref=area_ref, area_tol=tol)[0]
+                             is not None)
+        ts.append(t)
+        raw_area.append(blob.area if blob is not None else np.nan)
+        if blob is None:
+            for column in (us, vs, ths, areas):
+                column.append(np.nan)
+            qs.append(QUALITY_LOST)
+            if last is not None and t - last[2] > 1.0:
+                vel = (0.0, 0.0)
+        else:
+            q = QUALITY_OK
+            if blob.border or (area_ref and not 0.8 < blob.area / area_ref < 1.25):
+                q = QUALITY_DEGRADED
+            us.append(blob.u + rx)
+            vs.append(blob.v + ry)
+            ths.append(blob.theta)
+            areas.append(blob.coverage)
+            qs.append(q)
+            if q == QUALITY_OK or (len(area_hist) < 5 and not blob.border):
+                if last is not None and 0 < t - last[2] < 0.5:
+                    a = 0.5  # light smoothing of the velocity used only for the prediction
+                    nv = ((blob.u - last[0]) / (t - last[2]), (blob.v - last[1]) / (t - last[2]))
+                    vel = (a * nv[0] + (1 - a) * vel[0], a * nv[1] + (1 - a) * vel[1])
+                elif last is not None:
+                    vel = (0.0, 0.0)
+                last = (blob.u, blob.v, t)
+                area_hist.append(blob.area)
+                if len(area_hist) <= 25 or len(area_hist) % 10 == 0:
+                    area_ref = float(np.median(area_hist[-25:]))
+                    if len(area_hist) == 5:
+                        # the first confident frames now define the robot: re-check them
+                        qs_a = np.asarray(qs)
+                        for j in np.flatnonzero(qs_a == QUALITY_OK):
+                            if not 0.8 < raw_area[j] / area_ref < 1.25:
+                                qs[j] = QUALITY_DEGRADED
+                major = blob.major_px if major is None else 0.9 * major + 0.1 * blob.major_px
+                if blob.weights is not None:
+                    lengths.append(body_length_px(blob.weights, blob.u - blob.origin[0], blob.v - blob.origin[1],
+                                                  blob.theta))
+            elif last is None:
+                major = blob.major_px
+                last = (blob.u, blob.v, t)
+        if progress is not None:
+            progress.update(1)
+    lengths_a = np.asarray(lengths, float)
+    lengths_a = lengths_a[np.isfinite(lengths_a)]
+    return dict(t_s=np.asarray(ts, float), u_px=np.asarray(us, float), v_px=np.asarray(vs, float),
+                theta=np.asarray(ths, float), quality=np.asarray(qs, np.int8), area_px=np.asarray(areas, float),
+                length_px=float(np.median(lengths_a)) if lengths_a.size else float("nan"),
+                length_px_std=(float(1.2533 * np.std(lengths_a) / np.sqrt(lengths_a.size))
+                               if lengths_a.size > 1 else float("nan")),
+                n_length=int(lengths_a.size), best_contrast=finder.best_contrast,
+                ambiguous=finder.ambiguous, jumps=jumps, min_contrast=seg.min_contrast, noise=seg.noise)
+
+
+def resolve_heading(t_s: np.ndarray, u_px: np.ndarray, v_px: np.ndarray, theta: np.ndarray,
+                    quality: np.ndarray, min_travel_px: float = 3.0) -> tuple[np.ndarray, str]:
+    """Turn image axis angles (mod pi) into a continuous heading (world convention, rad).
+
+    Within each stretch of found frames the axis is unwrapped by continuity;
+    the stretch's front is the end the robot moves towards (summed over the
+    stretch), or, when it hardly moves, the one closest to the previous
+    stretch's heading. Returns the heading and ``"motion"``, ``"continuity"``
+    or ``"unknown"`` (how the front of the first stretch was decided).
+    """
+    n = theta.size
+    heading = np.full(n, np.nan)
+    found = np.isfinite(theta)
+    # image axis angle -> world heading modulo pi (front (-sin h, cos h); image v is -y)
+    h_mod = np.mod(-theta - np.pi / 2, np.pi)
+    idx = np.flatnonzero(found)
+    if idx.size == 0:
+        return heading, "unknown"
+    # stretches: split where frames were lost
+    breaks = np.flatnonzero(np.diff(idx) > 1) + 1
+    sense = "unknown"
+    prev_end: float | None = None
+    for seg_i, seg in enumerate(np.split(idx, breaks)):
+        h = np.empty(seg.size)
+        h[0] = h_mod[seg[0]]
+        if prev_end is not None:
+            h[0] += np.pi * np.round((prev_end - h[0]) / np.pi)
+        for j in range(1, seg.size):
+            x = h_mod[seg[j]]
+            h[j] = x + np.pi * np.round((h[j - 1] - x) / np.pi)
+        # direction of travel in world coordinates (x right, y up)
+        dx = np.diff(u_px[seg])
+        dy = -np.diff(v_px[seg])
+        fwd = np.array([-np.sin(h[:-1]), np.cos(h[:-1])])
+        score = float(np.sum(fwd[0] * dx + fwd[1] * dy))
+        travel = float(np.hypot(u_px[seg[-1]] - u_px[seg[0]], v_px[seg[-1]] - v_px[seg[0]]))
+        if travel >= min_travel_px and abs(score) > 0.3 * travel:
+            if score < 0:
+                h += np.pi
+            if seg_i == 0:
+                sense = "motion"
+        elif prev_end is not None:
+            if seg_i == 0:
+                sense = "continuity"
+        heading[seg] = h
+        prev_end = float(h[-1])
+    # start in (-pi, pi]; later values stay continuous (they may leave that range)
+    heading -= 2 * np.pi * np.round(heading[idx[0]] / (2 * np.pi))
+    return heading, sense
+
+
+def lost_stretches(t_s: np.ndarray, quality: np.ndarray) -> list[tuple[float, float]]:
+    """``(first, last)`` times of each run of lost frames (bridged by the speed's smoothing)."""
+    lost = np.r_[False, quality == QUALITY_LOST, False].astype(np.int8)
+    d = np.diff(lost)
+    return [(float(t_s[i]), float(t_s[j - 1])) for i, j in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1))]
+
+
+CHIP_AREA_MM2 = 5.0 * 2.0 + 6 * 0.45 * 0.3    # body and six leg stubs, seen from above
+ROBOT_WIDTH_MM = 2.0
+
+
+def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | None = None,
+                mask: Any = None, scale: Scale | None = None, mm_per_px: float | None = None,
+                robot_length_mm: float = ROBOT_LENGTH_MM, robot_length_std_mm: float = 0.05,
+                margin_px: int = 4, min_contrast: float | None = None, static_mask: bool = True,
+                max_speed_mm_s: float = 25.0, fps: float | None = None,
+                timestamps: str | Path | None = None, quiet: bool = True) -> Track:
+    """Track the robot through a video file or an image sequence.
+
+    Parameters
+    ----------
+    source:
+        Video path (anything OpenCV's FFmpeg backend reads), a folder of images,
+        or an image pattern such as ``frames/frame_%05d.png``.
+    roi:
+        ``(x, y, w, h)`` or ``"x,y,w,h"`` in pixels: search only there.
+    mask:
+        Bool/uint8 image or PNG path of the frame's size; non-zero = the robot may be there.
+    scale, mm_per_px:
+        The image scale; without either, it is measured from the robot's known
+        ``robot_length_mm`` (uncertain by ``robot_length_std_mm``). A known scale
+        also gives the robot's expected size in pixels (its identity).
+    margin_px:
+        Width of the band around the dark component whose pixels weigh in the
+        moments: at least the blur's half-length.
+    min_contrast:
+        Minimum (tray - object) / tray for an object to be the robot; default
+        (None): 5 x the tray's measured pixel noise, at least 4 %.
+    static_mask:
+        Model the static scene from frames spread over the video: the tray's
+        rim, static dark objects (dust) and the tray's texture
+        (:func:`~labkit.analysis.tracking.measure.background_model`).
+    max_speed_mm_s:
+        What the robot can walk: a candidate beyond it (plus jitter) from the
+        predicted position is an occlusion, not the robot.
+    fps, timestamps:
+        Frame times of an image sequence (a rate, or a CSV with a ``t_s`` column).
+
+    Returns
+    -------
+    Track
+        ``meta["warnings"]`` lists what the user should know (skipped frames,
+        ambiguous candidates, rejected jumps, static objects set aside).
+        Raises :class:`InputError` if the source is missing, unreadable, empty,
+        or no robot is found (the message gives the contrast found).
+    """
+    from labkit.analysis.tracking.video_io import (
+        check_timestamps,
+        iter_frames,
+        load_mask,
+        open_source,
+        parse_roi,
+        read_sample_frames,
+    )
+    from labkit.progress import progress as bar
+
+    cap, info = open_source(source, fps=fps, timestamps=timestamps)
+    warnings: list[str] = []
+    try:
+        if info.width <= 0 or info.height <= 0:
+            raise InputError("the video holds no frames", file=source)
+        W, H = info.width, info.height
+        roi_t = parse_roi(roi, W, H)
+        valid = load_mask(mask, W, H)
+        if scale is None and mm_per_px is not None:
+            scale = scale_given(mm_per_px)
+        if min_contrast is not None and not 0 < min_contrast < 1:
+            raise InputError(f"bad contrast {min_contrast}", key="min_contrast", expected="a share between 0 and 1")
+        body_w = ROBOT_WIDTH_MM / scale.mm_per_px if scale is not None else None
+        seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast)
+        static = None
+        flat = None
+        if static_mask:
+            static = background_model(read_sample_frames(cap, info, 15), seg)
+            seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast, noise=static.noise)
+            flat = static.flat
+            for m in (static.rim, static.objects):
+                if m is not None:
+                    valid = ~m if valid is None else valid & ~m
+            if static.object_boxes:
+                warnings.append(f"{len(static.object_boxes)} static dark object(s) set aside (never moved: dust, "
+                                f"not the robot) at x,y,w,h " + "; ".join(",".join(str(v) for v in b)
+                                                                          for b in static.object_boxes[:3]))
+        expected = CHIP_AREA_MM2 / scale.mm_per_px ** 2 if scale is not None else None
+        vmax = max_speed_mm_s / scale.mm_per_px if scale is not None else None
+        with bar(info.frame_count or None, "track", quiet=quiet, unit="frame") as pb:
+            raw = track_frames(iter_frames(cap, info), (W, H), roi=roi_t if roi is not None else None,
+                               valid=valid, flat=flat, seg=seg, margin_px=margin_px,
+                               expected_area_px=expected, max_speed_px_s=vmax, progress=pb)
+    finally:
+        cap.release()
+    if raw["t_s"].size == 0:
+        if info.undecodable:
+            raise InputError(f"none of the {info.undecodable} frames could be decoded", file=source)
+        raise InputError("the video holds no frames", file=source)
+    if info.undecodable:
+        warnings.insert(0, f"{info.undecodable} frame(s) could not be decoded and were skipped "
+                           f"(damaged or truncated file); {raw['t_s'].size} kept")
+    t_s, ts_source, faulty = check_timestamps(raw["t_s"], info.fps_nominal, str(source))
+    if info.timestamps_from != "container":
+        ts_source = info.timestamps_from
+    if faulty.any():
+        for key in ("u_px", "v_px", "theta", "area_px"):
+            raw[key][faulty] = np.nan
+        raw["quality"][faulty] = QUALITY_LOST
+    if np.all(raw["quality"] == QUALITY_LOST):
+        found = raw["best_contrast"]
+        noise = raw["noise"]
+        what = (f"the strongest dark object had {100 * found:.1f} % contrast against the tray"
+                f"{f' (pixel noise {100 * noise:.1f} %)' if np.isfinite(noise) else ''}; a robot needs "
+                f"{100 * raw['min_contrast']:.1f} % (--min-contrast)")
+        if static is not None and static.object_boxes and found >= raw["min_contrast"]:
+            what = f"only static dark objects (never moving: dust) were found; {what}"
+        raise InputError(f"no robot found in any of {t_s.size} frames: {what}", file=source,
+                         expected="a chip darker than the tray that moves (see --preview FRAME)")
+    if raw["ambiguous"]:
+        warnings.append(f"{raw['ambiguous']} frame(s) had a second robot-sized object within reach: check the "
+                        f"overlay (--overlay) or narrow the search (--roi/--mask)")
+    if raw["jumps"]:
+        warnings.append(f"{raw['jumps']} frame(s) showed a robot-like object farther than the robot can walk: "
+                        f"flagged lost (an occlusion), not taken as a position")
+    heading, sense = resolve_heading(t_s, raw["u_px"], raw["v_px"], raw["theta"], raw["quality"])
+    track = Track(t_s=t_s, u_px=raw["u_px"], v_px=raw["v_px"], heading_rad=heading, quality=raw["quality"],
+                  area_px=raw["area_px"], frame_size=(W, H), roi=roi_t, source=str(source),
+                  timestamps_source=ts_source, heading_sense=sense, length_px=raw["length_px"],
+                  length_px_std=raw["length_px_std"],
+                  meta={"fps_nominal": info.fps_nominal, "fourcc": info.fourcc,
+                        "timestamp_faults": int(faulty.sum()), "undecodable_frames": info.undecodable,
+                        "static_mask_px": int(static.rim.sum()) if static is not None and static.rim is not None
+                        else 0,
+                        "static_objects": static.object_boxes if static is not None else [],
+                        "noise": raw["noise"], "min_contrast": raw["min_contrast"],
+                        "contrast_found": raw["best_contrast"], "ambiguous_frames": raw["ambiguous"],
+                        "jumps_rejected": raw["jumps"], "lost_stretches_s": lost_stretches(t_s, raw["quality"]),
+                        "length_samples": raw["n_length"], "warnings": warnings})
+    track.scale = scale if scale is not None else scale_from_robot_length(track, robot_length_mm,
+                                                                          robot_length_std_mm)
+    return track

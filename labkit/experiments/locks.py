@@ -1,0 +1,148 @@
+"""One rig, one run: an exclusive OS lock per instrument resource (and per run file).
+
+A second run on the same instruments would switch the first one's drive off
+with its start-up OFF and then measure a rig it does not own. Before any
+instrument is opened, a run takes an exclusive, non-blocking ``flock`` on one
+small file per resource in the user's runtime folder
+(``$XDG_RUNTIME_DIR/labkit``, else ``/tmp/labkit-<uid>``); the file holds the
+holder's PID, command and run file as JSON. The kernel drops the lock when the
+process ends in any way (SIGKILL, a crash), so a stale file never blocks.
+
+A run file being written is locked the same way, so ``labkit info`` and
+``--resume`` can say "being written by PID n" instead of an HDF5 locking error.
+"""
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import os
+import re
+import sys
+import time
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+from labkit.errors import InputError
+
+
+class RigBusy(InputError):
+    """Another run holds one of the instruments (or the run file): nothing was opened or sent (exit 2)."""
+
+
+def runtime_dir() -> Path:
+    """The per-user folder of the lock files (created with mode 0700)."""
+    base = os.environ.get("XDG_RUNTIME_DIR")
+    folder = Path(base) / "labkit" if base and Path(base).is_dir() else Path(f"/tmp/labkit-{os.getuid()}")
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    return folder
+
+
+def lock_path(key: str) -> Path:
+    """The lock file for a resource string or a run file's absolute path."""
+    slug = re.sub(r"[^A-Za-z0-9._-]+", "_", key)[-60:]
+    digest = hashlib.sha1(key.encode()).hexdigest()[:12]
+    return runtime_dir() / f"{slug}.{digest}.lock"
+
+
+def file_key(path: str | Path) -> str:
+    return "file:" + os.path.realpath(path)
+
+
+def holder(key: str) -> dict[str, Any] | None:
+    """Who holds the lock on ``key`` now (its JSON record), or None when nobody does."""
+    p = lock_path(key)
+    if not p.exists():
+        return None
+    try:
+        fd = os.open(p, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return _read(p) or {"pid": "?"}
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)
+
+
+def _read(p: Path) -> dict[str, Any] | None:
+    try:
+        data = json.loads(p.read_text() or "{}")
+        return data if isinstance(data, dict) else None
+    except (OSError, ValueError):
+        return None
+
+
+def describe(info: dict[str, Any]) -> str:
+    """``PID 123 (labkit sweep inchip a.toml --out run.h5, run file run.h5, since 16:40:02)``."""
+    parts = [f"PID {info.get('pid', '?')}"]
+    extra = []
+    if info.get("command"):
+        extra.append(str(info["command"]))
+    if info.get("run_file"):
+        extra.append(f"run file {info['run_file']}")
+    if info.get("since"):
+        extra.append(f"since {info['since']}")
+    return parts[0] + (f" ({', '.join(extra)})" if extra else "")
+
+
+class RunLocks:
+    """The locks of one run; release with :meth:`release` (or use as a context manager)."""
+
+    def __init__(self) -> None:
+        self._fds: list[tuple[int, Path]] = []
+
+    def take(self, key: str, what: str, record: dict[str, Any], *, file: str | None = None,
+             conf_key: str | None = None) -> None:
+        """Lock ``key`` or raise :class:`RigBusy` naming the run that holds it."""
+        p = lock_path(key)
+        fd = os.open(p, os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            other = _read(p) or {"pid": "?"}
+            raise RigBusy(f"{what} is in use by another run: {describe(other)}; wait for it to end "
+                          f"(or stop it), then start this one", file=file, key=conf_key) from None
+        os.ftruncate(fd, 0)
+        os.write(fd, json.dumps(record | {"key": key}).encode())
+        self._fds.append((fd, p))
+
+    def release(self) -> None:
+        for fd, _p in reversed(self._fds):
+            try:
+                os.ftruncate(fd, 0)
+                fcntl.flock(fd, fcntl.LOCK_UN)
+                os.close(fd)
+            except OSError:
+                pass
+        self._fds.clear()
+
+    def __enter__(self) -> RunLocks:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+@contextlib.contextmanager
+def lock_run(resources: Iterable[tuple[str, str]], run_file: str | Path, config: str) -> Iterator[RunLocks]:
+    """Lock every ``(role, resource)`` and the run file, for the block; RigBusy if any is held."""
+    record = {"pid": os.getpid(), "command": " ".join(["labkit", *sys.argv[1:]]) if sys.argv else "",
+              "run_file": os.fspath(run_file), "config": config, "since": time.strftime("%H:%M:%S")}
+    locks = RunLocks()
+    try:
+        locks.take(file_key(run_file), f"the run file {run_file}", record, file=os.fspath(run_file), conf_key="--out")
+        for role, resource in resources:
+            if resource:
+                locks.take("resource:" + resource, f"the {role} ({resource})", record, file=config,
+                           conf_key=f"instruments.{role}.resource")
+        yield locks
+    finally:
+        locks.release()

@@ -1,0 +1,77 @@
+"""Every file labkit writes, opened by one call: :func:`labkit.open` (this package's :func:`open_file`).
+
+>>> run = labkit.open("sample_data/inchip_run.h5")          # doctest: +SKIP
+>>> run.locations["knee"].frf, run.units["frf"]             # doctest: +SKIP
+
+===========================  ===================  ==========================================
+file                         kind                 object
+===========================  ===================  ==========================================
+in-chip run (``.h5``)        ``run_inchip``       :class:`~labkit.files.runs.InchipRun`
+shaker run (``.h5``)         ``run_shaker``       :class:`~labkit.files.runs.ShakerRun`
+track (``.h5``)              ``track``            :class:`~labkit.files.kinds.Track`
+track table (``.csv``)       ``track_csv``        :class:`~labkit.files.kinds.Track`
+modal fit (``.fit.h5``)      ``modal_fit``        :class:`~labkit.files.kinds.ModalFit`
+simulation (``.h5``)         ``sim_result``       :class:`~labkit.files.kinds.SimRun`
+simulated sweep (``.h5``)    ``sim_sweep``        :class:`~labkit.files.kinds.SimSweep`
+robot parameters (``.toml``) ``robot_params``     :class:`~labkit.files.kinds.RobotParameters`
+video (``.mkv``, ``.avi``)   ``video``            :class:`~labkit.files.kinds.Video`
+===========================  ===================  ==========================================
+
+Each has ``path``, ``kind``, ``schema_version``, ``attrs`` (root attributes, ``*_json`` decoded),
+``units`` (name -> units of its arrays), ``summary()`` and ``to_xarray()``.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from labkit.errors import InputError
+from labkit.files.base import LabFile
+from labkit.files.kinds import ModalFit, RobotParameters, SimRun, SimSweep, Track, Video
+from labkit.files.runs import InchipRun, RunFile, ShakerRun, read_run_file
+
+__all__ = ["open_file", "LabFile", "RunFile", "InchipRun", "ShakerRun", "Track", "ModalFit", "SimRun",
+           "SimSweep", "RobotParameters", "Video", "read_run_file", "VIDEO_SUFFIXES"]
+
+VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4")
+
+
+def open_file(path: str | os.PathLike[str]) -> LabFile:
+    """Open any file labkit writes and return its typed object (see the module's table).
+
+    Raises
+    ------
+    InputError
+        Missing, unreadable, or not a file labkit writes (the message names the file and
+        what was found).
+    """
+    from labkit.files import kinds
+    from labkit.h5io import open_h5
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("no such file", file=p)
+    suffix = p.suffix.lower()
+    if suffix == ".toml":
+        return kinds.read_params(p)
+    if suffix == ".csv":
+        return kinds.read_track_csv(p)
+    if suffix in VIDEO_SUFFIXES:
+        return kinds.read_video(p)
+    with open_h5(p, "r") as f:
+        kind = f.attrs.get("kind")
+        kind = kind.decode() if isinstance(kind, bytes) else kind
+        if kind in ("run_inchip", "run_shaker"):
+            pass
+        elif kind == "track":
+            return kinds.read_track(p, f)
+        elif kind == "modal_fit":
+            return kinds.read_fit(p, f)
+        elif kind == "sim_result":
+            return kinds.read_sim_result(p, f)
+        elif kind == "sim_sweep":
+            return kinds.read_sim_sweep(p, f)
+        else:
+            raise InputError(f"not a file labkit reads: kind {kind!r}", file=p, key="kind",
+                             expected="run_inchip, run_shaker, track, modal_fit, sim_result or sim_sweep")
+    return read_run_file(p)

@@ -1,0 +1,390 @@
+"""Readers of the files labkit writes other than run files: tracks, fits, simulations, parameters, videos."""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from labkit.errors import InputError
+from labkit.files.base import LabFile, column, json_attr, require_xarray, root_attrs, text, units_of
+
+if TYPE_CHECKING:  # pragma: no cover
+    import xarray
+
+
+def _columns(g: Any, n: int | None = None) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    import h5py
+
+    cols = {k: column(g[k]) for k in g if isinstance(g[k], h5py.Dataset)}
+    return cols, {k: units_of(g[k]) for k in cols}
+
+
+def _var(dims: tuple[str, ...], v: np.ndarray, units: str) -> tuple[tuple[str, ...], np.ndarray, dict[str, str]]:
+    return dims, v, {"units": units}
+
+
+# --------------------------------------------------------------------------- tracks
+
+@dataclass
+class Track(LabFile):
+    """A robot track (kind ``track``): per-frame position and heading, the smoothed path, the speed.
+
+    ``columns`` holds the per-frame arrays (``t_s``, ``x_mm``, ``y_mm``, ``heading_rad``,
+    ``quality``, ``u_px``, ``v_px``, ``area_px``), ``smoothed`` those of the smoothed path.
+    """
+
+    columns: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    smoothed: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    mean_speed_mm_s: float = float("nan")
+    speed_ci_mm_s: tuple[float, float] = (float("nan"), float("nan"))
+    source_video: str = ""
+
+    @property
+    def t_s(self) -> np.ndarray:
+        return self.columns["t_s"]
+
+    def summary(self) -> dict[str, Any]:
+        return super().summary() | {"frames": int(self.t_s.size), "mean_speed_mm_s": self.mean_speed_mm_s,
+                                    "speed_ci_mm_s": list(self.speed_ci_mm_s), "source_video": self.source_video,
+                                    "mm_per_px": self.attrs.get("mm_per_px")}
+
+    def to_xarray(self) -> xarray.Dataset:
+        """Per-frame columns over ``t_s``; the smoothed path as ``smoothed_*`` over ``t_smoothed_s``."""
+        xr = require_xarray()
+        data = {k: _var(("t_s",), v, self.units.get(k, "")) for k, v in self.columns.items() if k != "t_s"}
+        coords = {"t_s": ("t_s", self.t_s, {"units": "s"})}
+        if self.smoothed:
+            coords["t_smoothed_s"] = ("t_smoothed_s", self.smoothed["t_s"], {"units": "s"})
+            data |= {f"smoothed_{k}": _var(("t_smoothed_s",), v, self.units.get(f"smoothed/{k}", ""))
+                     for k, v in self.smoothed.items() if k != "t_s"}
+        ds = xr.Dataset(data, coords=coords)
+        ds.attrs.update(kind=self.kind, file=str(self.path), mean_speed_mm_s=self.mean_speed_mm_s,
+                        source_video=self.source_video)
+        return ds
+
+
+def read_track(path: Path, f: Any) -> Track:
+    cols, units = _columns(f)
+    smoothed: dict[str, np.ndarray] = {}
+    if "smoothed" in f:
+        smoothed, su = _columns(f["smoothed"])
+        units |= {f"smoothed/{k}": u for k, u in su.items()}
+    if "t_s" not in cols:
+        raise InputError("missing dataset", file=path, key="t_s", expected="a track's frame times")
+    ci = np.asarray(f.attrs.get("speed_ci_mm_s", [np.nan, np.nan]), float).ravel()
+    return Track(path, "track", int(f.attrs.get("schema_version", 0)), root_attrs(f), units, cols, smoothed,
+                 float(f.attrs.get("mean_speed_mm_s", np.nan)),
+                 (float(ci[0]), float(ci[-1])) if ci.size else (np.nan, np.nan),
+                 text(f.attrs.get("source_video", "")))
+
+
+def read_track_csv(path: Path) -> Track:
+    """The CSV beside a track file (``labkit track --out``): one row per frame."""
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read ({exc})", file=path) from None
+    comments = [ln for ln in lines if ln.startswith("#")]
+    rows = list(csv.reader(ln for ln in lines if ln and not ln.startswith("#")))
+    if not rows or "t_s" not in rows[0]:
+        raise InputError("not a labkit track CSV", file=path, key="t_s", expected="a header row with t_s, x_mm, ...")
+    header, body = rows[0], rows[1:]
+    try:
+        cols = {h: np.array([float(r[i]) if r[i] else np.nan for r in body]) for i, h in enumerate(header)}
+    except (ValueError, IndexError) as exc:
+        raise InputError(f"bad row ({exc})", file=path) from None
+    units = {h: _csv_units(h) for h in header}
+    t = Track(path, "track_csv", 0, {"comment": "\n".join(comments)}, units, cols)
+    return t
+
+
+def _csv_units(name: str) -> str:
+    for suffix, unit in (("_mm_s", "mm/s"), ("_rad", "rad"), ("_mm", "mm"), ("_px", "px"), ("_s", "s")):
+        if name.endswith(suffix):
+            return unit
+    return "label" if name == "quality" else "1"
+
+
+# --------------------------------------------------------------------------- modal fits
+
+@dataclass
+class FitGroup:
+    """One fit group of a modal fit (``inchip``: tethered robot, ``shaker``: released robot)."""
+
+    name: str
+    method: str
+    quality: float
+    locations: dict[str, dict[str, np.ndarray]]       # loc -> freq_hz, frf, model
+    modes: dict[str, np.ndarray]                      # freq_hz, damping_ratio, ... (per mode)
+    stabilisation: dict[str, np.ndarray] | None
+    units: dict[str, str]
+
+
+@dataclass
+class ModalFit(LabFile):
+    """A resonance fit (kind ``modal_fit``): measured and fitted FRFs, modes with uncertainties."""
+
+    groups: dict[str, FitGroup] = field(default_factory=dict, repr=False)
+    runs: dict[str, list[str]] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        return super().summary() | {
+            "runs": self.runs,
+            "modes": {g: [{"freq_hz": float(f), "damping_ratio": float(z)} for f, z in
+                          zip(fg.modes.get("freq_hz", []), fg.modes.get("damping_ratio", []))]
+                      for g, fg in self.groups.items()}}
+
+    def to_xarray(self, group: str | None = None) -> xarray.Dataset:
+        """One group (default: the first) as ``frf``/``model`` over ``location`` x ``freq_hz`` and
+        the modes over ``mode`` (``mode_freq_hz``, ``damping_ratio``, ..., ``amplitude`` over mode x location)."""
+        xr = require_xarray()
+        if not self.groups:
+            return xr.Dataset()
+        name = group or next(iter(self.groups))
+        if name not in self.groups:
+            raise InputError(f"no fit group {name!r}", file=self.path, key="group",
+                             expected=" or ".join(self.groups))
+        g = self.groups[name]
+        parts = []
+        for loc, d in g.locations.items():
+            f, keep = np.unique(d["freq_hz"], return_index=True)
+            parts.append(xr.Dataset({k: (("freq_hz",), v[keep], {"units": g.units.get(k, "")})
+                                     for k, v in d.items() if k != "freq_hz"},
+                                    coords={"freq_hz": ("freq_hz", f, {"units": "Hz"})}).expand_dims(location=[loc]))
+        ds = xr.concat(parts, dim="location", join="outer") if parts else xr.Dataset()
+        nm = g.modes.get("freq_hz", np.array([])).size
+        ds = ds.assign_coords(mode=("mode", np.arange(1, nm + 1)))
+        for k, v in g.modes.items():
+            key = "mode_freq_hz" if k == "freq_hz" else "mode_freq_hz_std" if k == "freq_hz_std" else k
+            dims = ("mode",) if v.ndim == 1 else ("mode", "location")
+            if v.ndim == 2 and v.shape[1] != ds.sizes.get("location", -1):
+                continue
+            ds[key] = (dims, v, {"units": g.units.get(f"modes/{k}", "")})
+        ds.attrs.update(kind=self.kind, file=str(self.path), group=name, method=g.method, quality=g.quality)
+        return ds
+
+
+def read_fit(path: Path, f: Any) -> ModalFit:
+    groups: dict[str, FitGroup] = {}
+    for name, g in (f["groups"].items() if "groups" in f else []):
+        units: dict[str, str] = {}
+        locs: dict[str, dict[str, np.ndarray]] = {}
+        for key, lg in (g["locations"].items() if "locations" in g else []):
+            cols, u = _columns(lg)
+            units |= u
+            locs[text(lg.attrs.get("name", key))] = cols
+        modes, mu = _columns(g["modes"]) if "modes" in g else ({}, {})
+        units |= {f"modes/{k}": v for k, v in mu.items()}
+        stab = _columns(g["stabilisation"])[0] if "stabilisation" in g else None
+        groups[name] = FitGroup(name, text(g.attrs.get("method", "?")), float(g.attrs.get("quality", np.nan)),
+                                locs, modes, stab, units)
+    return ModalFit(path, "modal_fit", int(f.attrs.get("schema_version", 0)), root_attrs(f), {}, groups,
+                    json_attr(f.attrs, "runs_json", {}) or {})
+
+
+# --------------------------------------------------------------------------- simulations
+
+@dataclass
+class SimRun(LabFile):
+    """One simulator run (kind ``sim_result``): time series of body, feet, contact and knee."""
+
+    columns: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    scenario: dict[str, Any] = field(default_factory=dict)
+    params_toml: str = field(default="", repr=False)
+    mean_speed_mm_s: float = float("nan")
+
+    @property
+    def t_s(self) -> np.ndarray:
+        return self.columns["t_s"]
+
+    def summary(self) -> dict[str, Any]:
+        return super().summary() | {"scenario": self.scenario, "mean_speed_mm_s": self.mean_speed_mm_s,
+                                    "samples": int(self.t_s.size)}
+
+    def to_xarray(self) -> xarray.Dataset:
+        """Time series over ``t_s`` (per-leg arrays over ``leg``, body angles over ``axis``)."""
+        xr = require_xarray()
+        n = self.t_s.size
+        data = {}
+        for k, v in self.columns.items():
+            if k == "t_s" or v.ndim == 0:
+                continue
+            if v.shape[0] == n:
+                dims = ("t_s",) + tuple("leg" if s == 6 else "axis" if s == 3 else f"{k}_dim{i}"
+                                        for i, s in enumerate(v.shape[1:], 1))
+            elif v.ndim == 1 and v.size == 6:
+                dims = ("leg",)
+            elif v.ndim == 2 and v.shape[0] == 6:
+                dims = ("leg", f"{k}_column")
+            else:
+                dims = tuple(f"{k}_dim{i}" for i in range(v.ndim))
+            data[k] = (dims, v, {"units": self.units.get(k, "")})
+        ds = xr.Dataset(data, coords={"t_s": ("t_s", self.t_s, {"units": "s"})})
+        ds.attrs.update(kind=self.kind, file=str(self.path), mean_speed_mm_s=self.mean_speed_mm_s)
+        return ds
+
+
+def read_sim_result(path: Path, f: Any) -> SimRun:
+    cols, units = _columns(f)
+    if "t_s" not in cols:
+        raise InputError("missing dataset", file=path, key="t_s", expected="a simulation's time axis")
+    return SimRun(path, "sim_result", int(f.attrs.get("schema_version", 0)), root_attrs(f), units, cols,
+                  json_attr(f.attrs, "scenario_json", {}) or {}, text(f.attrs.get("params_toml", "")),
+                  float(f.attrs.get("mean_speed_mm_s", np.nan)))
+
+
+@dataclass
+class SimSweep(LabFile):
+    """A simulated sweep (kind ``sim_sweep``): speeds over the swept quantity and Monte Carlo draws."""
+
+    quantity: str = "?"
+    values: np.ndarray = field(default_factory=lambda: np.array([]))
+    columns: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    params_toml: str = field(default="", repr=False)
+
+    def summary(self) -> dict[str, Any]:
+        return super().summary() | {"quantity": self.quantity, "points": int(self.values.size),
+                                    "draws": int(self.columns["speeds_mm_s"].shape[1])
+                                    if self.columns.get("speeds_mm_s") is not None
+                                    and self.columns["speeds_mm_s"].ndim == 2 else 0}
+
+    def to_xarray(self) -> xarray.Dataset:
+        """Over the swept quantity (``freq_hz``, ``amp_um``, ...) x ``draw`` (0 = nominal) x ``foot`` x ``mode``."""
+        xr = require_xarray()
+        q = self.quantity
+        names = (q, "draw", "foot", "contact_mode")
+        data = {}
+        for k, v in self.columns.items():
+            if k in ("values", q) or v.ndim == 0 or v.shape[0] != self.values.size:
+                continue
+            data[k] = (names[:v.ndim], v, {"units": self.units.get(k, "")})
+        ds = xr.Dataset(data, coords={q: (q, self.values, {"units": self.units.get("values", "")})})
+        ds.attrs.update(kind=self.kind, file=str(self.path), quantity=q)
+        return ds
+
+
+def read_sim_sweep(path: Path, f: Any) -> SimSweep:
+    cols, units = _columns(f)
+    if "values" not in cols:
+        raise InputError("missing dataset", file=path, key="values", expected="the swept values")
+    return SimSweep(path, "sim_sweep", int(f.attrs.get("schema_version", 0)), root_attrs(f), units,
+                    text(f.attrs.get("quantity", "?")), cols["values"], cols, text(f.attrs.get("params_toml", "")))
+
+
+# --------------------------------------------------------------------------- parameter files, videos
+
+@dataclass
+class RobotParameters(LabFile):
+    """A robot parameter file (TOML): ``params`` (:class:`labkit.sim.RobotParams`) and its ``provenance``."""
+
+    params: Any = None
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        p = self.params
+        return super().summary() | {"modal_freq_hz": list(p.modal_freq_hz),
+                                    "modal_damping_ratio": list(p.modal_damping_ratio),
+                                    "provenance": provenance_digest(self.provenance)}
+
+    def to_xarray(self) -> xarray.Dataset:
+        """Scalars as 0-d variables, per-mode triples over ``mode`` (1, 2, 3); units on each."""
+        xr = require_xarray()
+        from labkit.sim.params import _SPECS  # the parameter table: units of every key
+
+        data = {}
+        for k, v in self.params.to_dict().items():
+            arr = np.asarray(v)
+            spec = _SPECS.get(k)
+            data[k] = (("mode",) if arr.ndim == 1 else (), arr, {"units": spec.unit if spec else ""})
+        ds = xr.Dataset(data, coords={"mode": ("mode", np.arange(1, 4))})
+        ds.attrs.update(kind=self.kind, file=str(self.path))
+        return ds
+
+
+def provenance_digest(prov: dict[str, Any]) -> dict[str, Any]:
+    """What ``labkit info`` shows of a ``[provenance]`` table: source, runs, fit file, and per mode
+    where its value came from (fit with uncertainty, or the base file)."""
+    keep = ("source", "created_utc", "runs", "fit_file", "method", "generated_by", "calibration")
+    out: dict[str, Any] = {k: prov[k] for k in keep if k in prov}
+    modes = prov.get("modes")
+    if isinstance(modes, dict):
+        out["modes"] = {}
+        for m, d in modes.items():
+            if not isinstance(d, dict):
+                continue
+            if d.get("source") == "fit":
+                nan = float("nan")
+                out["modes"][m] = (f"fit ({d.get('method', '?')}, {d.get('group', '?')}): "
+                                   f"{d.get('freq_hz', nan):.6g} +- {d.get('freq_hz_std', nan):.2g} Hz, "
+                                   f"zeta {d.get('damping_ratio', nan):.4g} +- {d.get('damping_ratio_std', nan):.2g}")
+            else:
+                out["modes"][m] = f"{d.get('source', '?')}: {d.get('base', '')}".rstrip(": ")
+    others = sorted(k for k in prov if k not in keep and k != "modes")
+    if others:
+        out["other_keys"] = others
+    return out
+
+
+def read_params(path: Path) -> RobotParameters:
+    from labkit.sim import RobotParams
+
+    p = RobotParams.from_toml(path)
+    return RobotParameters(path, "robot_params", 0, {}, {}, p, dict(p.provenance))
+
+
+@dataclass
+class Video(LabFile):
+    """A video labkit recorded or drew (``.mkv`` with per-frame timestamps, ``.avi``)."""
+
+    width: int = 0
+    height: int = 0
+    frames: int = 0
+    fps_nominal: float = 0.0
+    codec: str = ""
+    t_s: np.ndarray = field(default_factory=lambda: np.array([]), repr=False)
+
+    def summary(self) -> dict[str, Any]:
+        d = float(self.t_s[-1] - self.t_s[0]) if self.t_s.size > 1 else None
+        return super().summary() | {"width_px": self.width, "height_px": self.height, "frames": self.frames,
+                                    "fps_nominal": self.fps_nominal, "codec": self.codec, "duration_s": d}
+
+    def to_xarray(self) -> xarray.Dataset:
+        """The frame times (``t_s`` coordinate over ``frame``); pixels are read with ``labkit.analysis.tracking``."""
+        xr = require_xarray()
+        ds = xr.Dataset(coords={"frame": ("frame", np.arange(self.t_s.size)),
+                                "t_s": ("frame", self.t_s, {"units": "s"})})
+        ds.attrs.update(kind=self.kind, file=str(self.path), width_px=self.width, height_px=self.height)
+        return ds
+
+
+def read_video(path: Path) -> Video:
+    """Frame size, count, codec and every frame's container timestamp (OpenCV's FFmpeg backend).
+
+    Read here rather than through ``labkit.analysis.tracking`` so that this package stays
+    below the analysis layer (analysis reads files through it).
+    """
+    import cv2
+
+    cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    try:
+        if not cap.isOpened():
+            raise InputError("not a readable video", file=path)
+        code = int(cap.get(cv2.CAP_PROP_FOURCC))
+        fourcc = "".join(chr((code >> (8 * i)) & 0xFF) for i in range(4)).strip("\x00")
+        width, height = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        times = []
+        while cap.grab():                      # no decoding: only the timestamps are wanted
+            times.append(cap.get(cv2.CAP_PROP_POS_MSEC) / 1000.0)
+    finally:
+        cap.release()
+    t = np.asarray(times, float)
+    if t.size == 0:
+        raise InputError("the video has no frames", file=path)
+    if t.size > 1 and np.all(t == t[0]) and fps > 0:      # no timestamps in the container: nominal rate
+        t = np.arange(t.size) / fps
+    return Video(path, "video", 0, {}, {"t_s": "s"}, width, height, int(t.size), fps, fourcc, t)

@@ -1,0 +1,155 @@
+"""One output policy for every labkit command that writes files.
+
+The rules (``docs/file-formats.md``, "Outputs"):
+
+* **Checked before any work starts.** A command lists *every* file it will
+  write -- the main output and its sidecars (CSV, PNG, overlay video, JSON,
+  per-point videos) -- and calls :func:`check_outputs` before it opens an
+  instrument, runs a simulation or tracks a frame.
+* **Never overwritten silently.** An existing output is refused (exit 2) with
+  a hint: ``--force`` replaces it; ``--resume`` continues it where that applies.
+* **Replaced atomically with --force.** :func:`atomic_output` hands the
+  writer a temporary name in the same folder (same suffix, so writers that
+  infer a format from the suffix still work) and renames it over the old
+  file with :func:`os.replace` only once the writer returned. A crash or an
+  error mid-write leaves the old file as it was (and removes the partial one).
+* **Missing folders.** The folder that will hold an output file must exist;
+  labkit does not create it (a mistyped folder is far more often a typo than
+  a wish). A command whose ``--out`` *is* a folder (``report``, ``demo``,
+  ``simulate scenario``, ``sample-data``) creates that one folder, but not its
+  parents.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+from labkit.errors import InputError
+
+__all__ = ["check_outputs", "check_output_dir", "atomic_output", "temp_name"]
+
+
+def _hint(resume: bool) -> str:
+    return "use --force to replace it" + (", or --resume to continue it" if resume else "")
+
+
+def check_outputs(paths: Iterable[str | os.PathLike[str] | None], *, force: bool = False,
+                  key: str = "--out", resume: bool = False,
+                  suffixes: Iterable[str] | None = None) -> list[Path]:
+    """Check files a command is about to write; call before any work starts.
+
+    Parameters
+    ----------
+    paths:
+        Every file the command will write (``None`` entries are skipped, so
+        optional outputs can be passed as they are).
+    force:
+        The command's ``--force``: existing files may be replaced.
+    key:
+        The option named in messages (``"--out"``, ``"--overlay"``).
+    resume:
+        Mention ``--resume`` in the hint (the command can continue the file).
+    suffixes:
+        Accepted suffixes (lower case, with the dot), e.g. ``(".mkv", ".avi")``.
+
+    Returns
+    -------
+    list of Path
+        The paths (``None`` entries dropped), for the command to use.
+
+    Raises
+    ------
+    InputError
+        (exit 2) an output exists and ``force`` is false; its folder does not
+        exist or is not a folder; the path is a folder; a suffix is not accepted;
+        the same file is named twice.
+    """
+    out: list[Path] = []
+    allowed = tuple(s.lower() for s in suffixes) if suffixes is not None else None
+    for p in paths:
+        if p is None:
+            continue
+        path = Path(p)
+        if allowed is not None and path.suffix.lower() not in allowed:
+            raise InputError(f"unsupported file type {path.suffix or '(none)'!r}", file=path, key=key,
+                             expected=" or ".join(allowed))
+        if path.is_dir():
+            raise InputError("is a folder", file=path, key=key, expected="a file name")
+        parent = path.resolve().parent
+        if not parent.is_dir():
+            raise InputError("the output's folder does not exist (labkit does not create it)",
+                             file=path, key=key, expected=f"an existing folder {parent}")
+        if path.exists() and not force:
+            raise InputError(f"already exists; {_hint(resume)}", file=path, key=key)
+        if any(q.resolve() == path.resolve() for q in out):
+            raise InputError("named twice among the outputs", file=path, key=key)
+        out.append(path)
+    return out
+
+
+def check_output_dir(path: str | os.PathLike[str], *, force: bool = False, key: str = "--out",
+                     names: Iterable[str] = ()) -> Path:
+    """Check an output *folder* (created if missing; its parent must exist).
+
+    With ``names`` (the files the command will write in it), any of them
+    already present is refused unless ``force``; without ``names``, a
+    non-empty folder is refused unless ``force``.
+    """
+    d = Path(path)
+    if d.exists() and not d.is_dir():
+        raise InputError("is a file, not a folder", file=d, key=key, expected="a folder")
+    if not d.resolve().parent.is_dir():
+        raise InputError("the folder that would hold it does not exist (labkit creates only the output "
+                         "folder itself)", file=d, key=key, expected=f"an existing folder {d.resolve().parent}")
+    if d.is_dir() and not force:
+        names = list(names)
+        clash = [n for n in names if (d / n).exists()] if names else sorted(p.name for p in d.iterdir())
+        if clash:
+            shown = ", ".join(clash[:3]) + (" ..." if len(clash) > 3 else "")
+            raise InputError(f"already holds {shown}; {_hint(False)}", file=d, key=key)
+    return d
+
+
+def temp_name(path: str | os.PathLike[str]) -> Path:
+    """A fresh temporary file name beside ``path`` with the same suffix (the file is not left open)."""
+    path = Path(path)
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".partial{path.suffix}",
+                                dir=path.resolve().parent)
+    os.close(fd)
+    # mkstemp makes the file private (0600); give it the mode a plain open() would have
+    os.chmod(name, 0o666 & ~_umask())
+    return Path(name)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Write ``path`` through a temporary name in the same folder, renamed over it at the end.
+
+    Use as ``with atomic_output(out) as tmp: writer(tmp)``. On any exception
+    (including KeyboardInterrupt) the temporary file is removed and ``path``
+    is left exactly as it was; on success :func:`os.replace` swaps it in,
+    which on POSIX is atomic: a reader (or a crash) sees the old file or the
+    new one, never neither. The temporary file exists, empty, when the block
+    starts (writers that refuse to overwrite must be given ``force``-style
+    freedom, e.g. ``h5py.File(tmp, "w")``).
+    """
+    path = Path(path)
+    tmp = temp_name(path)
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise InputError("the writer did not produce the file", file=path)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise

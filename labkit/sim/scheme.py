@@ -1,0 +1,710 @@
+"""The integration scheme of the coupled hybrid model (docs/model.md sections 3-6, 10).
+
+One source, two engines: compiled by numba (:mod:`labkit.sim.kernel`) or run as
+plain Python (:mod:`labkit.sim.reference`), see :mod:`labkit.sim._jit`.
+Everything is on flat float64 arrays so the compiled loop allocates nothing:
+
+* ``P``: scalars (layout ``P_*`` below), ``A``: the constant matrices of
+  :mod:`labkit.sim.model` (layout ``OFF_*``), ``S``: the state (``S_*``),
+  ``mode``: contact mode of the 6 feet and the body (AIR / ADHESION / REST).
+
+The mechanics (docs/model.md section 10, equation numbers M1-M12 there):
+generalised coordinates ``q = (y_b, z_b, phi_x, phi_y, phi_z, x_11 .. x_63)``
+(23), one constant symmetric mass matrix ``M``, diagonal modal stiffness
+``K`` and damping ``D``, constant forces ``f_c`` (gravity minus the static
+support, the coordinates being deviations from rest), the actuator as
+generalised forces on the modal coordinates only (an internal force pair),
+and 14 contact rows ``R`` (foot z, foot y, body z, body y) plus 18 mode rows
+used when some modes are held rigid in impacts.
+
+One step of length h (implicit midpoint = trapezoidal rule, M5):
+
+    (2M + hD + h^2/2 K) vbar = 2 M v0 + h (f(t + h/2) - K q0) + sum_a R_a alpha_a
+    q1 = q0 + h vbar,   v1 = 2 vbar - v0
+
+where ``alpha_a = h lambda_a`` for a pinned row (``R_a . q1`` = its target at
+t + h) and ``alpha_a = -h c_a (R_a . vbar - v_g)`` for a squeeze-film row (the
+film is implicit: its rate reaches 1e8 1/s near the ground). The small system
+for ``alpha`` is solved by Gauss elimination; ``lambda`` is the contact force,
+used for release. Without damping the scheme conserves the energy of the
+linear system exactly and every linear momentum exactly (to round-off).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from labkit.sim._jit import jit
+
+NQ = 23          # generalised coordinates
+NB = 5           # body coordinates
+NR = 14          # contact rows: 0-5 foot z, 6-11 foot y, 12 body z, 13 body y
+NI = NR + 18     # impulse rows: the contact rows, then one per leg mode (held rigid in impacts)
+ROW_BZ = 12
+ROW_BY = 13
+AIR, ADHESION, REST = 0, 1, 2
+
+# ---- scalars P
+(P_H0, P_HMIN, P_BGF, P_BGB, P_AD, P_CAD, P_CADT, P_CR, P_CRB, P_VSTICK, P_MU, P_BNS, P_KIND, P_AMP,
+ P_OMEGA, P_FREQ, P_VOLT, P_DT, P_GAPTOL, P_MAXEV, P_NHELD, P_POSTOL) = range(22)
+P_SIZE = 22
+
+# ---- matrices A (row-major blocks)
+OFF_M = 0
+OFF_MINV = OFF_M + NQ * NQ
+OFF_SINV = OFF_MINV + NQ * NQ          # (2M + dt D + dt^2/2 K)^-1 for the default step
+OFF_RI = OFF_SINV + NQ * NQ            # NQ x NI: contact rows then mode rows (columns)
+OFF_MRI = OFF_RI + NQ * NI             # M^-1 RI
+OFF_WI = OFF_MRI + NQ * NI             # RI^T M^-1 RI
+OFF_Z = OFF_WI + NI * NI               # NQ x NR: Sinv R
+OFF_Q = OFF_Z + NQ * NR                # NR x NR: R^T Sinv R
+OFF_K = OFF_Q + NR * NR                # diagonal of K
+OFF_D = OFF_K + NQ
+OFF_FC = OFF_D + NQ                    # constant forces (deviation coordinates)
+OFF_FA = OFF_FC + NQ                   # actuator forces per volt (tripod phases included)
+OFF_KV = OFF_FA + NQ                   # 6 x NQ: knee vertical velocity rows
+OFF_YFEQ = OFF_KV + 6 * NQ             # 6: lateral foot position at rest
+OFF_HELD = OFF_YFEQ + 6                # 18: 1 = the mode is held rigid in impacts
+A_SIZE = OFF_HELD + 18
+
+# ---- state S
+S_Q = 0
+S_V = S_Q + NQ
+S_TC = S_V + NQ          # time in contact per foot
+S_YPIN = S_TC + 6        # lateral position where a pinned foot is held
+S_LAM = S_YPIN + 6       # last contact force per row (N; + pushes the foot up)
+S_SLIP = S_LAM + NR      # friction force of a slipping pinned foot (0: it sticks)
+S_SIZE = S_SLIP + 6
+
+# ---- recorded trajectory columns (SI)
+REC_T, REC_Y, REC_Z, REC_PH, REC_ZG, REC_FZ, REC_FY, REC_KV = 0, 1, 2, 3, 6, 7, 13, 19
+REC_COLS = 25
+# ---- impact log columns
+EV_T, EV_LEG, EV_VPRE, EV_VPOST, EV_VYPOST, EV_STUCK = range(6)
+EV_COLS = 6
+# ---- counters: 0..5 impacts per foot
+CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED, CNT_RELEASES = 6, 7, 8, 9, 10
+CNT_SIZE = 11
+
+# ---- float scratch W
+W_F = 0                   # forces at the step's midpoint
+W_R = W_F + NQ            # right-hand side
+W_Y0 = W_R + NQ           # Sinv r
+W_VB = W_Y0 + NQ          # vbar
+W_Q0 = W_VB + NQ
+W_V0 = W_Q0 + NQ
+W_SM = W_V0 + NQ          # NQ x NQ system matrix of a partial step
+W_B = W_SM + NQ * NQ      # NQ x (1 + NR) right-hand sides of a partial step
+W_ZH = W_B + NQ * (1 + NR)
+W_QH = W_ZH + NQ * NR
+W_AS = W_QH + NR * NR     # small system NI x NI
+W_BS = W_AS + NI * NI     # small right-hand side NI
+W_C = W_BS + NI           # film coefficient per active row
+W_T = W_C + NI            # targets per active row
+W_LAMS = W_T + NI         # saved contact forces
+W_Q1 = W_LAMS + NR        # trial end state
+W_V1 = W_Q1 + NQ
+W_GAP0 = W_V1 + NQ        # 7 gaps at the start
+W_GAP1 = W_GAP0 + 7       # 7 gaps at the end of a trial
+W_VREL = W_GAP1 + 7
+W_SIZE = W_VREL + 7
+# ---- int scratch I
+I_ROWS = 0                # active rows
+I_KIND = I_ROWS + NI      # 0 film, 1 pinned
+I_IMP = I_KIND + NI       # impacting flags (7)
+I_SIZE = I_IMP + 7
+
+
+@jit
+def ground(P, t):
+    """Ground height, velocity and acceleration (model.md section 7): shaker sine, else still."""
+    if P[P_KIND] != 0.0:
+        return 0.0, 0.0, 0.0
+    w = P[P_OMEGA]
+    a = P[P_AMP]
+    s = math.sin(w * t)
+    c = math.cos(w * t)
+    return a * s, a * w * c, -a * w * w * s
+
+
+@jit
+def volts(P, t):
+    """PZT square wave at time t (edges fall on step boundaries: t is a step's midpoint)."""
+    if P[P_KIND] != 1.0:
+        return 0.0
+    ph = P[P_FREQ] * t
+    return P[P_VOLT] if ph - math.floor(ph) < 0.5 else -P[P_VOLT]
+
+
+@jit
+def gauss(Am, oa, lda, Bm, ob, ldb, n, m):
+    """Solve A X = B in place (A n x n at Am[oa], row stride lda; B n x m at Bm[ob], stride ldb).
+
+    Gauss elimination with partial pivoting; X overwrites B, A is destroyed.
+    """
+    for k in range(n):
+        piv = k
+        best = abs(Am[oa + k * lda + k])
+        for i in range(k + 1, n):
+            v = abs(Am[oa + i * lda + k])
+            if v > best:
+                best = v
+                piv = i
+        if piv != k:
+            for c in range(n):
+                tmp = Am[oa + k * lda + c]
+                Am[oa + k * lda + c] = Am[oa + piv * lda + c]
+                Am[oa + piv * lda + c] = tmp
+            for c in range(m):
+                tmp = Bm[ob + k * ldb + c]
+                Bm[ob + k * ldb + c] = Bm[ob + piv * ldb + c]
+                Bm[ob + piv * ldb + c] = tmp
+        d = Am[oa + k * lda + k]
+        for i in range(k + 1, n):
+            f = Am[oa + i * lda + k] / d
+            if f != 0.0:
+                for c in range(k + 1, n):
+                    Am[oa + i * lda + c] -= f * Am[oa + k * lda + c]
+                for c in range(m):
+                    Bm[ob + i * ldb + c] -= f * Bm[ob + k * ldb + c]
+    for k in range(n - 1, -1, -1):
+        d = Am[oa + k * lda + k]
+        for c in range(m):
+            s = Bm[ob + k * ldb + c]
+            for j in range(k + 1, n):
+                s -= Am[oa + k * lda + j] * Bm[ob + j * ldb + c]
+            Bm[ob + k * ldb + c] = s / d
+
+
+@jit
+def row_dot(A, r, x, xo):
+    """Contact/impulse row r (column r of RI) dotted with x[xo:xo+NQ]."""
+    s = 0.0
+    for i in range(NQ):
+        s += A[OFF_RI + i * NI + r] * x[xo + i]
+    return s
+
+
+@jit
+def gaps(P, A, S, t, W, o):
+    """Gap of each foot (0-5) and of the body (6) above the ground at t, into W[o:o+7]."""
+    zg, _, _ = ground(P, t)
+    for j in range(6):
+        W[o + j] = row_dot(A, j, S, S_Q) - zg
+    W[o + 6] = P[P_H0] + S[S_Q + 1] - zg
+
+
+@jit
+def forces(P, A, S, mode, t_mid, q, qo, v, vo, F, fo):
+    """Generalised forces except springs, dampers, films and contacts (M4): constant
+    forces, the actuator at t_mid, air drag (explicit), friction of slipping feet."""
+    V = volts(P, t_mid)
+    for i in range(NQ):
+        F[fo + i] = A[OFF_FC + i] + V * A[OFF_FA + i]
+    ad = P[P_AD]
+    if ad > 0.0:
+        for j in range(6):
+            if mode[j] == AIR:
+                vz = 0.0
+                vy = 0.0
+                for i in range(NQ):
+                    vz += A[OFF_RI + i * NI + j] * v[vo + i]
+                    vy += A[OFF_RI + i * NI + 6 + j] * v[vo + i]
+                fz = -ad * vz * abs(vz)
+                fy = -ad * vy * abs(vy)
+                for i in range(NQ):
+                    F[fo + i] += A[OFF_RI + i * NI + j] * fz + A[OFF_RI + i * NI + 6 + j] * fy
+        F[fo + 0] -= ad * v[vo + 0] * abs(v[vo + 0])
+        F[fo + 1] -= ad * v[vo + 1] * abs(v[vo + 1])
+    for j in range(6):
+        fr = S[S_SLIP + j]
+        if mode[j] != AIR and fr != 0.0:
+            for i in range(NQ):
+                F[fo + i] += A[OFF_RI + i * NI + 6 + j] * fr
+
+
+@jit
+def active_rows(P, A, S, mode, t, I, W):
+    """The rows of the step's small system: pinned rows (kind 1) and film rows (kind 0).
+
+    Returns their number; film coefficients c (N s/m) are frozen at the step's start.
+    """
+    zg, _, _ = ground(P, t)
+    n = 0
+    for j in range(6):
+        if mode[j] == AIR:
+            if P[P_BGF] > 0.0:
+                gap = row_dot(A, j, S, S_Q) - zg
+                h = gap if gap > P[P_HMIN] else P[P_HMIN]
+                I[I_ROWS + n] = j
+                I[I_KIND + n] = 0
+                W[W_C + n] = P[P_BGF] / (h * h * h)
+                n += 1
+        else:
+            I[I_ROWS + n] = j
+            I[I_KIND + n] = 1
+            n += 1
+            if S[S_SLIP + j] == 0.0:
+                I[I_ROWS + n] = 6 + j
+                I[I_KIND + n] = 1
+                n += 1
+    if mode[6] == REST:
+        I[I_ROWS + n] = ROW_BZ
+        I[I_KIND + n] = 1
+        n += 1
+    elif P[P_BGB] > 0.0:
+        gap = P[P_H0] + S[S_Q + 1] - zg
+        h = gap if gap > P[P_HMIN] else P[P_HMIN]
+        I[I_ROWS + n] = ROW_BZ
+        I[I_KIND + n] = 0
+        W[W_C + n] = P[P_BGB] / (h * h * h)
+        n += 1
+    return n
+
+
+@jit
+def row_target(P, S, r, zg):
+    """Position a pinned row must have: the ground for z rows, the held place for y rows."""
+    if r < 6:
+        return zg
+    if r < 12:
+        return S[S_YPIN + r - 6]
+    return zg - P[P_H0]
+
+
+@jit
+def advance(P, A, S, mode, t, h, W, I, out):
+    """One midpoint step of length h from S (M5); the end state goes to ``out`` (q, v, lam).
+
+    ``h`` equal to the default step uses the precomputed inverse; any other
+    length (a partial step up to an event) solves its own system.
+    """
+    for i in range(NQ):
+        W[W_Q0 + i] = S[S_Q + i]
+        W[W_V0 + i] = S[S_V + i]
+    forces(P, A, S, mode, t + 0.5 * h, S, S_Q, S, S_V, W, W_F)
+    # r = 2 M v0 + h (f - K q0)
+    for i in range(NQ):
+        s = 0.0
+        for k in range(NQ):
+            s += A[OFF_M + i * NQ + k] * W[W_V0 + k]
+        W[W_R + i] = 2.0 * s + h * (W[W_F + i] - A[OFF_K + i] * W[W_Q0 + i])
+    full = h == P[P_DT]
+    if full:
+        for i in range(NQ):
+            s = 0.0
+            for k in range(NQ):
+                s += A[OFF_SINV + i * NQ + k] * W[W_R + k]
+            W[W_Y0 + i] = s
+    else:
+        for i in range(NQ):
+            for k in range(NQ):
+                W[W_SM + i * NQ + k] = 2.0 * A[OFF_M + i * NQ + k]
+            W[W_SM + i * NQ + i] += h * A[OFF_D + i] + 0.5 * h * h * A[OFF_K + i]
+            W[W_B + i * (1 + NR)] = W[W_R + i]
+            for r in range(NR):
+                W[W_B + i * (1 + NR) + 1 + r] = A[OFF_RI + i * NI + r]
+        gauss(W, W_SM, NQ, W, W_B, 1 + NR, NQ, 1 + NR)
+        for i in range(NQ):
+            W[W_Y0 + i] = W[W_B + i * (1 + NR)]
+            for r in range(NR):
+                W[W_ZH + i * NR + r] = W[W_B + i * (1 + NR) + 1 + r]
+        for a in range(NR):
+            for b in range(NR):
+                s = 0.0
+                for i in range(NQ):
+                    s += A[OFF_RI + i * NI + a] * W[W_ZH + i * NR + b]
+                W[W_QH + a * NR + b] = s
+    zg1, vg1, _ = ground(P, t + h)
+    _, vgm, _ = ground(P, t + 0.5 * h)
+    n = active_rows(P, A, S, mode, t, I, W)
+    # small system for alpha (M6, M7)
+    for a in range(n):
+        ra = I[I_ROWS + a]
+        ry = 0.0
+        for i in range(NQ):
+            ry += A[OFF_RI + i * NI + ra] * W[W_Y0 + i]
+        for b in range(n):
+            rb = I[I_ROWS + b]
+            qab = A[OFF_Q + ra * NR + rb] if full else W[W_QH + ra * NR + rb]
+            if I[I_KIND + a] == 1:
+                W[W_AS + a * NI + b] = qab
+            else:
+                W[W_AS + a * NI + b] = h * W[W_C + a] * qab + (1.0 if a == b else 0.0)
+        if I[I_KIND + a] == 1:
+            tgt = row_target(P, S, ra, zg1)
+            rq = 0.0
+            for i in range(NQ):
+                rq += A[OFF_RI + i * NI + ra] * W[W_Q0 + i]
+            W[W_BS + a] = (tgt - rq) / h - ry
+        else:
+            vg = vgm if ra != ROW_BY else 0.0
+            W[W_BS + a] = -h * W[W_C + a] * (ry - vg)
+    if n > 0:
+        gauss(W, W_AS, NI, W, W_BS, 1, n, 1)
+    for i in range(NQ):
+        s = W[W_Y0 + i]
+        for a in range(n):
+            ra = I[I_ROWS + a]
+            z = A[OFF_Z + i * NR + ra] if full else W[W_ZH + i * NR + ra]
+            s += z * W[W_BS + a]
+        W[W_VB + i] = s
+    for r in range(NR):
+        out[S_LAM + r] = 0.0
+    for a in range(n):
+        if I[I_KIND + a] == 1:
+            out[S_LAM + I[I_ROWS + a]] = W[W_BS + a] / h
+    for i in range(NQ):
+        out[S_Q + i] = W[W_Q0 + i] + h * W[W_VB + i]
+        out[S_V + i] = 2.0 * W[W_VB + i] - W[W_V0 + i]
+    for k in range(S_TC, S_LAM):
+        out[k] = S[k]
+    for k in range(S_SLIP, S_SIZE):
+        out[k] = S[k]
+    # pinned rows: velocities exactly the ground's (an impulse through the constraints, M8)
+    m = 0
+    for a in range(n):
+        if I[I_KIND + a] == 1:
+            ra = I[I_ROWS + a]
+            I[I_ROWS + m] = ra
+            W[W_T + m] = vg1 if (ra < 6 or ra == ROW_BZ) else 0.0
+            m += 1
+    if m > 0:
+        impulse(A, out, S_V, I, W, m)
+
+
+@jit
+def impulse(A, X, xo, I, W, m):
+    """Change X[xo:xo+NQ] (velocities, or positions) by M^-1 R_a P so that rows I_ROWS[:m]
+    take the values W[W_T:W_T+m] (the impact law M9 with the mass matrix); returns nothing."""
+    for a in range(m):
+        ra = I[I_ROWS + a]
+        for b in range(m):
+            W[W_AS + a * NI + b] = A[OFF_WI + ra * NI + I[I_ROWS + b]]
+        W[W_BS + a] = W[W_T + a] - row_dot(A, ra, X, xo)
+    gauss(W, W_AS, NI, W, W_BS, 1, m, 1)
+    for i in range(NQ):
+        s = 0.0
+        for a in range(m):
+            s += A[OFF_MRI + i * NI + I[I_ROWS + a]] * W[W_BS + a]
+        X[xo + i] += s
+
+
+@jit
+def pinned_rows(S, mode, I, m):
+    """Append the rows of every pinned foot (and a resting body) to I_ROWS from index m."""
+    for j in range(6):
+        if mode[j] != AIR:
+            I[I_ROWS + m] = j
+            m += 1
+            if S[S_SLIP + j] == 0.0:
+                I[I_ROWS + m] = 6 + j
+                m += 1
+    if mode[6] == REST:
+        I[I_ROWS + m] = ROW_BZ
+        m += 1
+    return m
+
+
+@jit
+def pinned_targets(P, S, I, W, m0, m, vg):
+    for a in range(m0, m):
+        r = I[I_ROWS + a]
+        W[W_T + a] = vg if (r < 6 or r == ROW_BZ) else 0.0
+
+
+@jit
+def held_rows(P, A, S, I, W, m):
+    """Rows of the modes held rigid in impacts (target: their current velocity)."""
+    if P[P_NHELD] == 0.0:
+        return m
+    for k in range(18):
+        if A[OFF_HELD + k] != 0.0:
+            I[I_ROWS + m] = NR + k
+            W[W_T + m] = S[S_V + NB + k]
+            m += 1
+    return m
+
+
+@jit
+def log_event(events, count, t, leg, vpre, vpost, vypost, stuck):
+    n = count[CNT_EVENTS]
+    if n < events.shape[0]:
+        events[n, EV_T] = t
+        events[n, EV_LEG] = leg
+        events[n, EV_VPRE] = vpre
+        events[n, EV_VPOST] = vpost
+        events[n, EV_VYPOST] = vypost
+        events[n, EV_STUCK] = 1.0 if stuck else 0.0
+        count[CNT_EVENTS] = n + 1
+    else:
+        count[CNT_LOST] += 1
+
+
+@jit
+def impact(P, A, S, mode, t, W, I, events, count):
+    """Impacts at t of every foot (and the body) flagged in I_IMP (M9, M11).
+
+    One impulse on the whole system through all contact points at once: an
+    impacting foot's normal velocity relative to the ground reverses with c_r
+    and its lateral velocity becomes zero; pinned feet stay pinned; held modes
+    keep their velocity. A rebound slower than v_stick ends the bouncing: the
+    foot (body) is pinned instead (perfectly plastic), so chattering ends after
+    finitely many impacts.
+    """
+    zg, vg, _ = ground(P, t)
+    vstick = P[P_VSTICK]
+    # relative normal velocities before
+    for j in range(7):
+        if I[I_IMP + j] != 0:
+            r = j if j < 6 else ROW_BZ
+            W[W_VREL + j] = row_dot(A, r, S, S_V) - vg
+    m = 0
+    for j in range(7):
+        if I[I_IMP + j] != 0:
+            cr = P[P_CR] if j < 6 else P[P_CRB]
+            vpre = W[W_VREL + j]
+            rebound = -cr * vpre
+            stuck = rebound < vstick
+            if j < 6:
+                I[I_ROWS + m] = j
+                W[W_T + m] = vg + (0.0 if stuck else rebound)
+                m += 1
+                I[I_ROWS + m] = 6 + j
+                W[W_T + m] = 0.0
+                m += 1
+            else:
+                I[I_ROWS + m] = ROW_BZ
+                W[W_T + m] = vg + (0.0 if stuck else rebound)
+                m += 1
+                if P[P_BNS] != 0.0:
+                    I[I_ROWS + m] = ROW_BY
+                    W[W_T + m] = 0.0
+                    m += 1
+            W[W_GAP1 + j] = 1.0 if stuck else 0.0
+    m0 = m
+    m = pinned_rows(S, mode, I, m)
+    pinned_targets(P, S, I, W, m0, m, vg)
+    m = held_rows(P, A, S, I, W, m)
+    # keep the rows for the position projection below
+    impulse(A, S, S_V, I, W, m)
+    # put the impacting points exactly on the ground (M-orthogonal position projection)
+    for a in range(m):
+        r = I[I_ROWS + a]
+        if r < NR:
+            if r < 6:
+                W[W_T + a] = zg
+            elif r < 12:
+                # lateral rows keep their place: a pinned foot its held place, an impacting one where it is
+                if mode[r - 6] != AIR:
+                    W[W_T + a] = S[S_YPIN + r - 6]
+                else:
+                    W[W_T + a] = row_dot(A, r, S, S_Q)
+            elif r == ROW_BZ:
+                W[W_T + a] = zg - P[P_H0]
+            else:
+                W[W_T + a] = S[S_Q + 0]
+        else:
+            W[W_T + a] = S[S_Q + NB + r - NR]
+    impulse(A, S, S_Q, I, W, m)
+    for j in range(7):
+        if I[I_IMP + j] == 0:
+            continue
+        stuck = W[W_GAP1 + j] != 0.0
+        r = j if j < 6 else ROW_BZ
+        touch = W[W_VREL + j] >= 0.0      # back on the ground without approaching it: no impact
+        if not touch:
+            vpost = row_dot(A, r, S, S_V) - vg
+            vy = row_dot(A, 6 + j, S, S_V) if j < 6 else S[S_V + 0]
+            if j < 6:
+                count[j] += 1
+            else:
+                count[CNT_BODY] += 1
+            log_event(events, count, t, j if j < 6 else -1, W[W_VREL + j], vpost, vy, stuck)
+        if stuck:
+            mode[j] = REST
+            if j < 6:
+                if not touch:
+                    S[S_TC + j] = 0.0
+                S[S_YPIN + j] = row_dot(A, 6 + j, S, S_Q)
+                S[S_SLIP + j] = 0.0
+
+
+@jit
+def release(P, A, S, mode, count):
+    """Start-of-step check of every pinned foot with the last step's contact forces (M10):
+    it goes back to AIR when the tension exceeds F_ad(t_c) = c_ad_t t_c + c_ad; else it is
+    labelled ADHESION (tension) or REST (compression). A resting body leaves when the
+    ground would have to pull it. Coulomb friction (mu finite) decides stick or slip."""
+    for j in range(6):
+        if mode[j] == AIR:
+            continue
+        lam_z = S[S_LAM + j]
+        fad = P[P_CADT] * S[S_TC + j] + P[P_CAD]
+        if -lam_z > fad:
+            # t_c is kept: should the foot not leave within the step, it keeps its contact time
+            mode[j] = AIR
+            S[S_SLIP + j] = 0.0
+            count[CNT_RELEASES] += 1
+            continue
+        mode[j] = ADHESION if lam_z < 0.0 else REST
+        if P[P_MU] < 1e300:
+            normal = lam_z + fad
+            if normal < 0.0:
+                normal = 0.0
+            cap = P[P_MU] * normal
+            if S[S_SLIP + j] == 0.0:
+                lam_y = S[S_LAM + 6 + j]
+                if abs(lam_y) > cap:
+                    S[S_SLIP + j] = cap if lam_y > 0.0 else -cap
+                    if cap == 0.0:
+                        S[S_SLIP + j] = 1e-300 if lam_y > 0.0 else -1e-300
+            else:
+                vy = row_dot(A, 6 + j, S, S_V)
+                if vy * S[S_SLIP + j] < 0.0:      # still sliding against the friction force
+                    S[S_SLIP + j] = cap if S[S_SLIP + j] > 0.0 else -cap
+                    if cap == 0.0:
+                        S[S_SLIP + j] = 1e-300 if vy < 0.0 else -1e-300
+                else:                              # it stopped: stick where it is
+                    S[S_SLIP + j] = 0.0
+                    S[S_YPIN + j] = row_dot(A, 6 + j, S, S_Q)
+    if mode[6] == REST and S[S_LAM + ROW_BZ] < 0.0:
+        mode[6] = AIR
+
+
+@jit
+def step(P, A, S, T, mode, t, dt, W, I, events, count):
+    """One full step with event location; the new state is left in S."""
+    release(P, A, S, mode, count)
+    now = t
+    rem = dt
+    n_ev = 0
+    tol = P[P_POSTOL]
+    while True:
+        advance(P, A, S, mode, now, rem, W, I, T)
+        gaps(P, A, S, now, W, W_GAP0)
+        gaps(P, A, T, now + rem, W, W_GAP1)
+        who = -1
+        best = 2.0
+        for j in range(7):
+            if j < 6 and mode[j] != AIR:
+                continue
+            if j == 6 and mode[6] == REST:
+                continue
+            g1 = W[W_GAP1 + j]
+            if g1 >= -tol:
+                continue
+            g0 = W[W_GAP0 + j]
+            frac = g0 / (g0 - g1) if g0 > 0.0 else 0.0
+            if frac < best:
+                best = frac
+                who = j
+        if who < 0:
+            break
+        if n_ev >= P[P_MAXEV]:
+            count[CNT_FORCED] += 1
+            break
+        n_ev += 1
+        # locate the crossing of `who` inside [0, rem] (secant on the scheme's own trajectory)
+        lo = 0.0
+        glo = W[W_GAP0 + who]
+        hi = rem
+        ghi = W[W_GAP1 + who]
+        tau = best * rem
+        for _ in range(8):
+            if tau <= 0.0:
+                tau = 0.0
+                break
+            advance(P, A, S, mode, now, tau, W, I, T)
+            gaps(P, A, T, now + tau, W, W_GAP1)
+            g = W[W_GAP1 + who]
+            if abs(g) <= tol:
+                break
+            if g > 0.0:
+                lo = tau
+                glo = g
+            else:
+                hi = tau
+                ghi = g
+            tau = lo + (hi - lo) * glo / (glo - ghi) if glo > 0.0 else lo
+        if tau > 0.0:
+            advance(P, A, S, mode, now, tau, W, I, T)
+            for k in range(S_SIZE):
+                S[k] = T[k]
+            for j in range(6):
+                if mode[j] != AIR:
+                    S[S_TC + j] += tau
+            now += tau
+            rem -= tau
+        # every free point at or below the ground and approaching it impacts now
+        gaps(P, A, S, now, W, W_GAP0)
+        _, vg, _ = ground(P, now)
+        for j in range(7):
+            I[I_IMP + j] = 0
+            free = mode[j] == AIR
+            if free and (W[W_GAP0 + j] <= tol or j == who):
+                r = j if j < 6 else ROW_BZ
+                # `who` is handled even when it is not approaching: a foot released at the
+                # step's start that comes back did not leave (impact() pins it, no impact)
+                if row_dot(A, r, S, S_V) - vg < 0.0 or j == who:
+                    I[I_IMP + j] = 1
+        impact(P, A, S, mode, now, W, I, events, count)
+        if rem <= 0.0:
+            return
+    for k in range(S_SIZE):
+        S[k] = T[k]
+    for j in range(6):
+        if mode[j] != AIR:
+            S[S_TC + j] += rem
+
+
+@jit
+def record(P, A, S, mode, t, rec, rec_contact, row):
+    zg, _, _ = ground(P, t)
+    rec[row, REC_T] = t
+    rec[row, REC_Y] = S[S_Q + 0]
+    rec[row, REC_Z] = P[P_H0] + S[S_Q + 1]
+    for k in range(3):
+        rec[row, REC_PH + k] = S[S_Q + 2 + k]
+    rec[row, REC_ZG] = zg
+    for j in range(6):
+        rec[row, REC_FZ + j] = row_dot(A, j, S, S_Q)
+        rec[row, REC_FY + j] = A[OFF_YFEQ + j] + row_dot(A, 6 + j, S, S_Q)
+        s = 0.0
+        for i in range(NQ):
+            s += A[OFF_KV + j * NQ + i] * S[S_V + i]
+        rec[row, REC_KV + j] = s
+        rec_contact[row, j] = mode[j]
+
+
+@jit
+def integrate(P, A, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac, max_air, max_h, count,
+              events):
+    """Run n_steps steps of dt; fill the outputs (statistics after n_skip steps)."""
+    W = np.zeros(W_SIZE)
+    I = np.zeros(I_SIZE, np.int64)
+    T = np.zeros(S_SIZE)
+    air_run = np.zeros(6)
+    row = 0
+    for n in range(n_steps + 1):
+        t = n * dt
+        if n % every == 0 and row < rec.shape[0]:
+            record(P, A, S, mode, t, rec, rec_contact, row)
+            row += 1
+        if n == n_steps:
+            break
+        step(P, A, S, T, mode, t, dt, W, I, events, count)
+        if n >= n_skip:
+            zg, _, _ = ground(P, t + dt)
+            for j in range(6):
+                frac[j, mode[j]] += dt
+                if mode[j] == AIR:
+                    air_run[j] += dt
+                    if air_run[j] > max_air[j]:
+                        max_air[j] = air_run[j]
+                    hgt = row_dot(A, j, S, S_Q) - zg
+                    if hgt > max_h[j]:
+                        max_h[j] = hgt
+                else:
+                    air_run[j] = 0.0

@@ -1,0 +1,71 @@
+"""Each figure shows its inputs: the numbers behind the figures (figure_data.json) checked
+against values computed here from the inputs, independently of the report."""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+from report_data import KNEE_DRIVES_HZ, write_real_fit, write_shaker_knees
+
+
+def test_fine_grid_fit_curve_resolves_the_anti_resonance(tmp_path):
+    from scipy.optimize import minimize_scalar
+
+    from labkit.analysis.report import build_report
+
+    fit_h5, fit = write_real_fit(tmp_path / "robot.fit.h5")
+    s = build_report(tmp_path / "rep", fit=str(fit_h5))
+    data = json.loads(Path(s["figure_data_json"]).read_text())
+    body = data["fig_frf_inchip"]["locations"]["body"]
+    assert body["fit_grid_points"] >= 2000
+    # the anti-resonance of the fitted model, found here by a bounded minimiser on ModalFit.model
+    res = minimize_scalar(lambda x: abs(fit.model([x], "body")[0]), bounds=(500.0, 1400.0), method="bounded",
+                          options={"xatol": 1e-4})
+    f_true, h_true = float(res.x), float(res.fun)
+    near = [m for m in body["fit_minima"] if abs(m[0] - f_true) < 0.05 * f_true]
+    assert len(near) == 1, body["fit_minima"]
+    assert near[0][1] == pytest.approx(h_true, rel=0.01)
+    assert near[0][0] == pytest.approx(f_true, rel=0.01)
+    # the stored model at the measured lines misses the dip: what a polyline through them would show
+    lines = [m for m in body["lines_model_minima"] if abs(m[0] - f_true) < 0.1 * f_true]
+    assert lines and lines[0][1] > 1.05 * h_true
+    # hip has no zero between its modes (residues of opposite sign): its dip there is shallow
+    hip = [m for m in data["fig_frf_inchip"]["locations"]["hip"]["fit_minima"] if 500 < m[0] < 1400]
+    assert all(m[1] > 5 * h_true for m in hip)
+    # the mode labels carry the fit's values with their uncertainty
+    from labkit.analysis.report.numbers import format_uncertain
+
+    m0 = fit.modes[0]
+    assert data["fig_frf_inchip"]["modes"][0] == (f"{format_uncertain(m0.freq_hz, m0.freq_hz_std, 'Hz')}, \u03b6 "
+                                                  f"{format_uncertain(m0.damping_ratio, m0.damping_ratio_std)}")
+
+
+def test_every_knee_drive_is_drawn(tmp_path):
+    from labkit.analysis.report import build_report
+
+    run = write_shaker_knees(tmp_path / "knees.h5")
+    s = build_report(tmp_path / "rep", runs=[str(run)], simulate_knee=False)
+    data = json.loads(Path(s["figure_data_json"]).read_text())
+    drawn = [d["freq_hz"] for d in data["fig_knee"]["drives"]]
+    assert drawn == list(KNEE_DRIVES_HZ)            # all nine, 230-290 Hz included, in order
+    assert all(d["measured"] and not d["simulated"] for d in data["fig_knee"]["drives"])
+    svg = Path(data["fig_knee"]["svg"]).read_text()
+    for f in KNEE_DRIVES_HZ:                         # one titled panel per drive, as text in the SVG
+        assert f"{f:.4g} Hz, tray 25 um" in svg
+    assert s["sections"]["knee"] == "ok" and "No simulation at 310 Hz" in s["notes"]["knee"]
+
+
+def test_figures_are_png_200_dpi_and_svg_with_text(tmp_path):
+    from PIL import Image
+
+    from labkit.analysis.report import build_report
+
+    run = write_shaker_knees(tmp_path / "knees.h5", freqs_hz=(200.0,))
+    s = build_report(tmp_path / "rep", runs=[str(run)], simulate_knee=False)
+    for png, svg in zip(s["figures"], s["svgs"]):
+        dpi = Image.open(png).info["dpi"]
+        assert dpi[0] == pytest.approx(200, abs=1)
+        text = Path(svg).read_text()
+        assert text.lstrip().startswith("<?xml") and re.search(r"<text\b", text)   # text kept as text
