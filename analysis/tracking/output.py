@@ -183,7 +183,7 @@ def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
     import cv2
 
     from labkit.analysis.tracking.video_io import iter_frames, open_video
-    from labkit.lab.render import write_video
+    from labkit.video import write_video
 
     cap, info = open_video(video_path)
     out_path = Path(out_path)
