@@ -30,9 +30,6 @@ PENDING: dict[tuple[str, str], str] = {
     # the library calls fit_robot / tracking (H4, H5).
     ("labkit.demo.run", "labkit.cli"): "H4/H5: demo calls fit_robot and the tracking library",
     ("labkit.demo.run", "labkit.commands"): "H4/H5: demo calls fit_robot and the tracking library",
-    # The overlay video borrows the virtual camera's video writer; it belongs below both
-    # (e.g. a labkit-level video module) (H5 tracking / H6 lab).
-    ("labkit.analysis.tracking.output", "labkit.lab.render"): "H5/H6: write_video out of labkit.lab",
     # Calibration reads measured files and classifies knee records with analysis code; the
     # readers belong in labkit.analysis and the commands pass Observations in (lead).
     ("labkit.sim.calibrate", "labkit.analysis.compare"): "lead: knee-pattern classifier below sim, or injected",
