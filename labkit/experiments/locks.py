@@ -139,8 +139,12 @@ def lock_run(resources: Iterable[tuple[str, str]], run_file: str | Path, config:
     locks = RunLocks()
     try:
         locks.take(file_key(run_file), f"the run file {run_file}", record, file=os.fspath(run_file), conf_key="--out")
+        seen: set[str] = set()
         for role, resource in resources:
-            if resource:
+            # roles may share one resource (the virtual lab's camera rides its control channel):
+            # one lock each, or the run would find itself "busy"
+            if resource and resource not in seen:
+                seen.add(resource)
                 locks.take("resource:" + resource, f"the {role} ({resource})", record, file=config,
                            conf_key=f"instruments.{role}.resource")
         yield locks

@@ -269,7 +269,7 @@ class Runner:
                 break
         return rec, waited
 
-    def _sine_point(self, p: SinePoint) -> tuple[dict, dict, Any]:
+    def _sine_point(self, p: SinePoint) -> tuple[dict, dict | None, Any]:
         self._set_sine(p.freq_hz, p.amp_vpp, p.offset_v)
         t_changed = time.monotonic()
         self.guard.on()
@@ -285,7 +285,7 @@ class Runner:
         return rows, loc, records
 
     # -- chirp -------------------------------------------------------------------------------
-    def _chirp_point(self, p: ChirpPoint) -> tuple[dict, dict, Any]:
+    def _chirp_point(self, p: ChirpPoint) -> tuple[dict, dict | None, Any]:
         rig = self.rig
         fg = self.guard.funcgen
         fg.set_sine(p.start_hz, p.amp_vpp, p.offset_v)
@@ -326,7 +326,7 @@ class Runner:
         return rows, loc, raw
 
     # -- shaker ------------------------------------------------------------------------------
-    def _shaker_point(self, p: ShakerPoint) -> tuple[dict, None, Any]:
+    def _shaker_point(self, p: ShakerPoint) -> tuple[dict, dict | None, Any]:
         cfg, rig = cast(ShakerConfig, self.cfg), self.rig     # shaker points come from shaker plans
         f = p.freq_hz
         self._move_spot("tray", drive_off=False)

@@ -160,7 +160,7 @@ def shielded() -> Iterator[list[int]]:
     def hold(signum: int, frame: Any) -> None:
         arrived.append(signum)
 
-    previous = {s: signal.signal(s, hold) for s in STOP_SIGNALS}
+    previous: dict[int, Any] = {s: signal.signal(s, hold) for s in STOP_SIGNALS}
     try:
         yield arrived
     finally:
