@@ -30,11 +30,6 @@ PENDING: dict[tuple[str, str], str] = {
     # the library calls fit_robot / tracking (H4, H5).
     ("labkit.demo.run", "labkit.cli"): "H4/H5: demo calls fit_robot and the tracking library",
     ("labkit.demo.run", "labkit.commands"): "H4/H5: demo calls fit_robot and the tracking library",
-    # Calibration reads measured files and classifies knee records with analysis code; the
-    # readers belong in labkit.analysis and the commands pass Observations in (lead).
-    ("labkit.sim.calibrate", "labkit.analysis.compare"): "lead: knee-pattern classifier below sim, or injected",
-    ("labkit.sim.calibrate", "labkit.analysis.report"): "lead: observations_from_files into labkit.analysis",
-    ("labkit.sim.calibrate", "labkit.analysis.report.inputs"): "lead: observations_from_files into labkit.analysis",
 }
 
 

@@ -51,8 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
+    from labkit.analysis.observations import observations_from_files
     from labkit.sim import RobotParams
-    from labkit.sim.calibrate import calibrate, observations_from_files
+    from labkit.sim.calibrate import calibrate
 
     if not args.duration_s > 0:
         raise InputError("must be > 0", key="--duration-s", expected="a duration in s")

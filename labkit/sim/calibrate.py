@@ -8,7 +8,7 @@ with bounds),
 * ``(v_sim(f_i) - v_meas,i) / sigma_i`` for every measured speed, and
 * ``w * (1 - share of legs showing the observed pattern)`` for every leg-pattern
   observation (optional; the simulated legs are labelled from their knee records
-  by :func:`labkit.analysis.compare.classify_knee_pattern`, as the observed ones are),
+  by :func:`labkit.sim.knee_patterns.classify_knee_pattern`, as the observed ones are),
 
 where ``v_sim`` is the nominal robot's mean speed (magnitude of the mean forward
 velocity: a tracked speed has no sign) from :func:`labkit.sim.simulate`
@@ -27,18 +27,16 @@ difference step is large on purpose (``rel_step``, default 5 %).
 """
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from labkit.errors import InputError
+from labkit.sim.knee_patterns import PATTERNS
 
-PATTERNS = ("firm_contact", "partial_contact", "jumping")
 _NAME = re.compile(r"^([a-z_][a-z0-9_]*)(?:\[([0-2])\])?$")
 
 
@@ -94,8 +92,8 @@ def set_values(params: Any, names: list[tuple[str, int | None]], values: Sequenc
 
 def speed_task(task: tuple) -> dict[str, Any]:
     """One simulation: ``(params, freq_hz, amp_um, duration_s, seed)`` -> speed and foot patterns."""
-    from labkit.analysis.compare import classify_knee_pattern
     from labkit.sim import Shaker, simulate
+    from labkit.sim.knee_patterns import classify_knee_pattern
 
     params, freq_hz, amp_um, duration_s, seed = task
     r = simulate(params, Shaker(freq_hz=float(freq_hz), amp_um=float(amp_um)), duration_s=duration_s, seed=seed)
@@ -346,72 +344,3 @@ def calibrate(params: Any, names: Sequence[str], obs: Observations, *, duration_
                                             for n, a, b in zip(labels, lo_a * scale, hi_a * scale)},
                                  "scheduler": scheduler or "local"},
                        sources=list(obs.sources))
-
-
-# --------------------------------------------------------------------------- inputs
-
-def observations_from_files(paths: Sequence[str], *, amp_um: float | None = None) -> Observations:
-    """Measured speeds from shaker run files + track files, or CSV/HDF5 speed tables.
-
-    The tray amplitude of each point is the run's measured one; tables (and
-    tracks with their own ``freq_hz``) use ``amp_um`` (InputError if not given).
-    Leg patterns come from a table's ``pattern`` column or from the knee
-    records of shaker runs (classified by :func:`labkit.analysis.compare.classify_knee_pattern`).
-    """
-    from labkit.analysis.report import inputs as ri
-
-    runs, tracks, tables = [], [], []
-    for p in paths:
-        if not Path(p).is_file():
-            raise InputError("no such file", file=p)
-        kind = None
-        if Path(p).suffix.lower() not in (".csv", ".txt"):
-            try:
-                kind = ri.file_kind(p)
-            except InputError:
-                kind = None
-        if kind == "run_shaker":
-            runs.append(ri.load_shaker_run(p))
-        elif kind == "track":
-            tracks.append(ri.load_track(p))
-        else:
-            tables.append(ri.load_speed_table(p))
-    freq, amp, speed, sd, pats, src = [], [], [], [], [], []
-    if runs or tracks:
-        m = ri.measured_speeds(runs, tracks)
-        for f, a, s, d, pat, source in zip(m["freq_hz"], m["amp_um"], m["speed_mm_s"], m["std_mm_s"],
-                                           m["patterns"], m["sources"]):
-            if not math.isfinite(a):
-                if amp_um is None:
-                    raise InputError("tray amplitude unknown for a track with its own frequency", file=source,
-                                     key="--amp-um", expected="--amp-um AMP (um)")
-                a = amp_um
-            freq.append(f)
-            amp.append(a)
-            speed.append(s)
-            sd.append(d)
-            pats.append(pat)
-            src.append(source)
-    for t in tables:
-        if amp_um is None:
-            raise InputError("a speed table holds no tray amplitude", file=t["file"], key="--amp-um",
-                             expected="--amp-um AMP (um)")
-        n = t["freq_hz"].size
-        freq += list(t["freq_hz"])
-        amp += [amp_um] * n
-        speed += list(t["speed_mm_s"])
-        sd += list(t.get("speed_std_mm_s", np.full(n, np.nan)))
-        pats += list(t.get("pattern", [""] * n))
-        src += [t["file"]] * n
-    if not freq:
-        raise InputError("no measured speeds in the given files", key="--measured",
-                         expected="shaker run files with tracks, track files or a freq_hz,speed_mm_s table")
-    for lab in pats:
-        if lab and lab not in PATTERNS:
-            raise InputError(f"unknown pattern {lab!r}", key="pattern", expected=" | ".join(PATTERNS))
-    sd_a = np.asarray(sd, float)
-    if np.isnan(sd_a).any():
-        raise InputError("speed standard deviation missing for some points", key="speed_std_mm_s",
-                         expected="a speed_std_mm_s column (or confidence intervals in the tracks)")
-    return Observations(np.asarray(freq, float), np.asarray(amp, float), np.asarray(speed, float), sd_a,
-                        pats if any(pats) else None, src)
