@@ -388,7 +388,7 @@ def _fit_lscf(ctx: _Ctx, n_modes: int | None, n_max: int | None, kind: str) -> M
         if len(chans) > 1:
             _reweight(chans, ref, ctx.powers)
             ref = refine(chans, _poles(ref), ctx.powers, band_hz=band, covariance=ctx.covariance)
-        keep, why = _credible(chans, ref)
+        keep, why = _credible(chans, ref, ctx.f_ref)
         for i in np.flatnonzero(~keep):
             warnings.append(f"kept the mode at {ctx.hz(ref.freq_hz[i])} because n_modes = {n_modes} was asked "
                             f"for, although {why[i]}")
@@ -412,6 +412,7 @@ def _fit_lscf(ctx: _Ctx, n_modes: int | None, n_max: int | None, kind: str) -> M
         warnings.append("nonlinear refinement did not converge")
     fit = _from_refined(ctx, ref, "lscf", kind, stab)
     _warn_outside(fit, ctx)
+    _warn_narrow(fit, ctx)
     return fit
 
 
@@ -422,7 +423,7 @@ def _poles(ref: Refined) -> np.ndarray:
 def _prune(ctx: _Ctx, ref: Refined) -> Refined:
     """Drop modes that are not credible (and say so), refitting the rest; never drops the last one."""
     for _ in range(3):
-        keep, why = _credible(ctx.chans, ref)
+        keep, why = _credible(ctx.chans, ref, ctx.f_ref)
         if keep.all():
             break
         if not keep.any():
@@ -509,7 +510,7 @@ def _grow_while_misfit(ctx: _Ctx, ref: Refined, max_add: int = 3) -> Refined:
         except InputError:
             break
         trial = refine(ctx.chans, trial_lam, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance)
-        keep, _ = _credible(ctx.chans, trial)
+        keep, _ = _credible(ctx.chans, trial, ctx.f_ref, check_width=True)
         lo, hi = ctx.band
         inside = (trial.freq_hz > lo) & (trial.freq_hz < hi)
         if not (keep.all() and inside.all()) or _misfits(ctx, trial).max() > 0.8 * mis.max():
@@ -544,14 +545,19 @@ def _fit_given(ctx: _Ctx, f_given: np.ndarray, z_given: np.ndarray, method: str,
     return fit
 
 
-def _credible(chans: list[Channel], ref: Refined) -> tuple[np.ndarray, list[str]]:
-    """Which refined modes are real: resolvable by the line spacing and significantly non-zero.
+def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: bool = False
+              ) -> tuple[np.ndarray, list[str]]:
+    """Which refined modes are real: significantly non-zero (and, with ``check_width``, resolvable).
 
-    A mode narrower than the spacing of the lines around it (half-power
-    bandwidth ``2 zeta f`` below it) is fitting noise between lines; a mode
-    whose residue is nowhere larger than 3 standard uncertainties is not
-    supported by the data.  Returns the mask and, per mode, why not ("" if
-    credible).
+    A mode whose residue is nowhere larger than 3 standard uncertainties is
+    not supported by the data.  With ``check_width`` (modes the fit adds
+    itself, not ones the stabilisation diagram shows) a mode narrower than the
+    spacing of the lines around it (half-power bandwidth ``2 zeta f`` below
+    it) is taken for noise between lines.  Lightly damped modes of real
+    impact tests are often that narrow and still well determined in frequency:
+    those from the diagram are kept and flagged (:func:`_warn_narrow`).
+    Returns the mask and, per mode, why not ("" if credible); ``f_ref``
+    converts the normalised frequencies in the messages to Hz.
     """
     m = ref.freq_hz.size
     n_lin = ref.lin[0].size
@@ -571,9 +577,10 @@ def _credible(chans: list[Channel], ref: Refined) -> tuple[np.ndarray, list[str]
             R = abs(complex(ref.lin[k][2 * i], ref.lin[k][2 * i + 1]))
             sd = np.sqrt(var[2 * m + k * n_lin + 2 * i] + var[2 * m + k * n_lin + 2 * i + 1])
             snr = max(snr, R / sd if sd > 0 else np.inf)
-        if 2 * z * f < spacing:
+        if check_width and 2 * z * f < spacing:
             keep[i] = False
-            why[i] = f"it is narrower (2 zeta f = {2 * z * f:.3g}) than the line spacing ({spacing:.3g}, same unit)"
+            why[i] = (f"its half-power bandwidth ({2 * z * f * f_ref:.3g} Hz) is under the line spacing "
+                      f"({spacing * f_ref:.3g} Hz)")
         elif snr < 3.0:
             keep[i] = False
             why[i] = "its residue is below 3 standard uncertainties at every location"
@@ -871,6 +878,27 @@ def _in_hz(text: str, ctx: _Ctx) -> str:
     import re
 
     return re.sub(r"near ([0-9.eE+-]+)", lambda m: f"near {ctx.hz(float(m.group(1)))}", text)
+
+
+def _warn_narrow(fit: ModalFit, ctx: _Ctx) -> None:
+    """Modes narrower than the line spacing: their frequencies hold, their damping rests on a few lines."""
+    narrow, spacings = [], []
+    for m in fit.modes:
+        spacing = np.inf
+        for f in fit.freq_hz:
+            j = int(np.searchsorted(f, m.freq_hz))
+            if 0 < j < f.size:
+                spacing = min(spacing, float(f[j] - f[j - 1]))
+        if np.isfinite(spacing) and 2 * m.damping_ratio * m.freq_hz < spacing:
+            narrow.append(m)
+            spacings.append(spacing)
+    if narrow:
+        fit.warnings.append(
+            "mode(s) at " + ", ".join(ctx.hz(m.freq_hz) for m in narrow) + ": half-power bandwidth "
+            + ", ".join(f"{2 * m.damping_ratio * m.freq_hz * ctx.f_ref:.3g}" for m in narrow)
+            + f" Hz, under the line spacing ({max(spacings) * ctx.f_ref:.3g} Hz): kept (the frequency is well "
+            "determined), but the damping rests on the lines next to the peak and is biased by leakage or "
+            "windowing: measure finer lines to trust it")
 
 
 def _warn_unresolved(fit: ModalFit, ctx: _Ctx, f_grid: np.ndarray) -> None:
