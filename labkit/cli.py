@@ -56,7 +56,9 @@ def build_parser() -> argparse.ArgumentParser:
     common = common_parser()
     parser = _Parser(prog="labkit", description="Vibration-lab toolkit for PZT microrobots.")
     parser.add_argument("--version", action="version", version=f"labkit {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    # typed as plain ArgumentParser: the shared parent parser is one (mypy infers _Parser otherwise)
+    sub: argparse._SubParsersAction[argparse.ArgumentParser] = parser.add_subparsers(
+        dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for mod in _command_modules():
         p = sub.add_parser(mod.NAME, help=getattr(mod, "HELP", ""), parents=[common],
