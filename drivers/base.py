@@ -141,8 +141,10 @@ class Instrument:
 
     Notes
     -----
-    Opening sends nothing: the identity is asked for lazily (:attr:`identity`)
-    so an expected-protocol test lists every byte a method sends.
+    Constructing sends nothing; :meth:`open` then runs :meth:`connect`, which
+    is empty here and the SCPI generators' and scopes' handshake there
+    (:meth:`ScpiInstrument.connect`). The identity is otherwise asked for
+    lazily (:attr:`identity`).
     """
 
     #: Model name used by :mod:`labkit.drivers.registry` and in snapshots.
@@ -198,10 +200,15 @@ class Instrument:
             raise InstrumentError(f"cannot open {resource}: {exc}", instrument=label,
                                   command="open") from exc
         try:
-            return cls(transport, name=name, **settings)
+            inst = cls(transport, name=name, **settings)
+            inst.connect()
+            return inst
         except BaseException:
             transport.close()
             raise
+
+    def connect(self) -> None:
+        """What :meth:`open` does once the link is up, before returning the driver (base: nothing)."""
 
     # -- timeouts ---------------------------------------------------------------------------
     @property
@@ -347,14 +354,72 @@ class ScpiInstrument(Instrument):
 
     err_command: ClassVar[str] = "SYST:ERR?"
     max_error_reads: ClassVar[int] = 32
+    #: Run the identity / error-queue handshake (:meth:`connect`) when opened.
+    connect_on_open: ClassVar[bool] = False
 
     def __init__(self, transport: Transport, *, name: str | None = None,
                  check_errors: bool = True, **settings: Any) -> None:
         super().__init__(transport, name=name, **settings)
         self.auto_check_errors = bool(check_errors)
+        #: The model word of the identity (``"33522B"``), once :meth:`connect` has run.
+        self.instrument_model: str | None = None
+        #: Errors the instrument held when the driver connected (``-113,"Undefined header"``...).
+        self.errors_at_connect: list[str] = []
 
     def settings(self) -> dict[str, Any]:
         return {**super().settings(), "check_errors": self.auto_check_errors}
+
+    # -- the handshake on open ------------------------------------------------------------
+    def identify(self, identity: str) -> tuple[str, int]:
+        """(model, channel count) from the ``*IDN?`` reply; ConfigError for a model the driver
+        does not know (subclasses with :attr:`connect_on_open`)."""
+        raise NotImplementedError
+
+    def identified(self, model: str, channels: int) -> None:
+        """Called by :meth:`connect` with what :meth:`identify` found (subclasses check settings)."""
+
+    def connect(self) -> None:
+        """Handshake: identity -> model and channel count; drain the error queue; ``*CLS``.
+
+        1. ``*IDN?``: the model word says the model and its channel count; a model
+           this driver does not know raises ConfigError (nothing else is sent).
+        2. The error query until the queue is empty: what an earlier program or the
+           front panel left there is kept in :attr:`errors_at_connect` (and the
+           snapshot), not blamed on the first setting.
+        3. ``*CLS``: the event registers are cleared too.
+        """
+        if not self.connect_on_open:
+            return
+        model, channels = self.identify(self.identity)
+        self.instrument_model = model
+        self.identified(model, channels)
+        stale = self.read_error_queue()
+        self.write("*CLS")
+        self.errors_at_connect = stale
+        if stale:
+            log.warning("%s: errors queued before this connection (cleared): %s", self.name,
+                        "; ".join(stale))
+
+    def snapshot(self) -> dict[str, Any]:
+        snap = super().snapshot()
+        if self.connect_on_open:
+            snap["connect"] = {"instrument_model": self.instrument_model,
+                               "errors_at_connect": list(self.errors_at_connect)}
+        return snap
+
+    def _identity_fields(self, identity: str) -> tuple[str, str]:
+        """(manufacturer, model) of an ``*IDN?`` reply; InstrumentError if it has no model field."""
+        parts = [p.strip() for p in identity.split(",")]
+        if len(parts) < 2 or not parts[1]:
+            raise InstrumentError(f"garbled identity {identity[:60]!r} (expected "
+                                  "'maker,model,serial,firmware')", instrument=self.name,
+                                  command="*IDN?")
+        return parts[0], parts[1]
+
+    def _unknown_model(self, identity: str, known: str) -> ConfigError:
+        return ConfigError(f"{self.name}: the instrument identifies as {identity[:80]!r}, not a model "
+                           f"the {self.model} driver knows; nothing else was sent", key="model",
+                           expected=known)
 
     def _send_all(self, commands: list[str]) -> None:
         for cmd in commands:
@@ -368,6 +433,13 @@ class ScpiInstrument(Instrument):
         ``after`` names the command the errors are reported against (default:
         the error query itself).
         """
+        errors = self.read_error_queue()
+        if errors:
+            raise InstrumentError("instrument reported " + "; ".join(errors), instrument=self.name,
+                                  command=after or self.err_command)
+
+    def read_error_queue(self) -> list[str]:
+        """Read the error queue until it is empty; return its entries (``'-113,"Undefined header"'``)."""
         errors: list[str] = []
         for _ in range(self.max_error_reads):
             reply = self.query(self.err_command)
@@ -380,7 +452,4 @@ class ScpiInstrument(Instrument):
             errors.append(f"{int(m.group(1))},\"{m.group(2)}\"")
         else:
             errors.append(f"(queue not empty after {self.max_error_reads} reads)")
-        if errors:
-            raise InstrumentError("instrument reported " + "; ".join(errors), instrument=self.name,
-                                  command=after or self.err_command)
-
+        return errors

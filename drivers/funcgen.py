@@ -47,8 +47,12 @@ class FunctionGenerator(ScpiInstrument):
     """
 
     model = "funcgen"
-    #: Channels the model has; safe_off turns every one of them off.
-    channels: ClassVar[tuple[int, ...]] = (1,)
+    #: Channels the model has; safe_off turns every one of them off. The class value is the
+    #: family's most; :meth:`connect` narrows it to the identified model's.
+    channels: tuple[int, ...] = (1,)
+    #: The family's models (the ``*IDN?`` model word) and their channel counts.
+    known_models: ClassVar[dict[str, int]] = {}
+    connect_on_open = True
     #: Output range into a high-impedance load (all three models: +-10 V, 20 Vpp).
     model_max_v: ClassVar[float] = 10.0
 
@@ -68,6 +72,31 @@ class FunctionGenerator(ScpiInstrument):
         self.max_freq_hz = None if max_freq_hz is None else float(max_freq_hz)
         self.state = {"output_on": None, "load": None}
         self._amp_checked = False
+
+    # -- identity ------------------------------------------------------------------------------
+    def identify(self, identity: str) -> tuple[str, int]:
+        """The model word must be one of :attr:`known_models` (case and spaces ignored)."""
+        _, word = self._identity_fields(identity)
+        key = word.replace(" ", "").upper()
+        for model, n in self.known_models.items():
+            if model.upper() == key:
+                return model, n
+        raise self._unknown_model(identity, "one of " + ", ".join(self.known_models))
+
+    def identified(self, model: str, channels: int) -> None:
+        """The model's channels replace the family's; the configured ``channel`` must be one."""
+        if self.channel > channels:
+            from labkit.errors import ConfigError
+            raise ConfigError(f"{self.name}: the {model} has {channels} channel"
+                              f"{'s' if channels > 1 else ''}, there is no channel {self.channel}; "
+                              "nothing else was sent", key="channel",
+                              expected=f"one of {list(range(1, channels + 1))}")
+        self.channels = tuple(range(1, channels + 1))
+
+    def snapshot(self) -> dict[str, Any]:
+        snap = super().snapshot()
+        snap.setdefault("connect", {})["channels"] = len(self.channels)
+        return snap
 
     # -- command spelling, per model ----------------------------------------------------------
     def _src(self, cmd: str) -> str:
@@ -261,6 +290,7 @@ class Agilent33220A(FunctionGenerator):
     """Keysight/Agilent 33220A (one channel, commands without prefixes)."""
 
     model = "33220A"
+    known_models = {"33220A": 1}
 
 
 class Keysight33500B(FunctionGenerator):
@@ -268,6 +298,10 @@ class Keysight33500B(FunctionGenerator):
 
     model = "33500B"
     channels = (1, 2)
+    #: 33500B Series (and the 33500A models it replaced): odd model numbers one channel,
+    #: even ones two (33500B Series data sheet, "Models and options")
+    known_models = {"33509B": 1, "33510B": 2, "33511B": 1, "33512B": 2, "33519B": 1, "33520B": 2,
+                    "33521B": 1, "33522B": 2, "33521A": 1, "33522A": 2}
 
     def _src(self, cmd: str) -> str:
         return f"SOUR{self.channel}:{cmd}"
@@ -284,6 +318,7 @@ class RigolDG1000Z(FunctionGenerator):
 
     model = "DG1000Z"
     channels = (1, 2)
+    known_models = {"DG1022Z": 2, "DG1032Z": 2, "DG1062Z": 2}
     err_command = ":SYST:ERR?"
     _TRIG = {"IMM": "INT", "EXT": "EXT", "BUS": "MAN"}
 

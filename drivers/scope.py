@@ -20,6 +20,7 @@ its RAW mode (the whole memory, not the screen) needs ``:STOP`` first.
 """
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -56,7 +57,9 @@ class Oscilloscope(ScpiInstrument):
     Parameters
     ----------
     channels:
-        Number of analog inputs (for validating ``ch``).
+        Number of analog inputs (for validating ``ch``). Default: what the
+        identity's model word says (``DSOX3024T``: 4, ``DS1202Z-E``: 2); given,
+        it must agree with it.
     max_volts_per_div:
         Refuse vertical scales above this (the scope's own range, default 10 V/div).
     """
@@ -71,16 +74,44 @@ class Oscilloscope(ScpiInstrument):
     #: The query whose reply says the acquisition is complete (each model sets it).
     _done_command: ClassVar[str]
 
-    def __init__(self, transport, *, name: str | None = None, channels: int = 4,
+    connect_on_open = True
+    #: The model word of ``*IDN?``: group ``ch`` is the number of analog channels.
+    model_pattern: ClassVar[re.Pattern[str]]
+    #: What :attr:`model_pattern` accepts, in words (for the error).
+    model_words: ClassVar[str]
+
+    def __init__(self, transport, *, name: str | None = None, channels: int | None = None,
                  max_volts_per_div: float = 10.0, **settings: Any) -> None:
         super().__init__(transport, name=name, **settings)
-        self.n_channels = int(channels)
+        self.declared_channels = None if channels is None else int(
+            check_range("channels", channels, 1, 8))
+        self.n_channels = 4 if channels is None else int(channels)
         self.max_volts_per_div = float(max_volts_per_div)
         self.state = {"channels": {}}
 
     def settings(self) -> dict[str, Any]:
         return {**super().settings(), "channels": self.n_channels,
                 "max_volts_per_div": self.max_volts_per_div}
+
+    def identify(self, identity: str) -> tuple[str, int]:
+        _, word = self._identity_fields(identity)
+        m = self.model_pattern.fullmatch(word.strip().upper())
+        if m is None:
+            raise self._unknown_model(identity, self.model_words)
+        return word.strip(), int(m.group("ch"))
+
+    def identified(self, model: str, channels: int) -> None:
+        if self.declared_channels is not None and self.declared_channels != channels:
+            from labkit.errors import ConfigError
+            raise ConfigError(f"{self.name}: channels = {self.declared_channels} declared, but the "
+                              f"{model} has {channels}; nothing else was sent", key="channels",
+                              expected=f"{channels} or no setting")
+        self.n_channels = channels
+
+    def snapshot(self) -> dict[str, Any]:
+        snap = super().snapshot()
+        snap.setdefault("connect", {})["channels"] = self.n_channels
+        return snap
 
     def _ch(self, ch: int) -> int:
         return int(check_range("scope channel", ch, 1, self.n_channels))
@@ -198,6 +229,10 @@ class InfiniiVision(Oscilloscope):
 
     model = "InfiniiVision"
     _done_command = ":OPER:COND?"
+    #: DSOX3024T, MSOX4154A, DSOX1102G, EDUX1052G, "DSO-X 2024A" (Agilent): series digit,
+    #: two bandwidth digits, the channel count, a letter
+    model_pattern = re.compile(r"(?:DSO|MSO|EDU)-?X ?\d\d\d(?P<ch>[24])[A-Z]")
+    model_words = "an InfiniiVision model: DSOX/MSOX/EDUX + series, bandwidth, channels (DSOX3024T)"
 
     def __init__(self, transport, *, name: str | None = None, points: int | str = "MAX",
                  **settings: Any) -> None:
@@ -255,6 +290,9 @@ class RigolDS1000Z(Oscilloscope):
 
     model = "DS1000Z"
     divisions = 12
+    #: DS1054Z, DS1104Z, MSO1104Z, DS1074Z-S PLUS, DS1202Z-E: bandwidth digits, channel count, Z
+    model_pattern = re.compile(r"(?:DS|MSO)1\d\d(?P<ch>[24])Z(?:-E|-S|-S PLUS| PLUS)?")
+    model_words = "a DS1000Z model: DS1054Z, DS1074Z, DS1104Z, MSO1104Z, DS1202Z-E ..."
     format_codes = {"WORD": 0, "BYTE": 1}   # Rigol's own codes: 0 WORD, 1 BYTE, 2 ASC
     _done_command = ":TRIG:STAT?"
 

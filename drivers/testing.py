@@ -237,6 +237,37 @@ class _PtyPeer(_Peer):
             os.close(self.master)
 
 
+#: The identity each family's scripted peer answers by default (a model of the family).
+IDENTITIES = {
+    "33220A": "Agilent Technologies,33220A,MY44012345,2.07-2.06-22-2",
+    "33500B": "Keysight Technologies,33522B,MY52400000,4.03-1.19-2.00-52-00",
+    "DG1000Z": "Rigol Technologies,DG1062Z,DG1ZA000000001,00.01.14",
+    "InfiniiVision": "KEYSIGHT TECHNOLOGIES,DSOX3024T,MY58420000,07.50.2021102830",
+    "DS1000Z": "RIGOL TECHNOLOGIES,DS1104Z,DS1ZA000000001,00.04.04.SP3",
+}
+
+
+def connect_exchanges(driver_cls: type[Instrument], identity: str | None = None,
+                      errors: Sequence[str] = ()) -> list[Exchange]:
+    """The handshake :meth:`ScpiInstrument.connect` sends on open, as script exchanges.
+
+    ``*IDN?`` (answered with ``identity``, default :data:`IDENTITIES` of the
+    family), the error query answered with each of ``errors`` and then the
+    empty queue (``0,"No error"`` in the family's spelling), ``*CLS``. Empty
+    for drivers without the handshake.
+    """
+    if not getattr(driver_cls, "connect_on_open", False):
+        return []
+    idn = identity if identity is not None else IDENTITIES[driver_cls.model]
+    err = getattr(driver_cls, "err_command", "SYST:ERR?").encode() + b"\n"
+    empty = b'0,"No error"\n' if idn.upper().startswith("RIGOL") else b'+0,"No error"\n'
+    out: list[Exchange] = [(b"*IDN?\n", idn.encode() + b"\n")]
+    out += [(err, e.encode() + b"\n") for e in errors]
+    out.append((err, empty))
+    out.append((b"*CLS\n", None))
+    return out
+
+
 def _report(peer: _Peer) -> str:
     return ("; ".join(peer.failures) + "\ntranscript:\n  " + "\n  ".join(peer.transcript))
 
@@ -244,7 +275,8 @@ def _report(peer: _Peer) -> str:
 @contextmanager
 def expected_protocol(driver_cls: type[Instrument], exchanges: Sequence[Exchange], *, timeout_s: float = 0.3,
                       link: str | None = None, resource_format: str = "{}",
-                      **settings: Any) -> Iterator[Any]:
+                      identity: str | None = None, errors_at_connect: Sequence[str] = (),
+                      handshake: bool = True, **settings: Any) -> Iterator[Any]:
     """Yield ``driver_cls`` opened on a scripted peer that asserts every byte.
 
     Parameters
@@ -253,7 +285,12 @@ def expected_protocol(driver_cls: type[Instrument], exchanges: Sequence[Exchange
         A :class:`labkit.drivers.base.Instrument` subclass.
     exchanges:
         ``[(bytes the driver must send, reply), ...]`` in order; see the module
-        docstring for reply values. An empty list asserts that nothing is sent.
+        docstring for reply values. An empty list asserts that nothing is sent
+        after the handshake.
+    identity, errors_at_connect, handshake:
+        For drivers that shake hands on open (the SCPI generators and scopes),
+        :func:`connect_exchanges` of ``identity`` and ``errors_at_connect`` is
+        put before ``exchanges``; ``handshake=False``: the script gives it.
     timeout_s:
         The driver's timeout (short, so stall tests stay fast).
     link:
@@ -271,6 +308,8 @@ def expected_protocol(driver_cls: type[Instrument], exchanges: Sequence[Exchange
         also when the test body raised.
     """
     link = link or getattr(driver_cls, "link", "socket")
+    if handshake:
+        exchanges = connect_exchanges(driver_cls, identity, errors_at_connect) + list(exchanges)
     peer: _Peer = _PtyPeer(exchanges) if link == "serial" else _SocketPeer(exchanges)
     peer.start()
     driver = None

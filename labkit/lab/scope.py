@@ -330,7 +330,7 @@ class SimInfiniiVision(SimScpiInstrument):
                 if t_trig is not None:
                     break
                 time.sleep(0.002)
-            if acq.cancelled:
+            if acq.cancelled or t_trig is None:
                 return
             acq.t_trig = t_trig
             t_end = t_trig + acq.xorig_s + acq.points * acq.xinc_s

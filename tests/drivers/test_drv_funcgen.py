@@ -44,8 +44,10 @@ def test_set_sine_load_first_then_errors(cls, kw, script):
     (RigolDG1000Z, b"RIGOL TECHNOLOGIES,DG1022Z,DG1ZA000000001,03.01.12\n"),
 ])
 def test_identity(cls, idn):
-    with expected_protocol(cls, [(b"*IDN?\n", idn)]) as fg:
+    # asked once, in the handshake on open; the model word names the model
+    with expected_protocol(cls, [], identity=idn.decode().strip()) as fg:
         assert fg.identity == idn.decode().strip()
+        assert fg.instrument_model == idn.decode().split(",")[1]
 
 
 def test_error_queue_nonempty_raises_with_text():
@@ -87,11 +89,12 @@ def test_limits_refused_before_anything_is_sent(kw, call, limit):
 
 
 def test_bad_channel_and_limit_settings():
+    # refused when constructed: not a byte is sent
     with pytest.raises(ConfigError, match="channel"):
-        with expected_protocol(Agilent33220A, [], channel=2):
+        with expected_protocol(Agilent33220A, [], channel=2, handshake=False):
             pass
     with pytest.raises(LimitError):
-        with expected_protocol(Keysight33500B, [], max_amp_vpp=50):
+        with expected_protocol(Keysight33500B, [], max_amp_vpp=50, handshake=False):
             pass
 
 
@@ -204,14 +207,16 @@ def test_drop_mid_settings_is_instrument_error():
 
 
 def test_snapshot_records_settings_and_state():
-    script = SINE_33500B_CH2 + [(b"*IDN?\n", b"Keysight Technologies,33522B,MY1,4\n")]
-    with expected_protocol(Keysight33500B, script, channel=2, max_amp_vpp=5, max_v=4) as fg:
+    script = SINE_33500B_CH2
+    with expected_protocol(Keysight33500B, script, channel=2, max_amp_vpp=5, max_v=4,
+                           identity="Keysight Technologies,33522B,MY1,4") as fg:
         fg.set_sine(1000, 2, 0.5)
         snap = json.loads(json.dumps(fg.snapshot()))
     assert snap["settings"] == {"timeout_s": pytest.approx(0.3), "check_errors": True, "channel": 2,
                                 "max_amp_vpp": 5.0, "max_v": 4.0, "max_freq_hz": None}
     assert snap["state"]["freq_hz"] == 1000 and snap["state"]["offset_v"] == 0.5
     assert snap["identity"].startswith("Keysight")
+    assert snap["connect"] == {"instrument_model": "33522B", "channels": 2, "errors_at_connect": []}
 
 
 def test_check_errors_can_be_disabled():

@@ -8,7 +8,7 @@ import pytest
 from labkit.drivers.funcgen import Keysight33500B, RigolDG1000Z
 from labkit.drivers.registry import driver_class, model_names, open_instrument
 from labkit.drivers.scope import InfiniiVision
-from labkit.drivers.testing import _SocketPeer
+from labkit.drivers.testing import _SocketPeer, connect_exchanges
 from labkit.drivers.vibrometer import OFV5000
 from labkit.errors import ConfigError, InstrumentError
 
@@ -25,7 +25,7 @@ def test_model_names_and_aliases():
 
 
 def test_open_instrument_over_loopback():
-    peer = _SocketPeer([(b"*IDN?\n", b"Keysight Technologies,33522B,MY1,4\n")])
+    peer = _SocketPeer(connect_exchanges(Keysight33500B, "Keysight Technologies,33522B,MY1,4"))
     peer.start()
     fg = open_instrument("33500B", peer.resource, timeout_s=0.5, channel=2)
     try:

@@ -43,7 +43,8 @@ def test_infiniivision_setup_and_timebase():
 
 
 def test_scope_limits_before_sending():
-    with expected_protocol(InfiniiVision, [], channels=2) as sc:
+    with expected_protocol(InfiniiVision, [], identity="KEYSIGHT TECHNOLOGIES,DSOX1102G,CN1,02.10") as sc:
+        assert sc.n_channels == 2          # from the identity's model word
         with pytest.raises(LimitError, match="scope channel"):
             sc.setup_channel(3, 0.1)
         with pytest.raises(LimitError, match="volts_per_div"):
