@@ -24,8 +24,12 @@ from labkit import __version__
 from labkit.errors import InputError
 from labkit.jsonutil import to_jsonable
 
-SCHEMA_VERSION = 1
-#: the newest layout this labkit reads (run files: 2 adds dimension scales)
+#: the layout version written (every kind; ``docs/file-formats.md`` has the history):
+#: 1 -- no dimension scales; 2 -- each group's axis (``index``, ``t_s``, ``freq_hz``, a sweep's
+#: quantity) is an HDF5 dimension scale attached to the datasets along it (:func:`label_dimensions`),
+#: and run files' point records hold ``t_s``
+SCHEMA_VERSION = 2
+#: the newest layout this labkit reads (readers accept every version up to it)
 READS_SCHEMA_VERSION = 2
 
 
@@ -84,11 +88,16 @@ def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None):
         if found is None or not str(found).startswith(kind):
             f.close()
             raise InputError(f"this file holds {found!r}", file=path, key="kind", expected=f"a '{kind}' file")
-        version = int(f.attrs.get("schema_version", 0))
-        if version > READS_SCHEMA_VERSION:
+    if mode == "r":
+        raw = f.attrs.get("schema_version", 0)
+        try:
+            version = int(raw)
+        except (TypeError, ValueError):
+            version = -1
+        if not 0 <= version <= READS_SCHEMA_VERSION:
             f.close()
-            raise InputError(f"written by a newer labkit (schema {version})", file=path,
-                             key="schema_version", expected=f"<= {READS_SCHEMA_VERSION}")
+            raise InputError(f"{raw!r}: written by a newer labkit, or not a version", file=path,
+                             key="schema_version", expected=f"an integer 0..{READS_SCHEMA_VERSION}")
     return f
 
 

@@ -1,7 +1,8 @@
 """``labkit info FILE``: summarise any file the toolkit writes.
 
 Run files, tracks, fits and simulations (HDF5), robot parameter files and
-experiment configs (TOML), track tables (CSV) and videos (``.mkv``, ``.avi``).
+experiment configs (TOML), track tables (CSV), videos (``.mkv``, ``.avi``), and
+the sidecars: figures (PNG), reports (HTML), JSON summaries, universal files (UFF).
 What a file *means* comes from :func:`labkit.open` (``content``); for HDF5
 files every dataset's shape, dtype and units are listed as well.
 """
@@ -15,7 +16,7 @@ from labkit.errors import ConfigError, InputError
 
 NAME = "info"
 HELP = ("summarise a labkit file: run file, track, fit, simulation (HDF5), parameter file or config (TOML), "
-        "track table (CSV), video (.mkv/.avi)")
+        "track table (CSV), video (.mkv/.avi), figure (PNG), report (HTML), JSON, UFF")
 
 
 def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
@@ -43,20 +44,84 @@ def summarise(path: str | Path) -> dict[str, Any]:
         return {"file": str(path), "format": "csv", "content": open_file(path).summary()}
     if suffix in VIDEO_SUFFIXES:
         return {"file": str(path), "format": "video", "content": open_file(path).summary()}
+    if suffix in SIDECARS:
+        return {"file": str(path), "format": suffix[1:], "content": SIDECARS[suffix](path)}
     return summarise_h5(path)
+
+
+def _json_summary(path: Path) -> dict[str, Any]:
+    """A JSON sidecar (calibration details, report agreement, figure data, demo summary): its top-level keys."""
+    import json
+
+    try:
+        obj = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise InputError(f"not readable JSON ({exc})", file=path) from None
+    what = {".calibration.json": "calibration details (labkit calibrate)",
+            "agreement.json": "model-measurement agreement (labkit report)",
+            "figure_data.json": "the report's figure data (labkit report)",
+            "demo_summary.json": "demo summary (labkit demo)"}
+    kind = next((v for k, v in what.items() if path.name.endswith(k)), "JSON")
+    keys = sorted(obj) if isinstance(obj, dict) else []
+    return {"kind": kind, "bytes": path.stat().st_size, "keys": keys,
+            "items": len(obj) if isinstance(obj, (dict, list)) else 1}
+
+
+def _png_summary(path: Path) -> dict[str, Any]:
+    """A figure: its size in pixels (from the PNG header)."""
+    head = path.read_bytes()[:24]
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n":
+        raise InputError("not a PNG file", file=path, expected="a PNG signature")
+    return {"kind": "figure", "width_px": int.from_bytes(head[16:20], "big"),
+            "height_px": int.from_bytes(head[20:24], "big"), "bytes": path.stat().st_size}
+
+
+def _html_summary(path: Path) -> dict[str, Any]:
+    """A report page: title, sections and images (self-contained: images are inline)."""
+    import re
+
+    page = path.read_text(encoding="utf-8", errors="replace")
+    title = re.search(r"<title>(.*?)</title>", page, re.S | re.I)
+    return {"kind": "report", "title": title.group(1).strip() if title else "",
+            "sections": len(re.findall(r"<section\b", page, re.I)),
+            "images": len(re.findall(r"<img\b", page, re.I)), "bytes": len(page.encode())}
+
+
+def _uff_summary(path: Path) -> dict[str, Any]:
+    """A universal file (``labkit fit --uff``): its datasets by type (58: FRFs, ...)."""
+    lines = path.read_text(encoding="ascii", errors="replace").splitlines()
+    types: dict[str, int] = {}
+    i = 0
+    while i < len(lines) - 1:
+        if lines[i].strip() == "-1" and lines[i + 1].strip().isdigit():
+            t = lines[i + 1].strip()
+            types[t] = types.get(t, 0) + 1
+            i += 2
+            while i < len(lines) and lines[i].strip() != "-1":
+                i += 1
+        i += 1
+    if not types:
+        raise InputError("no universal-file datasets", file=path, expected="blocks delimited by '    -1'")
+    return {"kind": "universal file", "datasets_by_type": types}
+
+
+#: sidecar files labkit writes beside its data files, by suffix
+SIDECARS = {".json": _json_summary, ".png": _png_summary, ".html": _html_summary, ".uff": _uff_summary}
 
 
 def summarise_toml(path: Path) -> dict[str, Any]:
     """Tables and keys of a TOML file; for a robot parameter file its modes and provenance digest."""
-    from labkit.files.kinds import provenance_digest, read_params
+    from labkit.files.kinds import CONFIG_TABLES, provenance_digest, read_config, read_params
     from labkit.tomlio import load_toml
 
-    table, _ = load_toml(path)
+    table, raw = load_toml(path)
     out: dict[str, Any] = {"file": str(path), "format": "toml",
                            "tables": sorted(k for k, v in table.items() if isinstance(v, dict)),
                            "keys": sorted(k for k, v in table.items() if not isinstance(v, dict)),
                            "provenance": table.get("provenance", {})}
-    if "k_per_s2" in table or "provenance" in table:        # a robot parameter file, not a config
+    if any(isinstance(table.get(k), dict) for k in CONFIG_TABLES):      # an experiment config
+        out["content"] = read_config(path, table, raw).summary()
+    elif "k_per_s2" in table or "provenance" in table:        # a robot parameter file
         try:
             out["content"] = read_params(path).summary()
         except ConfigError as exc:
@@ -69,7 +134,7 @@ def summarise_h5(path: Path) -> dict[str, Any]:
     """Root attributes, every dataset's shape, dtype and units, and the typed summary of known kinds."""
     import h5py
 
-    from labkit.files import open_file
+    from labkit.files import H5_KINDS, open_file
     from labkit.h5io import open_h5
 
     datasets: list[dict[str, Any]] = []
@@ -92,7 +157,7 @@ def summarise_h5(path: Path) -> dict[str, Any]:
     out = {"file": str(path), "format": "hdf5", "kind": attrs.get("kind"),
            "schema_version": attrs.get("schema_version"), "attrs": attrs,
            "groups": groups, "datasets": datasets, "dims": dims}
-    if attrs.get("kind") in ("run_inchip", "run_shaker", "track", "modal_fit", "sim_result", "sim_sweep"):
+    if attrs.get("kind") in H5_KINDS:
         try:
             out["content"] = open_file(path).summary()
         except InputError as exc:       # a damaged file still gets its listing
@@ -113,7 +178,14 @@ def _print(summary: dict[str, Any]) -> None:
     content = summary.get("content", {})
     if summary["format"] == "toml":
         print(f"  tables: {', '.join(summary['tables']) or '-'}")
-        if "content" in summary:
+        if content.get("experiment"):
+            print(f"  experiment config: {content['experiment']} ({content['kind']})")
+            for role, model in content.get("instruments", {}).items():
+                print(f"  instrument {role}: {model}")
+            for k in ("drive", "frequencies", "grid", "method"):
+                if k in content:
+                    print(f"  {k}: " + ", ".join(f"{a} = {b}" for a, b in content[k].items()))
+        elif "content" in summary:
             for k in ("modal_freq_hz", "modal_damping_ratio"):
                 if k in content:
                     print(f"  {k}: {', '.join(f'{v:.6g}' for v in content[k])}")

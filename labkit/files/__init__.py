@@ -13,7 +13,11 @@ track table (``.csv``)       ``track_csv``        :class:`~labkit.files.kinds.Tr
 modal fit (``.fit.h5``)      ``modal_fit``        :class:`~labkit.files.kinds.ModalFit`
 simulation (``.h5``)         ``sim_result``       :class:`~labkit.files.kinds.SimRun`
 simulated sweep (``.h5``)    ``sim_sweep``        :class:`~labkit.files.kinds.SimSweep`
+scenario sweeps (``.h5``)    ``sim_sweep_set``    :class:`~labkit.files.kinds.SimSweepSet`
+scenario runs (``.h5``)      ``sim_ablations``    :class:`~labkit.files.kinds.SimRunSet`
 robot parameters (``.toml``) ``robot_params``     :class:`~labkit.files.kinds.RobotParameters`
+experiment config (``.toml``) ``config_inchip``,  :class:`~labkit.files.kinds.ExperimentConfig`
+                             ``config_shaker``
 video (``.mkv``, ``.avi``)   ``video``            :class:`~labkit.files.kinds.Video`
 ===========================  ===================  ==========================================
 
@@ -27,13 +31,27 @@ from pathlib import Path
 
 from labkit.errors import InputError
 from labkit.files.base import LabFile
-from labkit.files.kinds import ModalFit, RobotParameters, SimRun, SimSweep, Track, Video
+from labkit.files.kinds import (
+    ExperimentConfig,
+    ModalFit,
+    RobotParameters,
+    SimRun,
+    SimRunSet,
+    SimSweep,
+    SimSweepSet,
+    Track,
+    Video,
+)
 from labkit.files.runs import InchipRun, RunFile, ShakerRun, read_run_file
 
 __all__ = ["open_file", "LabFile", "RunFile", "InchipRun", "ShakerRun", "Track", "ModalFit", "SimRun",
-           "SimSweep", "RobotParameters", "Video", "read_run_file", "VIDEO_SUFFIXES"]
+           "SimSweep", "SimSweepSet", "SimRunSet", "RobotParameters", "ExperimentConfig", "Video",
+           "read_run_file", "VIDEO_SUFFIXES", "H5_KINDS"]
 
 VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4")
+#: the ``kind`` attributes of the HDF5 files labkit writes
+H5_KINDS = ("run_inchip", "run_shaker", "track", "modal_fit", "sim_result", "sim_sweep", "sim_sweep_set",
+            "sim_ablations")
 
 
 def open_file(path: str | os.PathLike[str]) -> LabFile:
@@ -53,7 +71,7 @@ def open_file(path: str | os.PathLike[str]) -> LabFile:
         raise InputError("no such file", file=p)
     suffix = p.suffix.lower()
     if suffix == ".toml":
-        return kinds.read_params(p)
+        return kinds.read_toml(p)
     if suffix == ".csv":
         return kinds.read_track_csv(p)
     if suffix in VIDEO_SUFFIXES:
@@ -71,7 +89,11 @@ def open_file(path: str | os.PathLike[str]) -> LabFile:
             return kinds.read_sim_result(p, f)
         elif kind == "sim_sweep":
             return kinds.read_sim_sweep(p, f)
+        elif kind == "sim_sweep_set":
+            return kinds.read_sim_sweep_set(p, f)
+        elif kind == "sim_ablations":
+            return kinds.read_sim_run_set(p, f)
         else:
             raise InputError(f"not a file labkit reads: kind {kind!r}", file=p, key="kind",
-                             expected="run_inchip, run_shaker, track, modal_fit, sim_result or sim_sweep")
+                             expected=", ".join(H5_KINDS))
     return read_run_file(p)

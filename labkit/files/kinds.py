@@ -267,12 +267,97 @@ class SimSweep(LabFile):
         return ds
 
 
-def read_sim_sweep(path: Path, f: Any) -> SimSweep:
-    cols, units = _columns(f)
+def read_sim_sweep(path: Path, f: Any, group: Any = None, version: int | None = None) -> SimSweep:
+    """A sweep written by :meth:`labkit.sim.SweepResult.to_h5` (``group``: one sweep of a set)."""
+    g = f if group is None else group
+    cols, units = _columns(g)
     if "values" not in cols:
-        raise InputError("missing dataset", file=path, key="values", expected="the swept values")
-    return SimSweep(path, "sim_sweep", int(f.attrs.get("schema_version", 0)), root_attrs(f), units,
-                    text(f.attrs.get("quantity", "?")), cols["values"], cols, text(f.attrs.get("params_toml", "")))
+        raise InputError("missing dataset", file=path, key=f"{g.name.rstrip('/')}/values",
+                         expected="the swept values")
+    version = int(f.attrs.get("schema_version", 0)) if version is None else version
+    return SimSweep(path, "sim_sweep", version, root_attrs(g), units,
+                    text(g.attrs.get("quantity", "?")), cols["values"], cols, text(g.attrs.get("params_toml", "")))
+
+
+@dataclass
+class SimSweepSet(LabFile):
+    """Several simulated sweeps in one file (kind ``sim_sweep_set``, from ``labkit simulate scenario``):
+    ``sweeps[label]`` is a :class:`SimSweep` (labels are the groups' paths, e.g. ``capped/50_uN``)."""
+
+    sweeps: dict[str, SimSweep] = field(default_factory=dict, repr=False)
+
+    def summary(self) -> dict[str, Any]:
+        return super().summary() | {"sweeps": {k: s.summary() | {"file": None} for k, s in self.sweeps.items()}}
+
+    def to_xarray(self, label: str | None = None) -> xarray.Dataset:
+        """One sweep (default: the first) as :meth:`SimSweep.to_xarray`."""
+        return _pick(self.sweeps, label, self.path).to_xarray()
+
+
+def read_sim_sweep_set(path: Path, f: Any) -> SimSweepSet:
+    import h5py
+
+    version = int(f.attrs.get("schema_version", 0))
+    sweeps: dict[str, SimSweep] = {}
+
+    def visit(name: str, obj: Any) -> None:
+        if isinstance(obj, h5py.Group) and "values" in obj:
+            sweeps[name] = read_sim_sweep(path, f, obj, version)
+
+    f.visititems(visit)
+    return SimSweepSet(path, "sim_sweep_set", version, root_attrs(f), {}, sweeps)
+
+
+@dataclass
+class SimRunSet(LabFile):
+    """Several simulator runs in one file (kind ``sim_ablations``, from ``labkit simulate scenario
+    ablation-shaker``): ``runs[label]`` holds each run's time series (``t_s``, ``foot_z_um``, ...)."""
+
+    runs: dict[str, dict[str, np.ndarray]] = field(default_factory=dict, repr=False)
+
+    def summary(self) -> dict[str, Any]:
+        return super().summary() | {
+            "runs": {k: {"samples": int(v["t_s"].size), "mean_speed_mm_s": float(np.ravel(v.get(
+                "mean_speed_mm_s", np.nan))[0])} for k, v in self.runs.items()},
+            "info": self.attrs.get("summary", {})}
+
+    def to_xarray(self, label: str | None = None) -> xarray.Dataset:
+        """One run (default: the first): time series over ``t_s`` (per-leg arrays over ``leg``)."""
+        xr = require_xarray()
+        name = next(iter(self.runs), "") if label is None else label
+        cols = _pick(self.runs, name, self.path)
+        data: dict[str, Any] = {}
+        for k, v in cols.items():
+            if k == "t_s" or v.ndim == 0:
+                continue
+            dims = ("t_s", "leg")[:v.ndim] if v.shape[0] == cols["t_s"].size else \
+                tuple(f"{k}_dim{i}" for i in range(v.ndim))
+            data[k] = (dims, v, {"units": self.units.get(f"{name}/{k}", "")})
+        ds = xr.Dataset(data, coords={"t_s": ("t_s", cols["t_s"], {"units": "s"})})
+        ds.attrs.update(kind=self.kind, file=str(self.path), run=name)
+        return ds
+
+
+def read_sim_run_set(path: Path, f: Any) -> SimRunSet:
+    runs: dict[str, dict[str, np.ndarray]] = {}
+    units: dict[str, str] = {}
+    for label, g in (f["runs"].items() if "runs" in f else []):
+        cols, u = _columns(g)
+        if "t_s" not in cols:
+            raise InputError("missing dataset", file=path, key=f"runs/{label}/t_s", expected="a run's time axis")
+        runs[label] = cols
+        units |= {f"{label}/{k}": v for k, v in u.items()}
+    return SimRunSet(path, text(f.attrs.get("kind", "sim_ablations")), int(f.attrs.get("schema_version", 0)),
+                     root_attrs(f), units, runs)
+
+
+def _pick(items: dict[str, Any], label: str | None, path: Path) -> Any:
+    if not items:
+        raise InputError("holds no data", file=path)
+    name = next(iter(items)) if label is None else label
+    if name not in items:
+        raise InputError(f"no {name!r} in the file", file=path, key="label", expected=" or ".join(items))
+    return items[name]
 
 
 # --------------------------------------------------------------------------- parameter files, videos
@@ -334,6 +419,59 @@ def read_params(path: Path) -> RobotParameters:
 
     p = RobotParams.from_toml(path)
     return RobotParameters(path, "robot_params", 0, {}, {}, p, dict(p.provenance))
+
+
+#: top-level tables that mark a TOML file as an experiment config (not a robot parameter file)
+CONFIG_TABLES = ("run", "instruments")
+
+
+@dataclass
+class ExperimentConfig(LabFile):
+    """An experiment config (TOML; kind ``config_inchip`` or ``config_shaker``): its text and tables.
+
+    Read, not validated: ``labkit sweep inchip`` / ``labkit shaker`` validate a config (every
+    error naming the file and key) before they touch an instrument. ``frequencies_hz`` is the
+    in-chip plan's frequency list when the config gives one (``list_hz``) or a linear/log range.
+    """
+
+    experiment: str = "?"
+    text: str = field(default="", repr=False)
+    table: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    @property
+    def instruments(self) -> dict[str, str]:
+        """Role -> model of the ``[instruments.<role>]`` tables."""
+        inst = self.table.get("instruments", {})
+        return {k: str(v.get("model", "?")) for k, v in inst.items() if isinstance(v, dict)}
+
+    def summary(self) -> dict[str, Any]:
+        out = super().summary() | {"experiment": self.experiment, "instruments": self.instruments,
+                                   "tables": sorted(k for k, v in self.table.items() if isinstance(v, dict))}
+        for key in ("drive", "frequencies", "grid", "method"):
+            if isinstance(self.table.get(key), dict):
+                out[key] = self.table[key]
+        return out
+
+    def to_xarray(self) -> xarray.Dataset:
+        """No arrays: an empty Dataset whose attributes hold the config's text and kind."""
+        xr = require_xarray()
+        return xr.Dataset(attrs={"kind": self.kind, "file": str(self.path), "config_toml": self.text})
+
+
+def read_config(path: Path, table: dict[str, Any], raw: str) -> ExperimentConfig:
+    shaker = any(k in table for k in ("grid", "shaker", "amplifier", "tray_control"))
+    experiment = "shaker" if shaker else "inchip"
+    return ExperimentConfig(path, f"config_{experiment}", 0, {}, {}, experiment, raw, table)
+
+
+def read_toml(path: Path) -> RobotParameters | ExperimentConfig:
+    """A robot parameter file, or an experiment config (a file with a ``[run]`` or ``[instruments]`` table)."""
+    from labkit.tomlio import load_toml
+
+    table, raw = load_toml(path)
+    if any(isinstance(table.get(k), dict) for k in CONFIG_TABLES):
+        return read_config(path, table, raw)
+    return read_params(path)
 
 
 @dataclass
