@@ -162,7 +162,14 @@ class ModalFit:
                 "residual_powers": list(self.residual_powers), "background": self.background,
                 "delay_s": self.delay_s,
                 "modes": [m.to_dict(self.locations) for m in self.modes],
+                "mac": self.mac().tolist() if len(self.locations) > 1 and self.modes else None,
                 "stabilisation": None if self.stabilisation is None else self.stabilisation.to_dict()}
+
+    def mac(self, other: ModalFit | None = None) -> np.ndarray:
+        """MAC between this fit's mode shapes (and ``other``'s; see :mod:`labkit.analysis.modal.shapes`)."""
+        from labkit.analysis.modal.shapes import mac
+
+        return mac(self, other)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -348,9 +355,9 @@ def _given_poles(poles: Sequence[float | tuple[float, float]], band: tuple[float
     """``(freq, damping or NaN)`` of poles chosen by hand, checked."""
     fz = []
     for p in poles:
-        f, z = (p, np.nan) if np.ndim(p) == 0 else (tuple(p) + (np.nan,))[:2]    # type: ignore[arg-type]
+        pair: tuple[Any, ...] = (p, np.nan) if np.ndim(p) == 0 else (tuple(p) + (np.nan,))[:2]  # type: ignore[arg-type]
         try:
-            f, z = float(f), float(z)
+            f, z = float(pair[0]), float(pair[1])
         except (TypeError, ValueError):
             raise InputError(f"bad pole {p!r}", key="poles_hz", expected="a frequency or (frequency, zeta)") from None
         if not band[0] < f < band[1]:
@@ -540,8 +547,12 @@ def _fit_given(ctx: _Ctx, f_given: np.ndarray, z_given: np.ndarray, method: str,
     ctx.warnings.append(f"poles chosen by hand: {held} held at the given values (standard uncertainty 0), "
                         "damping ratios and residues fitted")
     fit = _from_refined(ctx, ref, method, kind, None)
-    for m in fit.modes:
+    for m, zg in zip(fit.modes, z_given[np.argsort(f_given)]):
         m.given = True
+        m.freq_hz_std = 0.0                     # held: exactly the given value
+        m.freq_damping_cov = 0.0
+        if not np.isnan(zg):
+            m.damping_ratio_std = 0.0
     return fit
 
 
@@ -795,7 +806,9 @@ def _sdof_poles(chans: list[Channel], n_modes: int | None, method: str, kind: st
     mob = _sdof_forms(chans, kind, f_grid, background)
     wts = [1.0 / np.sqrt(np.mean(np.abs(m) ** 2)) for m in mob]
     a = modal_sdof.indicator(mob, wts)
-    peaks = modal_sdof.pick_peaks(f_grid, a, n_modes)
+    # Noise of the indicator: each location's own noise level, weighted as in the indicator.
+    noise = np.sqrt(sum(wt ** 2 * np.median(noise_variance(m)) for m, wt in zip(mob, wts)))
+    peaks = modal_sdof.pick_peaks(f_grid, a, n_modes, floor=5 * noise)
     fz = []
     for k in peaks:
         fn, z = modal_sdof.half_power(f_grid, a, int(k))
@@ -828,7 +841,9 @@ def _fit_sdof(ctx: _Ctx, n_modes: int | None, method: str, kind: str, n_boot: in
         raise InputError(f"{method} fit: {_in_hz(str(exc), ctx)}; that is the optimiser's limit, not a mode",
                          expected="method 'lscf' (or a band around one clear resonance)") from None
     if lam.size == 0:
-        raise InputError("no resonance peak found in the band", expected="an FRF with a resonance")
+        raise InputError("no resonance peak found in the band" + (
+            "" if background else " (a resonance seen as a dip over a background? background='linear')"),
+            expected="an FRF with a resonance")
     if n_modes is not None and lam.size < n_modes:
         raise InputError(f"{method}: found {lam.size} resonance peaks, {n_modes} asked for", key="n_modes",
                          expected=f"at most {lam.size} modes with this method, or method 'lscf'")
@@ -868,7 +883,7 @@ def _fit_sdof(ctx: _Ctx, n_modes: int | None, method: str, kind: str, n_boot: in
     order = np.argsort(f0)
     fit = _assemble(chans, f0, z0, f_std, z_std, lin, lin_var, order, method, kind, ctx.band, powers, None,
                     None, True, warnings, fz_cov)
-    _warn_interference(fit, ctx)
+    _warn_interference(fit, ctx, modes_only=background or kind == "scattering")
     _warn_unresolved(fit, ctx, f_grid)
     return fit
 
@@ -914,7 +929,7 @@ def _warn_unresolved(fit: ModalFit, ctx: _Ctx, f_grid: np.ndarray) -> None:
                 "lines or use method 'lscf'")
 
 
-def _warn_interference(fit: ModalFit, ctx: _Ctx, limit: float = 0.03) -> None:
+def _warn_interference(fit: ModalFit, ctx: _Ctx, limit: float = 0.03, *, modes_only: bool = False) -> None:
     """Warn where other modes (and residual terms) add more than ``limit`` of a mode's own peak.
 
     Single-mode estimators assume each resonance is alone; there the result is
@@ -927,6 +942,9 @@ def _warn_interference(fit: ModalFit, ctx: _Ctx, limit: float = 0.03) -> None:
         R = m.amplitude[k]
         own = R / (jw - lam) + np.conj(R) / (jw - np.conj(lam))
         rest = fit.model([m.freq_hz], k)[0] - own
+        if modes_only:                      # a fitted background is not a neighbouring mode
+            c = fit.residual_terms[k]
+            rest -= complex(sum(ci * (jw ** q) for ci, q in zip(c, fit.residual_powers)))
         ratio = abs(rest) / max(abs(own), 1e-300)
         if ratio > limit:
             fit.warnings.append(f"mode at {ctx.hz(m.freq_hz)}: neighbouring modes add {ratio:.0%} of its peak "

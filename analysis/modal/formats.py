@@ -253,6 +253,7 @@ def read_csv(path: str | Path, *, columns: str | None = None, kind: str | None =
     for (ra, ca), (rb, cb) in zip(spec[1::2], spec[2::2]):
         a, name = col(ca)
         b, _ = col(cb)
+        h: np.ndarray
         if ra == "re":
             h = a + 1j * b
         else:

@@ -162,7 +162,7 @@ def stabilisation(channels, n_max: int, band_hz: tuple[float, float], *, n_min: 
         lam, f, z = lam[order_ix], f[order_ix], z[order_ix]
         by_order[int(n)] = lam
         status = np.zeros(f.size, dtype=np.int8)
-        if prev_f is not None and prev_f.size and f.size:
+        if prev_f is not None and prev_z is not None and prev_f.size and f.size:
             k = np.argmin(np.abs(f[:, None] - prev_f[None, :]), axis=1)
             df = np.abs(f - prev_f[k]) / np.minimum(f, width_hz)
             dz = np.abs(z - prev_z[k]) / np.maximum(z, 1e-12)

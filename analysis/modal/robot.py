@@ -161,7 +161,7 @@ def output_paths(out: str | Path, *, figures: bool, fits: dict[str, ModalFit] | 
 def fit_robot(runs: Sequence[str | Path | RunChannels], *, base: Any = None, assign: str | None = None,
               n_modes: int | None = None, band_hz: tuple[float, float] | None = None, method: str = "lscf",
               covariance: str = "sandwich", min_quality: float = 0.0,
-              poles_hz: Sequence[float] | None = None, background: str | None = None,
+              poles_hz: Sequence[float | tuple[float, float]] | None = None, background: str | None = None,
               frf_kind: str | None = None, columns: str | None = None) -> RobotFit:
     """Fit the resonances of run files (or other FRF files) and assign them to the simulator's modes.
 
@@ -272,11 +272,12 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
     new_z = list(base_p.modal_damping_ratio)
     modes_prov: dict[str, Any] = {}
     for sim in (1, 2, 3):
-        fm = mapping[sim]
-        if fm is None:
+        fm_or_none = mapping[sim]
+        if fm_or_none is None:
             modes_prov[str(sim)] = {"source": "base", "base": base_name,
                                     "freq_hz": new_f[sim - 1], "damping_ratio": new_z[sim - 1]}
             continue
+        fm = fm_or_none
         item = listing[fm.index - 1]
         group, i = where[fm.index - 1]
         new_f[sim - 1], new_z[sim - 1] = item["freq_hz"], item["damping_ratio"]

@@ -23,18 +23,27 @@ def indicator(mob: list[np.ndarray], weights: list[float]) -> np.ndarray:
     return np.sqrt(sum((wt * np.abs(h)) ** 2 for h, wt in zip(mob, weights)))
 
 
-def pick_peaks(f: np.ndarray, a: np.ndarray, n_modes: int | None, *, min_prominence: float = 0.1) -> np.ndarray:
+def pick_peaks(f: np.ndarray, a: np.ndarray, n_modes: int | None, *, min_prominence: float = 0.1,
+               floor: float = 0.0) -> np.ndarray:
     """Indices of resonance peaks of the magnitude ``a``.
 
     Peaks are ranked by prominence in ``log10(a)``; with ``n_modes`` the top
     ``n_modes`` are kept, otherwise those with prominence above
-    ``min_prominence`` decades.  Returned sorted by frequency.
+    ``min_prominence`` decades.  Peaks not above ``floor`` (e.g. a few times
+    the noise level: in log scale noise alone has prominent peaks) are never
+    taken.  Returned sorted by frequency.
     """
     from scipy.signal import find_peaks
 
     la = np.log10(np.maximum(a, np.finfo(float).tiny))
     idx, props = find_peaks(la, prominence=0.0)
     prom = props["prominences"]
+    if floor > 0:
+        # In linear scale too: a peak must stand out from its surroundings by more than the floor.
+        lin = find_peaks(a, prominence=0.0)
+        lin_prom = dict(zip(lin[0].tolist(), lin[1]["prominences"].tolist()))
+        above = np.array([a[i] > floor and lin_prom.get(int(i), 0.0) > floor for i in idx], dtype=bool)
+        idx, prom = idx[above], prom[above]
     order = np.argsort(-prom)
     if n_modes is None:
         order = order[prom[order] >= min_prominence]
@@ -121,6 +130,7 @@ def circle_fit(f: np.ndarray, mob: np.ndarray, fn0: float, zeta0: float, *, span
     fn, z = float(sol.x[1]), float(sol.x[2])
     for name, v, a, b in (("frequency", fn, lo[1], hi[1]), ("damping ratio", z, lo[2], hi[2])):
         if min(abs(v - a), abs(v - b)) <= 1e-6 * max(abs(a), abs(b)):
-            raise CircleAtBound(f"the circle fit near {fn0:.6g} ended at the bound of its {name} "
-                                f"({v:.6g}; search {a:.6g}..{b:.6g})")
+            what = ("frequency search (+-50 % of the peak's)" if name == "frequency" else
+                    f"damping ratio ({v:.3g}; search {a:.3g}..{b:.3g})")
+            raise CircleAtBound(f"the circle fit near {fn0:.6g} ended at the bound of its {what}")
     return fn, z
