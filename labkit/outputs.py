@@ -13,6 +13,11 @@ The rules (``docs/file-formats.md``, "Outputs"):
   infer a format from the suffix still work) and renames it over the old
   file with :func:`os.replace` only once the writer returned. A crash or an
   error mid-write leaves the old file as it was (and removes the partial one).
+  A command that writes several files (a track and its CSV and PNG, a
+  parameter file and its JSON) uses :func:`atomic_outputs`: every file is
+  written to its temporary name first, and the renames happen only once all
+  writers returned, so a failure in the last writer still leaves every old
+  file in place. A command that fills a folder uses :func:`staged_dir`.
 * **Missing folders.** The folder that will hold an output file must exist;
   labkit does not create it (a mistyped folder is far more often a typo than
   a wish). A command whose ``--out`` *is* a folder (``report``, ``demo``,
@@ -29,7 +34,7 @@ from pathlib import Path
 
 from labkit.errors import InputError
 
-__all__ = ["check_outputs", "check_output_dir", "atomic_output", "temp_name"]
+__all__ = ["check_outputs", "check_output_dir", "atomic_output", "atomic_outputs", "staged_dir", "temp_name"]
 
 
 def _hint(resume: bool) -> str:
@@ -153,3 +158,55 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+@contextlib.contextmanager
+def atomic_outputs(paths: Iterable[str | os.PathLike[str]]) -> Iterator[list[Path]]:
+    """Several outputs replaced together: temporaries for all, renamed only once every writer returned.
+
+    ``with atomic_outputs([h5, csv, png]) as (t_h5, t_csv, t_png): ...``. On any exception every
+    temporary file is removed and every target left as it was. The renames at the end are one
+    :func:`os.replace` each, in order; between two of them (microseconds) a power cut could
+    leave a mix of old and new files, never a missing or partial one.
+    """
+    targets = [Path(p) for p in paths]
+    temps: list[Path] = []
+    try:
+        for t in targets:
+            temps.append(temp_name(t))
+        yield list(temps)
+        for t, tmp in zip(targets, temps):
+            if not tmp.exists():
+                raise InputError("the writer did not produce the file", file=t)
+        for t, tmp in zip(targets, temps):
+            os.replace(tmp, t)
+    except BaseException:
+        for tmp in temps:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        raise
+
+
+@contextlib.contextmanager
+def staged_dir(out: str | os.PathLike[str], names: Iterable[str]) -> Iterator[Path]:
+    """Fill folder ``out`` through a hidden staging folder inside it.
+
+    The writer writes the files ``names`` into the yielded folder; once it returned, each is
+    moved over ``out/<name>`` with :func:`os.replace` (same file system: atomic per file) and
+    the staging folder removed. On any exception the staging folder is removed and ``out``
+    is left exactly as it was. ``out`` must exist.
+    """
+    import shutil
+
+    out = Path(out)
+    stage = Path(tempfile.mkdtemp(prefix=".staging.", dir=out))
+    try:
+        yield stage
+        names = list(names)
+        missing = [n for n in names if not (stage / n).exists()]
+        if missing:
+            raise InputError(f"the writer did not produce {', '.join(missing)}", file=out)
+        for n in names:
+            os.replace(stage / n, out / n)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)

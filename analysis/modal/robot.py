@@ -105,37 +105,38 @@ class RobotFit:
         Returns ``{"out", "fit_file", "figures", "uff_file"}``.
         """
         from labkit.h5io import utc_now
-        from labkit.outputs import atomic_output, check_outputs
+        from labkit.outputs import atomic_outputs, check_outputs
 
         paths = output_paths(out, figures=figures, fits=self.fits, uff=uff)
         check_outputs([paths["out"], paths["fit_file"], paths["uff_file"], *paths["figures"].values()],
                       force=force)
         prov = dict(self.provenance, created_utc=utc_now(), fit_file=Path(paths["fit_file"]).name)
-        with atomic_output(paths["out"]) as tmp:
-            self.params.to_toml(tmp, provenance=prov)
-        with atomic_output(paths["fit_file"]) as tmp:
-            write_fit_h5(tmp, self.fits, runs_json(self.runs), ma.as_dict(self.mapping),
+        figs = list(paths["figures"].items()) if figures else []
+        targets = [paths["out"], paths["fit_file"], *([paths["uff_file"]] if paths["uff_file"] is not None else []),
+                   *(p for _, p in figs)]
+        # every file to a temporary name first, all renamed at the end: a failure leaves every old file
+        with atomic_outputs(targets) as temps:
+            tmp_out, tmp_fit, rest = temps[0], temps[1], temps[2:]
+            self.params.to_toml(tmp_out, provenance=prov)
+            write_fit_h5(tmp_fit, self.fits, runs_json(self.runs), ma.as_dict(self.mapping),
                          {g: f.summary() for g, f in self.fits.items()})
-        if paths["uff_file"] is not None:
-            from labkit.analysis.modal.io import write_uff
+            if paths["uff_file"] is not None:
+                from labkit.analysis.modal.io import write_uff
 
-            with atomic_output(paths["uff_file"]) as tmp:
-                write_uff(tmp, self.fits)
-        written: list[str] = []
-        if figures:
-            from labkit.analysis.modal.plots import plot_frf_fit, plot_stabilisation
+                write_uff(rest.pop(0), self.fits)
+            if figs:
+                from labkit.analysis.modal.plots import plot_frf_fit, plot_stabilisation
 
-            groups = self.groups()
-            for (g, what), path in paths["figures"].items():
-                f = self.fits[g]
-                with atomic_output(path) as tmp:
+                groups = self.groups()
+                for ((g, what), _), tmp in zip(figs, rest):
+                    f = self.fits[g]
                     if what == "frf":
                         plot_frf_fit(f, tmp, units=groups[g][0].units,
                                      title=f"{g}: {', '.join(Path(r.path).name for r in groups[g])}")
                     else:
                         assert f.stabilisation is not None
                         plot_stabilisation(f.stabilisation, tmp, fit=f)
-                written.append(str(path))
+        written = [str(p) for _, p in figs]
         return {"out": str(paths["out"]), "fit_file": str(paths["fit_file"]), "figures": written,
                 "uff_file": None if paths["uff_file"] is None else str(paths["uff_file"])}
 

@@ -8,7 +8,7 @@ from typing import Any
 
 from labkit.errors import InputError
 from labkit.jsonutil import to_jsonable
-from labkit.outputs import atomic_output, check_outputs
+from labkit.outputs import atomic_outputs, check_outputs
 
 NAME = "calibrate"
 HELP = "fit uncertain model parameters (c_r, c_ad_n, ...) to measured speeds; write a new parameter file"
@@ -76,11 +76,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                     workers=args.workers, quiet=args.quiet or args.json)
     prov = cal.provenance()
     prov["calibration"]["start_params"] = args.params or "RobotParams() defaults"
-    with atomic_output(out) as tmp:
-        cal.params.to_toml(tmp, provenance=prov)
     summary = {"out": str(out), **cal.summary()}
-    with atomic_output(side) as tmp:
-        tmp.write_text(json.dumps(to_jsonable(summary, finite=True), indent=1), encoding="utf-8")
+    # both written to temporary names, then renamed together: old files survive any failed write
+    with atomic_outputs([out, side]) as (tmp, tmp_side):
+        cal.params.to_toml(tmp, provenance=prov)
+        tmp_side.write_text(json.dumps(to_jsonable(summary, finite=True), indent=1), encoding="utf-8")
     summary["details"] = str(side)
     if not args.json:
         print(f"calibrated {', '.join(cal.names)} on {len(obs.freq_hz)} points ({cal.n_sims} simulations)")

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError
-from labkit.outputs import atomic_output, check_outputs
+from labkit.outputs import atomic_outputs, check_outputs
 
 NAME = "track"
 HELP = "track the robot in a top-view video: path, heading, speed with confidence interval"
@@ -79,18 +79,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                         quiet=args.quiet)
     speed = track_speed(track, window_s=args.window_s)
     result = summary(track, speed)
-    written: dict[str, str] = {}
+    jobs: list[tuple[str, Path, Any]] = []
     if out is not None:
-        for name, target, writer in (("track_h5", out, save_track_h5),
-                                     ("track_csv", out.with_suffix(".csv"), save_track_csv),
-                                     ("path_png", out.with_suffix(".png"), plot_path)):
-            with atomic_output(target) as tmp:      # an old file survives a failed write
-                writer(tmp, track, speed)
-            written[name] = str(target)
+        jobs += [("track_h5", out, lambda p: save_track_h5(p, track, speed)),
+                 ("track_csv", out.with_suffix(".csv"), lambda p: save_track_csv(p, track, speed)),
+                 ("path_png", out.with_suffix(".png"), lambda p: plot_path(p, track, speed))]
     if args.overlay:
-        with atomic_output(args.overlay) as tmp:
-            write_overlay(args.video, track, tmp, speed)
-        written["overlay"] = str(args.overlay)
+        jobs.append(("overlay", Path(args.overlay), lambda p: write_overlay(args.video, track, p, speed)))
+    # all written to temporary names first, renamed together: every old file survives any failed write
+    with atomic_outputs([target for _, target, _ in jobs]) as temps:
+        for (_, _, write), tmp in zip(jobs, temps):
+            write(tmp)
+    written = {name: str(target) for name, target, _ in jobs}
     result["written"] = written
     if not args.json:
         lo, hi = speed.speed_ci_mm_s

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError, LabkitError
+from labkit.outputs import staged_dir
 
 GENERATOR = "labkit sample-data"
 VIDEO_FREQ_HZ = 240.0
@@ -64,7 +65,8 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
     Parameters
     ----------
     out:
-        Folder to write (created if needed); files of the same names are replaced.
+        Folder to write (created if needed; its parent must exist). Files of the same names are
+        replaced only once every new file is written and checked (:func:`labkit.outputs.staged_dir`).
     configs:
         Folder holding the example ``inchip.toml`` and ``shaker.toml`` (default: ``out``).
     seed:
@@ -73,9 +75,7 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
         Called with one line per step (progress).
     """
 
-    from labkit.demo.run import demo_robots, fit_and_assign, inchip_run, refined_grid
     from labkit.experiments.config import load_inchip, load_shaker
-    from labkit.lab import VirtualLab
     from labkit.tomlio import load_toml
 
     out = Path(out)
@@ -93,9 +93,24 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
     load_shaker(shaker_cfg)
     out.mkdir(parents=True, exist_ok=True)
     say = say or (lambda text: None)
-    for name in OUTPUTS:
-        if name != "README.md" and (out / name).exists():
-            (out / name).unlink()
+    # Written into a staging folder inside `out`, moved over the old files only once all of them
+    # exist and passed the checks: a failure anywhere leaves the old sample files untouched.
+    with staged_dir(out, OUTPUTS) as stage:
+        summary = _generate(stage, inchip_cfg, shaker_cfg, inchip_table, shaker_table, seed, quiet, say)
+    sizes = {name: (out / name).stat().st_size for name in OUTPUTS if (out / name).exists()}
+    total = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
+    return {"out": str(out), "files": {k: str(out / k) for k in sizes}, "bytes": sizes,
+            "total_bytes_folder": total, "under_5_mb": total < MAX_TOTAL_BYTES, "readme": str(out / "README.md"),
+            **summary}
+
+
+def _generate(out: Path, inchip_cfg: Path, shaker_cfg: Path, inchip_table: dict[str, Any],
+              shaker_table: dict[str, Any], seed: int, quiet: bool, say: Callable[[str], None]) -> dict[str, Any]:
+    """Write every file of :data:`OUTPUTS` into ``out`` (the staging folder); return the headline numbers."""
+    from labkit.demo.run import demo_robots, fit_and_assign, inchip_run, refined_grid
+    from labkit.experiments.config import load_inchip
+    from labkit.lab import VirtualLab
+
     truth, base = demo_robots()
     tag = label(seed)
     notes: list[str] = []
@@ -147,12 +162,8 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
         raise LabkitError(f"the sample video shows {track['mean_speed_mm_s']:.3g} mm/s, the simulator gives "
                           f"{expected:.3g} mm/s for the same robot and drive: not written as sample data "
                           "(is labkit.sim working? see the virtual lab's log)")
-    readme = write_readme(out, seed, fit, track, peaks, inchip_cfg.name, shaker_cfg.name, expected)
-    sizes = {name: (out / name).stat().st_size for name in OUTPUTS if (out / name).exists()}
-    total = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
-    return {"out": str(out), "files": {k: str(out / k) for k in sizes}, "bytes": sizes,
-            "total_bytes_folder": total, "under_5_mb": total < MAX_TOTAL_BYTES, "readme": str(readme),
-            "fitted_modes_hz": [m["freq_hz"] for m in fit["fitted_modes"]],
+    write_readme(out, seed, fit, track, peaks, inchip_cfg.name, shaker_cfg.name, expected)
+    return {"fitted_modes_hz": [m["freq_hz"] for m in fit["fitted_modes"]],
             "robot_modal_freq_hz": fit["modal_freq_hz"], "track_speed_mm_s": track["mean_speed_mm_s"],
             "simulated_speed_mm_s": expected,
             "wall_s": round(time.perf_counter() - t0, 1), "notes": notes}
