@@ -240,6 +240,13 @@ class RobotParams:
             raise
 
     @classmethod
+    def preset(cls, name: str) -> RobotParams:
+        """A bundled parameter set by name (``"published"``, ``"paper"``): :mod:`labkit.sim.presets`."""
+        from labkit.sim.presets import preset
+
+        return preset(name)
+
+    @classmethod
     def from_toml(cls, path: str | Path) -> RobotParams:
         """Read a parameter file; errors name the file, the key and what was expected."""
         from labkit.tomlio import load_toml
