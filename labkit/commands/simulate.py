@@ -43,6 +43,10 @@ SCENARIO_NAMES = {
     "pzt-payload": "speed vs total mass, PZT 1.8 kHz tripod (Fig. 13)",
     "pzt-frequency": "speed vs PZT frequency near 438 Hz at 20 V (Fig. 14)",
     "adhesion": "speed vs the adhesion magnitude (what the shaker behaviour hinges on)",
+    "paper-fig8": "the paper's Fig. 8 observations on its shaker law (pass/fail per observation)",
+    "paper-patterns": "the paper's 2-8 V leg patterns, Fig. 9-11 (pass/fail per observation)",
+    "paper-ablations": "the paper's Fig. 12 ablations at 4 V (pass/fail per observation)",
+    "paper-payload": "the paper's Fig. 13 PZT payload limit (pass/fail per observation)",
 }
 
 
@@ -52,7 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     sub.required = True
 
     run_opts = pclass(add_help=False)
-    run_opts.add_argument("--params", metavar="FILE", help="robot parameter file (TOML); default: the paper's")
+    run_opts.add_argument("--params", metavar="NAME|FILE",
+                          help="robot parameters: a preset (published, paper) or a TOML file; default: published")
     run_opts.add_argument("--duration-s", default="2.0", metavar="S", help="simulated time per run, s (default 2)")
     run_opts.add_argument("--seed", default="0", metavar="N", help="random seed (default 0)")
     run_opts.add_argument("--ablate", choices=ABLATIONS, default="none",
@@ -97,7 +102,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                     help="; ".join(f"{k}: {v}" for k, v in SCENARIO_NAMES.items()))
     sc.add_argument("--out", default=".", metavar="DIR", help="folder for the figure and data (default .)")
     sc.add_argument("--force", action="store_true", help="replace sim_NAME.h5 / .png already in --out")
-    sc.add_argument("--params", metavar="FILE", help="robot parameter file (TOML)")
+    sc.add_argument("--params", metavar="NAME|FILE",
+                    help="robot parameters: a preset (published, paper) or a TOML file; default: published")
     sc.add_argument("--quick", action="store_true", help="few points, short runs (a smoke test, not the result)")
     sc.add_argument("--draws", default=None, metavar="N", help="override the scenario's Monte Carlo draws")
     sc.add_argument("--duration-s", default=None, metavar="S", help="override the scenario's run duration")
@@ -164,13 +170,17 @@ def parse_range(text: str, option: str) -> list[float]:
 
 
 def load_params(path: str | None):
-    """The robot parameters: the file's (ConfigError names file and key) or the defaults."""
+    """The robot parameters: a preset by name, a file's (ConfigError names file and key), or the defaults."""
     from labkit.sim import RobotParams
+    from labkit.sim.presets import preset, preset_names
 
     if path is None:
         return RobotParams()
     if not Path(path).is_file():
-        raise InputError("no such parameter file", file=path)
+        if path in preset_names():
+            return preset(path)
+        raise InputError("no such parameter file or preset", file=path, key="--params",
+                         expected="a TOML file or one of " + ", ".join(preset_names()))
     return RobotParams.from_toml(path)
 
 
@@ -194,7 +204,7 @@ def _scenario_from(kind: str, values: dict[str, float]):
 
 def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.sim import simulate
-    from labkit.sim.scenarios import ablate
+    from labkit.sim.core import ablate
 
     kind = args.sim_command
     values = {"freq_hz": number(args.freq_hz, "--freq-hz", positive=True)}
@@ -236,7 +246,7 @@ def _result_summary(r: Any) -> dict[str, Any]:
 
 def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.sim import sweep
-    from labkit.sim.scenarios import ablate
+    from labkit.sim.core import ablate
 
     kind = args.sweep_kind
     ranged = [(opt, field) for opt, field, _ in SWEEPABLE[kind] if is_range(getattr(args, field))]
@@ -285,15 +295,19 @@ def _run_scenario(args: argparse.Namespace) -> dict[str, Any]:
     params = load_params(args.params)
     key = args.name.replace("_", "-")
     check_output_dir(args.out, force=args.force, names=[f"sim_{key}.h5", f"sim_{key}.png"])
-    summary = run_scenario(
+    result = run_scenario(
         args.name, params=params, out_dir=args.out, quick=args.quick,
         draws=None if args.draws is None else integer(args.draws, "--draws"),
         duration_s=None if args.duration_s is None else number(args.duration_s, "--duration-s", positive=True),
         seed=integer(args.seed, "--seed"), scheduler=args.scheduler,
         workers=None if args.workers is None else integer(args.workers, "--workers", minimum=1),
         quiet=args.quiet)
+    summary = result.summary()
+    summary["params"] = args.params or "published"
     if not args.json:
-        print(f"{args.name}: {summary.get('finding', '')}")
+        print(f"{args.name}: {result.finding}")
+        for line in result.lines():
+            print(f"  {line}")
         for key in ("figure", "data"):
             if key in summary:
                 print(f"  {key}: {summary[key]}")

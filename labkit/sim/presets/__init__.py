@@ -1,0 +1,47 @@
+"""Bundled robot parameter sets, selectable by name (``--params NAME``, ``RobotParams.preset(NAME)``).
+
+==============  ==========================================================================
+name            what it is
+==============  ==========================================================================
+``published``   the paper's Tables 1-2 and the documented choices of docs/model.md
+                (``RobotParams()``)
+``paper``       ``published`` with the parameters the paper did not measure calibrated to
+                its observations (``paper.toml`` here, written by
+                :func:`labkit.sim.paper.fit.calibrate_paper`; its ``[provenance]`` table
+                says how, with which observations met)
+==============  ==========================================================================
+
+A file preset is a plain parameter file (``labkit/sim/presets/<name>.toml``),
+read with :meth:`RobotParams.from_toml`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from labkit.errors import ConfigError
+from labkit.sim.params import RobotParams
+
+HERE = Path(__file__).parent
+#: Provenance of the built-in ``published`` set.
+PUBLISHED_PROVENANCE = {"source": "Qu, Choi, Oldham 2017, Tables 1-2, and the choices of docs/model.md",
+                        "preset": "published"}
+
+
+def preset_path(name: str) -> Path:
+    """Where the file of a file preset lives (it may not exist)."""
+    return HERE / f"{name}.toml"
+
+
+def preset_names() -> list[str]:
+    """The presets available: ``published`` and every bundled file."""
+    return ["published"] + sorted(p.stem for p in HERE.glob("*.toml") if p.stem != "published")
+
+
+def preset(name: str) -> RobotParams:
+    """A bundled parameter set by name; ConfigError (key ``preset``) naming the choices otherwise."""
+    if name == "published":
+        return RobotParams(provenance=dict(PUBLISHED_PROVENANCE))
+    path = preset_path(name)
+    if not name.isidentifier() or not path.is_file():
+        raise ConfigError(f"no parameter preset {name!r}", key="preset", expected=" | ".join(preset_names()))
+    return RobotParams.from_toml(path)

@@ -1,0 +1,182 @@
+"""Run a list of (robot, drive) points with Monte Carlo draws through the executor.
+
+:func:`labkit.sim.sweep` varies one quantity over a fixed base scenario; the
+paper scenarios need a drive that changes with the point (the shaker's
+amplitude falls with frequency, :mod:`labkit.sim.paper.shaker`) and per-run
+measures beyond the speed (foot clearance, leg motion, aperiodicity). A
+:class:`Point` is one robot and one fully specified drive; :func:`run_points`
+runs every (point, draw) as one task of :func:`labkit.executor.map_tasks`
+and returns a :class:`PointSet`, which has the curve attributes of a
+:class:`~labkit.sim.sweep.SweepResult` (so the same plots draw it).
+
+Seeding is the sweep's: draw ``d`` uses ``SeedSequence([seed, d])`` for both
+its parameter draw and its start, the same at every point (common random
+numbers); draw 0 is the nominal robot.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from labkit.sim.excitation import PZT, Shaker
+from labkit.sim.params import RobotParams
+
+
+@dataclass(frozen=True)
+class Point:
+    """One robot and one drive; ``x`` is the point's coordinate on the scenario's axis."""
+
+    params: RobotParams
+    drive: Shaker | PZT
+    x: float
+    ablation: str | None = None
+
+
+@dataclass(frozen=True)
+class Task:
+    """One simulation of :func:`run_task` (picklable)."""
+
+    point: Point
+    draw: int
+    seed: int
+    duration_s: float
+    table: dict[str, float] | None = None
+
+
+def task_seed(seed: int, draw: int) -> int:
+    """One integer seed per draw, the same at every point (common random numbers)."""
+    return int(np.random.SeedSequence([int(seed), int(draw)]).generate_state(1)[0])
+
+
+def run_task(task: Task) -> dict[str, Any]:
+    """Simulate one task and keep its small measures (a module-level function: pickled by reference)."""
+    from labkit.sim.core import simulate
+    from labkit.sim.scenarios.metrics import foot_rise_um, leg_aperiodicity, leg_motion_um
+    from labkit.sim.sweep import result_row
+    from labkit.sim.uncertainty import draw_params
+
+    seed = task_seed(task.seed, task.draw)
+    params = task.point.params
+    if task.draw > 0:
+        params = draw_params(params, np.random.default_rng(seed), task.table)
+    r = simulate(params, task.point.drive, duration_s=task.duration_s, seed=seed, ablation=task.point.ablation)
+    row = result_row(r)
+    row.update(foot_rise_um=foot_rise_um(r), leg_motion_um=leg_motion_um(r), aperiodicity=leg_aperiodicity(r))
+    return row
+
+
+@dataclass
+class PointSet:
+    """The runs of :func:`run_points`: arrays with axis 0 the points, axis 1 the draws."""
+
+    values: np.ndarray
+    speeds_mm_s: np.ndarray
+    patterns: np.ndarray
+    foot_rise_um: np.ndarray
+    leg_motion_um: np.ndarray
+    aperiodicity: np.ndarray
+    contact_fraction: np.ndarray
+    drives: list[dict[str, Any]] = field(default_factory=list)
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def draws(self) -> int:
+        return int(self.speeds_mm_s.shape[1])
+
+    @property
+    def mean_speed_mm_s(self) -> np.ndarray:
+        return self.speeds_mm_s.mean(axis=1)
+
+    @property
+    def std_speed_mm_s(self) -> np.ndarray:
+        if self.draws < 2:
+            return np.zeros(len(self.values))
+        return self.speeds_mm_s.std(axis=1, ddof=1)
+
+    @property
+    def nominal_speed_mm_s(self) -> np.ndarray:
+        return self.speeds_mm_s[:, 0]
+
+    def share(self, point: int, pattern: str) -> float:
+        """Share of (draw, foot) pairs at one point that show ``pattern``."""
+        labels = self.patterns[point].ravel()
+        return float(np.mean(labels == pattern)) if labels.size else float("nan")
+
+    def dominant(self, point: int) -> str:
+        """The most frequent foot pattern at one point (ties: the first of firm, partial, jumping)."""
+        from labkit.sim.sweep import PATTERNS
+
+        return max(PATTERNS, key=lambda p: self.share(point, p))
+
+    def points(self, name: str) -> list[dict[str, Any]]:
+        """One JSON-able row per point: the coordinate (as ``name``), speeds, pattern, drive."""
+        rows = []
+        for i, x in enumerate(self.values):
+            rows.append({name: float(x), "mean_speed_mm_s": float(self.mean_speed_mm_s[i]),
+                         "std_speed_mm_s": float(self.std_speed_mm_s[i]),
+                         "nominal_speed_mm_s": float(self.nominal_speed_mm_s[i]),
+                         "dominant_pattern": self.dominant(i),
+                         "foot_rise_um": float(np.mean(self.foot_rise_um[i])),
+                         **({"drive": self.drives[i]} if i < len(self.drives) else {})})
+        return rows
+
+    def to_h5(self, path: Any, name: str = "x") -> Any:
+        """Write the set (kind ``sim_points``): every array with its unit."""
+        import h5py
+
+        from labkit.h5io import put, put_json, stamp
+
+        with h5py.File(path, "w") as f:
+            stamp(f, "sim_points")
+            put_json(f, "meta_json", self.meta)
+            put_json(f, "drives_json", self.drives)
+            put(f, "values", self.values, "1", quantity=name)
+            put(f, "speeds_mm_s", self.speeds_mm_s, "mm/s", axes="point, draw (0 = nominal)")
+            put(f, "foot_rise_um", self.foot_rise_um, "um", axes="point, draw")
+            put(f, "leg_motion_um", self.leg_motion_um, "um", axes="point, draw")
+            put(f, "aperiodicity", self.aperiodicity, "1", axes="point, draw")
+            put(f, "contact_fraction", self.contact_fraction, "1", axes="point, draw, foot, mode")
+            put(f, "patterns", self.patterns.astype("S16"), "label", axes="point, draw, foot")
+        return path
+
+
+def make_tasks(points: Sequence[Point], draws: int, duration_s: float, seed: int,
+               table: dict[str, float] | None = None) -> list[Task]:
+    """One task per (point, draw); ``draws = 0`` or 1 runs the nominal robot only."""
+    n = max(1, int(draws))
+    return [Task(p, d, int(seed), float(duration_s), table) for p in points for d in range(n)]
+
+
+def collect(points: Sequence[Point], rows: Sequence[dict[str, Any]], draws: int,
+            meta: dict[str, Any] | None = None) -> PointSet:
+    """Assemble the rows of :func:`make_tasks`'s tasks (in order) into a :class:`PointSet`."""
+    from labkit.sim.sweep import scenario_dict
+
+    shape = (len(points), max(1, int(draws)))
+
+    def arr(key: str) -> np.ndarray:
+        return np.array([r[key] for r in rows], dtype=float).reshape(shape)
+
+    return PointSet(values=np.array([p.x for p in points], float), speeds_mm_s=arr("speed_mm_s"),
+                    patterns=np.array([r["patterns"] for r in rows], dtype=object).reshape(shape + (6,)).astype(str),
+                    foot_rise_um=arr("foot_rise_um"), leg_motion_um=arr("leg_motion_um"),
+                    aperiodicity=arr("aperiodicity"),
+                    contact_fraction=np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, 3)),
+                    drives=[scenario_dict(p.drive) | ({"ablation": p.ablation} if p.ablation else {})
+                            for p in points],
+                    meta=dict(meta or {}))
+
+
+def run_points(points: Sequence[Point], *, draws: int = 0, duration_s: float = 1.0, seed: int = 0,
+               scheduler: str | None = None, workers: int | None = None, quiet: bool = False,
+               desc: str = "scenario") -> PointSet:
+    """Run every point (``draws`` Monte Carlo robots each) and collect the measures."""
+    from labkit.executor import map_tasks
+
+    tasks = make_tasks(points, draws, duration_s, seed)
+    rows = map_tasks(run_task, tasks, scheduler=scheduler, workers=workers, desc=desc, quiet=quiet)
+    return collect(points, rows, draws, {"draws": max(1, int(draws)), "duration_s": float(duration_s),
+                                         "seed": int(seed), "seeding": "SeedSequence([seed, draw]) per draw"})
