@@ -48,6 +48,7 @@ class _Blob:
     border: bool          # cut by the ROI border
     weights: np.ndarray | None = None
     origin: tuple[int, int] = (0, 0)
+    contrast: float = float("nan")   # (tray - robot) / tray, measured inside the body
 
 
 def smooth_background(win: np.ndarray, cell_px: int, kernel_cells: int) -> np.ndarray:
@@ -267,7 +268,7 @@ class _Finder:
         common = np.sqrt(((a - b) / 2) ** 2 + c ** 2)
         lam1, lam2 = (a + b) / 2 + common, max((a + b) / 2 - common, 0.0)
         return _Blob(cu, cv_, theta, 0.0, mo["m00"], float(np.sqrt(12 * lam1)), float(np.sqrt(12 * lam2)),
-                     False, w if keep_weights else None)
+                     False, w if keep_weights else None, contrast=1.0 - rho)
 
 
 def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> float:
@@ -334,12 +335,13 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
       threshold (or 6 noise sigmas while that is not known);
     * dark in *every* sample and reaching the frame's border: the tray's rim,
       masked (a robot touching it must not merge with it);
-    * dark in every sample inside the frame, and dark in *any* sample over
-      hardly more area (< 1.3 x): a static object (dust, a scratch): masked.
-      A robot that moves even slowly darkens far more area in some sample than
-      in all of them, so it is never taken for dust; a robot that never moves
-      at all cannot be told from dust and is masked too (the tracker then says
-      so);
+    * dark in every sample inside the frame, robot-sized, while the tray
+      around it is dark in under a quarter of the samples on average: a static
+      object (dust, a scratch): masked. The robot passing by or touching it
+      darkens its surroundings in only a few samples; a robot that moves even
+      slowly darkens them in many (its samples overlap), so it is never taken
+      for dust; a robot that never moves at all cannot be told from dust and is
+      masked too (the tracker then says so);
     * the flat field is the static scene's brightness (ring light, texture,
       rim, dust), relative to its median: the per-pixel mean of the samples
       (scaled for flicker) where nothing moving is dark within ``grow_px``;
@@ -379,23 +381,27 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     thr = seg.min_contrast if not seg.auto else max(6 * noise, 0.04)
     darks = [(r < 1 - thr).view(np.uint8) & (1 - rim_g) for r in ratios]
     inter = np.bitwise_and.reduce(darks)
-    union = np.bitwise_or.reduce(darks)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(inter, connectivity=8)
     objects = np.zeros((h, w), np.uint8)
     boxes = []
     if n > 1:
-        nu, ulabels, ustats, _ = cv2.connectedComponentsWithStats(union, connectivity=8)
+        # how many samples each pixel is dark in: around a static object (dust) the tray is dark
+        # only when the robot passes (a few samples); around a robot that moves slowly (its
+        # samples overlap in the middle) it is dark in many
+        count = np.sum(darks, axis=0, dtype=np.int32)
+        r = int(max(seg.body_width_px / 2, 4))
         for i in range(1, n):
             x, y, bw, bh, area = stats[i]
             if area < 0.5 * seg.body_width_px ** 2:
                 continue      # texture, a speck: never robot-sized, needs no mask
-            # the union's component that holds it: as large = it never moved
-            ys, xs = np.nonzero(labels[y:y + bh, x:x + bw] == i)
-            j = ulabels[y + ys[0], x + xs[0]]
-            if ustats[j, cv2.CC_STAT_AREA] < 1.3 * area:
-                objects[ulabels == j] = 1
-                ux, uy, uw, uh = (int(v) for v in ustats[j, :4])
-                boxes.append((ux, uy, uw, uh))
+            x0, y0 = max(x - r - 3, 0), max(y - r - 3, 0)
+            x1, y1 = min(x + bw + r + 3, w), min(y + bh + r + 3, h)
+            comp = (labels[y0:y1, x0:x1] == i).view(np.uint8)
+            ring = cv2.dilate(comp, _square(r)) & (1 - cv2.dilate(comp, _square(2)))
+            ring_frac = float(count[y0:y1, x0:x1][ring > 0].mean()) / len(darks) if ring.any() else 0.0
+            if ring_frac < 0.25:
+                objects[y0:y1, x0:x1] |= cv2.dilate(comp, _square(2))
+                boxes.append((int(x), int(y), int(bw), int(bh)))
     # the static scene's brightness B: each pixel's mean over the samples where nothing moving is
     # dark within grow_px (static structure -- rim, dust, texture, the ring light's shape -- stays in
     # it); each sample scaled to a common brightness first (flicker)

@@ -35,9 +35,19 @@ def summary(track: Track, speed: SpeedResult | None) -> dict[str, Any]:
         "mm_per_px": track.mm_per_px, "mm_per_px_std": track.scale.mm_per_px_std if track.scale else None,
         "scale_method": track.scale.method if track.scale else None,
         "robot_length_px": track.length_px, "heading_sense": track.heading_sense,
+        "undecodable_frames": int(track.meta.get("undecodable_frames", 0)),
+        "lost_stretches_s": [list(p) for p in track.meta.get("lost_stretches_s", [])],
+        "robot_contrast": track.meta.get("robot_contrast"), "contrast_found": track.meta.get("contrast_found"),
+        "min_contrast": track.meta.get("min_contrast"),
+        "pixel_noise": track.meta.get("noise"),
+        "warnings": list(track.meta.get("warnings", [])),
     }
     if speed is not None:
         out.update(speed.summary())
+        unc = speed.meta.get("uncertainty", {})
+        out["speed_uncertainty"] = {k: unc[k] for k in ("speed_std_mm_s", "noise_part_mm_s", "timestamp_part_mm_s",
+                                                         "scale_part_mm_s", "noise_bias_mm_s", "position_noise_mm",
+                                                         "timestamp_jitter_s", "noise_ar1") if k in unc}
     return out
 
 
@@ -175,17 +185,19 @@ def plot_path(path: str | Path, track: Track, speed: SpeedResult | None = None) 
 
 
 def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
-                  speed: SpeedResult | None = None) -> Path:
+                  speed: SpeedResult | None = None, *, fps: float | None = None,
+                  timestamps: str | Path | None = None) -> Path:
     """Re-read the video and draw the trajectory so far, the centroid and the heading on each frame.
 
     Written as Motion-JPEG (``.avi`` recommended) at the video's nominal rate.
+    ``video_path`` may be an image sequence (``fps``/``timestamps`` as for the tracker).
     """
     import cv2
 
-    from labkit.analysis.tracking.video_io import iter_frames, open_video
+    from labkit.analysis.tracking.video_io import iter_frames, open_source
     from labkit.video import write_video
 
-    cap, info = open_video(video_path)
+    cap, info = open_source(video_path, fps=fps, timestamps=timestamps)
     out_path = Path(out_path)
     px_per_mm = 1.0 / track.mm_per_px if track.mm_per_px > 0 else 1.0
     arrow = 0.45 * (track.length_px if np.isfinite(track.length_px) else 60.0)

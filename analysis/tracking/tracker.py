@@ -160,7 +160,14 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     vroi = None if valid is None else np.ascontiguousarray(valid[ry:ry + rh, rx:rx + rw])
     froi = None if flat is None else np.ascontiguousarray(flat[ry:ry + rh, rx:rx + rw])
     finder = _Finder(vroi, margin_px, seg, min_area_px, froi)
-    ts, us, vs, ths, qs, areas, lengths = [], [], [], [], [], [], []
+    ts: list[float] = []
+    us: list[float] = []
+    vs: list[float] = []
+    ths: list[float] = []
+    qs: list[int] = []
+    areas: list[float] = []
+    lengths: list[float] = []
+    contrasts: list[float] = []
     area_hist: list[float] = []
     area_ref = expected_area_px
     # with only the expected area (from the scale) the tolerance is wide: blur and legs vary it
@@ -227,6 +234,8 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
             ths.append(blob.theta)
             areas.append(blob.coverage)
             qs.append(q)
+            if q == QUALITY_OK:
+                contrasts.append(blob.contrast)
             if q == QUALITY_OK or (len(area_hist) < 5 and not blob.border):
                 if last is not None and 0 < t - last[2] < 0.5:
                     a = 0.5  # light smoothing of the velocity used only for the prediction
@@ -261,6 +270,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 length_px_std=(float(1.2533 * np.std(lengths_a) / np.sqrt(lengths_a.size))
                                if lengths_a.size > 1 else float("nan")),
                 n_length=int(lengths_a.size), best_contrast=finder.best_contrast,
+                robot_contrast=float(np.median(contrasts)) if contrasts else float("nan"),
                 ambiguous=finder.ambiguous, jumps=jumps, min_contrast=seg.min_contrast, noise=seg.noise)
 
 
@@ -326,6 +336,50 @@ CHIP_AREA_MM2 = 5.0 * 2.0 + 6 * 0.45 * 0.3    # body and six leg stubs, seen fro
 ROBOT_WIDTH_MM = 2.0
 
 
+@dataclass
+class PreparedScene:
+    """What is known before tracking: the search region, the static scene, the segmentation."""
+
+    roi: tuple[int, int, int, int]
+    valid: np.ndarray | None
+    seg: Segmentation
+    static: Any
+    flat: np.ndarray | None
+    warnings: list[str]
+
+
+def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str | None = None, mask: Any = None,
+                  scale: Scale | None = None, min_contrast: float | None = None,
+                  static_mask: bool = True) -> PreparedScene:
+    """Region of interest, mask, static scene (rim, dust, flat field, noise) and contrast threshold.
+
+    Reads sample frames from ``cap`` and rewinds it (see :func:`track_video`)."""
+    from labkit.analysis.tracking.video_io import load_mask, parse_roi, read_sample_frames
+
+    W, H = info.width, info.height
+    roi_t = parse_roi(roi, W, H)
+    valid = load_mask(mask, W, H)
+    if min_contrast is not None and not 0 < min_contrast < 1:
+        raise InputError(f"bad contrast {min_contrast}", key="--min-contrast", expected="a share between 0 and 1")
+    body_w = ROBOT_WIDTH_MM / scale.mm_per_px if scale is not None else None
+    seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast)
+    static = None
+    flat = None
+    warnings: list[str] = []
+    if static_mask:
+        static = background_model(read_sample_frames(cap, info, 15), seg)
+        seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast, noise=static.noise)
+        flat = static.flat
+        for m in (static.rim, static.objects):
+            if m is not None:
+                valid = ~m if valid is None else valid & ~m
+        if static.object_boxes:
+            warnings.append(f"{len(static.object_boxes)} static dark object(s) set aside (never moved: dust, "
+                            f"not the robot) at x,y,w,h " + "; ".join(",".join(str(v) for v in b)
+                                                                      for b in static.object_boxes[:3]))
+    return PreparedScene(roi_t, valid, seg, static, flat, warnings)
+
+
 def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | None = None,
                 mask: Any = None, scale: Scale | None = None, mm_per_px: float | None = None,
                 robot_length_mm: float = ROBOT_LENGTH_MM, robot_length_std_mm: float = 0.05,
@@ -371,14 +425,7 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         Raises :class:`InputError` if the source is missing, unreadable, empty,
         or no robot is found (the message gives the contrast found).
     """
-    from labkit.analysis.tracking.video_io import (
-        check_timestamps,
-        iter_frames,
-        load_mask,
-        open_source,
-        parse_roi,
-        read_sample_frames,
-    )
+    from labkit.analysis.tracking.video_io import check_timestamps, iter_frames, open_source
     from labkit.progress import progress as bar
 
     cap, info = open_source(source, fps=fps, timestamps=timestamps)
@@ -387,27 +434,12 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         if info.width <= 0 or info.height <= 0:
             raise InputError("the video holds no frames", file=source)
         W, H = info.width, info.height
-        roi_t = parse_roi(roi, W, H)
-        valid = load_mask(mask, W, H)
         if scale is None and mm_per_px is not None:
             scale = scale_given(mm_per_px)
-        if min_contrast is not None and not 0 < min_contrast < 1:
-            raise InputError(f"bad contrast {min_contrast}", key="min_contrast", expected="a share between 0 and 1")
-        body_w = ROBOT_WIDTH_MM / scale.mm_per_px if scale is not None else None
-        seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast)
-        static = None
-        flat = None
-        if static_mask:
-            static = background_model(read_sample_frames(cap, info, 15), seg)
-            seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast, noise=static.noise)
-            flat = static.flat
-            for m in (static.rim, static.objects):
-                if m is not None:
-                    valid = ~m if valid is None else valid & ~m
-            if static.object_boxes:
-                warnings.append(f"{len(static.object_boxes)} static dark object(s) set aside (never moved: dust, "
-                                f"not the robot) at x,y,w,h " + "; ".join(",".join(str(v) for v in b)
-                                                                          for b in static.object_boxes[:3]))
+        scene = prepare_scene(cap, info, roi=roi, mask=mask, scale=scale, min_contrast=min_contrast,
+                              static_mask=static_mask)
+        roi_t, valid, seg, static, flat = scene.roi, scene.valid, scene.seg, scene.static, scene.flat
+        warnings.extend(scene.warnings)
         expected = CHIP_AREA_MM2 / scale.mm_per_px ** 2 if scale is not None else None
         vmax = max_speed_mm_s / scale.mm_per_px if scale is not None else None
         with bar(info.frame_count or None, "track", quiet=quiet, unit="frame") as pb:
@@ -440,6 +472,12 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
             what = f"only static dark objects (never moving: dust) were found; {what}"
         raise InputError(f"no robot found in any of {t_s.size} frames: {what}", file=source,
                          expected="a chip darker than the tray that moves (see --preview FRAME)")
+    stretches = lost_stretches(t_s, raw["quality"])
+    if stretches:
+        n_lost = int(np.sum(raw["quality"] == QUALITY_LOST))
+        shown = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in stretches[:4]) + (" ..." if len(stretches) > 4 else "")
+        warnings.append(f"{n_lost} frame(s) lost in {len(stretches)} stretch(es) ({shown}): occluded, out of view "
+                        f"or unlike the robot; bridged by the smoothed path, not used for the speed")
     if raw["ambiguous"]:
         warnings.append(f"{raw['ambiguous']} frame(s) had a second robot-sized object within reach: check the "
                         f"overlay (--overlay) or narrow the search (--roi/--mask)")
@@ -457,8 +495,9 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
                         else 0,
                         "static_objects": static.object_boxes if static is not None else [],
                         "noise": raw["noise"], "min_contrast": raw["min_contrast"],
-                        "contrast_found": raw["best_contrast"], "ambiguous_frames": raw["ambiguous"],
-                        "jumps_rejected": raw["jumps"], "lost_stretches_s": lost_stretches(t_s, raw["quality"]),
+                        "contrast_found": raw["best_contrast"], "robot_contrast": raw["robot_contrast"],
+                        "ambiguous_frames": raw["ambiguous"],
+                        "jumps_rejected": raw["jumps"], "lost_stretches_s": stretches,
                         "length_samples": raw["n_length"], "warnings": warnings})
     track.scale = scale if scale is not None else scale_from_robot_length(track, robot_length_mm,
                                                                           robot_length_std_mm)

@@ -6,14 +6,15 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError
-from labkit.outputs import atomic_outputs, check_outputs
+from labkit.outputs import atomic_output, check_outputs
 
 NAME = "track"
 HELP = "track the robot in a top-view video: path, heading, speed with confidence interval"
 
 
 def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
-    parser.add_argument("video", help="video file (.avi, .mkv, .mp4, ...)")
+    parser.add_argument("video", help="video file (.avi, .mkv, .mp4, ...), a folder of images, or a pattern "
+                                      "such as frames/frame_%%05d.png")
     sc = parser.add_mutually_exclusive_group()
     sc.add_argument("--mm-per-px", type=float, metavar="X", help="image scale (mm per pixel)")
     sc.add_argument("--scale-bar", metavar="x1,y1,x2,y2,MM",
@@ -29,8 +30,19 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--out", metavar="FILE",
                         help="track HDF5 file (kind 'track'); a .csv and a .png are written beside it")
     parser.add_argument("--overlay", metavar="FILE", help="overlay video with trajectory and heading (.avi or .mkv)")
+    parser.add_argument("--min-contrast", type=float, metavar="C",
+                        help="darkness (tray - robot) / tray a robot must have (default: from the pixel noise)")
+    parser.add_argument("--fps", type=float, metavar="RATE",
+                        help="frame rate of an image sequence without a timestamps.csv")
+    parser.add_argument("--timestamps", metavar="CSV",
+                        help="frame times of an image sequence (a CSV with a t_s column, optionally file)")
+    parser.add_argument("--preview", type=int, metavar="FRAME",
+                        help="only draw frame FRAME (0-based) with the segmentation and the ROI into a PNG "
+                             "(--preview-png), to see why a video fails")
+    parser.add_argument("--preview-png", metavar="PNG",
+                        help="where --preview writes (default: VIDEO-STEM_preview_FRAME.png here)")
     parser.add_argument("--force", action="store_true",
-                        help="replace existing outputs (--out, its .csv and .png, --overlay)")
+                        help="replace existing outputs (--out, its .csv and .png, --overlay, --preview-png)")
 
 
 def _scale_bar(text: str):
@@ -48,9 +60,8 @@ def _scale_bar(text: str):
 def run(args: argparse.Namespace) -> dict[str, Any]:
     import numpy as np
 
-    from labkit.analysis.tracking.output import plot_path, save_track_csv, save_track_h5, summary, write_overlay
-    from labkit.analysis.tracking.speed import track_speed
-    from labkit.analysis.tracking.tracker import ROBOT_LENGTH_MM, scale_given, track_video
+    from labkit.analysis.tracking.pipeline import track_file
+    from labkit.analysis.tracking.tracker import ROBOT_LENGTH_MM, scale_given
 
     scale = None
     if args.mm_per_px is not None:
@@ -62,38 +73,23 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     length = args.robot_length_mm if args.robot_length_mm is not None else ROBOT_LENGTH_MM
     if not length > 0:
         raise InputError(f"bad robot length {length}", key="--robot-length-mm", expected="a length > 0 mm")
-    if args.window_s is not None and not args.window_s > 0:
-        raise InputError(f"bad window {args.window_s}", key="--window-s", expected="a duration > 0 s")
-
-    # every output, sidecars included, is checked before a frame is read
-    out = Path(args.out) if args.out else None
-    if out is not None:
-        if out.suffix.lower() in (".csv", ".png"):
-            raise InputError("the track file would clash with its own .csv/.png sidecar", file=out,
-                             key="--out", expected="a .h5 file name")
-        check_outputs([out, out.with_suffix(".csv"), out.with_suffix(".png")], force=args.force)
-    check_outputs([args.overlay], force=args.force, key="--overlay", suffixes=(".avi", ".mkv"))
-    if args.overlay and out is not None:
-        check_outputs([out, out.with_suffix(".csv"), out.with_suffix(".png"), args.overlay], force=True)
-    track = track_video(args.video, roi=args.roi, mask=args.mask, scale=scale, robot_length_mm=length,
-                        quiet=args.quiet)
-    speed = track_speed(track, window_s=args.window_s)
-    result = summary(track, speed)
-    jobs: list[tuple[str, Path, Any]] = []
-    if out is not None:
-        jobs += [("track_h5", out, lambda p: save_track_h5(p, track, speed)),
-                 ("track_csv", out.with_suffix(".csv"), lambda p: save_track_csv(p, track, speed)),
-                 ("path_png", out.with_suffix(".png"), lambda p: plot_path(p, track, speed))]
-    if args.overlay:
-        jobs.append(("overlay", Path(args.overlay), lambda p: write_overlay(args.video, track, p, speed)))
-    # all written to temporary names first, renamed together: every old file survives any failed write
-    with atomic_outputs([target for _, target, _ in jobs]) as temps:
-        for (_, _, write), tmp in zip(jobs, temps):
-            write(tmp)
-    written = {name: str(target) for name, target, _ in jobs}
-    result["written"] = written
+    if args.fps is not None and not args.fps > 0:
+        raise InputError(f"bad frame rate {args.fps}", key="--fps", expected="frames per second > 0")
+    if args.min_contrast is not None and not 0 < args.min_contrast < 1:
+        raise InputError(f"bad contrast {args.min_contrast}", key="--min-contrast",
+                         expected="a share between 0 and 1, e.g. 0.1")
+    common = dict(roi=args.roi, mask=args.mask, min_contrast=args.min_contrast, fps=args.fps,
+                  timestamps=args.timestamps)
+    if args.preview is not None:
+        return _preview(args, scale, common)
+    if args.preview_png is not None:
+        raise InputError("--preview-png needs --preview FRAME", key="--preview-png")
+    res = track_file(args.video, out=args.out, overlay=args.overlay, force=args.force, scale=scale,
+                     robot_length_mm=length, window_s=args.window_s, quiet=args.quiet, **common)
+    track, speed, result = res.track, res.speed, res.summary
     if not args.json:
         lo, hi = speed.speed_ci_mm_s
+        assert track.scale is not None
         print(f"{track.source}: {track.frames} frames ({track.lost_frames} lost), "
               f"scale {track.mm_per_px:.5g} +- {track.scale.mm_per_px_std:.2g} mm/px ({track.scale.method})")
         print(f"  mean speed {speed.mean_speed_mm_s:.4g} mm/s, {int(100 * speed.ci_level)}% CI "
@@ -103,6 +99,29 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         vx, vy = speed.mean_velocity_mm_s
         print(f"  mean velocity ({vx:.4g}, {vy:.4g}) mm/s, path {speed.path_length_mm:.4g} mm, "
               f"turning {np.degrees(speed.mean_turn_rate_rad_s):.3g} deg/s")
-        for k, v in written.items():
+        c, thr, nz = (track.meta.get(k, float("nan")) for k in ("robot_contrast", "min_contrast", "noise"))
+        print(f"  contrast: robot {100 * c:.1f} % darker than the tray; threshold {100 * thr:.1f} % "
+              f"(pixel noise {100 * nz:.2f} %)")
+        for w in res.warnings:
+            print(f"  warning: {w}")
+        for k, v in res.written.items():
             print(f"  wrote {k}: {v}")
     return result
+
+
+def _preview(args: argparse.Namespace, scale: Any, common: dict[str, Any]) -> dict[str, Any]:
+    from labkit.analysis.tracking.preview import preview_frame
+
+    if args.out or args.overlay:
+        raise InputError("--preview draws one frame only", key="--preview", expected="no --out/--overlay with it")
+    png = Path(args.preview_png) if args.preview_png else Path(f"{Path(args.video).stem}_preview_{args.preview}.png")
+    check_outputs([png], force=args.force, key="--preview-png", suffixes=(".png",))
+    with atomic_output(png) as tmp:
+        res = preview_frame(args.video, args.preview, tmp, scale=scale, **common)
+    res["preview_png"] = str(png)
+    if not args.json:
+        print(f"{args.video}: frame {res['frame']} (t = {res['t_s']:.3f} s): threshold "
+              f"{100 * res['min_contrast']:.1f} %, pixel noise {100 * res['pixel_noise']:.2f} %, strongest dark "
+              f"object {100 * res['strongest_contrast']:.1f} %, {res['robot_like']} robot-like object(s)")
+        print(f"  wrote preview_png: {png}")
+    return res
