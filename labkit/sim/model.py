@@ -272,7 +272,9 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
     kkt[:NQ, :NQ] = np.diag(stiff)
     kkt[:NQ, NQ:] = -R12
     kkt[NQ:, :NQ] = R12.T
-    sol = np.linalg.solve(kkt, np.concatenate([f_grav, np.zeros(12)]))
+    # least squares: with cy_sign = 0 the lateral rows are dependent (their forces are then
+    # the minimum-norm ones; the coordinates are unique)
+    sol = np.linalg.lstsq(kkt, np.concatenate([f_grav, np.zeros(12)]), rcond=None)[0]
     q_eq = sol[:NQ]
     lam_rest = np.zeros(NR)
     lam_rest[:12] = sol[NQ:]

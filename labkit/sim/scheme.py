@@ -44,6 +44,10 @@ NI = NR + 18     # impulse rows: the contact rows, then one per leg mode (held r
 ROW_BZ = 12
 ROW_BY = 13
 AIR, ADHESION, REST = 0, 1, 2
+#: Passes of the step's small system: the second takes the squeeze films' coefficients
+#: at the midpoint gap of the first (second order; the first alone freezes them at the
+#: step's start, a first-order error where the gap changes fast).
+FILM_PASSES = 2
 
 # ---- scalars P
 (P_H0, P_HMIN, P_BGF, P_BGB, P_AD, P_CAD, P_CADT, P_CR, P_CRB, P_VSTICK, P_MU, P_BNS, P_KIND, P_AMP,
@@ -108,7 +112,12 @@ W_V1 = W_Q1 + NQ
 W_GAP0 = W_V1 + NQ        # 7 gaps at the start
 W_GAP1 = W_GAP0 + 7       # 7 gaps at the end of a trial
 W_VREL = W_GAP1 + 7
-W_SIZE = W_VREL + 7
+W_FI = W_VREL + 7         # forces at a state (contact_force)
+W_MF = W_FI + NQ          # M^-1 times them
+W_LI0 = W_MF + NQ         # instantaneous contact forces at the start of a trial (NR)
+W_LI1 = W_LI0 + NR        # ... at its end
+W_G0 = W_LI1 + NR         # release margins at the start (7: feet, body)
+W_SIZE = W_G0 + 7
 # ---- int scratch I
 I_ROWS = 0                # active rows
 I_KIND = I_ROWS + NI      # 0 film, 1 pinned
@@ -141,8 +150,18 @@ def volts(P, t):
 def gauss(Am, oa, lda, Bm, ob, ldb, n, m):
     """Solve A X = B in place (A n x n at Am[oa], row stride lda; B n x m at Bm[ob], stride ldb).
 
-    Gauss elimination with partial pivoting; X overwrites B, A is destroyed.
+    Gauss elimination with partial pivoting; X overwrites B, A is destroyed. A pivot
+    below 1e-12 of the largest entry marks a redundant equation (e.g. the lateral rows of
+    feet whose legs have no lateral compliance, cy_sign = 0): its unknown is set to 0,
+    which solves a consistent system with dependent rows.
     """
+    scale = 0.0
+    for i in range(n):
+        for c in range(n):
+            v = abs(Am[oa + i * lda + c])
+            if v > scale:
+                scale = v
+    eps = 1e-12 * scale
     for k in range(n):
         piv = k
         best = abs(Am[oa + k * lda + k])
@@ -161,6 +180,8 @@ def gauss(Am, oa, lda, Bm, ob, ldb, n, m):
                 Bm[ob + k * ldb + c] = Bm[ob + piv * ldb + c]
                 Bm[ob + piv * ldb + c] = tmp
         d = Am[oa + k * lda + k]
+        if abs(d) <= eps:
+            continue
         for i in range(k + 1, n):
             f = Am[oa + i * lda + k] / d
             if f != 0.0:
@@ -170,6 +191,10 @@ def gauss(Am, oa, lda, Bm, ob, ldb, n, m):
                     Bm[ob + i * ldb + c] -= f * Bm[ob + k * ldb + c]
     for k in range(n - 1, -1, -1):
         d = Am[oa + k * lda + k]
+        if abs(d) <= eps:
+            for c in range(m):
+                Bm[ob + k * ldb + c] = 0.0
+            continue
         for c in range(m):
             s = Bm[ob + k * ldb + c]
             for j in range(k + 1, n):
@@ -318,38 +343,55 @@ def advance(P, A, S, mode, t, h, W, I, out):
                 W[W_QH + a * NR + b] = s
     zg1, vg1, _ = ground(P, t + h)
     _, vgm, _ = ground(P, t + 0.5 * h)
+    zg0, _, _ = ground(P, t)
     n = active_rows(P, A, S, mode, t, I, W)
-    # small system for alpha (M6, M7)
-    for a in range(n):
-        ra = I[I_ROWS + a]
-        ry = 0.0
-        for i in range(NQ):
-            ry += A[OFF_RI + i * NI + ra] * W[W_Y0 + i]
-        for b in range(n):
-            rb = I[I_ROWS + b]
-            qab = A[OFF_Q + ra * NR + rb] if full else W[W_QH + ra * NR + rb]
-            if I[I_KIND + a] == 1:
-                W[W_AS + a * NI + b] = qab
-            else:
-                W[W_AS + a * NI + b] = h * W[W_C + a] * qab + (1.0 if a == b else 0.0)
-        if I[I_KIND + a] == 1:
-            tgt = row_target(P, S, ra, zg1)
-            rq = 0.0
-            for i in range(NQ):
-                rq += A[OFF_RI + i * NI + ra] * W[W_Q0 + i]
-            W[W_BS + a] = (tgt - rq) / h - ry
-        else:
-            vg = vgm if ra != ROW_BY else 0.0
-            W[W_BS + a] = -h * W[W_C + a] * (ry - vg)
-    if n > 0:
-        gauss(W, W_AS, NI, W, W_BS, 1, n, 1)
-    for i in range(NQ):
-        s = W[W_Y0 + i]
+    for it in range(FILM_PASSES):
+        if it > 0:
+            # the films' coefficients again, at the gap of the step's midpoint (M7)
+            nfilm = 0
+            for a in range(n):
+                if I[I_KIND + a] == 0:
+                    nfilm += 1
+                    ra = I[I_ROWS + a]
+                    off = P[P_H0] if ra == ROW_BZ else 0.0
+                    g0 = row_dot(A, ra, W, W_Q0) + off - zg0
+                    g1 = row_dot(A, ra, W, W_Q0) + off - zg1 + h * row_dot(A, ra, W, W_VB)
+                    hm = 0.5 * (g0 + g1)
+                    if hm < P[P_HMIN]:
+                        hm = P[P_HMIN]
+                    W[W_C + a] = (P[P_BGB] if ra == ROW_BZ else P[P_BGF]) / (hm * hm * hm)
+            if nfilm == 0:
+                break
         for a in range(n):
             ra = I[I_ROWS + a]
-            z = A[OFF_Z + i * NR + ra] if full else W[W_ZH + i * NR + ra]
-            s += z * W[W_BS + a]
-        W[W_VB + i] = s
+            ry = 0.0
+            for i in range(NQ):
+                ry += A[OFF_RI + i * NI + ra] * W[W_Y0 + i]
+            for b in range(n):
+                rb = I[I_ROWS + b]
+                qab = A[OFF_Q + ra * NR + rb] if full else W[W_QH + ra * NR + rb]
+                if I[I_KIND + a] == 1:
+                    W[W_AS + a * NI + b] = qab
+                else:
+                    W[W_AS + a * NI + b] = h * W[W_C + a] * qab + (1.0 if a == b else 0.0)
+            if I[I_KIND + a] == 1:
+                tgt = row_target(P, S, ra, zg1)
+                rq = 0.0
+                for i in range(NQ):
+                    rq += A[OFF_RI + i * NI + ra] * W[W_Q0 + i]
+                W[W_BS + a] = (tgt - rq) / h - ry
+            else:
+                vg = vgm if ra != ROW_BY else 0.0
+                W[W_BS + a] = -h * W[W_C + a] * (ry - vg)
+        if n > 0:
+            gauss(W, W_AS, NI, W, W_BS, 1, n, 1)
+        for i in range(NQ):
+            s = W[W_Y0 + i]
+            for a in range(n):
+                ra = I[I_ROWS + a]
+                z = A[OFF_Z + i * NR + ra] if full else W[W_ZH + i * NR + ra]
+                s += z * W[W_BS + a]
+            W[W_VB + i] = s
     for r in range(NR):
         out[S_LAM + r] = 0.0
     for a in range(n):
@@ -532,21 +574,84 @@ def impact(P, A, S, mode, t, W, I, events, count):
 
 
 @jit
-def release(P, A, S, mode, count):
-    """Start-of-step check of every pinned foot with the last step's contact forces (M10):
-    it goes back to AIR when the tension exceeds F_ad(t_c) = c_ad_t t_c + c_ad; else it is
+def contact_force(P, A, S, mode, t, tv, W, I, o):
+    """Instantaneous contact force of every pinned row at state S and time t (M10), into
+    W[o:o+NR] (N; + pushes the foot up / forward; 0 for free rows); the drive is taken at tv.
+
+    The force balance of the whole coupled system: with F every other force (springs,
+    dampers, gravity, actuator, films of the free feet and the body, drag, friction),
+    ``R_p^T M^-1 (F + R_p lam) = a_target`` (the ground's acceleration for z rows, 0 for
+    y rows). So the pull on a foot counts the actuator, the leg's weight, the films and
+    the body's motion, as the paper's force balance (eq. 10) does.
+    """
+    forces(P, A, S, mode, tv, S, S_Q, S, S_V, W, W_FI)
+    zg, vg, ag = ground(P, t)
+    hmin = P[P_HMIN]
+    for i in range(NQ):
+        W[W_FI + i] -= A[OFF_K + i] * S[S_Q + i] + A[OFF_D + i] * S[S_V + i]
+    if P[P_BGF] > 0.0:
+        for j in range(6):
+            if mode[j] == AIR:
+                gap = row_dot(A, j, S, S_Q) - zg
+                h = gap if gap > hmin else hmin
+                fz = -P[P_BGF] / (h * h * h) * (row_dot(A, j, S, S_V) - vg)
+                for i in range(NQ):
+                    W[W_FI + i] += A[OFF_RI + i * NI + j] * fz
+    if mode[6] != REST and P[P_BGB] > 0.0:
+        gap = P[P_H0] + S[S_Q + 1] - zg
+        h = gap if gap > hmin else hmin
+        W[W_FI + 1] -= P[P_BGB] / (h * h * h) * (S[S_V + 1] - vg)
+    for i in range(NQ):
+        s = 0.0
+        for k in range(NQ):
+            s += A[OFF_MINV + i * NQ + k] * W[W_FI + k]
+        W[W_MF + i] = s
+    for r in range(NR):
+        W[o + r] = 0.0
+    m = pinned_rows(S, mode, I, 0)
+    if m == 0:
+        return
+    for a in range(m):
+        ra = I[I_ROWS + a]
+        for b in range(m):
+            W[W_AS + a * NI + b] = A[OFF_WI + ra * NI + I[I_ROWS + b]]
+        acc = ag if (ra < 6 or ra == ROW_BZ) else 0.0
+        W[W_BS + a] = acc - row_dot(A, ra, W, W_MF)
+    gauss(W, W_AS, NI, W, W_BS, 1, m, 1)
+    for a in range(m):
+        W[o + I[I_ROWS + a]] = W[W_BS + a]
+
+
+@jit
+def release_margin(P, S, mode, W, o, j, extra):
+    """How far the pull on pinned foot j (or the resting body, j = 6) exceeds what holds
+    it, with the forces W[o:o+NR] and contact time S_TC + extra (M10): > 0 releases.
+    A foot is held by F_ad(t_c) = c_ad_t t_c + c_ad (paper eq. 9), the body by nothing."""
+    if j == 6:
+        return -W[o + ROW_BZ]
+    return -W[o + j] - (P[P_CADT] * (S[S_TC + j] + extra) + P[P_CAD])
+
+
+@jit
+def release(P, A, S, mode, count, W, o):
+    """Check of every pinned foot with the instantaneous contact forces W[o:o+NR] (M10): it
+    goes back to AIR when the tension exceeds F_ad(t_c) = c_ad_t t_c + c_ad; else it is
     labelled ADHESION (tension) or REST (compression). A resting body leaves when the
-    ground would have to pull it. Coulomb friction (mu finite) decides stick or slip."""
+    ground would have to pull it. Coulomb friction (mu finite) decides stick or slip.
+    Returns the number of releases. (Inside a step, releases are located in time by
+    :func:`step`; this check catches jumps of the force, e.g. at a drive edge.)"""
+    n = 0
     for j in range(6):
         if mode[j] == AIR:
             continue
-        lam_z = S[S_LAM + j]
+        lam_z = W[o + j]
         fad = P[P_CADT] * S[S_TC + j] + P[P_CAD]
         if -lam_z > fad:
             # t_c is kept: should the foot not leave within the step, it keeps its contact time
             mode[j] = AIR
             S[S_SLIP + j] = 0.0
             count[CNT_RELEASES] += 1
+            n += 1
             continue
         mode[j] = ADHESION if lam_z < 0.0 else REST
         if P[P_MU] < 1e300:
@@ -555,7 +660,7 @@ def release(P, A, S, mode, count):
                 normal = 0.0
             cap = P[P_MU] * normal
             if S[S_SLIP + j] == 0.0:
-                lam_y = S[S_LAM + 6 + j]
+                lam_y = W[o + 6 + j]
                 if abs(lam_y) > cap:
                     S[S_SLIP + j] = cap if lam_y > 0.0 else -cap
                     if cap == 0.0:
@@ -569,28 +674,64 @@ def release(P, A, S, mode, count):
                 else:                              # it stopped: stick where it is
                     S[S_SLIP + j] = 0.0
                     S[S_YPIN + j] = row_dot(A, 6 + j, S, S_Q)
-    if mode[6] == REST and S[S_LAM + ROW_BZ] < 0.0:
+    if mode[6] == REST and W[o + ROW_BZ] < 0.0:
         mode[6] = AIR
+        n += 1
+    return n
+
+
+@jit
+def event_value(P, A, S, T, mode, now, tau, tv, W, I, who, rel):
+    """Advance a trial to now + tau (into T) and return the event function of ``who``:
+    its gap for an impact, minus its release margin for a release (> 0 before the event)."""
+    advance(P, A, S, mode, now, tau, W, I, T)
+    if rel:
+        contact_force(P, A, T, mode, now + tau, tv, W, I, W_LI1)
+        return -release_margin(P, S, mode, W, W_LI1, who, tau)
+    gaps(P, A, T, now + tau, W, W_GAP1)
+    return W[W_GAP1 + who]
 
 
 @jit
 def step(P, A, S, T, mode, t, dt, W, I, events, count):
-    """One full step with event location; the new state is left in S."""
-    release(P, A, S, mode, count)
+    """One full step with event location (M9, M10); the new state is left in S.
+
+    Events inside the step: a free foot (or the body) reaching the ground, and a
+    pinned foot (or the resting body) whose pull exceeds what holds it. The
+    earliest is located on the scheme's own trajectory (secant), the step is
+    advanced to it, the event applied, and the rest of the step integrated.
+    """
     now = t
     rem = dt
+    tv = t + 0.5 * dt          # the drive is constant over a step (edges on step boundaries)
     n_ev = 0
     tol = P[P_POSTOL]
     while True:
+        contact_force(P, A, S, mode, now, tv, W, I, W_LI0)
+        if release(P, A, S, mode, count, W, W_LI0) > 0:
+            contact_force(P, A, S, mode, now, tv, W, I, W_LI0)
+        for j in range(7):
+            if (j < 6 and mode[j] != AIR) or (j == 6 and mode[6] == REST):
+                W[W_G0 + j] = release_margin(P, S, mode, W, W_LI0, j, 0.0)
         advance(P, A, S, mode, now, rem, W, I, T)
         gaps(P, A, S, now, W, W_GAP0)
         gaps(P, A, T, now + rem, W, W_GAP1)
+        contact_force(P, A, T, mode, now + rem, tv, W, I, W_LI1)
         who = -1
+        rel = False
         best = 2.0
         for j in range(7):
-            if j < 6 and mode[j] != AIR:
-                continue
-            if j == 6 and mode[6] == REST:
+            pinned = (j < 6 and mode[j] != AIR) or (j == 6 and mode[6] == REST)
+            if pinned:
+                g1 = release_margin(P, S, mode, W, W_LI1, j, rem)
+                if g1 <= 0.0:
+                    continue
+                g0 = W[W_G0 + j]
+                frac = g0 / (g0 - g1) if g0 < 0.0 else 0.0
+                if frac < best:
+                    best = frac
+                    who = j
+                    rel = True
                 continue
             g1 = W[W_GAP1 + j]
             if g1 >= -tol:
@@ -600,26 +741,25 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count):
             if frac < best:
                 best = frac
                 who = j
+                rel = False
         if who < 0:
             break
         if n_ev >= P[P_MAXEV]:
             count[CNT_FORCED] += 1
             break
         n_ev += 1
-        # locate the crossing of `who` inside [0, rem] (secant on the scheme's own trajectory)
+        # locate the event of `who` inside [0, rem] (secant on the scheme's own trajectory)
         lo = 0.0
-        glo = W[W_GAP0 + who]
+        glo = -W[W_G0 + who] if rel else W[W_GAP0 + who]
         hi = rem
-        ghi = W[W_GAP1 + who]
+        ghi = -release_margin(P, S, mode, W, W_LI1, who, rem) if rel else W[W_GAP1 + who]
         tau = best * rem
-        for _ in range(8):
+        for _ in range(12):
             if tau <= 0.0:
                 tau = 0.0
                 break
-            advance(P, A, S, mode, now, tau, W, I, T)
-            gaps(P, A, T, now + tau, W, W_GAP1)
-            g = W[W_GAP1 + who]
-            if abs(g) <= tol:
+            g = event_value(P, A, S, T, mode, now, tau, tv, W, I, who, rel)
+            if (not rel and abs(g) <= tol) or hi - lo <= 1e-9 * rem:
                 break
             if g > 0.0:
                 lo = tau
@@ -637,6 +777,15 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count):
                     S[S_TC + j] += tau
             now += tau
             rem -= tau
+        if rel:
+            # the pull now exceeds the hold: the foot (body) leaves the ground (M10)
+            mode[who] = AIR
+            if who < 6:
+                S[S_SLIP + who] = 0.0
+                count[CNT_RELEASES] += 1
+            if rem <= 0.0:
+                return
+            continue
         # every free point at or below the ground and approaching it impacts now
         gaps(P, A, S, now, W, W_GAP0)
         _, vg, _ = ground(P, now)
