@@ -342,8 +342,22 @@ def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple
     else:
         fit = _fit_sdof(ctx, n_modes, method, kind, n_boot, seed, background is not None)
     if background == "linear+delay":
-        delay = _polish_delay(ctx, fit, delay)
+        # Alternate: the delay with the poles held, then poles and residues with the delay held,
+        # until the delay settles (they are coupled through the background's slope).
+        for _ in range(20):
+            new = _polish_delay(ctx, fit, delay)
+            moved = abs(new - delay)
+            delay = new
+            if moved * _span_w(ctx) < 1e-7:
+                break
+        _delay_uncertainty(ctx, fit, delay)
     fit = _rescale(fit, f_ref, band, orig, delay)
+    if given is not None:                      # exactly the values given, not their round trip through f_ref
+        o = np.argsort(given[0])
+        for m, fg, zg in zip(fit.modes, given[0][o], given[1][o]):
+            m.freq_hz = float(fg)
+            if not np.isnan(zg):
+                m.damping_ratio = float(zg)
     fit.background = background
     _judge(fit)
     return fit
@@ -718,6 +732,11 @@ def _warn_outside(fit: ModalFit, ctx: _Ctx) -> None:
 
 
 # --------------------------------------------------------------------------------------------- delay
+def _span_w(ctx: _Ctx) -> float:
+    """The band's width in rad/s of the caller's unit (a delay times it is a phase)."""
+    return max(float(np.ptp(np.concatenate([c.w for c in ctx.chans]))) * ctx.f_ref, 1e-300)
+
+
 def _delay(chans: list[Channel]) -> float:
     """A first line delay (s) from the median slope of the unwrapped phase (a resonance bends the
     phase over a few lines only, the median ignores them)."""
@@ -727,6 +746,37 @@ def _delay(chans: list[Channel]) -> float:
         d = np.diff(ph) / np.diff(c.w)
         slopes.append(np.median(d))
     return float(-np.median(slopes))
+
+
+def _delay_uncertainty(ctx: _Ctx, fit: ModalFit, delay: float) -> None:
+    """Add the delay's uncertainty to the modes' (the delay is fitted apart from the poles).
+
+    The delay's variance from the curvature of the profile misfit (poles and
+    residues refitted at ``delay +- h``), times the sensitivity of each mode's
+    frequency and damping to it, is added to their variances (first order).
+    """
+    span = _span_w(ctx)
+    h = 1e-3 / span                                  # 1 mrad of phase across the band
+    lam = modal_to_pole(np.array([m.freq_hz for m in fit.modes]), np.array([m.damping_ratio for m in fit.modes]))
+    refs = []
+    for t in (delay - h, delay, delay + h):
+        chans = [Channel(c.name, c.w, c.H * np.exp(1j * c.w * ctx.f_ref * (t - delay)), c.weight)
+                 for c in ctx.chans]
+        refs.append(refine(chans, lam, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance))
+    ssr = [r.ssr for r in refs]
+    curv = (ssr[0] - 2 * ssr[1] + ssr[2]) / h ** 2
+    if not curv > 0:
+        fit.warnings.append("the line delay is not determined by the data (flat misfit); its uncertainty is "
+                            "not in the modes'")
+        return
+    var_t = 2 * ssr[1] / refs[1].dof / curv
+    o = [np.argsort(r.freq_hz) for r in refs]
+    df = (refs[2].freq_hz[o[2]] - refs[0].freq_hz[o[0]]) / (2 * h)
+    dz = (refs[2].damping_ratio[o[2]] - refs[0].damping_ratio[o[0]]) / (2 * h)
+    for m, a, b in zip(fit.modes, df, dz):
+        m.freq_hz_std = float(np.hypot(m.freq_hz_std, a * np.sqrt(var_t)))
+        m.damping_ratio_std = float(np.hypot(m.damping_ratio_std, b * np.sqrt(var_t)))
+        m.freq_damping_cov += float(a * b * var_t)
 
 
 def _polish_delay(ctx: _Ctx, fit: ModalFit, delay: float) -> float:
