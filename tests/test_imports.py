@@ -26,10 +26,6 @@ FIRST_PARTY = "labkit"
 # (importing module, imported module). The test fails on any violation not listed here AND on
 # any entry here that no longer occurs, so this list can only shrink.
 PENDING: dict[tuple[str, str], str] = {
-    # The demo reaches fit and track through the CLI (call_command); issue 16 replaces it with
-    # the library calls fit_robot / tracking (H4, H5).
-    ("labkit.demo.run", "labkit.cli"): "H4/H5: demo calls fit_robot and the tracking library",
-    ("labkit.demo.run", "labkit.commands"): "H4/H5: demo calls fit_robot and the tracking library",
 }
 
 

@@ -34,7 +34,6 @@ they appear only in the final comparison (``lab.truth``).
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 import shutil
 import sys
@@ -136,28 +135,6 @@ class Stages:
     def _say(self, text: str) -> None:
         if not self.quiet:
             print(f"labkit demo: {text}", file=self.stream, flush=True)
-
-
-def call_command(name: str, argv: list[str]) -> tuple[dict[str, Any], str]:
-    """Run ``labkit NAME ARGV --json --quiet`` in this process; return its summary and its stderr.
-
-    The command module's own ``run`` does the work (no subprocess); what it
-    writes to standard error (warnings) is captured and returned.
-    """
-    import argparse
-    import importlib
-
-    from labkit.cli import common_parser
-
-    mod = importlib.import_module(f"labkit.commands.{name}")
-    common = common_parser()
-    parser = argparse.ArgumentParser(prog=f"labkit {name}", parents=[common])
-    mod.add_arguments(parser, common)
-    args = parser.parse_args([*argv, "--json", "--quiet"])
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
-        summary = mod.run(args)
-    return summary, err.getvalue()
 
 
 def prepare_out(out: Path, force: bool) -> Path | None:
@@ -287,6 +264,8 @@ def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = Fa
     files["configs"] = sorted(str(p) for p in (out / "configs").glob("*.toml"))
 
     # 5. tracking
+    from labkit.analysis.tracking import track_file
+
     points = shaker_points(shaker)
     with st.stage("track", f"tracking {sum(1 for p in points if p['video'])} videos"):
         for p in points:
@@ -294,7 +273,7 @@ def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = Fa
                 continue
             video = (shaker.parent / p["video"]).resolve()     # absolute: the track names its video
             track_path = out / "tracks" / f"{video.stem}.h5"
-            summ, _ = call_command("track", [str(video), "--out", str(track_path)])
+            summ = track_file(video, out=track_path, quiet=True).summary
             p.update(track=str(track_path), speed_mm_s=float(summ["mean_speed_mm_s"]),
                      speed_ci_mm_s=[float(v) for v in summ["speed_ci_mm_s"]],
                      frames=int(summ["frames"]), lost_frames=int(summ["lost_frames"]),
