@@ -48,6 +48,9 @@ AIR, ADHESION, REST = 0, 1, 2
 #: at the midpoint gap of the first (second order; the first alone freezes them at the
 #: step's start, a first-order error where the gap changes fast).
 FILM_PASSES = 2
+#: A point reaching the ground slower than this (m/s) touches down: it is pinned without an
+#: impact being counted (round-off approach speeds of a foot that was just released).
+V_TOUCH = 1e-9
 
 # ---- scalars P
 (P_H0, P_HMIN, P_BGF, P_BGB, P_AD, P_CAD, P_CADT, P_CR, P_CRB, P_VSTICK, P_MU, P_BNS, P_KIND, P_AMP,
@@ -342,8 +345,10 @@ def advance(P, A, S, mode, t, h, W, I, out):
                     s += A[OFF_RI + i * NI + a] * W[W_ZH + i * NR + b]
                 W[W_QH + a * NR + b] = s
     zg1, vg1, _ = ground(P, t + h)
-    _, vgm, _ = ground(P, t + 0.5 * h)
     zg0, _, _ = ground(P, t)
+    # the films see the ground's mean velocity over the step (its chord), so a foot held
+    # by its film follows the ground's displacement exactly and does not sink into it
+    vgm = (zg1 - zg0) / h
     n = active_rows(P, A, S, mode, t, I, W)
     for it in range(FILM_PASSES):
         if it > 0:
@@ -555,7 +560,8 @@ def impact(P, A, S, mode, t, W, I, events, count):
             continue
         stuck = W[W_GAP1 + j] != 0.0
         r = j if j < 6 else ROW_BZ
-        touch = W[W_VREL + j] >= 0.0      # back on the ground without approaching it: no impact
+        # back on the ground without approaching it (to round-off): no impact
+        touch = W[W_VREL + j] >= -V_TOUCH
         if not touch:
             vpost = row_dot(A, r, S, S_V) - vg
             vy = row_dot(A, 6 + j, S, S_V) if j < 6 else S[S_V + 0]

@@ -40,24 +40,37 @@ def test_walking_run_shape_and_summary(walking):
     assert np.abs(r.knee_vz_mm_s).max() > 10
 
 
-def test_restitution_and_zero_lateral_slip_at_every_impact(walking):
-    ev = walking.events
+def _check_impact_law(r):
+    """Newton's law at every logged foot impact (docs/model.md M9, M11): the normal velocity
+    relative to the ground reverses with c_r, unless that rebound is slower than v_stick,
+    and then the foot is pinned (relative velocity 0); the lateral velocity becomes 0."""
+    p = r.params
+    ev = r.events
     feet = ev[ev[:, M.EV_LEG] >= 0]
-    assert len(feet) == walking.impacts.sum() > 20
+    assert len(feet) == r.impacts.sum() > 0
     vpre, vpost, vy = feet[:, M.EV_VPRE], feet[:, M.EV_VPOST], feet[:, M.EV_VYPOST]
     assert np.all(vpre < 0)                          # every impact meets the ground moving into it
-    np.testing.assert_allclose(vpost, -WALK.c_r * vpre, rtol=1e-9, atol=1e-15)
+    stuck = feet[:, M.EV_STUCK] == 1
+    np.testing.assert_array_equal(stuck, -p.c_r * vpre < p.v_stick_mm_s * 1e-3)
+    np.testing.assert_allclose(vpost[~stuck], -p.c_r * vpre[~stuck], rtol=1e-9, atol=1e-15)
+    assert np.abs(vpost[stuck]).max(initial=0.0) < 1e-12
     assert np.abs(vy).max() < 1e-12                  # no lateral slip, m/s
-    # and with another restitution
-    r = simulate(WALK.replace(c_r=0.8, c_ad_n=0.0), Shaker(240, 25), duration_s=0.05)
-    f = r.events[r.events[:, M.EV_LEG] >= 0]
-    np.testing.assert_allclose(f[:, M.EV_VPOST], -0.8 * f[:, M.EV_VPRE], rtol=1e-9, atol=1e-15)
+    return stuck
+
+
+def test_restitution_and_zero_lateral_slip_at_every_impact(walking):
+    _check_impact_law(walking)
+    # and with another restitution, a lower sticking threshold: rebounds
+    r = simulate(WALK.replace(c_r=0.8, c_ad_n=0.0, v_stick_mm_s=1e-3), Shaker(240, 25), duration_s=0.05)
+    stuck = _check_impact_law(r)
+    assert (~stuck).sum() > 10
 
 
 def test_no_foot_below_the_ground_in_air(walking):
     r = walking
     gap = r.foot_z_um - r.ground_z_um[:, None]
-    assert gap[r.contact == M.AIR].min() > -1e-6      # um: no missed impact
+    # um: no missed impact (events are located to M.POS_TOL_M = 0.1 nm)
+    assert gap[r.contact == M.AIR].min() > -2 * M.POS_TOL_M * 1e6
     pinned = r.contact != M.AIR
     assert np.abs(gap[pinned]).max() < 1e-6           # pinned feet sit exactly on the ground
 
@@ -80,8 +93,9 @@ def test_convergence_as_dt_shrinks():
     fine = runs[-1]
     err_y = [np.abs(r.body_y_um - fine.body_y_um).max() for r in runs[:-1]]
     err_z = [np.abs(r.body_z_um - fine.body_z_um).max() for r in runs[:-1]]
-    assert err_y[0] > err_y[1] > err_y[2] and err_z[0] > err_z[1] > err_z[2]
-    assert err_y[0] < 5.0 and err_z[0] < 2.0         # um, at the default step
+    # the hybrid trajectory is not smooth in dt (a contact decision a step earlier or later),
+    # so the errors are bounded, not monotone
+    assert max(err_y) < 1.0 and max(err_z) < 2.0      # um, at the default step and finer
     assert runs[0].mean_speed_mm_s == pytest.approx(fine.mean_speed_mm_s, rel=0.05)
 
 
@@ -170,11 +184,14 @@ def test_to_h5(walking, tmp_path):
 def test_coulomb_friction_option(walking):
     """mu = inf (default) is the paper's no-slip; a large mu changes nothing; a small one does."""
     big = simulate(WALK.replace(mu=1e3), Shaker(240, 25), duration_s=0.3)
-    np.testing.assert_allclose(big.body_y_um, walking.body_y_um, atol=1e-2)
+    # (a foot about to be released carries almost no normal load, so even mu = 1e3 lets
+    # it slip for an instant: the walk is the same to 0.1 um)
+    np.testing.assert_allclose(big.body_y_um, walking.body_y_um, atol=0.1)
+    assert big.mean_speed_mm_s == pytest.approx(walking.mean_speed_mm_s, rel=1e-4)
     slippery = simulate(WALK.replace(mu=0.1), Shaker(240, 25), duration_s=0.3)
     assert abs(slippery.mean_speed_mm_s - walking.mean_speed_mm_s) > 0.05
     at_rest = simulate(RobotParams(mu=0.0), Shaker(240, 0.0), duration_s=0.05)
-    assert np.all(at_rest.body_y_um == 0.0)
+    assert np.abs(at_rest.body_y_um).max() < 1e-9      # um: round-off of the static solve
     a = simulate(WALK.replace(mu=0.1), Shaker(240, 25), duration_s=0.02, engine="numba")
     b = simulate(WALK.replace(mu=0.1), Shaker(240, 25), duration_s=0.02, engine="reference")
     _agree(a, b, t_min_s=0.003)
@@ -182,14 +199,16 @@ def test_coulomb_friction_option(walking):
 
 
 def test_body_contact_restitution_and_rest():
-    """At 1 kHz the published robot hits the tray with its body: restitution, then rest."""
-    p = RobotParams()
-    r = simulate(p, Shaker(1000, 25), duration_s=0.3)
+    """Dropped from 3 mm without air films, the published robot's soft legs let the body
+    hit the ground: restitution c_r_body, then it comes to rest on its feet."""
+    p = RobotParams(b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, c_r_body=0.3)
+    r = simulate(p, Shaker(240, 0.0), duration_s=0.15, start_height_um=3000)
     gap = r.body_z_um - r.ground_z_um
-    assert r.body_impacts > 0 and gap.min() > -1e-6
+    assert r.body_impacts > 0 and gap.min() > -2 * M.POS_TOL_M * 1e6
     assert r.counters["steps_event_capped"] == 0       # no Zeno cascade of bounces
     body = r.events[r.events[:, M.EV_LEG] == -1]
     vpre, vpost = body[:, M.EV_VPRE], body[:, M.EV_VPOST]
-    bounced = vpost != 0.0
+    bounced = body[:, M.EV_STUCK] == 0
     np.testing.assert_allclose(vpost[bounced], -p.c_r_body * vpre[bounced], rtol=1e-9)
-    assert (~bounced).any()                              # and it comes to rest
+    assert bounced.any()
+    assert np.abs(np.diff(r.body_z_um[-100:])).max() < 0.5   # um per sample: settled
