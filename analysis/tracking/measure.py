@@ -49,6 +49,7 @@ class _Blob:
     weights: np.ndarray | None = None
     origin: tuple[int, int] = (0, 0)
     contrast: float = float("nan")   # (tray - robot) / tray, measured inside the body
+    masked: bool = False             # its band reaches a never-search region (static dust, the rim)
 
 
 def smooth_background(win: np.ndarray, cell_px: int, kernel_cells: int) -> np.ndarray:
@@ -219,7 +220,9 @@ class _Finder:
             ring = outer & (1 - band) & (1 - cv2.dilate(others, _square(m)))
         else:
             ring = outer & (1 - band)
+        masked = False
         if vmask is not None:
+            masked = bool(np.any(band & (1 - vmask)))    # part of the robot's band is never-search (dust, rim)
             band &= vmask
             ring &= vmask
         f = win.astype(np.float32)
@@ -268,7 +271,7 @@ class _Finder:
         common = np.sqrt(((a - b) / 2) ** 2 + c ** 2)
         lam1, lam2 = (a + b) / 2 + common, max((a + b) / 2 - common, 0.0)
         return _Blob(cu, cv_, theta, 0.0, mo["m00"], float(np.sqrt(12 * lam1)), float(np.sqrt(12 * lam2)),
-                     False, w if keep_weights else None, contrast=1.0 - rho)
+                     False, w if keep_weights else None, contrast=1.0 - rho, masked=masked)
 
 
 def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> float:

@@ -69,7 +69,8 @@ def preview_frame(source: str | Path, frame: int, out_png: str | Path, *, scale:
             continue
         m = np.zeros((h, w), np.uint8)
         cv2.drawContours(m, [c], -1, 1, -1)
-        contrast = 1.0 - float(cv2.mean(ratio, mask=m)[0])
+        inner = cv2.erode(m, np.ones((5, 5), np.uint8))     # clear of the blurred edge
+        contrast = 1.0 - float(cv2.mean(ratio, mask=inner if inner.any() else m)[0])
         (_cx, _cy), (a, b), _ang = cv2.minAreaRect(c)       # side lengths only (no angle convention)
         elong = max(a, b) / max(min(a, b), 1e-9)
         size_ok = expected is None or 0.45 * expected < area < 1.7 * expected

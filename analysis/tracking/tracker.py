@@ -168,6 +168,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     areas: list[float] = []
     lengths: list[float] = []
     contrasts: list[float] = []
+    cov_hist: list[float] = []      # the robot's weighted area in clear frames (what a whole robot shows)
     area_hist: list[float] = []
     area_ref = expected_area_px
     # with only the expected area (from the scale) the tolerance is wide: blur and legs vary it
@@ -229,6 +230,11 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
             q = QUALITY_OK
             if blob.border or (area_ref and not 0.8 < blob.area / area_ref < 1.25):
                 q = QUALITY_DEGRADED
+            elif blob.masked and cov_hist and abs(blob.coverage / float(np.median(cov_hist[-25:])) - 1) > 0.015:
+                # touching static dust (or the rim) and missing part of its darkness: partly hidden by it
+                q = QUALITY_DEGRADED
+            if q == QUALITY_OK and not blob.masked:
+                cov_hist.append(blob.coverage)
             us.append(blob.u + rx)
             vs.append(blob.v + ry)
             ths.append(blob.theta)
@@ -468,8 +474,10 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         what = (f"the strongest dark object had {100 * found:.1f} % contrast against the tray"
                 f"{f' (pixel noise {100 * noise:.1f} %)' if np.isfinite(noise) else ''}; a robot needs "
                 f"{100 * raw['min_contrast']:.1f} % (--min-contrast)")
-        if static is not None and static.object_boxes and found >= raw["min_contrast"]:
-            what = f"only static dark objects (never moving: dust) were found; {what}"
+        if static is not None and static.object_boxes:
+            boxes = "; ".join(",".join(str(v) for v in b) for b in static.object_boxes[:2])
+            what = (f"only {len(static.object_boxes)} static dark object(s) (never moving: dust, or a robot that "
+                    f"never moved) at x,y,w,h {boxes} were found and set aside; otherwise {what}")
         raise InputError(f"no robot found in any of {t_s.size} frames: {what}", file=source,
                          expected="a chip darker than the tray that moves (see --preview FRAME)")
     stretches = lost_stretches(t_s, raw["quality"])
