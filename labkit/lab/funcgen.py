@@ -265,14 +265,36 @@ class SimKeysight33500B(SimScpiInstrument):
         self.on_burst = on_burst or (lambda ch, start, end: None)
         chans = range(1, self.n_channels + 1)
         self.ch = {n: self._default() for n in chans}
-        self.load = {n: SOURCE_OHM for n in chans}   # declared load, ohm (inf for high Z)
+        self.load = {n: self.default_load_ohm for n in chans}   # declared load, ohm (inf for high Z)
         self.vunit = {n: "VPP" for n in chans}
         self.sync = {n: n == 1 for n in chans}
         super().__init__()
 
+    def fnum(self, value: float) -> str:
+        """NR3 replies as the Trueform generators send them: ``+1.000000000000000E+03``.
+
+        The amplitude, offset and phases answer with two digits fewer
+        (``+1.0000000000000E-01``), the infinite load and cycle count as
+        ``+9.900000000000000E+37`` (query replies of the 33500B/33600A family).
+        """
+        return f"{value:+.15E}"
+
+    def flevel(self, value: float) -> str:
+        """The amplitude/offset/phase reply format (``+1.0000000000000E-01``)."""
+        return f"{value:+.13E}"
+
+    #: what an infinite load or cycle count answers (SCPI's 9.9E37 for infinity)
+    inf_reply = "+9.900000000000000E+37"
+
+    #: ``*RST`` amplitude (Vpp for the default load) and load (ohm; inf: high Z)
+    default_vpp = 0.1
+    default_load_ohm = SOURCE_OHM
+
     def _default(self) -> Drive:
         # 33500B power-on: 1 kHz sine, 100 mVpp into 50 ohm (200 mV peak-to-peak open circuit)
-        return Drive(amp_v=0.1, t_epoch=self.clock())
+        load = self.default_load_ohm
+        factor = 1.0 if np.isinf(load) else (load + SOURCE_OHM) / load
+        return Drive(amp_v=self.default_vpp * factor / 2, t_epoch=self.clock())
 
     def reset(self) -> None:
         super().reset()
@@ -280,7 +302,7 @@ class SimKeysight33500B(SimScpiInstrument):
             was_on = self.ch[n].on
             self._cut_burst(n)
             self.ch[n] = self._default()
-            self.load[n] = SOURCE_OHM
+            self.load[n] = self.default_load_ohm
             self.vunit[n] = "VPP"
             self.sync[n] = n == 1
             if was_on:
@@ -342,13 +364,13 @@ class SimKeysight33500B(SimScpiInstrument):
         if c.params:
             word = c.params[0].upper()[:3]
             if word == "MAX":
-                return self.fnum(MAX_VPP_OPEN / self._factor(n))
+                return self.flevel(MAX_VPP_OPEN / self._factor(n))
             if word == "MIN":
-                return self.fnum(1e-3)
+                return self.flevel(1e-3)
         vpp = self._display_vpp(n)
         if self.vunit[n] == "DBM":
-            return self.fnum(_vpp_to_dbm(vpp, self.load[n]))
-        return self.fnum(vpp / (2 * 2 ** 0.5) if self.vunit[n] == "VRMS" else vpp)
+            return self.flevel(_vpp_to_dbm(vpp, self.load[n]))
+        return self.flevel(vpp / (2 * 2 ** 0.5) if self.vunit[n] == "VRMS" else vpp)
 
     def _set_output(self, n: int, on: bool) -> None:
         if self.ch[n].on != on:
@@ -391,10 +413,10 @@ class SimKeysight33500B(SimScpiInstrument):
             query=lambda c: self._amp_query(self._chan(c), c))
         add(S + "VOLTage:UNIT", set=self._set_unit, query=lambda c: self.vunit[self._chan(c)])
         add(S + "VOLTage[:LEVel][:IMMediate]:OFFSet", set=self._set_offset,
-            query=lambda c: self.fnum(self.ch[self._chan(c)].offset_v / self._factor(self._chan(c))))
+            query=lambda c: self.flevel(self.ch[self._chan(c)].offset_v / self._factor(self._chan(c))))
         add(S + "PHASe[:ADJust]",
             set=lambda c: self._update(self._chan(c), phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
-            query=lambda c: self.fnum(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
+            query=lambda c: self.flevel(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
         add(S + "APPLy:SINusoid", set=self._apply_sin, query=None)
         add(S + "APPLy", query=lambda c: self._apply_query(self._chan(c)))
         add(S + "SWEep:STATe", set=lambda c: self._update(self._chan(c), sweep=parse_bool(c.one())),
@@ -419,7 +441,7 @@ class SimKeysight33500B(SimScpiInstrument):
             query=fget("burst_period_s", 1e-6, 8000.0))
         add(S + "BURSt:PHASe",
             set=lambda c: self._update(self._chan(c), phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
-            query=lambda c: self.fnum(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
+            query=lambda c: self.flevel(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
         add("OUTPut#[:STATe]", set=lambda c: self._set_output(self._chan(c), parse_bool(c.one())),
             query=lambda c: "1" if self.ch[self._chan(c)].on else "0")
         add("OUTPut#:LOAD", set=self._set_load, query=self._load_query)
@@ -444,7 +466,7 @@ class SimKeysight33500B(SimScpiInstrument):
         if c.params:
             return self.fnum(self.query_limit(c, (1.0, 1e8), 1.0))
         cycles = self.ch[n].ncycles
-        return "+9.9E+37" if np.isinf(cycles) else self.fnum(cycles)
+        return self.inf_reply if np.isinf(cycles) else self.fnum(cycles)
 
     # -- high/low levels and dBm ---------------------------------------------------------------
     def _levels(self, n: int) -> tuple[float, float]:
@@ -524,7 +546,7 @@ class SimKeysight33500B(SimScpiInstrument):
                      str, True)
         self.setting("TRIGger#:COUNt", "trig_count", 1.0,
                      lambda t: float("inf") if t.strip().upper() in ("INF", "INFINITY")
-                     else self.num(t, "", 1, 1e6), lambda v: "+9.9E+37" if np.isinf(v) else self.fnum(v),
+                     else self.num(t, "", 1, 1e6), lambda v: self.inf_reply if np.isinf(v) else self.fnum(v),
                      True, (1.0, 1e6))
         self.setting("TRIGger#:DELay", "trig_delay", 0.0, lambda t: self.num(t, "S", 0.0, 1000.0), self.fnum,
                      True, (0.0, 1000.0))
@@ -567,7 +589,7 @@ class SimKeysight33500B(SimScpiInstrument):
 
     def _load_query(self, c: Call) -> str:
         load = self.load[self._chan(c)]
-        return "+9.9E+37" if np.isinf(load) else self.fnum(load)
+        return self.inf_reply if np.isinf(load) else self.fnum(load)
 
     def _apply_sin(self, c: Call) -> None:
         n = self._chan(c)
@@ -633,6 +655,9 @@ class SimRigolDG1000Z(SimKeysight33500B):
     no_error = '0,"No error"'
     models = MODELS_DG1000Z
     idn_format = "Rigol Technologies,{model},DG1ZA000000001,00.01.14"
+    #: DG1000Z factory defaults: 1 kHz sine, 5 Vpp, offset 0, output impedance HighZ
+    default_vpp = 5.0
+    default_load_ohm = float("inf")
 
     def __init__(self, clock: Callable[[], float] = time.monotonic,
                  on_output: Callable[[int, bool], None] | None = None, *, model: str = "DG1062Z",
@@ -640,6 +665,9 @@ class SimRigolDG1000Z(SimKeysight33500B):
         super().__init__(clock, on_output, model=model, on_burst=on_burst)
 
     def fnum(self, value: float) -> str:
+        return f"{value:E}"
+
+    def flevel(self, value: float) -> str:
         return f"{value:E}"
 
     def build(self) -> None:

@@ -56,7 +56,7 @@ def test_identity_long_short_forms_and_error_queue(raw):
 def test_compound_commands_follow_the_scpi_path_rule(raw):
     fg = raw("funcgen")
     assert fg.query("SOUR2:FREQ 500;VOLT 0.4;:SOUR2:FREQ?;VOLT?") == \
-        "+5.00000000000000E+02;+4.00000000000000E-01"
+        "+5.000000000000000E+02;+4.0000000000000E-01"
     assert float(fg.query("SOUR1:FREQ?")) == 1000.0      # channel 1 untouched
 
 
