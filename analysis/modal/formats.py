@@ -149,10 +149,12 @@ def write_uff(path: str | Path, fits: dict[str, Any]) -> Path:
         uff_kind = _KIND_UFF.get(fit.kind)
         for k, loc in enumerate(fit.locations):
             f = np.asarray(fit.freq_hz[k], dtype=float)
+            # Even lines are stored as start + step (exact); uneven ones as a list of 6-digit numbers.
+            even = f.size > 1 and bool(np.allclose(np.diff(f), f[1] - f[0], rtol=1e-9, atol=0))
             sets.append(pyuff.prepare_58(
                 id1=f"labkit fit model: {group} {loc}"[:80], id2="NONE", id3="NONE", id4="NONE", id5="NONE",
                 func_type=5 if fit.kind == "transmissibility" else 4, rsp_node=nodes[k], rsp_dir=3,
-                ref_node=0, ref_dir=3, ord_data_type=6, num_pts=f.size, abscissa_spacing=0,
+                ref_node=0, ref_dir=3, ord_data_type=6, num_pts=f.size, abscissa_spacing=int(even),
                 abscissa_spec_data_type=18, ordinate_spec_data_type=uff_kind or 0,
                 orddenom_spec_data_type=13 if uff_kind else 0, data=fit.model(f, k).astype(complex), x=f,
                 ))
