@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from clihelpers import last_json, run_cli
 
+from clihelpers import last_json, run_cli
 from labkit.analysis.modal.fit import fit_modes
 from labkit.analysis.modal.io import read_frf
 from labkit.analysis.modal.shapes import mac, pair_modes, shape_table

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from clihelpers import last_json, run_cli
 
+from clihelpers import last_json, run_cli
 from labkit.analysis.modal.fit import fit_modes
 from labkit.errors import InputError
 
