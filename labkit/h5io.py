@@ -90,6 +90,7 @@ def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None):
             raise InputError(f"this file holds {found!r}", file=path, key="kind", expected=f"a '{kind}' file")
     if mode == "r":
         raw = f.attrs.get("schema_version", 0)
+        raw = raw.item() if isinstance(raw, np.generic) else raw
         try:
             version = int(raw)
         except (TypeError, ValueError):
