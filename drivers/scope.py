@@ -156,6 +156,13 @@ class Oscilloscope(ScpiInstrument):
         """Put the trigger at the record's first sample (the base model keeps its default)."""
         self.state["trigger_at_start_s"] = float(check_range("record_s", record_s, 1e-9, 5e4, "s"))
 
+    #: whether :meth:`set_record_delay` is implemented for the model
+    record_delay = False
+
+    def set_record_delay(self, record_s: float, delay_s: float) -> None:
+        """Record ``record_s`` seconds starting ``delay_s`` after the trigger (e.g. a burst's settled part)."""
+        raise NotImplementedError(f"{self.model}: no delayed record")
+
     def single(self) -> None:
         """Arm one acquisition (``:SING``)."""
         self.write(":SING")
@@ -257,6 +264,16 @@ class InfiniiVision(Oscilloscope):
         self._send_all([":TIM:REF LEFT", f":TIM:POS {rec / self.divisions:.6g}"])
         self.state["trigger_at_start_s"] = rec
 
+    record_delay = True
+
+    def set_record_delay(self, record_s: float, delay_s: float) -> None:
+        """Record ``record_s`` from ``delay_s`` after the trigger: reference LEFT (one division of
+        pre-trigger) and a position of one division plus the delay (``:TIM:REF LEFT``, ``:TIM:POS``)."""
+        rec = check_range("record_s", record_s, 1e-9, 5e4, "s")
+        d = check_range("delay_s", delay_s, 0.0, 400.0, "s")
+        self._send_all([":TIM:REF LEFT", f":TIM:POS {rec / self.divisions + d:.9g}"])
+        self.state["record_delay_s"] = d
+
     def _done(self) -> bool:
         # bit 3 (value 8) of the operation status condition register: "Run" (acquiring)
         return not (self.query_int(self._done_command) & 8)
@@ -293,7 +310,8 @@ class RigolDS1000Z(Oscilloscope):
     #: DS1054Z, DS1104Z, MSO1104Z, DS1074Z-S PLUS, DS1202Z-E: bandwidth digits, channel count, Z
     model_pattern = re.compile(r"(?:DS|MSO)1\d\d(?P<ch>[24])Z(?:-E|-S|-S PLUS| PLUS)?")
     model_words = "a DS1000Z model: DS1054Z, DS1074Z, DS1104Z, MSO1104Z, DS1202Z-E ..."
-    format_codes = {"WORD": 0, "BYTE": 1}   # Rigol's own codes: 0 WORD, 1 BYTE, 2 ASC
+    #: DS1000Z Programming Guide, :WAVeform:PREamble?: <format> 0 (BYTE), 1 (WORD) or 2 (ASC)
+    format_codes = {"BYTE": 0, "WORD": 1}
     _done_command = ":TRIG:STAT?"
 
     def __init__(self, transport, *, name: str | None = None, max_block_bytes: int = 250_000,
@@ -306,6 +324,16 @@ class RigolDS1000Z(Oscilloscope):
 
     def _timebase_command(self, scale_s: float) -> str:
         return f":TIM:MAIN:SCAL {scale_s:.6g}"
+
+    record_delay = True
+
+    def set_record_delay(self, record_s: float, delay_s: float) -> None:
+        """Record ``record_s`` from ``delay_s`` after the trigger: the main offset is the time of the
+        screen's centre after the trigger (``:TIM:MAIN:OFFS``)."""
+        rec = check_range("record_s", record_s, 1e-9, 5e4, "s")
+        d = check_range("delay_s", delay_s, 0.0, 400.0, "s")
+        self._send_all([f":TIM:MAIN:OFFS {rec / 2 + d:.9g}"])
+        self.state["record_delay_s"] = d
 
     def _done(self) -> bool:
         return self.query(self._done_command).upper() == "STOP"

@@ -169,7 +169,7 @@ def test_rigol_raw_word_chunked_and_scaled():
     samples = (np.arange(n) % 256).astype(np.uint16)
     raw = samples.astype("<u2")
     raw[::7] |= 0xAB00             # WORD: only the low byte is the sample; the high byte is ignored
-    pre = preamble(0, n, 1e-6, -1e-4, 0, 0.04, 10, 127)
+    pre = preamble(1, n, 1e-6, -1e-4, 0, 0.04, 10, 127)   # DS1000Z format 1: WORD
     script = _w(":STOP", ":WAV:SOUR CHAN3", ":WAV:MODE RAW", ":WAV:FORM WORD") + [
         (b":SYST:ERR?\n", R_OK), (b":WAV:PRE?\n", pre)] + _rigol_chunks(raw, 150, 2)
     with expected_protocol(RigolDS1000Z, script, max_block_bytes=300) as sc:
@@ -182,7 +182,7 @@ def test_rigol_raw_word_chunked_and_scaled():
 def test_rigol_byte_default_chunks_of_250000():
     n = 600_000
     raw = (np.arange(n) % 251).astype(np.uint8)
-    pre = preamble(1, n, 1e-7, 0, 0, 0.01, 0, 128)
+    pre = preamble(0, n, 1e-7, 0, 0, 0.01, 0, 128)        # DS1000Z format 0: BYTE
     script = _w(":STOP", ":WAV:SOUR CHAN1", ":WAV:MODE RAW", ":WAV:FORM BYTE") + [
         (b":SYST:ERR?\n", R_OK), (b":WAV:PRE?\n", pre)] + _rigol_chunks(raw, 250_000, 1)
     assert [e for e, _ in script if e and e.startswith(b":WAV:STOP")] == [
@@ -193,7 +193,7 @@ def test_rigol_byte_default_chunks_of_250000():
 
 
 def test_rigol_short_chunk_is_error():
-    pre = preamble(1, 10, 1e-6, 0, 0, 0.01, 0, 128)
+    pre = preamble(0, 10, 1e-6, 0, 0, 0.01, 0, 128)
     script = _w(":STOP", ":WAV:SOUR CHAN1", ":WAV:MODE RAW", ":WAV:FORM BYTE") + [
         (b":SYST:ERR?\n", R_OK), (b":WAV:PRE?\n", pre)] + _w(":WAV:STAR 1", ":WAV:STOP 10") + [
         (b":WAV:DATA?\n", block(b"\x00" * 9, 9))]
