@@ -48,6 +48,17 @@ ENVELOPE_KEYS = ("freq_min_hz", "freq_max_hz", "force_peak_n", "stroke_peak_mm",
                  "moving_mass_kg")
 # Analog output of the vibrometer controllers spans +-10 V (OFV-3001/5000 manuals).
 VIB_OUTPUT_MAX_V = 10.0
+#: the thin-film PZT's rating (the paper: 5-20 V actuation): drive.pzt_max_v may be lowered, not raised
+PZT_RATED_MAX_V = 20.0
+#: every supported generator's output range into a high-impedance load: +-10 V
+FUNCGEN_MAX_V = 10.0
+#: the highest sine frequency of each generator family (the smallest model of the family:
+#: 33220A 20 MHz, 33500B 20 MHz (33511B/33521B), DG1000Z 25 MHz (DG1022Z))
+FUNCGEN_MAX_HZ = {"33220A": 20e6, "33500B": 20e6, "DG1000Z": 25e6}
+#: the longest settling a point may ask for (s); a longer one is a typo, not a measurement
+MAX_SETTLE_S = 600.0
+#: the 2718's published input cap (V rms) per gain switch position; max_input_vrms may only lower it
+AMP_MAX_INPUT_VRMS = {20.0: 0.8, 40.0: 0.08}
 
 
 @dataclass(frozen=True)
@@ -193,7 +204,7 @@ def load_inchip(path: str | Path) -> InchipConfig:
     drive = root.table("drive")
     drive.only(("amp_vpp", "offset_v", "pzt_max_v"))
     pzt_max_v = drive.number("pzt_max_v", default=DEFAULT_PZT_MAX_V, unit="V", minimum=0,
-                             exclusive_minimum=True)
+                             exclusive_minimum=True, maximum=PZT_RATED_MAX_V)
     amp_vpp = drive.number("amp_vpp", unit="Vpp", minimum=0, exclusive_minimum=True)
     offset_v = drive.number("offset_v", default=0.0, unit="V")
     peak = abs(offset_v) + amp_vpp / 2
@@ -201,8 +212,14 @@ def load_inchip(path: str | Path) -> InchipConfig:
         raise drive.error("amp_vpp", f"drive peak |offset_v| + amp_vpp/2 = {peak:g} V exceeds the PZT "
                                      f"limit drive.pzt_max_v = {pzt_max_v:g} V",
                           f"|offset_v| + amp_vpp/2 <= {pzt_max_v:g} V")
+    if peak > FUNCGEN_MAX_V:
+        raise drive.error("amp_vpp", f"drive peak |offset_v| + amp_vpp/2 = {peak:g} V is beyond the "
+                                     f"generator's output range (+-{FUNCGEN_MAX_V:g} V into high-Z)",
+                          f"|offset_v| + amp_vpp/2 <= {FUNCGEN_MAX_V:g} V")
 
     freqs = _frequencies(root.table("frequencies"))
+    _check_generator_band(root, "frequencies", "list_hz" if "list_hz" in root.table("frequencies") else "stop_hz",
+                          freqs, instruments)
     method = _method(root.table("method"), allow_chirp=True)
     if method.kind == "chirp":
         f = root.table("frequencies")
@@ -230,7 +247,7 @@ def load_shaker(path: str | Path) -> ShakerConfig:
     run = root.table("run", required=False)
     run.only(("robot_spot", "video_s", "on_interlock"))
     robot_spot = run.string("robot_spot", choices=LOCATIONS, default="knee", lower=True)
-    video_s = run.number("video_s", default=0.0, unit="s", minimum=0)
+    video_s = run.number("video_s", default=0.0, unit="s", minimum=0, maximum=MAX_SETTLE_S)
     on_interlock = run.string("on_interlock", choices=ON_INTERLOCK, default="skip", lower=True)
     if video_s > 0 and "camera" not in instruments and "control" not in instruments:
         raise root.table("instruments").error("camera", "run.video_s > 0 needs a camera",
@@ -244,16 +261,21 @@ def load_shaker(path: str | Path) -> ShakerConfig:
         raise amp.error("gain_db", f"unsupported gain {gain_db:g} dB", "20 or 40 (the 2718's gain switch)")
     attenuator_db = amp.number("attenuator_db", unit="dB", minimum=0)
     current_limit_a = amp.number("current_limit_a", unit="A", minimum=0, exclusive_minimum=True)
-    max_input_vrms = amp.number("max_input_vrms", default=None, unit="V rms", minimum=0, exclusive_minimum=True)
+    cap = AMP_MAX_INPUT_VRMS[gain_db]
+    max_input_vrms = amp.number("max_input_vrms", default=None, unit="V rms", minimum=0, exclusive_minimum=True,
+                                maximum=cap)
 
     shaker = root.table("shaker", required=False)
     shaker.only(("model", "payload_kg") + ENVELOPE_KEYS)
-    payload_kg = shaker.number("payload_kg", default=0.0, unit="kg", minimum=0)
-    envelope = {k: shaker.number(k, minimum=0, exclusive_minimum=True) for k in ENVELOPE_KEYS if k in shaker}
+    payload_kg = shaker.number("payload_kg", default=0.0, unit="kg", minimum=0, maximum=10.0)
+    envelope = {k: _envelope_value(shaker, k) for k in ENVELOPE_KEYS if k in shaker}
+    if envelope.get("freq_min_hz", 0.0) >= envelope.get("freq_max_hz", float("inf")):
+        raise shaker.error("freq_max_hz", "the band is empty", "freq_max_hz > freq_min_hz")
 
     grid = root.table("grid")
     grid.only(("freq_hz", "tray_amp_um", "drive_vpp"))
     freqs = grid.numbers("freq_hz", unit="Hz", minimum=0, exclusive_minimum=True)
+    _check_generator_band(root, "grid", "freq_hz", freqs, instruments)
     if ("tray_amp_um" in grid) == ("drive_vpp" in grid):
         raise grid.error("tray_amp_um", "give the amplitudes one way",
                          "exactly one of grid.tray_amp_um (tray displacement, um) or grid.drive_vpp")
@@ -265,7 +287,8 @@ def load_shaker(path: str | Path) -> ShakerConfig:
     control = TrayControl(
         tolerance=tc.number("tolerance", default=0.02, minimum=0, maximum=0.5, exclusive_minimum=True),
         max_iterations=tc.integer("max_iterations", default=8, minimum=1, maximum=50),
-        start_vpp=tc.number("start_vpp", default=0.05, unit="Vpp", minimum=0, exclusive_minimum=True),
+        start_vpp=tc.number("start_vpp", default=0.05, unit="Vpp", minimum=0, exclusive_minimum=True,
+                            maximum=2 * math.sqrt(2) * (max_input_vrms or cap)),
         max_step_ratio=tc.number("max_step_ratio", default=4.0, minimum=1, exclusive_minimum=True))
 
     method = _method(root.table("method"), allow_chirp=False)
@@ -275,7 +298,8 @@ def load_shaker(path: str | Path) -> ShakerConfig:
     scale = vib.number("scale_mm_s_per_v", unit="mm/s/V", minimum=0, exclusive_minimum=True)
     il = root.table("interlock")
     il.only(("tray_max_um",))
-    tray_max_um = il.number("tray_max_um", unit="um", minimum=0, exclusive_minimum=True)
+    stroke_um = 1e3 * _envelope_defaults()["stroke_peak_mm"]   # the 4809 itself (a lowered stroke interlocks)
+    tray_max_um = il.number("tray_max_um", unit="um", minimum=0, exclusive_minimum=True, maximum=stroke_um)
     if kind == "tray_amp_um" and max(amps) > tray_max_um:
         raise grid.error("tray_amp_um", f"request {max(amps):g} um is above interlock.tray_max_um "
                                         f"= {tray_max_um:g} um", f"amplitudes <= {tray_max_um:g} um")
@@ -303,6 +327,40 @@ def _instruments(t: Table, required: tuple[str, ...], optional: tuple[str, ...])
             _check_driver(spec, model, settings)
         out[role] = InstrumentSpec(role, model, resource, settings)
     return out
+
+
+def _envelope_defaults() -> dict[str, float]:
+    from labkit.drivers.shaker import Shaker4809Envelope
+
+    published = Shaker4809Envelope()
+    return {k: float(getattr(published, k)) for k in ENVELOPE_KEYS}
+
+
+def _envelope_value(shaker: Table, key: str) -> float:
+    """A declared envelope value: it may make the envelope smaller, never larger than the 4809's."""
+    published = float(_envelope_defaults()[key])
+    if key in ("freq_min_hz", "moving_mass_kg"):      # larger is stricter
+        return shaker.number(key, minimum=published, maximum=1e6 if key == "freq_min_hz" else 100.0,
+                             unit="Hz" if key == "freq_min_hz" else "kg")
+    units = {"freq_max_hz": "Hz", "force_peak_n": "N", "stroke_peak_mm": "mm", "velocity_peak_m_s": "m/s"}
+    return shaker.number(key, minimum=0, exclusive_minimum=True, maximum=published, unit=units[key])
+
+
+def _check_generator_band(root: Table, table: str, key: str, freqs: tuple[float, ...],
+                          instruments: dict[str, InstrumentSpec]) -> None:
+    """Every frequency within what the generator can put out (its family's published maximum)."""
+    from labkit.drivers.registry import driver_class
+
+    cls = driver_class(instruments["funcgen"].model)
+    top = FUNCGEN_MAX_HZ.get(getattr(cls, "model", ""), min(FUNCGEN_MAX_HZ.values()))
+    declared = instruments["funcgen"].settings.get("max_freq_hz")
+    if isinstance(declared, (int, float)) and not isinstance(declared, bool) and 0 < declared < top:
+        top = float(declared)
+    for i, f in enumerate(freqs):
+        if f > top:
+            name = f"{key}[{i}]" if key.endswith("list_hz") or key == "freq_hz" else key
+            raise root.table(table).error(name, f"{f:g} Hz is above what the {cls.model} generator may put out",
+                                          f"frequencies <= {top:g} Hz")
 
 
 def _check_driver(spec: Table, model: str, settings: dict[str, Any]) -> None:
@@ -343,7 +401,8 @@ def _method(t: Table, *, allow_chirp: bool) -> Method:
     kind = t.string("kind", choices=kinds, default="stepped", lower=True)
     if kind == "chirp":
         t.only(("kind", "length_s", "averages", "keep_raw"))
-        return Method(kind, length_s=t.number("length_s", unit="s", minimum=0, exclusive_minimum=True),
+        return Method(kind, length_s=t.number("length_s", unit="s", minimum=0, exclusive_minimum=True,
+                                              maximum=MAX_SETTLE_S),
                       averages=t.integer("averages", default=1, minimum=1, maximum=1000),
                       keep_raw=t.boolean("keep_raw", default=False))
     t.only(("kind", "settle_s", "settle_cycles", "dwell_cycles", "keep_raw"))
@@ -351,9 +410,9 @@ def _method(t: Table, *, allow_chirp: bool) -> Method:
         raise t.error("settle_s", "given together with settle_cycles", "one of settle_s or settle_cycles")
     if "settle_s" not in t and "settle_cycles" not in t:
         raise t.error("settle_cycles", "missing", "settle_s (s) or settle_cycles (drive periods)")
-    settle_s = t.number("settle_s", default=None, unit="s", minimum=0)
-    settle_cycles = t.number("settle_cycles", default=None, minimum=0)
-    dwell = t.number("dwell_cycles", minimum=1)
+    settle_s = t.number("settle_s", default=None, unit="s", minimum=0, maximum=MAX_SETTLE_S)
+    settle_cycles = t.number("settle_cycles", default=None, minimum=0, maximum=1e7)
+    dwell = t.number("dwell_cycles", minimum=1, maximum=1e7)
     if not math.isfinite(dwell):
         raise t.error("dwell_cycles", "not finite", "a number >= 1")
     return Method(kind, settle_s=settle_s, settle_cycles=settle_cycles, dwell_cycles=dwell,

@@ -120,7 +120,15 @@ def _shaker_preflight(cfg: ShakerConfig) -> None:
         cap, a requested tray amplitude outside the shaker's envelope.
     """
     amp, env = shaker_chain(cfg)
+    for i, f in enumerate(cfg.freqs_hz):      # the band, whatever the amplitudes are given as
+        if not env.freq_min_hz <= f <= env.freq_max_hz:
+            raise LimitError(f"{f:g} Hz is outside the 4809 frequency range {env.freq_min_hz:g}-"
+                             f"{env.freq_max_hz:g} Hz; nothing was sent", limit="frequency", file=cfg.path,
+                             key=f"grid.freq_hz[{i}]",
+                             expected=f"{env.freq_min_hz:g} <= freq_hz <= {env.freq_max_hz:g}")
     if cfg.amplitude_kind == "drive_vpp":
+        # the tray's response per volt is not declared: the runner ramps each point up from
+        # tray_control.start_vpp, measuring the tray and predicting the next step (soft start)
         for i, v in enumerate(cfg.amplitudes):
             try:
                 amp.check_input(v)

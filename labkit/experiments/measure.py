@@ -57,6 +57,29 @@ def acquire(scope: Any, drive_channel: int, velocity_channel: int, record_s: flo
     # The record cannot be complete before it has been acquired: sleep through it, then poll.
     time.sleep(record_s)
     scope.wait_done(timeout_s)
+    return _read(scope, drive_channel, velocity_channel)
+
+
+def acquire_burst(scope: Any, fire: Any, drive_channel: int, velocity_channel: int, settle_s: float,
+                  dwell_s: float, timeout_s: float) -> Records:
+    """Arm the scope, start the generator's burst (``fire()``, a ``*TRG``), record its settled part.
+
+    The scope's record was placed ``settle_s`` after its trigger (the burst's start,
+    :meth:`set_record_delay`), so it holds ``dwell_s`` of the steady response.
+    """
+    scope.single()
+    # a query answered after :SING means the scope has armed: only then may the burst start
+    # (the two instruments are separate links; nothing else orders their commands)
+    confirm = getattr(scope, "query", None)
+    if confirm is not None:
+        confirm("*OPC?")
+    fire()
+    time.sleep(settle_s + dwell_s)
+    scope.wait_done(timeout_s)
+    return _read(scope, drive_channel, velocity_channel)
+
+
+def _read(scope: Any, drive_channel: int, velocity_channel: int) -> Records:
     wd = scope.read_waveform(drive_channel)
     wv = scope.read_waveform(velocity_channel)
     d = np.asarray(wd.volts, dtype=float)

@@ -80,6 +80,7 @@ class Scope(Protocol):
     """A digitiser of the drive and the vibrometer's analog output."""
 
     poll_s: float
+    record_delay: bool          # set_record_delay works on this model
 
     def setup_channel(self, ch: int, volts_per_div: float, offset_v: float = 0.0,
                       coupling: str = "DC") -> None: ...
@@ -91,6 +92,8 @@ class Scope(Protocol):
     def set_record_points(self, points: int) -> None: ...
 
     def set_trigger_at_start(self, record_s: float) -> None: ...
+
+    def set_record_delay(self, record_s: float, delay_s: float) -> None: ...
 
     def single(self) -> None: ...
 

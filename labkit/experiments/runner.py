@@ -49,6 +49,11 @@ from labkit.progress import progress
 #: how long past twice the record an acquisition may take before the scope counts as lost
 #: (a missing trigger; generous because a simulated robot may be computed meanwhile)
 ACQUIRE_MARGIN_S = 10.0
+#: cycles a point's burst runs beyond settle + dwell (the scope's record must end inside it)
+BURST_MARGIN_CYCLES = 2
+#: a point whose measured drive differs from the commanded one by more than this (relative) is
+#: flagged: the generator was changed or switched off outside the run, or its cable came loose
+DRIVE_TOLERANCE = 0.2
 
 
 class InterlockEnd(LimitError):
@@ -85,6 +90,12 @@ class Runner:
         self.interlocks: list[dict[str, Any]] = []
         self.gain_um_per_vpp: dict[float, float] = {}       # shaker: tray response per drive volt
         self.timing: list[dict[str, float]] = []            # per point: total, waited (for the bench)
+        # bounded drive: each acquisition is a finite burst (settle + dwell cycles), armed per point
+        self.bounded = False
+        self.burst_n: int | None = None          # cycles of the armed burst
+        self.burst_end = 0.0                     # time.monotonic() when the last burst ends by itself
+        self.record_delay: tuple[float, float] | None = None   # (record_s, delay_s) set on the scope
+        self.drive_set_vpp: float | None = None  # amplitude commanded (for the measured-drive check)
 
     # -- events ------------------------------------------------------------------------------
     def _event(self, text: str) -> None:
@@ -109,6 +120,7 @@ class Runner:
                 bar.bar_format = "{desc} {percentage:3.0f}%|{bar}| {postfix} [{elapsed}<{remaining}]"
                 bar.set_postfix_str(f"point {n_done}/{plan.points_total}", refresh=False)
                 self._event(f"run started: {len(plan.points)} of {plan.points_total} points to measure")
+                self._declare_bounded(plan)
                 m = self.cfg.method
                 if m.kind == "stepped":
                     self.rig.set_record_points(math.ceil(m.dwell_cycles * self.cfg.scope.samples_per_cycle))
@@ -164,6 +176,92 @@ class Runner:
         if drive_error is not None:
             raise drive_error
         return finish_error
+
+    # -- bounded drive -----------------------------------------------------------------------
+    def _declare_bounded(self, plan: Plan) -> None:
+        """Decide whether each point's drive is a finite burst; say so (console, events, file)."""
+        fg, scope = self.guard.funcgen, self.rig.scope
+        if self.cfg.method.kind == "chirp":
+            why = ("a chirp is a generator sweep, which keeps running between triggers: if this "
+                   "computer dies mid-run, the drive stays on until someone turns it off")
+        elif not callable(getattr(fg, "burst", None)):
+            why = f"the {getattr(fg, 'model', 'generator')} driver has no burst mode"
+        elif not getattr(scope, "record_delay", False):
+            why = f"the {getattr(scope, 'model', 'scope')} driver cannot delay its record past the settling"
+        else:
+            why = ""
+        self.bounded = not why
+        if self.bounded:
+            text = ("drive bounded: each acquisition is a burst of settle + dwell cycles "
+                    f"(+{BURST_MARGIN_CYCLES}); the generator stops by itself at its end")
+        else:
+            text = f"DRIVE NOT BOUNDED: {why}"
+            import sys
+
+            try:        # said even with --quiet: the person must know
+                print(f"labkit: warning: {text}", file=sys.stderr, flush=True)
+            except (OSError, ValueError):
+                pass
+        self._event(text)
+        try:
+            self.file.set_attrs(drive_bounded=self.bounded, drive_bounded_note=text)
+        except Exception:   # the events say it too
+            pass
+
+    def _arm_burst(self, freq_hz: float, settle_s: float, hold_s: float) -> None:
+        """Burst mode with enough cycles for ``settle_s + hold_s`` at ``freq_hz`` (re-armed when it changes)."""
+        if not self.bounded:
+            return
+        n = math.ceil((settle_s + hold_s) * freq_hz) + BURST_MARGIN_CYCLES
+        if n != self.burst_n:
+            self.guard.funcgen.burst(n, trigger_source="BUS")
+            self.burst_n = n
+
+    def _wait_burst_end(self) -> None:
+        """A trigger during a running burst is ignored by the generator: wait for its end."""
+        left = self.burst_end - time.monotonic()
+        if left > 0:
+            time.sleep(left)
+
+    def _fire_burst(self, freq_hz: float) -> float:
+        """Start the armed burst (``*TRG``) once the last one has ended; return the start (monotonic)."""
+        assert self.burst_n is not None
+        self._wait_burst_end()
+        t = time.monotonic()
+        self.guard.funcgen.trigger()
+        self.burst_end = t + self.burst_n / freq_hz + 0.002
+        return t
+
+    def _no_drive_in(self, rec: measure.Records) -> bool:
+        want = self.drive_set_vpp
+        if not want:
+            return False
+        vpp = 2 * math.sqrt(2) * float(np.std(rec.drive_v))     # a sine's Vpp from its rms
+        return bool(vpp < (1 - DRIVE_TOLERANCE) * want)
+
+    def _check_predicted(self, freq_hz: float, x_um: float, vpp: float) -> None:
+        """Interlock (nothing sent) when ``vpp`` is predicted to move the tray ``x_um``, past a limit."""
+        cfg = cast(ShakerConfig, self.cfg)
+        if x_um > cfg.tray_max_um:
+            raise Interlock(f"{vpp:.4g} Vpp would move the tray about {x_um:.3g} um (from the response "
+                            f"measured at a lower drive), above interlock.tray_max_um = {cfg.tray_max_um:g} um;"
+                            " not sent")
+        try:
+            self.rig.check_envelope(freq_hz, x_um)
+        except Interlock as il:
+            raise Interlock(f"{il.reason} (predicted for {vpp:.4g} Vpp from the tray's response "
+                            "at a lower drive)") from None
+
+    def _check_measured_drive(self, ph: measure.SinePhasors) -> None:
+        """Interlock when the drive the scope saw is not the one commanded (off, changed, unplugged)."""
+        want = self.drive_set_vpp
+        if want is None or not want > 0:
+            return
+        got = 2 * abs(ph.drive_v)
+        if not abs(got / want - 1) <= DRIVE_TOLERANCE:
+            raise Interlock(f"drive measured {got:.4g} Vpp, commanded {want:.4g} Vpp (more than "
+                            f"{DRIVE_TOLERANCE:.0%} off): the generator was switched off or changed "
+                            "outside this run, or its cable is loose")
 
     # -- steps -------------------------------------------------------------------------------
     def _move_spot(self, spot: str, *, drive_off: bool) -> None:
@@ -243,6 +341,7 @@ class Runner:
         elif self.freq_set != freq_hz:
             fg.set_frequency(freq_hz)
         self.freq_set = freq_hz
+        self.drive_set_vpp = amp_vpp
 
     def _settle_and_acquire(self, freq_hz: float, settle_s: float, dwell_s: float,
                             t_changed: float) -> tuple[measure.Records, float]:
@@ -254,15 +353,37 @@ class Runner:
         if self.record_s != dwell_s:
             rig.scope.set_timebase(dwell_s)
             self.record_s = dwell_s
-        left = settle_s - (time.monotonic() - t_changed)
-        if left > 0:
-            time.sleep(left)
-        waited = max(left, 0.0)
-        for _attempt in range(4):
+            self.record_delay = None
+        if self.bounded:
+            # each acquisition is its own burst: the response starts from rest at the trigger
+            if self.record_delay != (dwell_s, settle_s):
+                rig.scope.set_record_delay(dwell_s, settle_s)
+                self.record_delay = (dwell_s, settle_s)
+            waited = 0.0
+        else:
+            left = settle_s - (time.monotonic() - t_changed)
+            if left > 0:
+                time.sleep(left)
+            waited = max(left, 0.0)
+        retries = 2      # the scope may miss a burst's start on a loaded machine
+        for _attempt in range(6):
             t_acq = time.monotonic()
-            rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
-                                  timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
-            waited += min(dwell_s, time.monotonic() - t_acq)
+            if self.bounded:
+                self._wait_burst_end()       # before arming: the trigger must follow the arm at once
+                rec = measure.acquire_burst(rig.scope, lambda: self._fire_burst(freq_hz),
+                                            rig.drive_channel, rig.velocity_channel,
+                                            settle_s, dwell_s, timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                waited += min(settle_s + dwell_s, time.monotonic() - t_acq)
+                if retries and self._no_drive_in(rec):
+                    # the scope may have missed the burst's start (it then records silence): once more;
+                    # a drive that is really off is flagged by the caller's measured-drive check
+                    retries -= 1
+                    self._event(f"too little drive in the record at {freq_hz:g} Hz: acquiring once more")
+                    continue
+            else:
+                rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
+                                      timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                waited += min(dwell_s, time.monotonic() - t_acq)
             if rig.vibrometer.over_range():
                 raise Interlock("vibrometer over-range")
             if not rig.velocity_clipped(rec.velocity_v) or not rig.widen_velocity_range():
@@ -271,10 +392,12 @@ class Runner:
 
     def _sine_point(self, p: SinePoint) -> tuple[dict, dict | None, Any]:
         self._set_sine(p.freq_hz, p.amp_vpp, p.offset_v)
+        self._arm_burst(p.freq_hz, p.settle_s, p.dwell_s)     # before the output goes on
         t_changed = time.monotonic()
         self.guard.on()
         rec, waited = self._settle_and_acquire(p.freq_hz, p.settle_s, p.dwell_s, t_changed)
         ph = measure.sine_phasors(rec, p.freq_hz, self.rig.scale_mm_s_per_v)
+        self._check_measured_drive(ph)
         self.timing.append({"waited_s": waited, "settle_s": p.settle_s, "dwell_s": p.dwell_s})
         rows = {"location": p.location, "freq_hz": p.freq_hz, "reason": ""}
         loc = {"location": p.location, "freq_hz": p.freq_hz, "frf": ph.frf, "quality": ph.quality,
@@ -296,6 +419,7 @@ class Runner:
         rig.chirp_timebase(p.length_s)
         rig.set_record_points(math.ceil(p.length_s * p.stop_hz * 10))
         self.record_s = p.length_s
+        self.record_delay = None
         records = []
         try:
             for _ in range(p.averages):
@@ -331,21 +455,29 @@ class Runner:
         f = p.freq_hz
         self._move_spot("tray", drive_off=False)
         waited = 0.0
+        target_vpp = float(p.drive_vpp or 0.0)   # a shaker point has a tray amplitude or a drive
+        gain = self.gain_um_per_vpp.get(f)
         if p.tray_amp_um is not None:
             rig.check_envelope(f, p.tray_amp_um)          # LimitError -> Interlock in rig
-            gain = self.gain_um_per_vpp.get(f)
             vpp = p.tray_amp_um / gain if gain else cfg.control.start_vpp
+        elif gain:
+            # the tray's response per volt at this frequency is known: predict before sending
+            self._check_predicted(f, gain * target_vpp, target_vpp)
+            vpp = target_vpp
         else:
-            vpp = float(p.drive_vpp or 0.0)    # a shaker point has a tray amplitude or a drive
+            # soft start: nothing predicts the tray's travel yet; ramp up while measuring it
+            vpp = min(target_vpp, cfg.control.start_vpp)
         iterations = 0
         while True:
             rig.check_drive(vpp)
             self._set_sine(f, vpp, 0.0)
+            self._arm_burst(f, p.settle_s, p.dwell_s)
             t_changed = time.monotonic()
             self.guard.on()
             rec, w = self._settle_and_acquire(f, p.settle_s, p.dwell_s, t_changed)
             waited += w
             tray = measure.sine_phasors(rec, f, rig.scale_mm_s_per_v)
+            self._check_measured_drive(tray)
             x_um = measure.displacement_um(tray.velocity_mm_s, f)
             iterations += 1
             if x_um > cfg.tray_max_um:
@@ -354,7 +486,15 @@ class Runner:
             rig.check_envelope(f, x_um)
             if x_um > 0:
                 self.gain_um_per_vpp[f] = x_um / vpp
-            if p.tray_amp_um is None or abs(x_um / p.tray_amp_um - 1) <= cfg.control.tolerance:
+            if p.tray_amp_um is None:
+                if vpp >= target_vpp:
+                    reason = ""
+                    break
+                nxt = min(target_vpp, vpp * cfg.control.max_step_ratio)
+                self._check_predicted(f, x_um / vpp * nxt, nxt)
+                vpp = nxt
+                continue
+            if abs(x_um / p.tray_amp_um - 1) <= cfg.control.tolerance:
                 reason = ""
                 break
             if iterations >= p.max_iterations:
@@ -368,12 +508,17 @@ class Runner:
         robot_rec, w = self._settle_and_acquire(f, p.settle_s, p.dwell_s, time.monotonic())
         waited += w
         robot = measure.sine_phasors(robot_rec, f, rig.scale_mm_s_per_v)
+        self._check_measured_drive(robot)
         from labkit.analysis.frf import transmissibility
 
         T, q = transmissibility(robot.velocity_re_drive, tray.velocity_re_drive,
                                 robot_quality=robot.quality, tray_quality=tray.quality)
         video, frames = "", 0
         if p.video_s > 0:
+            if self.bounded:     # one more burst, long enough to settle and film
+                self._arm_burst(f, p.settle_s, p.video_s)
+                self._fire_burst(f)
+                time.sleep(p.settle_s)
             video, frames = self._video(p)
             waited += p.video_s
         self.timing.append({"waited_s": waited})

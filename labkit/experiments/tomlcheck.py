@@ -7,6 +7,7 @@ silently fall back to a default at the bench).
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -50,9 +51,13 @@ class Table:
     def number(self, key: str, *, default: Any = _MISSING, unit: str = "",
                minimum: float | None = None, maximum: float | None = None,
                exclusive_minimum: bool = False) -> float:
+        """A finite number within the bounds (inf or nan never pass: a run would fail mid-way)."""
         kw: dict[str, Any] = {} if default is _MISSING else {"default": default}
-        return get_number(self.data, key, file=self.file, prefix=self.prefix, unit=unit,
-                          minimum=minimum, maximum=maximum, exclusive_minimum=exclusive_minimum, **kw)
+        value = get_number(self.data, key, file=self.file, prefix=self.prefix, unit=unit,
+                           minimum=minimum, maximum=maximum, exclusive_minimum=exclusive_minimum, **kw)
+        if value is not None and key in self.data and not math.isfinite(value):
+            raise self.error(key, f"not finite: {value!r}", "a finite number" + (f" in {unit}" if unit else ""))
+        return value
 
     def integer(self, key: str, *, default: Any = _MISSING, minimum: int | None = None,
                 maximum: int | None = None) -> int:
@@ -127,7 +132,7 @@ class Table:
             raise self.error(name, f"not a number: {item!r}", expected)
         v = float(item)
         low = minimum is not None and (v <= minimum if exclusive_minimum else v < minimum)
-        if low or (maximum is not None and v > maximum) or v != v:
+        if low or (maximum is not None and v > maximum) or not math.isfinite(v):
             raise self.error(name, f"out of range: {v!r}", expected)
         return v
 

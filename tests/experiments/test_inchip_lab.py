@@ -93,7 +93,7 @@ def test_lost_instrument_leaves_output_off(tmp_path, instrument, match):
     out = tmp_path / "lost.h5"
     with VirtualLab(seed=2) as lab:
         # the link drops in the middle of the third point (after the drive is on)
-        lab.inject_fault(instrument, "drop", after=5, match=match)
+        lab.inject_fault(instrument, "drop", after=5 if instrument == "scope" else 9, match=match)
         with pytest.raises(InstrumentError) as err:
             run_session("inchip", cfg, out, lab=lab, quiet=True)
         assert instrument in str(err.value)
