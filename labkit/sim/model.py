@@ -10,20 +10,21 @@ along the mode's direction ``C_i = (Cy_i, Cz_i)`` relative to the leg's
 attachment). All are *deviations from the robot at rest on still ground*
 (the static equilibrium on six pinned feet), so the resting robot is q = 0.
 
-Kinetic energy (M2): the body's, plus for every mode the modal mass ``M_i``
-moving along ``C_i`` with the attachment: ``T = 1/2 m_b (y_b'^2 + z_b'^2) +
-1/2 sum I phi'^2 + sum_ij 1/2 M_i (C_i . r_att,j' + x_ij')^2``. Hence one
+Kinetic energy (M2): the body's, plus for every mode the modal mass ``M_i``, a
+point at the attachment displaced by ``C_i x_ij``: ``T = 1/2 m_b (y_b'^2 +
+z_b'^2) + 1/2 sum I phi'^2 + sum_ij 1/2 M_i |r_att,j' + C_i x_ij'|^2``. Hence one
 constant symmetric positive definite mass matrix ``M = diag(m_b, m_b, I_x,
-I_y, I_z, 0...) + sum_ij M_i w_ij w_ij^T`` with ``w_ij = C_i^T A_j + e_ij``
-(``A_j`` the attachment's 2x5 kinematic matrix). The leg's base excitation
+I_y, I_z, 0...) + sum_ij M_i U_ij^T U_ij`` with ``U_ij = [A_j | C_i e_ij^T]``
+(``A_j`` the attachment's 2x5 kinematic matrix). The robot's rigid-body mass is
+``m_b + sum M_i`` (0.355 mg for the defaults: three modes of half a leg's mass each). The leg's base excitation
 by the body's acceleration and its reaction on the body are the two
 off-diagonal blocks of the same matrix, so they are consistent by
 construction, and with no external force every linear and angular momentum
 ``M[:5] q'`` is conserved.
 
 Potential and forces (M3, M4): modal springs and dampers ``M_i k_i``,
-``M_i b_i`` on the modal coordinates; gravity ``-g (m_b e_z + sum M_i Cz_i
-w_ij)`` (so a falling robot does not deform); the PZT actuator as the
+``M_i b_i`` on the modal coordinates; gravity ``-g (m_b e_z + sum M_i U_ij[z])``, vertical on
+every mass (a falling robot does not deform, and does not drift sideways); the PZT actuator as the
 generalised force ``M_i G_i V(t)`` on ``x_ij`` alone: a force pair between
 leg and body, it changes no momentum.
 
@@ -249,11 +250,15 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
     f_grav[1] = -m_b * g
     for j in range(6):
         for i in range(3):
-            wv = np.zeros(NQ)
-            wv[:NB] = cy[i] * att_y[j] + cz[i] * att_z[j]
-            wv[xi(j, i)] = 1.0
-            mass += m_modal[i] * np.outer(wv, wv)
-            f_grav += -g * m_modal[i] * cz[i] * wv          # M4: gravity on the modal masses
+            # M2: the modal mass is a point at the attachment displaced by C_i x_ij:
+            # velocity U q' with U's rows y and z (2 x NQ)
+            U = np.zeros((2, NQ))
+            U[0, :NB] = att_y[j]
+            U[1, :NB] = att_z[j]
+            U[0, xi(j, i)] = cy[i]
+            U[1, xi(j, i)] = cz[i]
+            mass += m_modal[i] * U.T @ U
+            f_grav += -g * m_modal[i] * U[1]                  # M4: its weight, vertical
     mass = 0.5 * (mass + mass.T)
     stiff = np.zeros(NQ)
     damp = np.zeros(NQ)
@@ -279,11 +284,12 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
     lam_rest = np.zeros(NR)
     lam_rest[:12] = sol[NQ:]
     f_const = f_grav - stiff * q_eq
-    # In-air equilibrium of the legs relative to the body (M4): M_i k_i x = -M_i g Cz_i.
+    # In free fall the legs are undeformed (M4: gravity and the attachment's acceleration
+    # cancel in every modal equation), so a robot released in the air starts there.
     x_air = np.zeros(18)
     for j in range(6):
         for i in range(3):
-            x_air[3 * j + i] = -g * cz[i] / k[i] - q_eq[xi(j, i)]
+            x_air[3 * j + i] = -q_eq[xi(j, i)]
     y_foot_eq = yj + np.array([cy @ q_eq[xi(j, 0):xi(j, 0) + 3] for j in range(6)]) \
         + np.array([att_y[j] @ q_eq[:NB] for j in range(6)])
 

@@ -673,7 +673,7 @@ def release(P, A, S, mode, count, W, o):
                         S[S_SLIP + j] = 1e-300 if lam_y > 0.0 else -1e-300
             else:
                 vy = row_dot(A, 6 + j, S, S_V)
-                if vy * S[S_SLIP + j] < 0.0:      # still sliding against the friction force
+                if vy * S[S_SLIP + j] < 0.0 or cap == 0.0:   # still sliding (or nothing can hold it)
                     S[S_SLIP + j] = cap if S[S_SLIP + j] > 0.0 else -cap
                     if cap == 0.0:
                         S[S_SLIP + j] = 1e-300 if vy < 0.0 else -1e-300

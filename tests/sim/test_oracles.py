@@ -96,13 +96,11 @@ def _stiff(**kw):
 
 
 def _supported_mass_kg(p):
-    """Mass a foot carries on a rigid robot: a sixth of the robot's vertical inertia,
-    the body plus each mode's mass times Cz^2 (docs/model.md M2, M4), computed from the
+    """Mass a foot carries on a rigid robot: a sixth of the robot's mass, the body plus
+    the 18 modal masses (docs/model.md M2, M4), computed from the
     parameters, not from the model."""
-    r = np.array(p.ratio)
-    cz2 = 1 / (1 + r * r)
     m_modal = p.modal_participation * p.leg_mass_mg * 1e-6
-    return (p.body_mass_mg * 1e-6 + 6 * m_modal * cz2.sum()) / 6
+    return (p.body_mass_mg * 1e-6 + 18 * m_modal) / 6
 
 
 @pytest.mark.parametrize("c_ad_n", [0.0, 2e-7])
@@ -119,7 +117,7 @@ def test_liftoff_only_above_table_acceleration_threshold(c_ad_n):
 
     assert below.impacts.sum() == 0
     assert all(below.contact_fraction[f"leg{j}"]["air"] == 0.0 for j in range(1, 7))
-    assert hop_um(below) < 0.01
+    assert hop_um(below) < 0.03                      # the stiff legs' static give
     assert above.impacts.min() > 0 and hop_um(above) > 0.1
 
 
@@ -163,18 +161,17 @@ def test_squeeze_film_settling_matches_closed_form():
 
 
 def test_air_drag_terminal_velocity():
-    """A robot falling in still air reaches v^2 = (m_b + 6 S M) g / (7 a), S = sum Cz^2, M the
-    modal mass: gravity acts on the body and the modal masses (M4), drag on the body and the
-    six feet, which fall with it (the legs keep their in-air shape)."""
+    """A robot falling in still air reaches v^2 = (m_b + 18 M) g / (7 a), M the modal mass:
+    gravity acts on the body and the modal masses (M4), drag on the body and the six feet,
+    which fall with it (the legs keep their free-fall shape)."""
     p = RobotParams(b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, cy_sign=(0, 0, 0))
     mdl = M.build_model(p, Shaker(240, 0.0))
     s = M.air_state(mdl, 0.5)
     dt = 2e-5
     out = run_model(mdl, s, np.zeros(6, np.int8), int(0.4 / dt), dt, every=50)
     v_end = out["state"][M.S_V + 1]
-    S = float(np.sum(mdl.cz ** 2))
     m_modal = p.modal_participation * p.leg_mass_mg * 1e-6
-    v_t = math.sqrt((p.body_mass_mg * 1e-6 + 6 * S * m_modal) * p.g_m_s2 / (7 * p.a_drag_n_s2_m2))
+    v_t = math.sqrt((p.body_mass_mg * 1e-6 + 18 * m_modal) * p.g_m_s2 / (7 * p.a_drag_n_s2_m2))
     assert v_end == pytest.approx(-v_t, rel=1e-3)
     assert out["count"][:6].sum() == 0
 
