@@ -399,6 +399,8 @@ def _fit_lscf(ctx: _Ctx, n_modes: int | None, n_max: int | None, kind: str) -> M
     stab = stabilisation([(c.w, c.H, c.weight) for c in chans], n_max, band)
     lam0 = choose_poles(stab, n_modes, band_hz=band)
     stab.chosen_hz = pole_to_modal(lam0)[0]
+    if len(chans) > 1:
+        _noise_weights(chans)
     if n_modes is not None:
         if lam0.size < n_modes:
             warnings.append(f"the stabilisation diagram offers {lam0.size} of the {n_modes} modes asked for; "
@@ -406,9 +408,6 @@ def _fit_lscf(ctx: _Ctx, n_modes: int | None, n_max: int | None, kind: str) -> M
             lam0 = _grow_to(ctx, lam0, n_modes)
         _check_size(chans, lam0.size, ctx.powers)
         ref = refine(chans, lam0, ctx.powers, band_hz=band, covariance=ctx.covariance)
-        if len(chans) > 1:
-            _reweight(chans, ref, ctx.powers)
-            ref = refine(chans, _poles(ref), ctx.powers, band_hz=band, covariance=ctx.covariance)
         keep, why = _credible(chans, ref, ctx.f_ref)
         for i in np.flatnonzero(~keep):
             warnings.append(f"kept the mode at {ctx.hz(ref.freq_hz[i])} because n_modes = {n_modes} was asked "
@@ -424,10 +423,6 @@ def _fit_lscf(ctx: _Ctx, n_modes: int | None, n_max: int | None, kind: str) -> M
         _check_size(chans, lam0.size, ctx.powers)
         ref = refine(chans, lam0, ctx.powers, band_hz=band, covariance=ctx.covariance)
         ref = _prune(ctx, ref)
-        if len(chans) > 1:
-            # Weight each location by its own noise level (feasible weighted least squares).
-            _reweight(chans, ref, ctx.powers)
-            ref = refine(chans, _poles(ref), ctx.powers, band_hz=band, covariance=ctx.covariance)
         ref = _grow_while_misfit(ctx, ref)
     if not ref.success:
         warnings.append("nonlinear refinement did not converge")
@@ -620,12 +615,11 @@ def _check_size(chans: list[Channel], m: int, powers: Sequence[int]) -> None:
                          expected="more frequency lines or fewer modes")
 
 
-def _reweight(chans: list[Channel], ref: Refined, powers: Sequence[int]) -> None:
-    lam = _poles(ref)
-    for c, p in zip(chans, ref.lin):
-        r = (basis(c.w, lam, powers) @ p - c.H) * c.weight
-        n_par = p.size + 2 * lam.size / len(chans)
-        s = np.sqrt(np.sum(np.abs(r) ** 2) / max(2 * c.w.size - n_par, 1) * 2)
+def _noise_weights(chans: list[Channel]) -> None:
+    """Weight each location by its own noise level estimated from the data (feasible weighted least
+    squares: a noisy location does not pull the common poles as hard as a clean one)."""
+    for c in chans:
+        s = float(np.sqrt(np.median(noise_variance(c.H) * c.weight ** 2)))
         if s > 0:
             c.weight = c.weight / s
 

@@ -198,26 +198,29 @@ def choose_poles(stab: Stabilisation, n_modes: int | None, *, band_hz: tuple[flo
     ix = np.argsort(f)
     f, z, o = f[ix], z[ix], o[ix]
     clusters: list[list[int]] = []
+    stats: list[tuple[float, float]] = []           # per cluster: median frequency and damping
     # Join a pole to the nearest open cluster of similar frequency *and* damping (a spurious,
     # heavily damped pole next to a light mode starts its own cluster instead of splitting the
     # mode's), at most one pole per order in a cluster.
     for i in range(f.size):
         best, best_d = -1, np.inf
         for k in range(len(clusters) - 1, -1, -1):
-            c = clusters[k]
-            fc, zc = float(np.median(f[c])), float(np.median(z[c]))
+            fc, zc = stats[k]
             scale = min(fc, width)
             if (f[i] - fc) / scale > 2 * max(cluster_tol, 0.5 * max(zc, z[i]) * fc / scale):
                 break                                   # clusters further down are further away
             tol = max(cluster_tol, 0.25 * min(zc, z[i]) * fc / scale)
             d = abs(f[i] - fc) / scale
             similar = abs(np.log(max(z[i], 1e-12) / max(zc, 1e-12))) < np.log(3.0)
-            if d < tol and similar and o[i] not in o[c] and d < best_d:
+            if d < tol and similar and d < best_d and o[i] not in o[clusters[k]]:
                 best, best_d = k, d
         if best >= 0:
             clusters[best].append(i)
+            c = clusters[best]
+            stats[best] = (float(np.median(f[c])), float(np.median(z[c])))
         else:
             clusters.append([i])
+            stats.append((float(f[i]), float(z[i])))
     # Poles within 1 % (of the frequency or of the band's width) of a band edge, or whose half-power
     # band reaches past it, stand in for modes outside the band.
     def inside(c: list[int]) -> bool:

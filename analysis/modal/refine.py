@@ -47,6 +47,11 @@ def basis(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> np.ndarray:
     Returns a complex ``(N, 2 modes + 2 len(powers))`` matrix ``B`` with ``H = B @ p``
     for real ``p``.
     """
+    return _basis_ef(w, lam, powers)[0]
+
+
+def _basis_ef(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`basis` and its pole terms ``E = 1 / (j w - lam)``, ``F = 1 / (j w - conj(lam))``."""
     jw = 1j * w[:, None]
     E = 1.0 / (jw - lam[None, :])
     F = 1.0 / (jw - np.conj(lam)[None, :])
@@ -57,7 +62,7 @@ def basis(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> np.ndarray:
         t = (1j * w) ** q
         cols[:, 2 * lam.size + 2 * k] = t
         cols[:, 2 * lam.size + 2 * k + 1] = 1j * t
-    return cols
+    return cols, E, F
 
 
 def _ri(a: np.ndarray) -> np.ndarray:
@@ -112,15 +117,14 @@ def _channel_terms(theta, channels, m, powers, want_jac=True):
     dlam_dz = wn * (-1 - 1j * z / sq)
     out = []
     for k, ch in enumerate(channels):
-        B = basis(ch.w, lam, powers)
+        B, E, F = _basis_ef(ch.w, lam, powers)
         p = lins[k]
         r = (B @ p - ch.H) * ch.weight
         if not want_jac:
             out.append((r, None, None))
             continue
-        jw = 1j * ch.w[:, None]
-        E2 = 1.0 / (jw - lam[None, :]) ** 2
-        F2 = 1.0 / (jw - np.conj(lam)[None, :]) ** 2
+        E2 = E * E
+        F2 = F * F
         R = p[0:2 * m:2] + 1j * p[1:2 * m:2]
         dH_dlam = E2 * R[None, :]
         dH_dlamc = F2 * np.conj(R)[None, :]
