@@ -1,4 +1,13 @@
-"""``labkit calibrate``: fit chosen model parameters to measured speeds (and leg patterns)."""
+"""``labkit calibrate``: fit model parameters to measured speeds (and leg patterns), or to the paper.
+
+* ``labkit calibrate MEASURED... --fit NAMES --out OUT.toml``: least squares on measured speeds
+  (:func:`labkit.sim.calibrate.calibrate`);
+* ``labkit calibrate --paper --out OUT.toml``: the unmeasured parameters against the paper's
+  observations (:func:`labkit.sim.paper.fit.calibrate_paper`); writing
+  ``labkit/sim/presets/paper.toml`` makes the bundled ``paper`` preset;
+* ``labkit calibrate --paper --sensitivity --params paper --out SENS.json``: one-at-a-time
+  sensitivity of every observation around a parameter set (and ``SENS.png``).
+"""
 from __future__ import annotations
 
 import argparse
@@ -24,13 +33,24 @@ def _bound(text: str) -> tuple[str, tuple[float, float]]:
 
 
 def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
-    parser.add_argument("measured", nargs="+", metavar="MEASURED",
+    parser.add_argument("measured", nargs="*", metavar="MEASURED",
                         help="shaker run files and/or track files, or a CSV/HDF5 table with "
                              "freq_hz, speed_mm_s, speed_std_mm_s[, pattern]")
-    parser.add_argument("--fit", dest="names", required=True, metavar="NAMES",
+    parser.add_argument("--fit", dest="names", metavar="NAMES",
                         help="comma-separated RobotParams fields to fit, e.g. c_r,c_ad_n,k_per_s2[1]")
-    parser.add_argument("--params", metavar="ROBOT.toml", help="starting parameters (default: the defaults)")
-    parser.add_argument("--out", required=True, metavar="OUT.toml", help="calibrated parameter file to write")
+    parser.add_argument("--params", metavar="NAME|ROBOT.toml",
+                        help="starting parameters: a preset (published, paper) or a file (default: published)")
+    parser.add_argument("--out", required=True, metavar="OUT.toml",
+                        help="calibrated parameter file to write (with --sensitivity: OUT.json)")
+    paper = parser.add_argument_group("calibration to the paper's observations (--paper)")
+    paper.add_argument("--paper", action="store_true",
+                       help="fit the unmeasured parameters to the paper's observations (no MEASURED, no --fit)")
+    paper.add_argument("--free", metavar="NAMES", help="free parameters (default: all of labkit.sim.paper.fit.FREE)")
+    paper.add_argument("--paper-scan", type=int, default=32, metavar="N", help="Sobol points of the first scan")
+    paper.add_argument("--paper-rounds", type=int, default=2, metavar="N", help="zoom rounds (N/2 points each)")
+    paper.add_argument("--paper-polish", type=int, default=30, metavar="N", help="Nelder-Mead evaluations")
+    paper.add_argument("--sensitivity", action="store_true",
+                       help="with --paper: one-at-a-time sensitivity around --params instead of a fit")
     parser.add_argument("--force", action="store_true", help="replace --out and its .calibration.json")
     parser.add_argument("--amp-um", type=float, help="tray amplitude for speed tables (um)")
     parser.add_argument("--bound", dest="bounds", nargs="+", type=_bound, default=[], metavar="NAME=LO:HI",
@@ -50,11 +70,33 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
 
 
+def _load_params(text: str | None) -> Any:
+    from labkit.sim import RobotParams
+    from labkit.sim.presets import preset, preset_names
+
+    if text is None:
+        return RobotParams()
+    if not Path(text).is_file():
+        if text in preset_names():
+            return preset(text)
+        raise InputError("no such parameter file or preset", file=text, key="--params",
+                         expected="a TOML file or one of " + ", ".join(preset_names()))
+    return RobotParams.from_toml(text)
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.analysis.observations import observations_from_files
-    from labkit.sim import RobotParams
     from labkit.sim.calibrate import calibrate
 
+    if args.paper:
+        return _run_paper(args)
+    if args.sensitivity:
+        raise InputError("--sensitivity needs --paper", key="--sensitivity", expected="--paper --sensitivity")
+    if not args.measured:
+        raise InputError("no measured files", key="MEASURED", expected="shaker run/track files or a speed table "
+                         "(or --paper to calibrate to the paper's observations)")
+    if not args.names:
+        raise InputError("no parameters to fit", key="--fit", expected="e.g. --fit c_r,c_ad_n")
     if not args.duration_s > 0:
         raise InputError("must be > 0", key="--duration-s", expected="a duration in s")
     if not 0 < args.rel_step < 1:
@@ -67,7 +109,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if out.suffix.lower() != ".toml":
         raise InputError("not a .toml path", file=out, key="--out", expected="OUT.toml")
     check_outputs([out, side], force=args.force)         # before any simulation
-    params = RobotParams.from_toml(args.params) if args.params else RobotParams()
+    params = _load_params(args.params)
     obs = observations_from_files(args.measured, amp_um=args.amp_um)
     cal = calibrate(params, names, obs, duration_s=args.duration_s, seed=args.seed, bounds=dict(args.bounds),
                     rel_step=args.rel_step, pattern_weight=args.pattern_weight, max_iterations=args.max_iterations,
@@ -91,3 +133,106 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             print(f"  pattern agreement: {cal.before['pattern_agreement']:.2f} -> {cal.after['pattern_agreement']:.2f}")
         print(f"wrote {out}")
     return summary
+
+
+def _run_paper(args: argparse.Namespace) -> dict[str, Any]:
+    from labkit.sim import RobotParams
+    from labkit.sim.paper.fit import FREE, calibrate_paper, sensitivity
+
+    if args.measured or args.names:
+        raise InputError("--paper fits the paper's observations, not measured files", key="--paper",
+                         expected="no MEASURED and no --fit (use --free to choose parameters)")
+    free = None if not args.free else [n.strip() for n in args.free.split(",") if n.strip()]
+    known = [f.name for f in FREE]
+    for n in free or []:
+        if n not in known:
+            raise InputError(f"unknown free parameter {n!r}", key="--free", expected=", ".join(known))
+    out = Path(args.out)
+    workers = args.workers
+    quiet = args.quiet or args.json
+    if args.sensitivity:
+        if out.suffix.lower() != ".json":
+            raise InputError("not a .json path", file=out, key="--out", expected="SENS.json")
+        png = out.with_suffix(".png")
+        check_outputs([out, png], force=args.force)
+        params = _load_params(args.params)
+        sens = sensitivity(params, RobotParams(), free=free, seed=args.seed, scheduler=args.scheduler,
+                           workers=workers, quiet=quiet)
+        sens["params"] = args.params or "published"
+        with atomic_outputs([out, png]) as (tmp, tmp_png):
+            tmp.write_text(json.dumps(to_jsonable(sens, finite=True), indent=1), encoding="utf-8")
+            _sensitivity_figure(sens, tmp_png)
+        if not args.json:
+            print(f"sensitivity around {sens['params']} (cost {sens['base_cost']:.3f}); x{sens['factor']:g} steps")
+            for r in sens["rows"]:
+                print(f"  {r['parameter']:>20} {r['direction']:>4} -> cost {r['cost']:7.3f}"
+                      + (f"; loses {', '.join(r['lost'])}" if r["lost"] else "")
+                      + (f"; gains {', '.join(r['gained'])}" if r["gained"] else ""))
+            print(f"wrote {out}, {png}")
+        return {"out": str(out), "figure": str(png), **sens}
+    if out.suffix.lower() != ".toml":
+        raise InputError("not a .toml path", file=out, key="--out", expected="OUT.toml")
+    side = out.with_suffix(".calibration.json")
+    check_outputs([out, side], force=args.force)
+    start = _load_params(args.params)
+
+    def log(msg: str) -> None:
+        if not quiet:
+            print(msg, flush=True)
+
+    cal = calibrate_paper(start, free=free, scan=max(1, args.paper_scan), rounds=max(0, args.paper_rounds),
+                          polish=max(0, args.paper_polish), seed=args.seed, scheduler=args.scheduler,
+                          workers=workers, quiet=quiet, log=log)
+    prov = cal.provenance()
+    prov["start_params"] = args.params or "published"
+    summary = {"out": str(out), **cal.summary()}
+    with atomic_outputs([out, side]) as (tmp, tmp_side):
+        cal.params.replace(provenance={}).to_toml(tmp, provenance=prov)
+        tmp_side.write_text(json.dumps(to_jsonable({**summary, "history": cal.history}, finite=True), indent=1),
+                            encoding="utf-8")
+    summary["details"] = str(side)
+    if not args.json:
+        print(f"calibrated {', '.join(f.name for f in cal.free)} to {len(cal.after['violations'])} paper "
+              f"observations ({len(cal.history)} evaluations, {cal.settings['wall_s']:g} s)")
+        for n, v in cal.fitted.items():
+            lo, hi = cal.spread[n]
+            print(f"  {n}: {cal.start[n]:.4g} -> {v:.4g} (near-optimal {lo:.3g} .. {hi:.3g})")
+        print(f"  cost (sum of squared violations): {cal.before['cost']:.3f} -> {cal.after['cost']:.3f}")
+        for k, v in cal.after["violations"].items():
+            b = cal.before["violations"][k]
+            print(f"  {'PASS' if v == 0 else 'FAIL'}  {k}: violation {b:.3g} -> {v:.3g}")
+        if cal.never_together:
+            print("  never met together in the search: "
+                  + "; ".join(f"{a} / {b}" for a, b in cal.never_together))
+        print(f"wrote {out}")
+    return summary
+
+
+def _sensitivity_figure(sens: dict[str, Any], path: Path) -> None:
+    """Heat map: change of each observation's violation per parameter step (rows) and observation (columns)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    ids = list(sens["base"])
+    rows = sens["rows"]
+    d = np.array([[r["violations"][i] - sens["base"][i] for i in ids] for r in rows])
+    fig, ax = plt.subplots(figsize=(9.0, 0.28 * len(rows) + 2.4), dpi=100)
+    try:
+        lim = max(1e-6, float(np.abs(d).max()))
+        im = ax.imshow(d, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
+        ax.set_xticks(range(len(ids)), ids, rotation=60, ha="right", fontsize=6)
+        ax.set_yticks(range(len(rows)), [f"{r['parameter']} {r['direction']}" for r in rows], fontsize=6)
+        for y, r in enumerate(rows):
+            for x, i in enumerate(ids):
+                if i in r["lost"] or i in r["gained"]:
+                    ax.text(x, y, "x" if i in r["lost"] else "o", ha="center", va="center", fontsize=6)
+        fig.colorbar(im, ax=ax, label="change of violation (red: worse)")
+        ax.set_title(f"one-at-a-time sensitivity around {sens.get('params', '')} (x{sens['factor']:g}; "
+                     "x: observation lost, o: gained)", fontsize=8)
+        fig.tight_layout()
+        fig.savefig(path, format="png")
+    finally:
+        plt.close(fig)

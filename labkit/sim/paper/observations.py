@@ -106,12 +106,12 @@ class ObservationCheck:
                 "band": self.band, "source": self.source, "violation": self.violation}
 
 
-def _num(row: Mapping[str, Any], key: str, where: str) -> float | None:
+def _num(row: Mapping[str, Any], key: str, where: str, file: str | Path = TABLE_PATH) -> float | None:
     if key not in row:
         return None
     v = row[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-        raise ConfigError(f"not a finite number: {v!r}", file=str(TABLE_PATH), key=f"{where}.{key}",
+        raise ConfigError(f"not a finite number: {v!r}", file=str(file), key=f"{where}.{key}",
                           expected="a number")
     return float(v)
 
@@ -139,7 +139,7 @@ def parse(table: Mapping[str, Any], *, file: str | Path = TABLE_PATH) -> list[Ob
                               expected=" | ".join(BASES))
         if row["who"] not in WHO:
             raise ConfigError(f"unknown {row['who']!r}", file=str(file), key=f"{where}.who", expected=" | ".join(WHO))
-        low, high = _num(row, "low", where), _num(row, "high", where)
+        low, high = _num(row, "low", where, file), _num(row, "high", where, file)
         if low is None and high is None:
             raise ConfigError("no pass band", file=str(file), key=where, expected="low and/or high")
         if low is not None and high is not None and not low < high:
@@ -149,7 +149,7 @@ def parse(table: Mapping[str, Any], *, file: str | Path = TABLE_PATH) -> list[Ob
         seen.add(row["id"])
         out.append(Observation(id=row["id"], scenario=row["scenario"], metric=row["metric"], source=row["source"],
                                quote=row["quote"], basis=row["basis"], tolerance=row["tolerance"], who=row["who"],
-                               low=low, high=high, paper_value=_num(row, "paper_value", where)))
+                               low=low, high=high, paper_value=_num(row, "paper_value", where, file)))
     return out
 
 
