@@ -193,3 +193,73 @@ def signals_raise() -> Iterator[None]:
 
 #: the former name (SIGTERM only); now every stop signal
 sigterm_raises = signals_raise
+
+
+def turn_off(config: str | None = None, *, model: str | None = None, resource: str | None = None,
+             timeout_s: float = 3.0, attempts: int = 3) -> dict[str, Any]:
+    """``labkit off``: every output of a rig's generator off, confirmed by reading each one back.
+
+    Reads only ``[instruments.funcgen]`` of ``config`` (the rest may be invalid), or takes
+    ``model`` and ``resource``. Returns a summary; raises :class:`labkit.errors.DriveNotOff`
+    (exit 4) when no attempt could confirm every output off, InputError for a config or
+    arguments that name no generator.
+    """
+    from labkit.drivers.registry import open_instrument
+    from labkit.errors import ConfigError, InputError
+    from labkit.experiments.locks import describe, holder
+
+    settings: dict[str, Any] = {}
+    if config is not None:
+        from labkit.tomlio import load_toml
+
+        data, _ = load_toml(config)
+        inst = data.get("instruments")
+        fg_table = inst.get("funcgen") if isinstance(inst, dict) else None
+        if not isinstance(fg_table, dict):
+            raise ConfigError("no generator to turn off", file=config, key="instruments.funcgen",
+                              expected="an [instruments.funcgen] table with model and resource")
+        model = model or fg_table.get("model")
+        resource = resource or fg_table.get("resource")
+        settings = {k: v for k, v in fg_table.items() if k == "channel"}
+        if not isinstance(model, str) or not isinstance(resource, str) or not resource:
+            raise ConfigError("the generator's model or resource is missing", file=config,
+                              key="instruments.funcgen.resource" if model else "instruments.funcgen.model",
+                              expected="model = \"33500B\" (or 33220A, DG1000Z) and resource = \"TCPIP0::...\"")
+    if not model or not resource:
+        raise InputError("no generator named", key="CONFIG", expected="a config file, or --model and --resource")
+    busy = holder("resource:" + resource)
+    where = f"{model} at {resource}"
+    last: Exception | None = None
+    for attempt in range(attempts):
+        fg = None
+        try:
+            fg = open_instrument(model, resource, name="funcgen", timeout_s=timeout_s, **settings)
+            fg.safe_off()                         # every channel, then *OPC?
+            still_on = []
+            for ch in fg.channels:                # read each back
+                reply = fg.query(fg._outp("?", channel=ch)).strip().upper()
+                if reply not in ("0", "OFF", "+0"):
+                    still_on.append(ch)
+            if still_on:
+                raise InstrumentError(f"output(s) {still_on} still read on after OFF", instrument="funcgen",
+                                      command="OUTP?")
+            out: dict[str, Any] = {"ok": True, "instrument": getattr(fg, "instrument_model", None) or model,
+                                   "resource": resource, "channels_off": list(fg.channels),
+                                   "attempts": attempt + 1}
+            if busy:
+                out["in_use_by"] = describe(busy)
+            return out
+        except InputError:
+            raise
+        except InstrumentError as exc:
+            last = exc
+        except OSError as exc:
+            last = exc
+        finally:
+            if fg is not None:
+                try:
+                    fg.close()
+                except Exception:
+                    pass
+        time.sleep(0.2 * (attempt + 1))
+    raise DriveNotOff("funcgen", where, str(last), config=config or "")
