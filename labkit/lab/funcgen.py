@@ -18,6 +18,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from decimal import Decimal
 
 import numpy as np
 
@@ -191,6 +192,15 @@ def _sweep_phase(tau: np.ndarray, f0: float, f1: float, T: float, H: float, R: f
     return out
 
 
+def _nr3(value: float, decimals: int) -> str:
+    """``+9.999000000000000E+01`` for 99.99: the decimal value (15 significant digits, what a
+    double holds for sure) printed with ``decimals`` digits, not the binary float's tail."""
+    if not np.isfinite(value) or value == 0:
+        return f"{value + 0.0:+.{decimals}E}"     # (-0.0 + 0.0 is +0.0)
+    mantissa, exponent = format(Decimal(f"{float(value):.15g}"), f"+.{decimals}E").split("E")
+    return f"{mantissa}E{int(exponent):+03d}"
+
+
 def yes_no(value: object) -> str:
     """A boolean reply: ``1`` or ``0``."""
     return "1" if value else "0"
@@ -277,11 +287,11 @@ class SimKeysight33500B(SimScpiInstrument):
         (``+1.0000000000000E-01``), the infinite load and cycle count as
         ``+9.900000000000000E+37`` (query replies of the 33500B/33600A family).
         """
-        return f"{value:+.15E}"
+        return _nr3(value, 15)
 
     def flevel(self, value: float) -> str:
         """The amplitude/offset/phase reply format (``+1.0000000000000E-01``)."""
-        return f"{value:+.13E}"
+        return _nr3(value, 13)
 
     #: what an infinite load or cycle count answers (SCPI's 9.9E37 for infinity)
     inf_reply = "+9.900000000000000E+37"
@@ -607,7 +617,8 @@ class SimKeysight33500B(SimScpiInstrument):
 
     def _apply_query(self, n: int) -> str:
         d = self.ch[n]
-        return f'"{d.func} {d.freq_hz:+.15E},{self._display_vpp(n):+.15E},{d.offset_v / self._factor(n):+.15E}"'
+        return (f'"{d.func} {self.flevel(d.freq_hz)},{self.flevel(self._display_vpp(n))},'
+                f'{self.flevel(d.offset_v / self._factor(n))}"')
 
     def _trigger(self, channels: list[int], force: bool, source: str = "BUS") -> None:
         """A trigger event: each channel waiting for ``source`` (or any, with ``force``) starts.
@@ -670,6 +681,8 @@ class SimRigolDG1000Z(SimKeysight33500B):
     def flevel(self, value: float) -> str:
         return f"{value:E}"
 
+    inf_reply = "9.900000E+37"
+
     def build(self) -> None:
         super().build()
         S = ":SOURce#:"
@@ -682,6 +695,10 @@ class SimRigolDG1000Z(SimKeysight33500B):
         add(S + "BURSt[:STATe]", set=lambda c: self._update(self._chan(c), burst=parse_bool(c.one())),
             query=lambda c: "ON" if self.ch[self._chan(c)].burst else "OFF")
         add(S + "BURSt:TRIGger:SOURce", set=self._set_rigol_trig, query=self._rigol_trig_query)
+        self.commands = [cmd for cmd in self.commands
+                         if cmd.pattern not in ("[SOURce#:]BURSt:MODE", "[SOURce#:]APPLy")]
+        add(S + "BURSt:MODE", set=self._set_rigol_burst_mode, query=self._rigol_burst_mode_query)
+        add(S + "APPLy", query=lambda c: self._rigol_apply_query(self._chan(c)))
         add(S + "SWEep:TRIGger:SOURce", set=self._set_rigol_trig, query=self._rigol_trig_query)
         add(S + "BURSt:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
         add(S + "SWEep:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
@@ -689,6 +706,27 @@ class SimRigolDG1000Z(SimKeysight33500B):
     def _load_query(self, c: Call) -> str:
         load = self.load[self._chan(c)]
         return "INFINITY" if np.isinf(load) else self.fnum(load)
+
+    def _set_rigol_burst_mode(self, c: Call) -> None:
+        """``TRIGgered`` (N cycles), ``GATed``, ``INFinity`` (cycles until the burst is switched off)."""
+        n = self._chan(c)
+        mode = parse_enum(c.one(), ["TRIGgered", "GATed", "INFinity"])
+        if mode == "INF":
+            self._update(n, burst_gated=False, ncycles=float("inf"))
+        else:
+            cycles = self.ch[n].ncycles
+            self._update(n, burst_gated=mode == "GAT", ncycles=1.0 if np.isinf(cycles) else cycles)
+
+    def _rigol_burst_mode_query(self, c: Call) -> str:
+        d = self.ch[self._chan(c)]
+        return "GAT" if d.burst_gated else ("INF" if np.isinf(d.ncycles) else "TRIG")
+
+    def _rigol_apply_query(self, n: int) -> str:
+        """``"SIN,1.000000E+03,5.000000E+00,0.000000E+00,0.000000E+00"``: function, frequency,
+        amplitude, offset, phase."""
+        d = self.ch[n]
+        values = (d.freq_hz, self._display_vpp(n), d.offset_v / self._factor(n), np.rad2deg(d.phase_rad))
+        return '"' + ",".join([d.func, *(self.fnum(v) for v in values)]) + '"'
 
     def _set_rigol_trig(self, c: Call) -> None:
         word = parse_enum(c.one(), ["INTernal", "EXTernal", "MANual"])
