@@ -163,6 +163,9 @@ class ShakerConfig:
     scale_mm_s_per_v: float
     tray_max_um: float
     on_interlock: str
+    #: declared tray acceleration per volt at the amplifier's output (m/s^2/V, with the payload):
+    #: when given, every drive_vpp point's tray travel is predicted before anything is sent
+    accel_m_s2_per_v: float | None = None
 
     kind = "shaker"
 
@@ -266,7 +269,8 @@ def load_shaker(path: str | Path) -> ShakerConfig:
                                 maximum=cap)
 
     shaker = root.table("shaker", required=False)
-    shaker.only(("model", "payload_kg") + ENVELOPE_KEYS)
+    shaker.only(("model", "payload_kg", "accel_m_s2_per_v") + ENVELOPE_KEYS)
+    accel = shaker.number("accel_m_s2_per_v", default=None, unit="m/s^2 per V", minimum=0, exclusive_minimum=True)
     payload_kg = shaker.number("payload_kg", default=0.0, unit="kg", minimum=0, maximum=10.0)
     envelope = {k: _envelope_value(shaker, k) for k in ENVELOPE_KEYS if k in shaker}
     if envelope.get("freq_min_hz", 0.0) >= envelope.get("freq_max_hz", float("inf")):
@@ -305,7 +309,7 @@ def load_shaker(path: str | Path) -> ShakerConfig:
                                         f"= {tray_max_um:g} um", f"amplitudes <= {tray_max_um:g} um")
     return ShakerConfig(str(path), text, instruments, gain_db, attenuator_db, current_limit_a, max_input_vrms,
                         payload_kg, envelope, freqs, kind, amps, control, method, robot_spot, video_s, scope,
-                        scale, tray_max_um, on_interlock)
+                        scale, tray_max_um, on_interlock, accel)
 
 
 # ----------------------------------------------------------------------------- pieces

@@ -16,6 +16,7 @@ Add a kind by registering one more :class:`ExperimentKind` in :data:`KINDS`.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,9 +127,26 @@ def _shaker_preflight(cfg: ShakerConfig) -> None:
                              f"{env.freq_max_hz:g} Hz; nothing was sent", limit="frequency", file=cfg.path,
                              key=f"grid.freq_hz[{i}]",
                              expected=f"{env.freq_min_hz:g} <= freq_hz <= {env.freq_max_hz:g}")
+    if cfg.amplitude_kind == "drive_vpp" and cfg.accel_m_s2_per_v is not None:
+        # the declared chain predicts the tray's travel: x = a / w^2 with a = sensitivity * gain * V
+        # (the mass line; below the suspension's resonance the tray moves less: conservative)
+        for i, f in enumerate(cfg.freqs_hz):
+            for j, v in enumerate(cfg.amplitudes):
+                x_um = 1e6 * cfg.accel_m_s2_per_v * amp.voltage_gain * v / 2 / (2 * math.pi * f) ** 2
+                key = f"grid.drive_vpp[{j}] at grid.freq_hz[{i}]"
+                if x_um > cfg.tray_max_um:
+                    raise LimitError(f"{v:g} Vpp at {f:g} Hz is predicted to move the tray {x_um:.4g} um "
+                                     f"(declared shaker.accel_m_s2_per_v = {cfg.accel_m_s2_per_v:g}), above "
+                                     f"interlock.tray_max_um = {cfg.tray_max_um:g} um; nothing was sent",
+                                     limit="tray_max_um", file=cfg.path, key=key)
+                try:
+                    env.check(f, x_um, payload_kg=cfg.payload_kg)
+                except LimitError as exc:
+                    raise LimitError(f"{v:g} Vpp at {f:g} Hz is predicted to move the tray {x_um:.4g} um: "
+                                     + exc.message, limit=exc.limit, file=cfg.path, key=key) from None
     if cfg.amplitude_kind == "drive_vpp":
-        # the tray's response per volt is not declared: the runner ramps each point up from
-        # tray_control.start_vpp, measuring the tray and predicting the next step (soft start)
+        # without a declared sensitivity the runner ramps each point up from tray_control.start_vpp,
+        # measuring the tray and predicting the next step (soft start)
         for i, v in enumerate(cfg.amplitudes):
             try:
                 amp.check_input(v)

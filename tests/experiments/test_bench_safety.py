@@ -1,0 +1,242 @@
+"""Bench safety against a virtual lab that outlives the client (issue 18).
+
+The lab runs in this (pytest) process and serves its instruments over real
+TCP sockets and a pty; ``labkit`` runs in a separate process against them, as
+it would against a bench. The lab's own records say when the generator's
+output went on and off and when each triggered burst ended by itself
+(:attr:`VirtualLab.burst_timeline`, :meth:`VirtualLab.drive_idle_after_s`).
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from labcfg import inchip_toml, points_done, shaker_toml, wait_points
+
+from clihelpers import REPO
+from labkit.commands.info import summarise_h5
+from labkit.errors import LimitError
+from labkit.experiments.safety import turn_off
+from labkit.experiments.session import run_session
+from labkit.lab import VirtualLab
+
+FREQS = [float(f) for f in np.round(np.geomspace(500, 3000, 10), 2)]
+SETTLE_S, DWELL_CYCLES = 0.03, 20
+#: the longest a point's burst lasts: settle + dwell at the lowest frequency, plus its margin cycles
+POINT_S = SETTLE_S + DWELL_CYCLES / min(FREQS) + 2 / min(FREQS)
+
+_PLACEHOLDERS = {"funcgen": "TCPIP0::192.0.2.1::5025::SOCKET", "scope": "TCPIP0::192.0.2.2::5025::SOCKET",
+                 "vibrometer": "ASRL/dev/ttyUSB0::INSTR"}
+
+
+@pytest.fixture(scope="module")
+def lab():
+    with VirtualLab(seed=5) as lab:
+        yield lab
+
+
+def on_lab(path: Path, lab: VirtualLab) -> Path:
+    """Point a test config's instruments at a running lab (with its control channel for the spot)."""
+    text = path.read_text()
+    for role, placeholder in _PLACEHOLDERS.items():
+        text = text.replace(placeholder, lab.resources[role])
+    text = text.replace("[instruments.funcgen]",
+                        f'[instruments.control]\nmodel = "LabControl"\nresource = "{lab.resources["control"]}"\n\n'
+                        "[instruments.funcgen]", 1)
+    path.write_text(text)
+    return path
+
+
+def start(cfg: Path, out: Path, *extra: str) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "labkit", "sweep", "inchip", str(cfg), "--out", str(out),
+                             "--quiet", *extra], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+
+
+def rx_count(lab: VirtualLab, instrument: str = "funcgen") -> int:
+    return sum(1 for _, inst, kind, _ in lab.log if inst == instrument and kind == "rx")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGHUP, signal.SIGQUIT, signal.SIGTERM, signal.SIGINT])
+def test_stop_signals_mid_point_turn_the_drive_off_within_a_second(tmp_path, lab, sig):
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
+                             dwell_cycles=DWELL_CYCLES), lab)
+    out = tmp_path / "run.h5"
+    proc = start(cfg, out)
+    try:
+        wait_points(out, 3, proc)
+        time.sleep(0.02)                       # somewhere inside the next point
+        t_sig = lab.now_s()
+        proc.send_signal(sig)
+        _, stderr = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    name = signal.Signals(sig).name
+    assert proc.returncode == 130, stderr
+    assert f"interrupted by {name}" in stderr and "Traceback" not in stderr
+    # the lab's record: the generator carries no signal from at most 1 s after the signal on
+    assert lab.output_state("funcgen", 1) is False
+    assert lab.drive_idle_after_s(1) - t_sig < 1.0
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == f"interrupted: {name}"
+        assert bool(f.attrs["drive_bounded"])
+        n = f["points/index"].shape[0]
+        assert 3 <= n < len(FREQS) and f["locations/hip/freq_hz"].shape[0] == n
+
+
+@pytest.mark.slow
+def test_sigkill_the_burst_stops_by_itself_then_off_and_resume(tmp_path, lab):
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
+                             dwell_cycles=DWELL_CYCLES), lab)
+    out = tmp_path / "run.h5"
+    proc = start(cfg, out)
+    try:
+        wait_points(out, 3, proc)
+        time.sleep(0.02)
+        t_kill = lab.now_s()
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+    # nobody turned the output off, but the point's burst ended by itself within one point
+    assert lab.output_state("funcgen", 1) is True
+    idle = lab.drive_idle_after_s(1)
+    assert idle - t_kill <= POINT_S + 1.0, (idle - t_kill, POINT_S)
+    time.sleep(max(0.0, idle - lab.now_s()) + 0.05)
+    assert lab.drive_idle_after_s(1) == idle            # nothing restarted it
+    # labkit off: the way back to a safe rig
+    done = subprocess.run([sys.executable, "-m", "labkit", "off", str(cfg), "--json"], cwd=REPO,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert lab.output_state("funcgen", 1) is False and lab.output_state("funcgen", 2) is False
+    assert summarise_h5(out)["attrs"]["status"] == "running"
+    summary = run_session("inchip", cfg, None, resume=out, quiet=True)
+    assert summary["status"] == "complete" and summary["points_ok"] == len(FREQS)
+    with h5py.File(out, "r") as f:
+        assert sorted(f["points/index"][...]) == list(range(len(FREQS)))
+
+
+@pytest.mark.slow
+def test_second_run_is_refused_and_the_first_is_unharmed(tmp_path, lab):
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
+                             dwell_cycles=DWELL_CYCLES), lab)
+    out_a, out_b = tmp_path / "a.h5", tmp_path / "b.h5"
+    proc = start(cfg, out_a)
+    try:
+        wait_points(out_a, 2, proc)
+        second = subprocess.run([sys.executable, "-m", "labkit", "sweep", "inchip", str(cfg), "--out", str(out_b)],
+                                cwd=REPO, capture_output=True, text=True, timeout=60)
+        assert points_done(out_a) < len(FREQS), "run A ended before run B tried: test nothing"
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert second.returncode == 2
+    assert f"in use by another run: PID {proc.pid}" in second.stderr and "a.h5" in second.stderr
+    assert "Traceback" not in second.stderr and not out_b.exists()
+    assert proc.returncode == 0, stderr
+    with h5py.File(out_a, "r") as f:
+        assert f.attrs["status"] == "complete"
+        assert list(f["points/status"].asstr()[...]) == ["ok"] * len(FREQS)
+        frf = f["locations/hip/frf"][...]
+        truth = lab.frf("hip", f["locations/hip/freq_hz"][...])
+        assert np.all(np.abs(np.abs(frf) / np.abs(truth) - 1) < 0.1)
+
+
+def test_second_run_sends_nothing(tmp_path, lab):
+    """While a run holds the rig (here: its locks, taken by this process), another is refused before
+    any instrument is opened: the lab receives no command at all."""
+    from labkit.experiments.locks import lock_run
+
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS[:2], locations=("hip",)), lab)
+    before = {inst: rx_count(lab, inst) for inst in ("funcgen", "scope", "vibrometer", "control")}
+    roles = [(r, lab.resources[r]) for r in ("funcgen", "scope", "vibrometer", "control")]
+    with lock_run(roles, tmp_path / "a.h5", str(cfg)):
+        second = subprocess.run([sys.executable, "-m", "labkit", "sweep", "inchip", str(cfg), "--out",
+                                 str(tmp_path / "b.h5")], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert second.returncode == 2 and "is in use by another run" in second.stderr
+    assert f"PID {os.getpid()}" in second.stderr
+    assert {inst: rx_count(lab, inst) for inst in before} == before
+    assert not (tmp_path / "b.h5").exists()
+
+
+@pytest.mark.slow
+def test_output_switched_off_behind_the_runs_back_is_caught(tmp_path, lab):
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
+                             dwell_cycles=DWELL_CYCLES), lab)
+    out = tmp_path / "run.h5"
+    proc = start(cfg, out, "--json")
+    try:
+        wait_points(out, 3, proc)
+        turn_off(model="33500B", resource=lab.resources["funcgen"])     # someone else's connection
+        n_off = points_done(out)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, stderr
+    with h5py.File(out, "r") as f:
+        status = list(f["points/status"].asstr()[...])
+        reasons = list(f["points/reason"].asstr()[...])
+        assert f.attrs["status"] == "complete" and len(status) == len(FREQS)
+        bad = [i for i, s in enumerate(status) if s != "ok"]
+        # the point in progress or the next one is flagged; the run turns the drive back on after it
+        assert len(bad) == 1 and n_off <= bad[0] <= n_off + 1, (bad, n_off)
+        assert "drive measured" in reasons[bad[0]] and "commanded 4 Vpp" in reasons[bad[0]]
+        assert status[bad[0] + 1:] == ["ok"] * (len(FREQS) - bad[0] - 1)
+
+
+def _shaker_cfg(tmp_path: Path, lab: VirtualLab, grid: str, extra: str = "") -> Path:
+    cfg = shaker_toml(tmp_path / "s.toml", [150.0], [10.0])
+    text = cfg.read_text().replace("tray_amp_um = [10]", grid)
+    if extra:
+        text = text.replace("payload_kg = 0.001", "payload_kg = 0.001\n" + extra)
+    cfg.write_text(text)
+    return on_lab(cfg, lab)
+
+
+@pytest.mark.parametrize("grid, extra, key, words", [
+    # 1 Vpp at 5 Hz: below the 4809's 10 Hz
+    ("freq_hz = [5.0]\ndrive_vpp = [1.0]", "", "grid.freq_hz[0]", "outside the 4809 frequency range"),
+    # 2 Vpp at 10 Hz with the declared sensitivity: far beyond the stroke
+    ("freq_hz = [10.0]\ndrive_vpp = [2.0]", "accel_m_s2_per_v = 20.0", "grid.drive_vpp[0] at grid.freq_hz[0]",
+     "predicted to move the tray"),
+])
+def test_shaker_limits_refused_before_any_command(tmp_path, lab, grid, extra, key, words):
+    cfg = _shaker_cfg(tmp_path, lab, grid, extra)
+    cfg.write_text(cfg.read_text().replace("freq_hz = [150]\n", ""))
+    before = {inst: rx_count(lab, inst) for inst in ("funcgen", "scope", "control")}
+    out = tmp_path / "s.h5"
+    with pytest.raises(LimitError) as err:
+        run_session("shaker", cfg, out, quiet=True)
+    assert err.value.key == key and words in err.value.message and err.value.file == str(cfg)
+    assert {inst: rx_count(lab, inst) for inst in before} == before
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_shaker_soft_start_stops_before_the_stroke(tmp_path, lab):
+    """No declared sensitivity: the drive is ramped while the tray is measured; the step that would
+    pass interlock.tray_max_um is never sent."""
+    cfg = _shaker_cfg(tmp_path, lab, "drive_vpp = [2.0]")
+    out = tmp_path / "s.h5"
+    first = len(lab.log)
+    summary = run_session("shaker", cfg, out, quiet=True)
+    assert summary["points_interlocked"] == 1
+    reason = summary["interlocks"][0]["reason"]
+    assert "would move the tray" in reason and "not sent" in reason
+    # every amplitude the generator received kept the tray under the limit (the lab's chain says)
+    worst = 0.0
+    for _, inst, kind, text in lab.log[first:]:
+        if inst == "funcgen" and kind == "rx" and text.startswith("SOUR1:VOLT ") and not text.startswith("SOUR1:VOLT:"):
+            worst = max(worst, lab.chain.tray_amp_um(150.0, float(text.split()[1]) / 2))
+    assert 0 < worst < 60.0
+    assert lab.output_state("funcgen", 1) is False
