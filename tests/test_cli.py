@@ -5,7 +5,7 @@ import h5py
 import numpy as np
 
 from clihelpers import last_json, run_cli
-from labkit.h5io import put, stamp
+from labkit.h5io import SCHEMA_VERSION, put, stamp
 
 
 def test_help_lists_subcommands():
@@ -41,7 +41,7 @@ def test_info_summarises_datasets_with_units(tmp_path):
         put(f.create_group("data"), "speed_mm_s", np.arange(3.0), "mm/s")
     summary = last_json(run_cli("info", str(path), "--json"))
     assert summary["kind"] == "example"
-    assert summary["schema_version"] == 1
+    assert summary["schema_version"] == SCHEMA_VERSION
     assert {"name": "data/speed_mm_s", "shape": [3], "dtype": "float64", "units": "mm/s"} in summary["datasets"]
 
 
