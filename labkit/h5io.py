@@ -82,6 +82,13 @@ def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None):
     try:
         f = h5py.File(path, mode)
     except OSError as exc:
+        if "lock" in str(exc).lower():      # another process has it open for writing: say who
+            from labkit.experiments.locks import describe, file_key, holder
+
+            who = holder(file_key(path))
+            if who is not None:
+                raise InputError(f"being written by another run: {describe(who)}; wait for it to end",
+                                 file=path) from None
         raise InputError(f"not a readable HDF5 file ({exc})", file=path) from None
     if kind is not None:
         found = f.attrs.get("kind")
