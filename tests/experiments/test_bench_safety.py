@@ -22,7 +22,8 @@ from labcfg import inchip_toml, points_done, shaker_toml, wait_points
 
 from clihelpers import REPO
 from labkit.commands.info import summarise_h5
-from labkit.errors import LimitError
+from labkit.errors import InputError, LimitError
+from labkit.experiments.locks import RigBusy
 from labkit.experiments.safety import turn_off
 from labkit.experiments.session import run_session
 from labkit.lab import VirtualLab
@@ -128,15 +129,21 @@ def test_sigkill_the_burst_stops_by_itself_then_off_and_resume(tmp_path, lab):
 
 @pytest.mark.slow
 def test_second_run_is_refused_and_the_first_is_unharmed(tmp_path, lab):
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
+    freqs = [float(f) for f in np.round(np.geomspace(500, 3000, 24), 2)]
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", freqs, locations=("hip",), settle_s=SETTLE_S,
                              dwell_cycles=DWELL_CYCLES), lab)
     out_a, out_b = tmp_path / "a.h5", tmp_path / "b.h5"
     proc = start(cfg, out_a)
     try:
         wait_points(out_a, 2, proc)
+        # the file being written is reported as such (labkit info, --resume)
+        with pytest.raises(InputError, match=f"being written by another run: PID {proc.pid}"):
+            summarise_h5(out_a)
+        with pytest.raises(RigBusy, match=f"run file .*a.h5 is in use by another run: PID {proc.pid}"):
+            run_session("inchip", cfg, None, resume=out_a, quiet=True)
         second = subprocess.run([sys.executable, "-m", "labkit", "sweep", "inchip", str(cfg), "--out", str(out_b)],
                                 cwd=REPO, capture_output=True, text=True, timeout=60)
-        assert points_done(out_a) < len(FREQS), "run A ended before run B tried: test nothing"
+        assert points_done(out_a) < len(freqs), "run A ended before run B tried: test nothing"
         stdout, stderr = proc.communicate(timeout=120)
     finally:
         proc.kill()
@@ -146,7 +153,7 @@ def test_second_run_is_refused_and_the_first_is_unharmed(tmp_path, lab):
     assert proc.returncode == 0, stderr
     with h5py.File(out_a, "r") as f:
         assert f.attrs["status"] == "complete"
-        assert list(f["points/status"].asstr()[...]) == ["ok"] * len(FREQS)
+        assert list(f["points/status"].asstr()[...]) == ["ok"] * len(freqs)
         frf = f["locations/hip/frf"][...]
         truth = lab.frf("hip", f["locations/hip/freq_hz"][...])
         assert np.all(np.abs(np.abs(frf) / np.abs(truth) - 1) < 0.1)
