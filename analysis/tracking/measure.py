@@ -29,6 +29,13 @@ def _otsu(hist: np.ndarray) -> tuple[int, float, float]:
 _KERNELS: dict[int, np.ndarray] = {}
 
 
+def _dilate(img: np.ndarray, r: int) -> np.ndarray:
+    """Grey/binary dilation by a (2r+1)^2 square, as uint8 (typed for mypy: cv2's stubs are loose)."""
+    import cv2
+
+    return np.asarray(cv2.dilate(img, _square(r)), np.uint8)
+
+
 def _square(r: int) -> np.ndarray:
     """A (2r+1)^2 square structuring element (separable, so dilation is cheap)."""
     if r not in _KERNELS:
@@ -91,10 +98,12 @@ class Segmentation:
         cell = max(int(k_px // 6), 2)
         kernel = max(int(np.ceil(k_px / cell)) | 1, 3)
         auto = min_contrast is None
-        if auto:
+        if min_contrast is None:
             # 5 noise sigmas of one pixel: the mean of a chip-sized object is then far beyond noise
-            min_contrast = max(5 * noise, 0.04) if np.isfinite(noise) else 0.08
-        return cls(cell, kernel, float(min_contrast), float(noise), auto, k_px / 1.8)
+            mc = max(5 * noise, 0.04) if np.isfinite(noise) else 0.08
+        else:
+            mc = float(min_contrast)
+        return cls(cell, kernel, float(mc), float(noise), auto, k_px / 1.8)
 
     def ratio(self, win: np.ndarray, flat: np.ndarray | None = None) -> np.ndarray:
         """The window relative to the tray's local level (1 = tray, the chip's reflectance inside)."""
@@ -212,12 +221,12 @@ class _Finder:
         import cv2
 
         m = self.margin
-        band = cv2.dilate(comp, _square(m))
-        outer = cv2.dilate(comp, _square(m + 3))
-        others = binary & (1 - comp)
+        band = _dilate(comp, m)
+        outer = _dilate(comp, m + 3)
+        others = np.asarray(binary & (1 - comp), np.uint8)
         if others.any():
             band &= 1 - others
-            ring = outer & (1 - band) & (1 - cv2.dilate(others, _square(m)))
+            ring = outer & (1 - band) & (1 - _dilate(others, m))
         else:
             ring = outer & (1 - band)
         masked = False
@@ -312,6 +321,18 @@ def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> 
     return float(ends[0] + ends[1])
 
 
+def _wide_blur(img: np.ndarray, sigma: float) -> np.ndarray:
+    """A Gaussian blur of a wide ``sigma``, computed on a grid ``sigma / 4`` coarser and interpolated back."""
+    import cv2
+
+    h, w = img.shape
+    f = max(int(sigma // 4), 1)
+    if f == 1:
+        return np.asarray(cv2.GaussianBlur(img, (0, 0), sigma))
+    small = cv2.resize(img, (max(w // f, 1), max(h // f, 1)), interpolation=cv2.INTER_AREA)
+    return np.asarray(cv2.resize(cv2.GaussianBlur(small, (0, 0), sigma / f), (w, h), interpolation=cv2.INTER_LINEAR))
+
+
 # ----------------------------------------------------------------------------- static structure
 @dataclass
 class StaticScene:
@@ -367,7 +388,8 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
         level = float(np.median(sub[sub > 0.75 * np.percentile(sub, 99)]))
         nrm = smp.astype(np.float32) * np.float32(1.0 / max(level, 1.0))
         peak = nrm if peak is None else np.maximum(peak, nrm)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats((peak < dark_ratio).view(np.uint8), connectivity=8)
+    assert peak is not None
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(np.asarray(peak < dark_ratio, np.uint8), connectivity=8)
     rim = np.zeros((h, w), bool)
     for i in range(1, n):
         x, y, bw, bh, _a = stats[i]
@@ -382,8 +404,11 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     diff = (a - b)[both][::7]
     noise = float(1.4826 * np.median(np.abs(diff - np.median(diff))) / np.sqrt(2)) if diff.size > 100 else 0.01
     thr = seg.min_contrast if not seg.auto else max(6 * noise, 0.04)
-    darks = [(r < 1 - thr).view(np.uint8) & (1 - rim_g) for r in ratios]
-    inter = np.bitwise_and.reduce(darks)
+    rim_keep = np.asarray(1 - rim_g, np.uint8)
+    darks = [np.asarray(r < 1 - thr, np.uint8) & rim_keep for r in ratios]
+    inter = darks[0].copy()
+    for d in darks[1:]:
+        inter &= d
     n, labels, stats, _ = cv2.connectedComponentsWithStats(inter, connectivity=8)
     objects = np.zeros((h, w), np.uint8)
     boxes = []
@@ -391,7 +416,9 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
         # how many samples each pixel is dark in: around a static object (dust) the tray is dark
         # only when the robot passes (a few samples); around a robot that moves slowly (its
         # samples overlap in the middle) it is dark in many
-        count = np.sum(darks, axis=0, dtype=np.int32)
+        dark_count = np.zeros((h, w), np.int32)
+        for d in darks:
+            dark_count += d
         r = int(max(seg.body_width_px / 2, 4))
         for i in range(1, n):
             x, y, bw, bh, area = stats[i]
@@ -399,11 +426,11 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
                 continue      # texture, a speck: never robot-sized, needs no mask
             x0, y0 = max(x - r - 3, 0), max(y - r - 3, 0)
             x1, y1 = min(x + bw + r + 3, w), min(y + bh + r + 3, h)
-            comp = (labels[y0:y1, x0:x1] == i).view(np.uint8)
-            ring = cv2.dilate(comp, _square(r)) & (1 - cv2.dilate(comp, _square(2)))
-            ring_frac = float(count[y0:y1, x0:x1][ring > 0].mean()) / len(darks) if ring.any() else 0.0
+            comp = np.asarray(labels[y0:y1, x0:x1] == i, np.uint8)
+            ring = _dilate(comp, r) & (1 - _dilate(comp, 2))
+            ring_frac = float(dark_count[y0:y1, x0:x1][ring > 0].mean()) / len(darks) if ring.any() else 0.0
             if ring_frac < 0.25:
-                objects[y0:y1, x0:x1] |= cv2.dilate(comp, _square(2))
+                objects[y0:y1, x0:x1] |= _dilate(comp, 2)
                 boxes.append((int(x), int(y), int(bw), int(bh)))
     # the static scene's brightness B: each pixel's mean over the samples where nothing moving is
     # dark within grow_px (static structure -- rim, dust, texture, the ring light's shape -- stays in
@@ -417,13 +444,15 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     # what moves is judged at a higher darkness than the noise (texture dimples are static and must
     # stay in B; a robot's blurred edge below it is covered by the growth)
     thr_b = max(thr, min(0.12, 0.5 * (seg.min_contrast if not seg.auto else 0.24)))
-    for smp, g, r in zip(samples, gains, ratios):
-        moving = (r < 1 - thr_b).view(np.uint8) & ~static.view(np.uint8)
-        clear = 1 - cv2.dilate(moving, grow)
+    for smp, g, rat in zip(samples, gains, ratios):
+        moving = np.asarray(rat < 1 - thr_b, np.uint8) & np.asarray(~static, np.uint8)
+        clear = (1 - np.asarray(cv2.dilate(moving, grow), np.float32))
         total += smp.astype(np.float32) * np.float32(1 / g) * clear
         count += clear
     # the rim (static, never walked on) keeps its mean over all samples
-    flat = np.mean([smp.astype(np.float32) / g for smp, g in zip(samples, gains)], axis=0)
+    flat = np.zeros((h, w), np.float32)
+    for smp, g in zip(samples, gains):
+        flat += smp.astype(np.float32) * np.float32(1 / (g * len(samples)))
     np.divide(total, count, out=flat, where=count > 0)
     holes = (count == 0) & ~rim
     if holes.any():
@@ -435,8 +464,8 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
         sigma = max(seg.body_width_px / 2, 4.0)
         todo = holes.copy()
         for _ in range(6):
-            num = cv2.GaussianBlur(src, (0, 0), sigma)
-            den = cv2.GaussianBlur(known, (0, 0), sigma)
+            num = _wide_blur(src, sigma)
+            den = _wide_blur(known, sigma)
             ok = todo & (den > 1e-3)
             flat[ok] = num[ok] / den[ok]
             todo &= ~ok

@@ -15,6 +15,7 @@ HDF5 layout (``schema_version`` 1)::
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -110,9 +111,14 @@ def load_track_h5(path: str | Path) -> Track:
                       get_json(f, "scale_detail_json", {}))
         return Track(t_s=t, u_px=f["u_px"][()], v_px=f["v_px"][()], heading_rad=f["heading_rad"][()],
                      quality=f["quality"][()], area_px=f["area_px"][()], frame_size=(fw, fh),
-                     roi=tuple(int(v) for v in f.attrs["roi_px"]), scale=scale,
+                     roi=_roi4(f.attrs["roi_px"]), scale=scale,
                      source=str(f.attrs["source_video"]), timestamps_source=str(f.attrs["timestamps_source"]),
                      heading_sense=str(f.attrs["heading_sense"]))
+
+
+def _roi4(v: Any) -> tuple[int, int, int, int]:
+    x, y, w, h = (int(a) for a in v)
+    return (x, y, w, h)
 
 
 def save_track_csv(path: str | Path, track: Track, speed: SpeedResult | None = None) -> Path:
@@ -206,7 +212,7 @@ def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
 
     finite = np.isfinite(pts).all(axis=1)
 
-    def drawn():
+    def drawn() -> Iterator[np.ndarray]:
         # The trajectory grows one segment a frame on a layer of its own, so a long video
         # costs linear, not quadratic, drawing.
         trail: np.ndarray | None = None
