@@ -41,6 +41,33 @@ def test_serve_prints_resources_answers_and_stops_on_sigint(tmp_path):
 
 
 @pytest.mark.slow
+def test_serve_other_models_rigol_and_ofv3001(tmp_path):
+    """Every driver has a counterpart: the Rigol pair and the OFV-3001 are picked on the command line."""
+    proc = subprocess.Popen([sys.executable, "-m", "labkit", "lab", "serve", "--json", "--funcgen", "DG1062Z",
+                             "--scope", "DS1104Z", "--vibrometer", "OFV-3001"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        resources = json.loads(proc.stdout.readline())
+        fg, sc = Raw(resources["funcgen"], 10), Raw(resources["scope"], 10)
+        assert fg.query("*IDN?").split(",")[1] == "DG1062Z" and fg.query(":OUTP1?") == "OFF"
+        assert sc.query("*IDN?").split(",")[1] == "DS1104Z" and sc.query(":SYST:ERR?") == '0,"No error"'
+        fg.close()
+        sc.close()
+        with serial.Serial(resources["vibrometer"][4:-7], 9600, timeout=5) as port:
+            port.write(b"VELO?\n")
+            assert port.readline() == b"3\n"
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130
+    proc = run_cli("lab", "serve", "--funcgen", "33600A", check=2, timeout=60)
+    assert "33600A" in proc.stderr and "DG1062Z" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.slow
 def test_serve_sigterm_also_shuts_down(tmp_path):
     from labkit.lab.client import LabControl
     from labkit.sim import RobotParams

@@ -5,7 +5,7 @@ import time
 
 import numpy as np
 import pytest
-from labhelpers import fit_sine, lab, settle  # noqa: F401  (lab is a fixture)
+from labhelpers import fit_sine, lab, raw, settle  # noqa: F401  (lab, raw are fixtures)
 
 from labkit.drivers.funcgen import Keysight33500B
 from labkit.drivers.scope import InfiniiVision
@@ -104,3 +104,20 @@ def test_vibrometer_faults_on_the_pty(lab):
             vib.scale_mm_s_per_v
         assert time.monotonic() - t0 < 1.5
         assert vib.scale_mm_s_per_v == 125.0      # one reply lost; the next is fine
+
+
+def test_stale_errors_from_an_earlier_program_are_recorded_not_blamed(lab, raw):
+    """The issue's case: an error left in the queue (here by another client) is drained and recorded on
+    connect; the first set_sine then succeeds, and the snapshot says what was there."""
+    other = raw("funcgen")
+    other.write("SOUR1:VOLT:OFFS")          # -109: missing parameter
+    other.write("FREQU 5")                  # -113
+    assert int(other.query("*STB?")) & 4     # the queue holds them
+    with Keysight33500B.open(lab.resources["funcgen"], max_amp_vpp=10, timeout_s=5) as fg:
+        assert fg.errors_at_connect == ['-109,"Missing parameter"', '-113,"Undefined header"']
+        fg.set_sine(1000.0, 1.0, 0.0)        # no InstrumentError: the queue was empty after connect
+        snap = fg.snapshot()
+        assert snap["connect"] == {"instrument_model": "33522B", "channels": 2,
+                                   "errors_at_connect": fg.errors_at_connect}
+        assert fg.read_error_queue() == []
+    assert other.query("*ESR?") == "+0"      # *CLS on connect cleared the event register too
