@@ -109,7 +109,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     """
     from labkit import __version__
     from labkit.h5io import utc_now
-    from labkit.outputs import atomic_output
+    from labkit.outputs import staged_dir
 
     tol = tolerances if isinstance(tolerances, Tolerances) else Tolerances.from_mapping(tolerances)
     out = Path(out_dir)
@@ -137,41 +137,48 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
 
     details: dict[str, Any] = {}
     pattern_pairs: list[dict[str, Any]] = []
-    sections = [_frf_section(out, inchip, fit_data, tol),
-                _stab_section(out, fit_data),
-                _speed_section(out, shaker, track_data, sweeps, tol, details, pattern_pairs),
-                _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simulate_knee,
-                              knee_duration_s, leg, scheduler, workers, quiet, tol, details, pattern_pairs),
-                _pattern_section(pattern_pairs, tol, details),
-                _tracks_section(out, track_data)]
-    rows = [dict(r, section=s.id) for s in sections for r in s.rows]
-    sections.append(_agreement_section(rows, tol, sections))
-    for s in sections:
-        s.verdict = _section_verdict(s)
-        if s.status == "ok":
-            s.provenance = _provenance(s.files, software, command, s.notes)
+    names: list[str] = []           # filled below; staged_dir moves them into ``out`` once all are written
+    # every file goes to a staging folder first: a failure anywhere leaves an old report whole
+    with staged_dir(out, names) as stage:
+        sections = [_frf_section(stage, inchip, fit_data, tol),
+                    _stab_section(stage, fit_data),
+                    _speed_section(stage, shaker, track_data, sweeps, tol, details, pattern_pairs),
+                    _knee_section(stage, shaker, results, sweeps, fit, params, knee_drives, simulate_knee,
+                                  knee_duration_s, leg, scheduler, workers, quiet, tol, details, pattern_pairs),
+                    _pattern_section(pattern_pairs, tol, details),
+                    _tracks_section(stage, track_data)]
+        rows = [dict(r, section=s.id) for s in sections for r in s.rows]
+        sections.append(_agreement_section(rows, tol, sections))
+        for s in sections:
+            s.verdict = _section_verdict(s)
+            if s.status == "ok":
+                s.provenance = _provenance(s.files, software, command, s.notes)
 
-    created = utc_now()
-    headline = _headline(fit_data, details, sections)
-    meta = {"created_utc": created, "software": software, "command": command,
-            "inputs": {"runs": list(map(str, runs)), "tracks": list(map(str, tracks)), "fit": fit,
-                       "sims": list(map(str, sims)), "params": params},
-            "tolerances": tol.as_dict()}
-    html_path = out / "report.html"
-    with atomic_output(html_path) as tmp:       # an old report survives a failed write
-        tmp.write_text(rh.render(title, sections, meta), encoding="utf-8")
-    agreement_path = out / "agreement.json"
-    payload = {"meta": meta, "headline": headline, "agreement": rows,
-               "sections": {s.id: {"status": s.status, "verdict": s.verdict, "provenance": s.provenance}
-                            for s in sections},
-               "details": details}
-    with atomic_output(agreement_path) as tmp:
-        tmp.write_text(json.dumps(_jsonable(payload), indent=1), encoding="utf-8")
-    figure_data_path = out / "figure_data.json"
-    with atomic_output(figure_data_path) as tmp:
-        tmp.write_text(json.dumps(_jsonable({key: {"png": str(f.png), "svg": str(f.svg), "caption": cap, **f.data}
-                                             for s in sections for f, cap, key in s.figures}), indent=1),
-                       encoding="utf-8")
+        created = utc_now()
+        headline = _headline(fit_data, details, sections)
+        meta = {"created_utc": created, "software": software, "command": command,
+                "inputs": {"runs": list(map(str, runs)), "tracks": list(map(str, tracks)), "fit": fit,
+                           "sims": list(map(str, sims)), "params": params},
+                "tolerances": tol.as_dict()}
+        (stage / "report.html").write_text(rh.render(title, sections, meta, headline), encoding="utf-8")
+        # from here on, the figures' paths are where they will be
+        for s in sections:
+            s.figures = [(figs.FigureFiles(out / f.png.name, out / f.svg.name, f.data), cap, key)
+                         for f, cap, key in s.figures]
+        payload = {"meta": meta, "headline": headline, "agreement": rows,
+                   "sections": {s.id: {"status": s.status, "verdict": s.verdict, "provenance": s.provenance}
+                                for s in sections},
+                   "details": details}
+        (stage / "agreement.json").write_text(json.dumps(_jsonable(payload), indent=1), encoding="utf-8")
+        (stage / "figure_data.json").write_text(
+            json.dumps(_jsonable({key: {"png": str(f.png), "svg": str(f.svg), "caption": cap, **f.data}
+                                  for s in sections for f, cap, key in s.figures}), indent=1), encoding="utf-8")
+        names += sorted(p.name for p in stage.iterdir())
+    # figures of an earlier report in this folder that this one did not draw would mislead: remove them
+    for old in out.glob("fig_*.*"):
+        if old.suffix in (".png", ".svg") and old.name not in names:
+            old.unlink()
+    html_path, agreement_path, figure_data_path = out / "report.html", out / "agreement.json", out / "figure_data.json"
     mc = details.get("speed_mc_mean_rms_error_mm_s")
     return {"html": str(html_path), "figures": [str(f.png) for s in sections for f, _, _ in s.figures],
             "svgs": [str(f.svg) for s in sections for f, _, _ in s.figures],
@@ -228,8 +235,8 @@ def _section_verdict(s: Section) -> dict[str, Any]:
         return {"result": "fail", "passed": len(judged) - len(failed), "judged": len(judged),
                 "text": f"Verdict: FAIL: {len(failed)} of {len(judged)} comparisons outside tolerance ({names}{more})."}
     return {"result": "pass", "passed": len(judged), "judged": len(judged),
-            "text": f"Verdict: PASS: {'the' if len(judged) == 1 else f'all {len(judged)}'} comparison"
-                    f"{'' if len(judged) == 1 else 's'} within tolerance."}
+            "text": "Verdict: PASS: " + ("its one comparison is within tolerance." if len(judged) == 1 else
+                                         f"all {len(judged)} comparisons within tolerance.")}
 
 
 # --------------------------------------------------------------------------- FRF and stabilisation
@@ -376,10 +383,6 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
     sec = Section("speed", title)
     sec.files += [r["file"] for r in shaker] + [t["file"] for t in tracks] + [c["file"] for c in curves]
     band = f"{tol.band_lo_pct:g}\u2013{tol.band_hi_pct:g} %"
-    ff = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed")
-    sec.figure(ff, f"Measured speed (markers, 95 % confidence interval) against the simulated nominal robot "
-                   f"(line) and the Monte Carlo {band} band over draws; below, the leg pattern (simulated: the "
-                   f"dominant one over draws and feet; measured: where a knee record or label gives it).")
     for c in curves:
         sec.notes[f"sweep {c['label']}"] = c["describe"]
     msgs = []
@@ -408,6 +411,20 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
                 continue
             _judge_speed(sec, m, c, tol, details, band)
             pattern_pairs += _sweep_pattern_pairs(m, c)
+    note = ""
+    judged = details.get("speed", {})
+    if judged:
+        first = next(iter(judged.values()))
+        nom, cov = first["nominal"], first["coverage"]
+        note = (f"nominal robot: RMS error {format_value(nom['rms_error_mm_s'], 3)} mm/s "
+                f"(relative {format_value(nom['relative_rms_error'], 2)}, tolerance "
+                f"\u2264 {tol.speed_relative_rms_max:g})\n"
+                f"{band} band holds {sum(q['inside_band'] for q in nom['points'])} of {cov['n']} measured points; "
+                f"median percentile in the draws {format_value(cov['median_percentile'], 3)} (50 if unbiased)")
+    ff = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed", note=note)
+    sec.figure(ff, f"Measured speed (markers, 95 % confidence interval) against the simulated nominal robot "
+                   f"(line) and the Monte Carlo {band} band over draws; below, the leg pattern (simulated: the "
+                   f"dominant one over draws and feet; measured: where a knee record or label gives it).")
     sec.message = " ".join(msgs)
     return sec
 
@@ -420,7 +437,8 @@ def _judge_speed(sec: Section, m: dict[str, Any], c: dict[str, Any], tol: Tolera
     a_mc = compare.speed_agreement(m["freq_hz"], m["speed_mm_s"], m["lo_mm_s"], m["hi_mm_s"], c["freq_hz"],
                                    c["mean_mm_s"], c["p10_mm_s"], c["p90_mm_s"], provenance=p)
     pct = compare.draw_percentiles(m["freq_hz"], m["speed_mm_s"], c["freq_hz"], c["draws_mm_s"])
-    cov = compare.coverage(pct, [q["inside_band"] for q in a_nom["points"]], (tol.band_lo_pct, tol.band_hi_pct))
+    cov = compare.coverage(pct.tolist(), [q["inside_band"] for q in a_nom["points"]],
+                           (tol.band_lo_pct, tol.band_hi_pct))
     details.setdefault("speed", {})[c["file"]] = {"nominal": a_nom, "monte_carlo_mean": a_mc, "coverage": cov,
                                                   "percentiles": pct.tolist()}
     details.setdefault("speed_mc_mean_rms_error_mm_s", a_mc["rms_error_mm_s"])
@@ -701,7 +719,8 @@ def _agreement_section(rows: list[dict[str, Any]], tol: Tolerances, sections: li
         return _missing("agreement", title, "Nothing to compare: needs measured and simulated data of the same "
                         "kind (speeds and a frequency sweep, knee records and simulations) or a fit.")
     sec = Section("agreement", title)
-    sec.files = [f for s in sections for f in s.files]
+    # its inputs are the other sections' (listed once each in their provenance): not repeated here
+    sec.notes["inputs"] = "those of the sections above, listed in each section's provenance"
     sec.summarises = rows          # the rows belong to their sections; this one summarises them
     judged = [r for r in rows if r["verdict"] in ("pass", "fail")]
     failed = [r for r in judged if r["verdict"] == "fail"]
@@ -731,7 +750,8 @@ def _headline(fit: dict | None, details: dict[str, Any], sections: list[Section]
                 h[f"{name}_mode{i + 1}_damping_ratio"] = {"label": f"{name} mode {i + 1} damping ratio",
                                                           "value": m.get("damping_ratio"),
                                                           "std": m.get("damping_ratio_std"), "units": "1"}
-            h[f"{name}_fit_quality"] = {"label": f"{name} fit quality", "value": g.get("quality"), "units": "1"}
+            h[f"{name}_fit_quality"] = {"label": f"{name} fit quality (1 - NRMSE\u00b2)", "value": g.get("quality"),
+                                        "units": "1", "digits": 6}
     nom = details.get("speed_nominal")
     if nom:
         h["speed_rms_error_nominal_mm_s"] = {"label": "speed RMS error, nominal robot",

@@ -24,6 +24,7 @@ import numpy as np
 from labkit.analysis.report.numbers import format_uncertain
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
@@ -63,16 +64,45 @@ def _figure(w: float, h: float) -> Figure:
 def _save(fig: Figure, stem: Path, data: dict[str, Any] | None = None) -> FigureFiles:
     import matplotlib
 
-    from labkit.outputs import atomic_output
+    from labkit.outputs import atomic_outputs
 
     png, svg = stem.with_suffix(".png"), stem.with_suffix(".svg")
-    with atomic_output(png) as tmp:             # an old figure survives a failed write
-        fig.savefig(tmp, dpi=PNG_DPI, format="png")
-    # text as <text> (selectable, small); a salt per figure keeps element ids unique when
-    # several SVGs are inlined in one page
-    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": stem.name}), atomic_output(svg) as tmp:
-        fig.savefig(tmp, format="svg")
+    # both or neither (an old pair survives a failed write); text as <text> (selectable, small);
+    # a salt per figure keeps element ids unique when several SVGs are inlined in one page
+    with atomic_outputs([png, svg]) as (tmp_png, tmp_svg):
+        fig.savefig(tmp_png, dpi=PNG_DPI, format="png")
+        with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": stem.name}):
+            fig.savefig(tmp_svg, format="svg")
     return FigureFiles(png, svg, data or {})
+
+
+def log_freq_axis(ax: Axes) -> None:
+    """A log frequency axis labelled in plain numbers (300, 500, 1000, 2000 Hz, not 3x10^2): major
+    ticks at 1, 2, 5 (and 3 when a decade or less is shown) times the powers of ten."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    lo, hi = ax.get_xlim()
+    subs = (1.0, 2.0, 3.0, 5.0) if hi / max(lo, 1e-300) <= 40 else (1.0, 2.0, 5.0)
+    ax.xaxis.set_major_locator(LogLocator(base=10.0, subs=subs))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: f"{x:g}"))
+    ax.xaxis.set_minor_locator(LogLocator(base=10.0, subs=tuple(float(k) for k in range(1, 10))))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
+def wrapped_phase_deg(h: np.ndarray) -> np.ndarray:
+    """Phase in degrees in (-180, 180], NaN inserted where it wraps so a line is not drawn across
+    the plot at a +-180 deg jump. Returns an array one longer per wrap: use with
+    :func:`wrap_x` on the frequencies."""
+    ph = np.degrees(np.angle(np.asarray(h, complex)))
+    jumps = np.flatnonzero(np.abs(np.diff(ph)) > 180.0) + 1
+    return np.insert(ph, jumps, np.nan)
+
+
+def wrap_x(x: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """The abscissae matching :func:`wrapped_phase_deg` (the same NaN-separated breaks)."""
+    ph = np.degrees(np.angle(np.asarray(h, complex)))
+    jumps = np.flatnonzero(np.abs(np.diff(ph)) > 180.0) + 1
+    return np.insert(np.asarray(x, float), jumps, np.nan)
 
 
 def _legend_outside(ax: Axes, **kw: Any) -> None:
@@ -128,13 +158,14 @@ def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]]
         fm = fine.get(loc)
         if fm is not None:
             am.loglog(fm["freq_hz"], np.abs(fm["frf"]), "-", color=c, lw=1.1, zorder=2, label=f"{loc}: fit")
-            ap.semilogx(fm["freq_hz"], np.degrees(np.angle(fm["frf"])), "-", color=c, lw=0.9, zorder=2)
+            ap.semilogx(wrap_x(fm["freq_hz"], fm["frf"]), wrapped_phase_deg(fm["frf"]), "-", color=c, lw=0.9,
+                        zorder=2)
             entry["fit_grid_points"] = int(np.size(fm["freq_hz"]))
             entry["fit_min_abs"] = float(np.min(np.abs(fm["frf"])))
         elif d.get("model_frf") is not None:
             hm = np.asarray(d["model_frf"], complex)
             am.loglog(f, np.abs(hm), "--", color=c, lw=1.0, zorder=2, label=f"{loc}: fit (at the lines only)")
-            ap.semilogx(f, np.degrees(np.angle(hm)), "--", color=c, lw=0.8, zorder=2)
+            ap.semilogx(wrap_x(f, hm), wrapped_phase_deg(hm), "--", color=c, lw=0.8, zorder=2)
             entry["fit_grid_points"] = int(f.size)
         am.loglog(f, np.abs(h), "o", ms=3.0, mfc=c, mec="white", mew=0.3, color=c, zorder=3,
                   label=f"{loc}: measured")
@@ -147,6 +178,7 @@ def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]]
     ap.set_yticks([-180, -90, 0, 90, 180])
     ap.set_ylim(-190, 190)
     ap.set_xlabel("frequency (Hz)")
+    log_freq_axis(ap)
     for ax in (am, ap):
         ax.grid(True, which="major", alpha=0.35)
         ax.grid(True, which="minor", alpha=0.12)
@@ -193,6 +225,7 @@ def stabilisation_figure(stab: dict[str, np.ndarray], stem: Path, locations: dic
         (ln,) = ax.plot(chosen, np.full(chosen.size, top + 1), "*", color="#c0392b", ms=9,
                         label="chosen poles (freq.)")
     ax.set_xscale("log")
+    log_freq_axis(ax)
     ax.set_ylim(0, top + 2.5)
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel("model order")
@@ -230,14 +263,29 @@ def _pattern_strip(ax: Axes, rows: list[tuple[str, np.ndarray, list[str], bool]]
               title="leg pattern", title_fontsize=7.5)
 
 
-def speed_figure(measured: dict[str, Any] | None, sims: list[dict[str, Any]], stem: Path) -> FigureFiles:
+def speed_figure(measured: dict[str, Any] | None, sims: list[dict[str, Any]], stem: Path,
+                 note: str = "") -> FigureFiles:
     """Speed against shaker frequency (Fig. 8): measured points with their intervals, the
     nominal robot as a line, the Monte Carlo 10-90 % band (with its draws count), and the
-    leg patterns as a strip below (simulated dominant pattern; measured where known)."""
-    fig = _figure(8.0, 5.4)
-    ax, strip = fig.subplots(2, 1, sharex=True, height_ratios=[4, 1])
-    data: dict[str, Any] = {"sims": [], "measured_points": 0}
+    leg patterns as a strip below (simulated dominant pattern; measured where known).
+    ``note`` (e.g. the nominal robot's RMS error and the band coverage) is written in the plot."""
     rows: list[tuple[str, np.ndarray, list[str], bool]] = []
+    for s in sims:
+        tag = f" ({s['label']})" if len(sims) > 1 else ""
+        rows.append((f"simulated{tag}", s["freq_hz"], list(s["patterns"]), True))
+    if measured is not None and measured["freq_hz"].size:
+        pats = list(measured.get("patterns", []))
+        known = [i for i, p in enumerate(pats) if p in PATTERN_COLOURS]
+        if known:
+            rows.append(("measured", measured["freq_hz"][known], [pats[i] for i in known], False))
+    fig = _figure(8.0, 5.4 if rows else 4.4)
+    if rows:
+        ax, strip = fig.subplots(2, 1, sharex=True, height_ratios=[4, max(1, len(rows)) * 0.6])
+    else:
+        ax, strip = fig.subplots(), None
+    data: dict[str, Any] = {"sims": [], "measured_points": 0}
+    xs: list[float] = []
+    top = 0.0
     for i, s in enumerate(sims):
         c = SIM_COLOUR if i == 0 else f"C{i + 1}"
         tag = f" ({s['label']})" if len(sims) > 1 else ""
@@ -245,9 +293,13 @@ def speed_figure(measured: dict[str, Any] | None, sims: list[dict[str, Any]], st
                         label=f"Monte Carlo 10\u201390 % ({s['draws']} draws){tag}")
         ax.plot(s["freq_hz"], s["nominal_mm_s"], "-", color=c, lw=1.6, marker=".", ms=4,
                 label=f"simulated, nominal robot{tag}")
-        rows.append((f"sim{tag}", s["freq_hz"], list(s["patterns"]), True))
-        data["sims"].append({"file": s["file"], "freq_hz": np.asarray(s["freq_hz"]).tolist(),
-                             "draws": s["draws"]})
+        data["sims"].append({"file": s["file"], "freq_hz": np.asarray(s["freq_hz"]).tolist(), "draws": s["draws"],
+                             "p10_mm_s": np.asarray(s["p10_mm_s"]).tolist(),
+                             "p90_mm_s": np.asarray(s["p90_mm_s"]).tolist(),
+                             "nominal_mm_s": np.asarray(s["nominal_mm_s"]).tolist(),
+                             "patterns": list(s["patterns"])})
+        xs += [float(np.min(s["freq_hz"])), float(np.max(s["freq_hz"]))]
+        top = max(top, float(np.nanmax(s["p90_mm_s"])), float(np.nanmax(s["nominal_mm_s"])))
     if measured is not None and measured["freq_hz"].size:
         m = measured
         amps = np.asarray(m.get("amp_um", np.full(m["freq_hz"].size, np.nan)), float)
@@ -259,22 +311,30 @@ def speed_figure(measured: dict[str, Any] | None, sims: list[dict[str, Any]], st
             ax.errorbar(m["freq_hz"][sel], m["speed_mm_s"][sel], yerr=np.clip(yerr, 0, None), fmt=marker,
                         color=(MEAS_COLOUR, "#8e44ad", "#16a085", "#7f8c8d")[k % 4], ms=5, capsize=3,
                         zorder=4, label=name)
-        pats = [p for p in m.get("patterns", [])]
-        known = [i for i, p in enumerate(pats) if p in PATTERN_COLOURS]
-        if known:
-            rows.append(("measured", m["freq_hz"][known], [pats[i] for i in known], False))
         data["measured_points"] = int(m["freq_hz"].size)
+        data["measured_freq_hz"] = np.asarray(m["freq_hz"], float).tolist()
+        data["measured_mm_s"] = np.asarray(m["speed_mm_s"], float).tolist()
+        xs += [float(np.min(m["freq_hz"])), float(np.max(m["freq_hz"]))]
+        top = max(top, float(np.nanmax(np.fmax(m["hi_mm_s"], m["speed_mm_s"]))))
+    if xs:
+        lo, hi = min(xs), max(xs)
+        pad = 0.04 * (hi - lo) if hi > lo else 0.1 * abs(lo) + 1.0
+        ax.set_xlim(lo - pad, hi + pad)
     ax.set_ylabel("speed (mm/s)")
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(0, (top if np.isfinite(top) and top > 0 else 1.0) * (1.25 if note else 1.08))
     ax.grid(True, alpha=0.3)
+    if note:
+        ax.text(0.01, 0.98, note, transform=ax.transAxes, fontsize=7.5, va="top", ha="left",
+                bbox={"boxstyle": "round,pad=0.3", "fc": "white", "ec": "0.75", "alpha": 0.9})
     _legend_outside(ax)
-    if rows:
+    if strip is not None:
         _pattern_strip(strip, rows)
+        strip.set_xlabel("shaker frequency (Hz)")
+        strip.grid(True, axis="x", alpha=0.3)
     else:
-        strip.set_axis_off()
-    strip.set_xlabel("shaker frequency (Hz)")
-    strip.grid(True, axis="x", alpha=0.3)
+        ax.set_xlabel("shaker frequency (Hz)")
     ax.set_title("robot speed against shaker frequency", fontsize=10)
+    data["pattern_rows"] = [r[0] for r in rows]
     return _save(fig, stem, data)
 
 
@@ -291,7 +351,7 @@ def tray_aligned_window(t_s: np.ndarray, x: np.ndarray, tray: np.ndarray | None,
     period: the first one in the record, or with ``settled_end`` the last ones.
     Returns ``(t_window_s, x_window, shift_s)``.
     """
-    from labkit.analysis.compare import fundamental
+    from labkit.sim.knee_patterns import fundamental
 
     t = np.asarray(t_s, float)
     period = 1.0 / freq_hz
@@ -307,6 +367,15 @@ def tray_aligned_window(t_s: np.ndarray, x: np.ndarray, tray: np.ndarray | None,
     return tp[sel] - k0, np.asarray(x)[sel], float(phi / (2 * np.pi * freq_hz) - k0)
 
 
+def _drawn_phase_deg(t_s: np.ndarray, x: np.ndarray, freq_hz: float) -> float | None:
+    """Phase (deg) of the drive-frequency component of a trace as drawn (on the drawn time axis)."""
+    from labkit.sim.knee_patterns import fundamental
+
+    if np.size(t_s) < 4:
+        return None
+    return float(np.degrees(fundamental(np.asarray(t_s), np.asarray(x), freq_hz)["phase_rad"]))
+
+
 def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, ncols: int = 3) -> FigureFiles:
     """Small multiples, one panel per drive: the knee's vertical velocity measured and simulated
     overlaid on one tray-aligned time axis, the tray's velocity behind them, and the simulated
@@ -318,8 +387,9 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
     n = len(cases)
     ncols = max(1, min(ncols, n))
     nrows = math.ceil(n / ncols)
-    fig = _figure(3.5 * ncols + 0.4, 3.1 * nrows + 0.7)
-    subs = np.atleast_1d(fig.subfigures(nrows, ncols, wspace=0.02, hspace=0.03)).ravel()
+    fig = _figure(max(3.5 * ncols + 0.4, 5.6), 3.1 * nrows + 0.9)
+    grid = fig.subfigures(nrows, ncols, wspace=0.02, hspace=0.03, squeeze=False)
+    subs = list(np.asarray(grid, dtype=object).ravel())
     cmap = ListedColormap(CONTACT_COLOURS)
     data: dict[str, Any] = {"drives": []}
     for k, sub in enumerate(subs):
@@ -330,12 +400,13 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
         f = float(case["freq_hz"])
         ax, tl = sub.subplots(2, 1, sharex=True, height_ratios=[3, 1])
         meas, sim = case.get("measured"), case.get("simulated")
-        drawn = {"freq_hz": f, "tray_amp_um": case.get("tray_amp_um"), "measured": meas is not None,
+        drawn: dict[str, Any] = {"freq_hz": f, "tray_amp_um": case.get("tray_amp_um"), "measured": meas is not None,
                  "simulated": sim is not None}
         if meas is not None:
             tray = meas.get("tray_vz_mm_s")
             tm, xm, _ = tray_aligned_window(meas["t_s"], meas["knee_vz_mm_s"], tray, f, periods, settled_end=False)
             ax.plot(1e3 * tm, xm, "-", color=MEAS_COLOUR, lw=1.3, zorder=3)
+            drawn["measured_phase_deg"] = _drawn_phase_deg(tm, xm, f)
             if tray is not None:
                 tt, xt, _ = tray_aligned_window(meas["t_s"], tray, tray, f, periods, settled_end=False)
                 ax.plot(1e3 * tt, xt, "-", color="0.6", lw=0.8, zorder=1)
@@ -343,6 +414,7 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
             ts, xs, shift = tray_aligned_window(sim["t_s"], sim["knee_vz_mm_s"], sim["tray_vz_mm_s"], f, periods,
                                                 settled_end=True)
             ax.plot(1e3 * ts, xs, "--", color=SIM_COLOUR, lw=1.3, zorder=4)
+            drawn["simulated_phase_deg"] = _drawn_phase_deg(ts, xs, f)
             if meas is None or meas.get("tray_vz_mm_s") is None:
                 tt, xt, _ = tray_aligned_window(sim["t_s"], sim["tray_vz_mm_s"], sim["tray_vz_mm_s"], f, periods,
                                                 settled_end=True)
@@ -373,11 +445,12 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
         ax.set_title(f"{f:.4g} Hz, tray {case.get('tray_amp_um', float('nan')):.3g} um\n"
                      f"measured: {pm.replace('_', ' ')} | simulated: {ps.replace('_', ' ')}", fontsize=7.5)
         data["drives"].append(drawn)
-    handles = [Line2D([], [], color=MEAS_COLOUR, lw=1.3, label="knee, measured"),
-               Line2D([], [], color=SIM_COLOUR, lw=1.3, ls="--", label="knee, simulated"),
-               Line2D([], [], color="0.6", lw=0.8, label="tray")]
+    handles: list[Artist] = [Line2D([], [], color=MEAS_COLOUR, lw=1.3, label="knee, measured"),
+                             Line2D([], [], color=SIM_COLOUR, lw=1.3, ls="--", label="knee, simulated"),
+                             Line2D([], [], color="0.6", lw=0.8, label="tray")]
     handles += [Patch(color=c, label=f"contact: {nm}") for c, nm in zip(CONTACT_COLOURS, CONTACT_NAMES)]
-    fig.legend(handles=handles, loc="outside upper center", ncol=6, fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="outside upper center", ncol=6 if ncols >= 2 else 3, fontsize=8,
+               frameon=False)
     return _save(fig, stem, data)
 
 

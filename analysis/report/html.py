@@ -27,7 +27,9 @@ p.verdict.pass { border-color: #1e8449; background: #eafaf1; }
 p.verdict.fail { border-color: #c0392b; background: #fdedec; }
 p.verdict.missing { border-color: #e69500; background: #fff4e0; }
 figure { margin: 1em 0; }
-figure svg { max-width: 100%; height: auto; display: block; border: 1px solid #ddd; }
+figure svg { width: 100%; height: auto; display: block; border: 1px solid #ddd; }
+div.summary { border: 1px solid #ccc; background: #fbfbfb; padding: .3em 1em; margin: 1em 0; }
+div.summary table { margin: .5em 0; }
 figcaption { font-size: .9em; color: #444; margin-top: .3em; }
 figcaption .files { color: #777; font-family: ui-monospace, Menlo, Consolas, monospace; font-size: .9em; }
 table { border-collapse: collapse; margin: 1em 0; font-size: .88em; }
@@ -49,7 +51,8 @@ footer { margin-top: 3em; font-size: .8em; color: #777; }
   section:first-of-type h2 { break-before: auto; }
   h2, h3 { break-after: avoid; }
   figure, table, div.provenance, p.verdict { break-inside: avoid; }
-  figure svg { border: none; max-height: 235mm; width: auto; max-width: 100%; }
+  figure svg { border: none; max-height: 235mm; width: 100%; }
+  div.summary { break-inside: avoid; }
   p.verdict { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
   a { color: #000; text-decoration: none; }
 }
@@ -72,7 +75,10 @@ def inline_svg(path: Path, label: str) -> str:
     if start < 0:
         raise ValueError(f"{path} holds no <svg> element")
     svg = text[start:]
-    return re.sub(r"^<svg\b", f'<svg role="img" aria-label="{e(label)}"', svg, count=1)
+    # scale to the page's width, but a small figure (one knee panel) no more than 1.5 times its own size
+    m = re.match(r'<svg\b[^>]*?\bwidth="([0-9.]+)pt"', svg)
+    style = f' style="max-width: min(100%, {float(m.group(1)) * 4 / 3 * 1.5:.0f}px)"' if m else ""
+    return re.sub(r"^<svg\b", f'<svg role="img" aria-label="{e(label)}"{style}', svg, count=1)
 
 
 def fmt(value: Any, digits: int = 4) -> str:
@@ -121,7 +127,30 @@ def provenance_block(p: dict[str, Any]) -> str:
     return "".join(parts)
 
 
-def render(title: str, sections: list[Section], meta: dict[str, Any]) -> str:
+def headline_block(headline: dict[str, Any]) -> str:
+    """The headline numbers (those ``labkit report --compare`` puts side by side) as a table."""
+    from labkit.analysis.report.numbers import format_uncertain
+
+    rows = []
+    for key, h in headline.items():
+        v = h.get("value")
+        if "of" in h:
+            text = f"{format_value(v)} of {h['of']}"
+        elif h.get("std") is not None:
+            text = format_uncertain(v, h["std"])
+        else:
+            text = format_value(v, int(h.get("digits", 4)))
+        rows.append([h.get("label", key), text, h.get("units", "")])
+    if not rows:
+        return ""
+    return ('<div class="summary"><h2 id="summary">Headline numbers</h2>'
+            + table(["quantity", "value", "units"], rows, num_cols={1})
+            + "<p>The same numbers are in <code>agreement.json</code> (<code>headline</code>); "
+              "<code>labkit report --compare A_DIR B_DIR</code> puts two reports' side by side.</p></div>")
+
+
+def render(title: str, sections: list[Section], meta: dict[str, Any],
+           headline: dict[str, Any] | None = None) -> str:
     """The whole page."""
     parts = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
              f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
@@ -130,7 +159,8 @@ def render(title: str, sections: list[Section], meta: dict[str, Any]) -> str:
              f"<p>Generated {e(meta.get('created_utc', ''))} by {e(meta.get('software', 'labkit'))}.</p>",
              "<nav><ul>" + "".join(f'<li><a href="#{e(s.id)}">{e(s.title)}</a>: '
                                    f'{verdict_badge(s.verdict.get("result", "n/a"))}</li>'
-                                   for s in sections) + "</ul></nav>"]
+                                   for s in sections) + "</ul></nav>",
+             headline_block(headline or {})]
     for s in sections:
         cls = "ok" if s.status == "ok" else "missing"
         parts.append(f'<section id="{e(s.id)}" class="{cls}"><h2>{e(s.title)}</h2>')

@@ -37,7 +37,7 @@ def _text(entry: dict[str, Any] | None) -> str:
         return f"{format_value(v)} of {entry['of']}"
     if entry.get("std") is not None:
         return format_uncertain(v, entry["std"], "")
-    return format_value(v, 4)
+    return format_value(v, int(entry.get("digits", 4)))
 
 
 def compare_reports(a_dir: str | Path, b_dir: str | Path) -> dict[str, Any]:
@@ -56,11 +56,11 @@ def compare_reports(a_dir: str | Path, b_dir: str | Path) -> dict[str, Any]:
         ea, eb = ha.get(key), hb.get(key)
         va = ea.get("value") if ea else None
         vb = eb.get("value") if eb else None
-        num = isinstance(va, (int, float)) and isinstance(vb, (int, float))
         any_entry = ea or eb or {}
         rows.append({"key": key, "label": any_entry.get("label", key), "units": any_entry.get("units", ""),
                      "a": va, "b": vb, "a_text": _text(ea), "b_text": _text(eb),
-                     "change": (vb - va) if num else None})
+                     "change": (vb - va) if isinstance(va, (int, float)) and isinstance(vb, (int, float))
+                     else None})
     return {"a": str(a_dir), "b": str(b_dir), "rows": rows}
 
 

@@ -69,3 +69,49 @@ def test_figures_are_png_200_dpi_and_svg_with_text(tmp_path):
         assert dpi[0] == pytest.approx(200, abs=1)
         text = Path(svg).read_text()
         assert text.lstrip().startswith("<?xml") and re.search(r"<text\b", text)   # text kept as text
+
+
+def test_speed_figure_band_is_the_draws_percentiles(inputs, tmp_path):
+    """The speed figure's band is the 10-90 % percentiles of the sweep's draws, its line the nominal
+    robot (draw 0), and the plot states the nominal robot's RMS error (report_data.write_sweep:
+    draws = base x (0.90, 0.95, 1.00, 1.05, 1.10), so linear-interpolated percentiles are 0.92 and
+    1.08 x base)."""
+    import numpy as np
+
+    from labkit.analysis.report import build_report
+
+    tracks = [str(inputs[f"track{i}"]) for i in range(5)]
+    s = build_report(tmp_path / "rep", runs=[str(inputs["shaker"])], tracks=tracks, sims=[str(inputs["sweep"])],
+                     simulate_knee=False)
+    data = json.loads(Path(s["figure_data_json"]).read_text())["fig_speed"]
+    (sim,) = data["sims"]
+    base = np.array([2.0, 3.5, 5.0, 3.0, 3.5, 0.5, 0.0])
+    assert sim["freq_hz"] == [100.0, 150.0, 200.0, 250.0, 300.0, 400.0, 800.0] and sim["draws"] == 5
+    np.testing.assert_allclose(sim["p10_mm_s"], 0.92 * base, rtol=1e-12)
+    np.testing.assert_allclose(sim["p90_mm_s"], 1.08 * base, rtol=1e-12)
+    np.testing.assert_allclose(sim["nominal_mm_s"], 0.90 * base, rtol=1e-12)
+    assert sim["patterns"][1] == "firm_contact" and sim["patterns"][0] == "partial_contact"
+    assert "simulated" in data["pattern_rows"]
+    # the tracked speeds at the run's frequencies (its videos) and the one track carrying its own
+    assert sorted(data["measured_freq_hz"]) == [150.0, 200.0, 250.0, 300.0, 600.0]
+    # the headline number is written in the plot itself, not only in the table
+    nominal = next(r for r in s["agreement"] if r["comparison"].startswith("speed, nominal robot"))
+    rms = nominal["value_text"].split("RMS error ")[1].split(" mm/s")[0]
+    assert f"nominal robot: RMS error {rms} mm/s" in Path(data["svg"]).read_text()
+
+
+def test_knee_traces_share_the_tray_time_axis(inputs, tmp_path):
+    """Measured and simulated knee records start at different times (0.00731 s and 0 s); each is
+    drawn on the axis where its own tray velocity is ``A sin(2 pi f t)``, so a knee moving with
+    the tray (firm contact: 1.05 and 1.1 x the tray) has phase 0 there in both: they do not look
+    out of phase, as they did when each was drawn on its own record's clock."""
+    from labkit.analysis.report import build_report
+
+    s = build_report(tmp_path / "rep", runs=[str(inputs["shaker"])],
+                     sims=[str(inputs["sim_200"]), str(inputs["sim_300"])], simulate_knee=False)
+    drives = {d["freq_hz"]: d for d in json.loads(Path(s["figure_data_json"]).read_text())["fig_knee"]["drives"]}
+    assert sorted(drives) == [200.0, 300.0]
+    firm = drives[200.0]
+    assert firm["measured"] and firm["simulated"]
+    assert firm["measured_phase_deg"] == pytest.approx(0.0, abs=1.0)
+    assert firm["simulated_phase_deg"] == pytest.approx(0.0, abs=1.0)

@@ -177,3 +177,30 @@ def test_report_with_the_real_simulator(inputs, tmp_path):
     mean = np.abs(sw.speeds_mm_s).mean(axis=1)          # magnitudes: measured speed has no sign
     sim_at = np.interp([150.0, 200.0, 250.0, 300.0], sw.values, mean)
     assert speed["rms_error_mm_s"] == pytest.approx(np.sqrt(np.mean((sim_at - SHAKER_SPEED[:4]) ** 2)))
+
+
+def test_failed_report_leaves_the_old_one_whole(inputs, tmp_path, monkeypatch):
+    """All files of a report are written to a staging folder and moved in only when all exist: a
+    failure mid-report (here: the speed figure) leaves the earlier report byte for byte; a new
+    report removes the earlier one's figures that it did not draw."""
+    from labkit.analysis.report import build_report
+    from labkit.analysis.report import figures as figs
+
+    out = tmp_path / "rep"
+    build_report(out, runs=[str(inputs["inchip"])])
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert "fig_frf_run1.svg" in before and "report.html" in before
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    with monkeypatch.context() as m:
+        m.setattr(figs, "speed_figure", broken)
+        with pytest.raises(RuntimeError, match="disk full"):
+            build_report(out, runs=[str(inputs["inchip"])], tracks=[str(inputs["track4"])])
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before     # no staging folder left either
+    s = build_report(out, tracks=[str(inputs["track4"])])
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["agreement.json", "fig_speed.png", "fig_speed.svg", "fig_tracks.png", "fig_tracks.svg",
+                     "figure_data.json", "report.html"]
+    assert s["figures"] == [str(out / "fig_speed.png"), str(out / "fig_tracks.png")]
