@@ -247,3 +247,54 @@ def test_shaker_soft_start_stops_before_the_stroke(tmp_path, lab):
             worst = max(worst, lab.chain.tray_amp_um(150.0, float(text.split()[1]) / 2))
     assert 0 < worst < 60.0
     assert lab.output_state("funcgen", 1) is False
+
+
+def _limit_fsize(soft: int):
+    import resource
+
+    def apply() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, resource.RLIM_INFINITY))
+    return apply
+
+
+def test_preflight_refuses_a_run_that_does_not_fit(tmp_path, lab):
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), keep_raw=True), lab)
+    out = tmp_path / "run.h5"
+    before = rx_count(lab)
+    proc = subprocess.run([sys.executable, "-m", "labkit", "sweep", "inchip", str(cfg), "--out", str(out)],
+                          cwd=REPO, capture_output=True, text=True, timeout=60, preexec_fn=_limit_fsize(1 << 20))
+    assert proc.returncode == 2 and "not enough room for this run" in proc.stderr and "--out" in proc.stderr
+    assert "Traceback" not in proc.stderr and not out.exists() and rx_count(lab) == before
+
+
+@pytest.mark.slow
+def test_disk_full_mid_run_drive_off_file_readable_resume_completes(tmp_path, lab):
+    """The file-size limit is lowered under a running sweep (as a disk filling up): the run stops
+    before a write could fail, with the drive off and every completed point readable."""
+    import resource
+
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
+                             dwell_cycles=DWELL_CYCLES), lab)
+    out = tmp_path / "run.h5"
+    proc = start(cfg, out)
+    try:
+        wait_points(out, 3, proc)
+        soft = out.stat().st_size + 3 * (1 << 19)           # 1.5 MB more: less than the reserve
+        resource.prlimit(proc.pid, resource.RLIMIT_FSIZE, (soft, resource.RLIM_INFINITY))
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 2, stderr
+    assert "not enough room to write the next point" in stderr and "--resume" in stderr
+    assert "Traceback" not in stderr and "Segmentation" not in stderr
+    assert lab.output_state("funcgen", 1) is False
+    info = summarise_h5(out)
+    assert info["attrs"]["status"].startswith("aborted: DiskFull")
+    with h5py.File(out, "r") as f:
+        n = f["points/index"].shape[0]
+        assert 3 <= n < len(FREQS) and f["locations/hip/freq_hz"].shape[0] == n
+        assert np.all(np.isfinite(f["locations/hip/frf"][...]))
+    summary = run_session("inchip", cfg, None, resume=out, quiet=True)    # room again: no limit here
+    assert summary["status"] == "complete" and summary["points_ok"] == len(FREQS)
+    with h5py.File(out, "r") as f:
+        assert sorted(f["points/index"][...]) == list(range(len(FREQS)))
