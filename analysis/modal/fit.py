@@ -343,7 +343,9 @@ def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple
         fit = _fit_sdof(ctx, n_modes, method, kind, n_boot, seed, background is not None)
     if background == "linear+delay":
         # Alternate: the delay with the poles held, then poles and residues with the delay held,
-        # until the delay settles (they are coupled through the background's slope).
+        # until the delay settles.  A delay and the background's slope are the same to first order
+        # (the misfit grows only as the 4th power of the delay's error near the optimum), so the
+        # delay is loosely determined and matters little to the modes.
         for _ in range(20):
             new = _polish_delay(ctx, fit, delay)
             moved = abs(new - delay)
@@ -778,7 +780,7 @@ def _polish_delay(ctx: _Ctx, fit: ModalFit, delay: float) -> float:
 
     The fit's poles and residues are then refitted on the data de-embedded
     with that delay (in ``ctx.chans``, in place).  The delay's own
-    uncertainty is not propagated into the modes'.
+    uncertainty is added to the modes' afterwards (:func:`_delay_uncertainty`).
     """
     from scipy.optimize import minimize_scalar
 

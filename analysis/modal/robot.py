@@ -94,6 +94,7 @@ class RobotFit:
                 "nrmse": {g: f.nrmse for g, f in self.fits.items()},
                 "misfit_to_noise": {g: f.misfit_to_noise for g, f in self.fits.items()},
                 "dominant_mode": {g: f.dominant_mode for g, f in self.fits.items()},
+                "mac": {g: f.mac().tolist() for g, f in self.fits.items() if len(f.locations) > 1 and f.modes},
                 "warnings": list(self.warnings)}
 
     def write(self, out: str | Path, *, figures: bool = True, force: bool = False,

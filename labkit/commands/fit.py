@@ -136,13 +136,18 @@ def _print(s: dict[str, Any]) -> None:
 
     print(f"{'#':>3} {'group':7} {'freq_hz':>12} {'+-':>9} {'zeta':>9} {'+-':>9}  dominant  -> sim mode")
     for m in s["fitted_modes"]:
-        print(f"{m['index']:>3} {m['group']:7} {m['freq_hz']:12.5g} {m['freq_hz_std']:9.2g} "
+        print(f"{m['index']:>3} {m['group']:7} {m['freq_hz']:12.8g} {m['freq_hz_std']:9.2g} "
               f"{m['damping_ratio']:9.4g} {m['damping_ratio_std']:9.2g}  {m['dominant_location']:8} "
               f"-> {m['assigned_to'] if m['assigned_to'] else '-'}")
     for g, ratio in s["misfit_to_noise"].items():
         worst = max(ratio.values()) if ratio else float("nan")
         flag = "  <- WARNING: well above the noise (see the warnings)" if worst > MISFIT_WARN else ""
         print(f"{g}: quality {s['quality'][g]:.4g}, misfit {worst:.3g} x noise{flag}")
+    for g, mac in s.get("mac", {}).items():
+        first = next(m["index"] for m in s["fitted_modes"] if m["group"] == g)
+        print(f"{g}: MAC between its modes (1 = same shape over the locations):")
+        for i, row in enumerate(mac):
+            print(f"  #{first + i:<3}" + " ".join(f"{v:5.2f}" for v in row))
     print(f"assignment: {s['assignment_rule']}")
     print("simulator modes: " + ", ".join(f"{f:.5g} Hz (zeta {z:.3g})"
                                           for f, z in zip(s["modal_freq_hz"], s["modal_damping_ratio"])))
