@@ -184,3 +184,20 @@ def test_stated_uncertainty_covers_the_truth_in_repeated_noisy_trials(case):
     else:
         cf, cz = _coverage(_dip, [1000.0], [0.005], 40, background="linear")
     assert cf >= 0.9 and cz >= 0.9, (cf, cz)
+
+
+def test_automatic_order_adds_a_mode_the_diagram_missed_while_the_misfit_is_above_the_noise(monkeypatch):
+    """With n_modes=None the order rests on the stabilisation diagram *and* on the misfit against the
+    noise level estimated from the data: a mode the diagram's choice misses is added, and said."""
+    import labkit.analysis.modal.fit as modal_fit
+
+    f = np.linspace(200, 2500, 1500)
+    H = synthetic_frf(f, [1000.0, 1600.0], [0.01, 0.01], [[1e6, 0.1e6]], noise=0.002, seed=3)[0]
+    choose = modal_fit.choose_poles
+    monkeypatch.setattr(modal_fit, "choose_poles", lambda stab, n, band_hz=None: choose(stab, n, band_hz=band_hz)[:1])
+    fit = fit_modes(f, H)
+    r = _fz(fit)
+    assert r.shape[0] == 2
+    np.testing.assert_allclose(r[:, 0], [1000.0, 1600.0], rtol=1e-4)
+    assert max(fit.misfit_to_noise.values()) < MISFIT_WARN
+    assert any(w.startswith("added a mode at 1600 Hz") for w in fit.warnings), fit.warnings

@@ -149,10 +149,17 @@ def test_mode_shapes_mac_and_pairing():
     ("bad.csv", "freq,a,b\n1,2,3\n", ["--columns", "f=freq,mag=a"], "--columns"),
     ("bad.uff", "not a universal file\n", [], "bad.uff"),
     ("bad.s1p", "# Hz S RI R 50\nthis is not numbers\n", [], "bad.s1p"),
+    ("time.uff", None, [], "no frequency response function"),
 ])
 def test_bad_files_exit_2_with_one_line(tmp_path, name, content, extra, message):
     path = tmp_path / name
-    path.write_text(content)
+    if content is None:                   # a UFF 58 time history (function type 1), not an FRF
+        pyuff.UFF(str(path)).write_sets([pyuff.prepare_58(
+            func_type=1, rsp_node=1, rsp_dir=3, ref_node=0, ref_dir=0, ord_data_type=4, abscissa_spacing=1,
+            abscissa_spec_data_type=17, ordinate_spec_data_type=12, orddenom_spec_data_type=0,
+            data=np.sin(np.arange(256.0)), x=np.arange(256.0) * 1e-3, num_pts=256, id1="time")], mode="overwrite")
+    else:
+        path.write_text(content)
     proc = run_cli("fit", str(path), *extra, "--out", str(tmp_path / "r.toml"), check=2)
     err = proc.stderr.strip().splitlines()
     assert len(err) == 1 and message in err[0] and "Traceback" not in proc.stderr, proc.stderr
