@@ -298,3 +298,34 @@ def test_disk_full_mid_run_drive_off_file_readable_resume_completes(tmp_path, la
     assert summary["status"] == "complete" and summary["points_ok"] == len(FREQS)
     with h5py.File(out, "r") as f:
         assert sorted(f["points/index"][...]) == list(range(len(FREQS)))
+
+
+@pytest.mark.slow
+def test_unconfirmed_off_is_loud_then_labkit_off_recovers(tmp_path, lab):
+    """The generator's link fails mid-run and every reconnection too: exit 4, a banner naming it and what to do, the
+    original fault too; the file says so; once it answers again, ``labkit off`` turns it off."""
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
+                             dwell_cycles=DWELL_CYCLES, timeout_s=0.4), lab)
+    out = tmp_path / "run.h5"
+    proc = start(cfg, out)
+    try:
+        wait_points(out, 2, proc)
+        lab.inject_fault("funcgen", "drop", count=100_000)     # every link dropped at its next reply
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+        lab.clear_faults()
+    assert proc.returncode == 4, stderr
+    assert "DRIVE MAY STILL BE ON: funcgen" in stderr and lab.resources["funcgen"] in stderr
+    assert "TURN THE GENERATOR OUTPUT OFF BY HAND" in stderr and f"labkit off {cfg}" in stderr
+    # the original fault: the run stopped because the generator timed out
+    assert "the run had stopped because: aborted: InstrumentError: funcgen" in stderr
+    assert "Traceback" not in stderr
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"].endswith("DRIVE OFF NOT CONFIRMED")
+        assert any("DRIVE OFF NOT CONFIRMED" in e for e in f["events/text"].asstr()[...])
+    assert lab.output_state("funcgen", 1) is True         # no OFF got through: it really is on
+    done = subprocess.run([sys.executable, "-m", "labkit", "off", str(cfg)], cwd=REPO, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert "off (confirmed)" in done.stdout and lab.output_state("funcgen", 1) is False
