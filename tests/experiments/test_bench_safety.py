@@ -329,3 +329,37 @@ def test_unconfirmed_off_is_loud_then_labkit_off_recovers(tmp_path, lab):
                           text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert "off (confirmed)" in done.stdout and lab.output_state("funcgen", 1) is False
+
+
+@pytest.mark.parametrize("kind, old, new, key", [
+    ("inchip", "settle_s = 0.04", "settle_s = inf", "method.settle_s"),
+    ("inchip", "settle_s = 0.04", "settle_s = nan", "method.settle_s"),
+    ("inchip", "list_hz = [1000.0", "list_hz = [50e6", "frequencies.list_hz[0]"),
+    ("inchip", "offset_v = 2.0", "offset_v = 2.0\npzt_max_v = 30", "drive.pzt_max_v"),
+    ("inchip", "amp_vpp = 4.0\noffset_v = 2.0", "amp_vpp = 14.0\noffset_v = 5.0\npzt_max_v = 20",
+     "drive.amp_vpp"),
+    ("shaker", "payload_kg = 0.001", "payload_kg = 0.001\nforce_peak_n = 1e6", "shaker.force_peak_n"),
+    ("shaker", "payload_kg = 0.001", "payload_kg = 0.001\nmoving_mass_kg = 0.01", "shaker.moving_mass_kg"),
+    ("shaker", "current_limit_a = 1.0", "current_limit_a = 1.0\nmax_input_vrms = 5", "amplifier.max_input_vrms"),
+    ("shaker", "tray_max_um = 60.0", "tray_max_um = inf", "interlock.tray_max_um"),
+    ("shaker", "tray_max_um = 60.0", "tray_max_um = 9000.0", "interlock.tray_max_um"),
+])
+def test_bad_config_exits_2_naming_file_and_key_nothing_sent(tmp_path, lab, capsys, kind, old, new, key):
+    from labkit.cli import main
+
+    if kind == "inchip":
+        cfg = inchip_toml(tmp_path / "c.toml", [1000.0, 2000.0], locations=("hip",))
+    else:
+        cfg = shaker_toml(tmp_path / "c.toml", [150.0], [10.0])
+    text = cfg.read_text()
+    assert old in text
+    cfg.write_text(text.replace(old, new))
+    on_lab(cfg, lab)
+    before = {inst: rx_count(lab, inst) for inst in ("funcgen", "scope", "control")}
+    out = tmp_path / "run.h5"
+    args = ["sweep", "inchip"] if kind == "inchip" else ["shaker"]
+    assert main([*args, str(cfg), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(cfg) in err[0] and f"key '{key}'" in err[0], err
+    assert {inst: rx_count(lab, inst) for inst in before} == before
+    assert not out.exists()
