@@ -82,13 +82,9 @@ def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None):
     try:
         f = h5py.File(path, mode)
     except OSError as exc:
-        if "lock" in str(exc).lower():      # another process has it open for writing: say who
-            from labkit.experiments.locks import describe, file_key, holder
-
-            who = holder(file_key(path))
-            if who is not None:
-                raise InputError(f"being written by another run: {describe(who)}; wait for it to end",
-                                 file=path) from None
+        if "lock" in str(exc).lower():      # another process has it open for writing
+            raise InputError("being written by another process (a run in progress holds it); read it "
+                             "when that run has ended", file=path) from None
         raise InputError(f"not a readable HDF5 file ({exc})", file=path) from None
     if kind is not None:
         found = f.attrs.get("kind")
@@ -127,7 +123,9 @@ def label_dimensions(group: Any) -> None:
       ``t_s`` dataset (s) first;
     * a simulated sweep's ``values`` gets a copy named after its ``quantity`` (``freq_hz``);
     * in a point table the other columns name ``freq_hz`` (and ``location``) as
-      coordinates (the CF ``coordinates`` attribute, which xarray reads).
+      coordinates (the CF ``coordinates`` attribute, which xarray reads);
+    * a dataset of two or more dimensions with an ``axes`` attribute (``"point, draw, foot"``)
+      gets every dimension labelled (:func:`_label_axes`).
 
     Idempotent; works on empty growing tables (call it when they are created) and on
     finished files (older files can be labelled in place).
@@ -175,3 +173,37 @@ def _label_group(g: Any) -> None:
         others = [c for c in coords if c != name]
         if others:
             v.attrs["coordinates"] = " ".join(others)
+    for v in list(ds.values()):
+        if v.ndim >= 2 and "axes" in v.attrs:
+            _label_axes(g, v, scale)
+
+
+def _label_axes(g: Any, v: Any, axis_scale: Any) -> None:
+    """Label every dimension of a dataset with an ``axes`` attribute (``"point, draw, foot"``).
+
+    Axis ``point`` is the group's axis (a sweep's quantity); another name uses the group's 1-D
+    dataset of that name, or a new index dataset ``0..n-1`` (units ``1``). All or nothing: a
+    netCDF reader refuses a variable with some dimensions labelled and others not.
+    """
+    names = [a.strip() for a in str(v.attrs["axes"]).split(",")]
+    if len(names) != v.ndim:
+        return
+    scales = []
+    for i, nm in enumerate(names):
+        n = v.shape[i]
+        if nm == "point" and axis_scale.ndim == 1 and axis_scale.shape[0] == n:
+            scales.append(axis_scale)
+            continue
+        if not nm.isidentifier() or nm == v.name.rsplit("/", 1)[-1]:
+            return
+        found = g.get(nm)
+        if found is None:
+            found = put(g, nm, np.arange(n), "1")
+        if found.ndim != 1 or found.shape[0] != n:
+            return
+        scales.append(found)
+    for i, sc in enumerate(scales):
+        if not sc.is_scale:
+            sc.make_scale(names[i] if sc is not axis_scale else axis_scale.name.rsplit("/", 1)[-1])
+        if not any(s == sc for s in v.dims[i].values()):
+            v.dims[i].attach_scale(sc)
