@@ -137,7 +137,7 @@ def test_second_run_is_refused_and_the_first_is_unharmed(tmp_path, lab):
     try:
         wait_points(out_a, 2, proc)
         # the file being written is reported as such (labkit info, --resume)
-        with pytest.raises(InputError, match=f"being written by another run: PID {proc.pid}"):
+        with pytest.raises(InputError, match="being written by another process"):
             summarise_h5(out_a)
         with pytest.raises(RigBusy, match=f"run file .*a.h5 is in use by another run: PID {proc.pid}"):
             run_session("inchip", cfg, None, resume=out_a, quiet=True)
