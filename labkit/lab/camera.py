@@ -41,13 +41,16 @@ class Recording:
                 "heading_rad": self.heading_rad}
 
 
-def robot_path(sim: Any, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def robot_path(sim: Any, t_s: np.ndarray, move_s: float = float("inf")
+               ) -> tuple[np.ndarray, np.ndarray, float]:
     """(y_mm, heading_rad, mean speed mm/s) of the robot at the frame times ``t_s``.
 
     ``sim`` is the hybrid simulator's result for the present shaker drive
     (``t_s``, ``body_y_um``, ``body_angles_rad``), or None when the robot does
-    not walk (in-chip, output off, no simulator).
+    not walk (in-chip, output off, no simulator). After ``move_s`` (the end of
+    a triggered burst) the robot stands where it got to.
     """
+    t_s = np.minimum(np.asarray(t_s, float), max(0.0, move_s))
     speed = 0.0
     y_osc = np.zeros(len(t_s))
     yaw = np.zeros(len(t_s))
@@ -71,11 +74,12 @@ def robot_path(sim: Any, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, float
 
 
 def record(path: str | Path, duration_s: float, *, fps: float, seed: int, take: int, sim: Any,
-           shaking: bool) -> Recording:
+           shaking: bool, move_s: float = float("inf")) -> Recording:
     """Render ``duration_s`` of video at ``fps`` to ``path``.
 
     Everything the camera needs is passed in (the lab owns the state): ``sim``
     the simulator's result for the present drive (None: the robot stands),
+    ``move_s`` how long into the clip the drive lasts (a triggered burst),
     ``shaking`` whether the tray vibrates (vibration blur), ``seed`` and
     ``take`` (a counter) make the frame jitter and noise reproducible.
     """
@@ -90,7 +94,7 @@ def record(path: str | Path, duration_s: float, *, fps: float, seed: int, take: 
     t = np.arange(n) / fps + rng.uniform(-FRAME_JITTER_S, FRAME_JITTER_S, n)
     t[0] = 0.0
     t = np.maximum.accumulate(t + np.arange(n) * 1e-6)
-    y, heading, speed = robot_path(sim, t)
+    y, heading, speed = robot_path(sim, t, move_s)
     # the front direction is (-sin h, cos h): walking along it
     dy = np.gradient(y, t) if n > 1 else np.zeros(1)
     x = np.concatenate([[0.0], np.cumsum(-np.sin(heading[1:]) * dy[1:] * np.diff(t))]) if n > 1 else np.zeros(1)

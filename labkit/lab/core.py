@@ -267,10 +267,15 @@ class VirtualLab:
         drive = self.funcgen.drive(1)
         shaker = self.setup == "shaker"
         sim = None
-        if shaker and drive.is_sine():
+        now = time.monotonic()
+        # a sine, also in bursts: the robot walks while the drive carries the sine (until the
+        # end of a triggered burst, if that comes within the clip), then stands
+        moving = shaker and drive.sine_like() and drive.active(now)
+        if moving:
             sim = self._simulation(drive.freq_hz, self.chain.tray_amp_um(drive.freq_hz, drive.amp_v))
         rec = camera.record(path, duration_s, fps=self.camera_fps, seed=self.seed, take=len(self.log),
-                            sim=sim, shaking=shaker and drive.on)
+                            sim=sim, shaking=shaker and drive.active(now),
+                            move_s=drive.idle_after() - now if moving else float("inf"))
         self.last_recording = rec.as_dict()
         self._log("camera", "state", f"recorded {rec.frames} frames to {rec.path} (speed {rec.speed_mm_s:.3f} mm/s)")
         return {"path": rec.path, "frames": rec.frames, "timestamps_s": rec.timestamps_s}
@@ -438,7 +443,7 @@ class VirtualLab:
         if setup == "inchip":
             return float(np.max(np.abs(self.model.frf(spot, freqs))) * peak_v)
         tray = float(np.max(np.abs(self.chain.tray_velocity_frf(freqs))) * peak_v)
-        if spot == "tray" or not drive.is_sine():
+        if spot == "tray" or not drive.sine_like():
             return tray
         res = self._simulation(drive.freq_hz, self.chain.tray_amp_um(drive.freq_hz, drive.amp_v))
         if res is None:
@@ -498,9 +503,13 @@ class VirtualLab:
         return t, np.gradient(z, t) * 1e-3
 
     def _robot_velocity(self, spot: str, drive: Drive, t_abs: np.ndarray, tray: np.ndarray) -> np.ndarray:
-        if not drive.is_sine():
+        if not drive.sine_like():
             # the hybrid simulator is run for sines only; other drives: the robot rides the tray
             return tray
+        # inside a burst of a sine the robot moves as under the continuous sine, in phase with the
+        # burst's own start (a documented simplification: no start-up transient); outside, it rides
+        # the tray (whose response, transients included, is the linear simulation)
+        inside, epoch = drive.burst_epochs(t_abs)
         f = drive.freq_hz
         res = self._simulation(f, self.chain.tray_amp_um(f, drive.amp_v))
         if res is None:
@@ -513,10 +522,10 @@ class VirtualLab:
         # the lab's tray displacement phase: drive phase + shaker phase (velocity -> displacement)
         h = complex(np.ravel(self.chain.tray_velocity_frf(f))[0])
         phi_lab = drive.phase_rad + np.angle(h) - np.pi / 2
-        tau = (t_abs - drive.t_epoch) + (phi_lab - phi_g) / w
+        tau = (t_abs - epoch) + (phi_lab - phi_g) / w
         # wrap into the simulation's settled part, a whole number of drive periods long
         start = t_sim[-1] / 3
         n_per = max(1, int(np.floor((t_sim[-1] - start) * f)))
         span = n_per / f
         tau = start + np.mod(tau - start, span)
-        return np.interp(tau, t_sim, v_sim)
+        return np.where(inside, np.interp(tau, t_sim, v_sim), tray)

@@ -66,6 +66,31 @@ class Drive:
         """A plain continuous sine (the analytic steady state applies)."""
         return self.on and self.func == "SIN" and not self.sweep and not self.burst
 
+    def sine_like(self) -> bool:
+        """A sine, continuous or in (triggered or internally repeated) bursts: inside a burst the
+        steady state of the continuous sine applies (a gated burst has no gate signal: silent)."""
+        return self.on and self.func == "SIN" and not self.sweep and not (self.burst and self.burst_gated)
+
+    def active(self, t: float) -> bool:
+        """The output carries a signal at absolute time ``t`` (on, and not past its last burst)."""
+        return self.on and t < self.idle_after() and (not self.burst or self.trig_source == "IMM"
+                                                      or any(s <= t for s in self.trig_times))
+
+    def burst_epochs(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(inside, epoch) per sample: whether it lies inside a burst (always, without bursts) and the
+        time the sine's phase counts from there (the burst's start; :attr:`t_epoch` otherwise)."""
+        t = np.asarray(t, dtype=float)
+        if not self.burst:
+            return np.ones(t.shape, dtype=bool), np.full(t.shape, self.t_epoch)
+        inside = np.zeros(t.shape, dtype=bool)
+        epoch = np.full(t.shape, self.t_epoch)
+        length = self.burst_length_s()
+        for s in self.starts(float(t.min()), float(t.max())):
+            sel = (t >= s) & (t < s + length)
+            inside |= sel
+            epoch[sel] = s
+        return inside, epoch
+
     def burst_length_s(self) -> float:
         """Duration of one burst (inf for ``BURS:NCYC INF``)."""
         return float(self.ncycles) / self.freq_hz
@@ -112,6 +137,10 @@ class Drive:
         """Time of the next sync pulse at or after ``t_min`` (scope trigger), or None."""
         if not self.on:
             return None
+        if (self.sweep or self.burst) and self.trig_source != "IMM":
+            # a BUS/EXT trigger may come at any time after the scope armed: every later one counts
+            later_trig = [t for t in self.trig_times if t >= max(t_min, self.t_epoch)]
+            return later_trig[0] if later_trig else None
         if self.sweep or self.burst:
             starts = self.starts(t_min, t_min + 2 * self._period())
             later = starts[starts >= t_min]

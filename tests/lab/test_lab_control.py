@@ -118,3 +118,73 @@ def test_camera_bad_directory_is_a_clear_error(lab, tmp_path):
         with pytest.raises(InstrumentError, match="camera: no such directory"):
             ctl.record_video(tmp_path / "missing" / "clip.avi", 0.2)
         assert time.monotonic() - t0 < 1.0
+
+
+def test_a_late_bus_triggered_sine_burst_moves_the_robot_like_the_sine(lab, raw):
+    """The scope armed on EXT sees a *TRG that comes well after :SING (not only within 20 ms), and inside
+    the burst the knee moves as under the continuous sine (the simulator's answer), not with the tray."""
+    fg, sc = raw("funcgen"), raw("scope")
+    lab.set_setup("shaker")
+    lab.set_spot("knee")
+    freq_hz, amp_um = 240.0, 25.0
+    vpp = 2 * amp_um / lab.chain.tray_amp_um(freq_hz, 1.0)
+    fg.write("OUTP1:LOAD INF")
+    fg.write(f"SOUR1:FUNC SIN;FREQ {freq_hz};VOLT {vpp};VOLT:OFFS 0")
+    fg.write("SOUR1:BURS:MODE TRIG;NCYC 96;STAT ON;:TRIG1:SOUR BUS;:OUTP1 ON")
+    assert fg.query("SYST:ERR?") == '+0,"No error"'
+    settle = lab.chain.settle_s()
+    sc.write(":CHAN1:DISP 1;:CHAN2:DISP 1;:CHAN3:DISP 1;:TRIG:SWE NORM;:TRIG:EDGE:SOUR EXT")
+    sc.write(f":TIM:RANG 0.05;REF LEFT;POS {settle + 0.005 + 0.1 * 0.05}")
+    sc.write(":WAV:POIN:MODE RAW;:WAV:POIN 20000;:SING")
+    time.sleep(0.1)                          # the trigger comes 100 ms after the scope armed
+    fg.write("*TRG")
+    for _ in range(1000):
+        if not int(sc.query(":OPER:COND?")) & 8:
+            break
+        time.sleep(0.01)
+    assert sc.query(":TER?") == "+1"
+    scale = lab.vibrometer.scale_mm_s_per_v
+    t, drive = read_word(sc, 1)
+    _, knee = read_word(sc, 2)
+    _, tray = read_word(sc, 3)
+    assert abs(fit_sine(t, drive, freq_hz)) == pytest.approx(vpp / 2, rel=0.02)   # inside the burst
+    tray_v = fit_sine(t, tray * scale, freq_hz)
+    assert abs(tray_v) / (2 * np.pi * freq_hz) * 1e3 == pytest.approx(amp_um, rel=0.02)
+    from labkit.sim import Shaker, simulate
+    res = simulate(lab.params, Shaker(freq_hz, round(lab.chain.tray_amp_um(freq_hz, lab.funcgen.drive(1).amp_v), 4)),
+                   duration_s=lab.sim_duration_s, seed=lab.seed, record_dt_s=1 / (freq_hz * 64))
+    sim_knee = np.asarray(res.knee_vz_mm_s)[:, 0][res.t_s > res.t_s[-1] / 3]
+    assert np.std(knee * scale) == pytest.approx(np.std(sim_knee), rel=0.15)
+    assert abs(np.std(knee) - np.std(tray)) > 0.2 * np.std(tray)    # not riding the tray
+
+
+def test_camera_walk_stops_at_the_end_of_a_triggered_burst():
+    from types import SimpleNamespace
+
+    from labkit.lab.camera import robot_path
+
+    t_sim = np.linspace(0.0, 0.3, 3001)
+    sim = SimpleNamespace(t_s=t_sim, body_y_um=2000.0 * t_sim, body_angles_rad=np.zeros((len(t_sim), 3)))
+    t = np.linspace(0.0, 1.0, 101)
+    y, _, speed = robot_path(sim, t, move_s=0.4)
+    assert speed == pytest.approx(2.0)                       # mm/s: 2000 um/s
+    assert y[t <= 0.4] == pytest.approx(2.0 * t[t <= 0.4], abs=1e-9)
+    assert np.all(y[t >= 0.4] == y[40])                      # stands where the burst left it
+
+
+def test_camera_sees_the_robot_walk_during_a_sine_burst_only(lab, raw, tmp_path):
+    fg = raw("funcgen")
+    lab.set_setup("shaker")
+    lab.camera_fps = 10
+    freq_hz, amp_um = 240.0, 25.0
+    vpp = 2 * amp_um / lab.chain.tray_amp_um(freq_hz, 1.0)
+    drive_sine(fg, freq_hz, vpp)
+    lab.record_video(tmp_path / "sine.avi", 0.5)
+    walking = lab.last_recording["speed_mm_s"]
+    assert walking != 0.0
+    assert fg.query("SOUR1:BURS:MODE TRIG;NCYC 2400;STAT ON;:TRIG1:SOUR BUS;*OPC?") == "1"   # 10 s bursts
+    lab.record_video(tmp_path / "armed.avi", 0.5)
+    assert lab.last_recording["speed_mm_s"] == 0.0                     # no trigger yet: no drive
+    assert fg.query("*TRG;*OPC?") == "1"
+    lab.record_video(tmp_path / "burst.avi", 0.5)
+    assert lab.last_recording["speed_mm_s"] == walking                 # inside the burst: as the sine
