@@ -728,6 +728,11 @@ class SimRigolDG1000Z(SimKeysight33500B):
                          if cmd.pattern not in ("[SOURce#:]BURSt:MODE", "[SOURce#:]APPLy")]
         add(S + "BURSt:MODE", set=self._set_rigol_burst_mode, query=self._rigol_burst_mode_query)
         add(S + "APPLy", query=lambda c: self._rigol_apply_query(self._chan(c)))
+        self.commands = [cmd for cmd in self.commands if cmd.pattern not in ("[SOURce#:]APPLy:SINusoid",
+                                                                             "OUTPut#:SYNC[:STATe]")]
+        add(S + "APPLy:SINusoid", set=self._rigol_apply_sin)
+        add("OUTPut#:SYNC[:STATe]", set=lambda c: self.sync.__setitem__(self._chan(c), parse_bool(c.one())),
+            query=lambda c: "ON" if self.sync[self._chan(c)] else "OFF")
         add(S + "SWEep:TRIGger:SOURce", set=self._set_rigol_trig, query=self._rigol_trig_query)
         add(S + "BURSt:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
         add(S + "SWEep:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
@@ -749,6 +754,14 @@ class SimRigolDG1000Z(SimKeysight33500B):
     def _rigol_burst_mode_query(self, c: Call) -> str:
         d = self.ch[self._chan(c)]
         return "GAT" if d.burst_gated else ("INF" if np.isinf(d.ncycles) else "TRIG")
+
+    def _rigol_apply_sin(self, c: Call) -> None:
+        """``:SOURce<n>:APPLy:SINusoid [<freq>[,<amp>[,<offset>[,<phase>]]]]`` (DG1000Z: a fourth, the phase)."""
+        if len(c.params) > 4:
+            raise ScpiError(-108)
+        if len(c.params) == 4 and c.params[3].upper() not in ("DEF", ""):
+            self._update(self._chan(c), phase_rad=np.deg2rad(self.num(c.params[3], "", 0, 360, 0)))
+        self._apply_sin(Call(c.params[:3], c.suffixes, c.header, False))
 
     def _rigol_apply_query(self, n: int) -> str:
         """``"SIN,1.000000E+03,5.000000E+00,0.000000E+00,0.000000E+00"``: function, frequency,
