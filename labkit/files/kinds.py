@@ -271,12 +271,15 @@ def read_sim_sweep(path: Path, f: Any, group: Any = None, version: int | None = 
     """A sweep written by :meth:`labkit.sim.SweepResult.to_h5` (``group``: one sweep of a set)."""
     g = f if group is None else group
     cols, units = _columns(g)
+    q = text(g.attrs.get("quantity", "?"))
+    for k in [k for k in cols if k not in ("values", q) and g[k].is_scale]:   # axis indices (draw, foot, mode)
+        cols.pop(k)
     if "values" not in cols:
         raise InputError("missing dataset", file=path, key=f"{g.name.rstrip('/')}/values",
                          expected="the swept values")
     version = int(f.attrs.get("schema_version", 0)) if version is None else version
     return SimSweep(path, "sim_sweep", version, root_attrs(g), units,
-                    text(g.attrs.get("quantity", "?")), cols["values"], cols, text(g.attrs.get("params_toml", "")))
+                    q, cols["values"], cols, text(g.attrs.get("params_toml", "")))
 
 
 @dataclass

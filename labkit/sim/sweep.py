@@ -167,7 +167,7 @@ class SweepResult:
         put_json(g, "meta_json", self.meta)
         put_json(g, "summary_json", self.summary())
         put(g, "values", self.values, units_of(self.quantity), quantity=self.quantity)
-        put(g, "speeds_mm_s", self.speeds_mm_s, "mm/s",
+        put(g, "speeds_mm_s", self.speeds_mm_s, "mm/s", axes="point, draw",
             description="mean forward speed per run; axis 0 points, axis 1 draws (0 = nominal)")
         put(g, "mean_speed_mm_s", self.mean_speed_mm_s, "mm/s")
         put(g, "std_speed_mm_s", self.std_speed_mm_s, "mm/s", ddof=1)

@@ -267,6 +267,11 @@ def test_simulated_sweep_opens_with_its_quantity_as_coordinate(sim_files):
         assert "freq_hz" in ds.coords and ds["mean_speed_mm_s"].dims == ("freq_hz",)
         np.testing.assert_array_equal(ds["freq_hz"].values, [200.0, 300.0])
         np.testing.assert_allclose(ds["mean_speed_mm_s"].values, s.mean_speed_mm_s)
+        # 2 points x 2 draws: only the labels (axes attribute -> dimension scales) tell them apart
+        assert ds["speeds_mm_s"].dims == ("freq_hz", "draw")
+        np.testing.assert_array_equal(ds["speeds_mm_s"].values, s.speeds_mm_s)
+        assert ds["contact_fraction"].dims == ("freq_hz", "draw", "foot", "mode")
+        assert not [d for d in ds.dims if str(d).startswith("phony_dim")]
     assert obj.to_xarray()["speeds_mm_s"].dims == ("freq_hz", "draw")
 
 
