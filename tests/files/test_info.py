@@ -1,0 +1,53 @@
+"""`labkit info` on the sidecar files labkit writes (figures, reports, JSON, UFF) and on configs."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from clihelpers import REPO, last_json, run_cli
+from labkit.commands.info import summarise
+
+
+def test_png_figure_size_from_its_header(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(3, 2), dpi=50)
+    fig.savefig(tmp_path / "f.png")
+    plt.close(fig)
+    s = summarise(tmp_path / "f.png")
+    assert s["format"] == "png" and (s["content"]["width_px"], s["content"]["height_px"]) == (150, 100)
+
+
+def test_json_sidecar_keys(tmp_path):
+    p = tmp_path / "cal.calibration.json"
+    p.write_text(json.dumps({"out": "cal.toml", "parameters": {"c_r": {}}}))
+    c = summarise(p)["content"]
+    assert c["keys"] == ["out", "parameters"] and "calibrate" in c["kind"]
+
+
+def test_html_report_title_sections_images(tmp_path):
+    p = tmp_path / "report.html"
+    p.write_text("<html><head><title>Robot 7</title></head><body><section><img src='data:,'></section>"
+                 "<section></section></body></html>")
+    c = summarise(p)["content"]
+    assert (c["title"], c["sections"], c["images"]) == ("Robot 7", 2, 1)
+
+
+def test_uff_datasets_by_type(tmp_path):
+    block = ["    -1", "    58", "header", "    -1"]
+    p = tmp_path / "robot.fit.uff"
+    p.write_text("\n".join(block * 3 + ["    -1", "    55", "modes", "    -1"]) + "\n")
+    assert summarise(p)["content"]["datasets_by_type"] == {"58": 3, "55": 1}
+
+
+def test_info_cli_on_a_config_and_a_bad_png(tmp_path):
+    s = last_json(run_cli("info", str(REPO / "sample_data" / "shaker.toml"), "--json"))
+    assert s["content"]["kind"] == "config_shaker" and s["content"]["instruments"]["funcgen"]
+    bad = tmp_path / "x.png"
+    bad.write_bytes(np.zeros(30, np.uint8).tobytes())
+    proc = run_cli("info", str(bad), check=2)
+    assert "x.png" in proc.stderr and "PNG" in proc.stderr
