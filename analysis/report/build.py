@@ -54,6 +54,11 @@ def _missing(sid: str, title: str, message: str) -> Section:
     return Section(sid, title, status="missing", message=message)
 
 
+def _fixed(x: float | None, decimals: int) -> str:
+    """A number with a fixed count of decimals ("n/a" for None/NaN): table columns that line up."""
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{decimals}f}"
+
+
 def _row(comparison: str, metric: str, value: float | None, units: str, tolerance: str, result: str, *,
          band: str = "", n: int = 1, text: str | None = None) -> dict[str, Any]:
     """One judged comparison: the metric's value, the tolerance it is judged against, the verdict."""
@@ -607,17 +612,17 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
             ratio, phase, corr = a["amplitude_ratio"], a["phase_diff_deg"], a["correlation"]
             sec.rows.append(_row(f"knee @ {drive}", "amplitude ratio (sim/meas)", ratio, "1",
                                  f"{r_lo:.2f}\u2013{r_hi:.2f}", verdict(ratio, at_least=r_lo, at_most=r_hi),
-                                 text=format_value(ratio, 3)))
+                                 text=_fixed(ratio, 2)))
             sec.rows.append(_row(f"knee @ {drive}", "phase difference (sim - meas)", phase, "deg",
                                  f"|Δφ| ≤ {tol.knee_phase_deg_max:g} deg",
                                  verdict(abs(phase) if phase is not None else None, at_most=tol.knee_phase_deg_max),
-                                 text=format_value(phase, 3)))
+                                 text=_fixed(phase, 1)))
             sec.rows.append(_row(f"knee @ {drive}", "waveform correlation (one folded period)", corr, "1",
                                  f"≥ {tol.knee_correlation_min:g}", verdict(corr, at_least=tol.knee_correlation_min),
-                                 text=format_value(corr, 3)))
+                                 text=_fixed(corr, 3)))
             table_rows.append([freq, amp, format_value(a["amplitude_meas_mm_s"], 3),
-                               format_value(a["amplitude_sim_mm_s"], 3), format_value(ratio, 3),
-                               format_value(phase, 3), format_value(corr, 3),
+                               format_value(a["amplitude_sim_mm_s"], 3), _fixed(ratio, 2),
+                               _fixed(phase, 1), _fixed(corr, 3),
                                meas.get("pattern", "?"), s["knee_pattern"], s["foot_pattern"]])
             if meas.get("pattern") in compare.PATTERNS:
                 pattern_pairs.append({"source": "knee record", "drive": drive, "measured": meas["pattern"],
@@ -650,7 +655,11 @@ def _pattern_section(pairs: list[dict[str, Any]], tol: Tolerances, details: dict
         return _missing("patterns", title, "No drive with both an observed leg pattern (a knee record or a "
                         "pattern label in the run file) and a simulated one.")
     sec = Section("patterns", title)
-    sec.files += sorted({p["measured_file"].split(" (")[0] for p in pairs} | {p["simulated_file"] for p in pairs})
+    sources = sorted({p["measured_file"].split(" (")[0] for p in pairs} | {p["simulated_file"] for p in pairs})
+    sec.files += [f for f in sources if Path(f).is_file()]
+    here = [f for f in sources if not Path(f).is_file()]
+    if here:
+        sec.notes["simulated here"] = f"{len(here)} knee simulation(s) run by this report (see the knee section)"
     sec.notes["observed"] = "run file label, or classify_knee_pattern on the knee record"
     sec.notes["simulated (sweep)"] = "dominant foot-contact pattern over draws and feet"
     sec.notes["simulated (knee record)"] = "classify_knee_pattern on the simulated knee record"

@@ -47,8 +47,11 @@ footer { margin-top: 3em; font-size: .8em; color: #777; }
   @page { size: A4; margin: 14mm 12mm; }
   body { max-width: none; margin: 0; padding: 0; font-size: 10pt; color: #000; }
   nav { display: none; }
-  h2 { break-before: page; margin-top: 0; }
-  section:first-of-type h2 { break-before: auto; }
+  section > h2 { break-before: page; margin-top: 0; }
+  div.summary h2 { break-before: auto; margin-top: .3em; }
+  table { font-size: 7.5pt; max-width: 100%; }
+  td.num { white-space: normal; }
+  th, td { padding: .15em .35em; }
   h2, h3 { break-after: avoid; }
   figure, table, div.provenance, p.verdict { break-inside: avoid; }
   figure svg { border: none; max-height: 235mm; width: 100%; }

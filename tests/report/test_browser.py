@@ -5,9 +5,10 @@ verdict in its text, and the provenance is written once per section (not once pe
 No extra Python dependency: Chromium's ``--dump-dom`` returns the DOM after the load
 event, with the result of a small check script written into it; console messages are
 read from Chromium's own log (``--enable-logging=stderr``, lines with ``CONSOLE``). A
-screenshot of the whole page (window as tall as the page) is kept as the test's artifact:
-``<tmp_path>/browser/report_fullpage.png``, and copied into the folder named by the
-environment variable ``LABKIT_TEST_ARTIFACTS`` when it is set (CI can upload that folder).
+screenshot of the whole page (window as tall as the page) and the page printed to PDF are
+kept as the test's artifacts: ``<tmp_path>/browser/report_fullpage.png`` and
+``report_print.pdf``, both copied into the folder named by the environment variable
+``LABKIT_TEST_ARTIFACTS`` when it is set (CI can upload that folder).
 The check script goes into a *copy* of the report (the report itself holds no script).
 External hosts are unresolvable (``--host-resolver-rules``), so a page that needed the
 network would fail here.
@@ -95,6 +96,19 @@ def open_in_browser(html_path: Path, work: Path, width: int = 1200) -> dict:
     return verdict
 
 
+def print_to_pdf(html_path: Path, work: Path) -> tuple[Path, int]:
+    """Chromium's "print to PDF" of a page (the print style sheet applies): the PDF and its page count."""
+    pdf = work / "report_print.pdf"
+    proc = _chromium(["--no-pdf-header-footer", f"--print-to-pdf={pdf}", html_path.as_uri()], work / "profile3")
+    assert pdf.is_file(), proc.stderr[-2000:]
+    data = pdf.read_bytes()
+    assert data.startswith(b"%PDF")
+    keep = os.environ.get("LABKIT_TEST_ARTIFACTS")
+    if keep:
+        shutil.copy2(pdf, Path(keep) / f"{html_path.parent.name}_print.pdf")
+    return pdf, len(re.findall(rb"/Type\s*/Page[^s]", data))
+
+
 def _pixels(png: Path) -> np.ndarray:
     import matplotlib.image
 
@@ -146,6 +160,9 @@ def test_report_renders_in_chromium(inputs, tmp_path):
     fit_sha = sha256(inputs["fit"])
     assert 1 <= v["text"].count(fit_sha) <= 2                 # FRF and stabilisation sections
     assert v["text"].count(sha256(inputs["sweep"])) == 2       # speed and leg patterns
+    # printing: the print style sheet starts each of the 7 sections on a new page after the title page
+    _, pages = print_to_pdf(Path(s["html"]), tmp_path / "browser")
+    assert 8 <= pages <= 40, pages
 
 
 def test_checker_catches_broken_page(tmp_path):
