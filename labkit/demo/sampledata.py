@@ -222,13 +222,12 @@ def _one_point_shaker(table: dict[str, Any], path: Path, name: str, tag: str) ->
 
 
 def _drive_of(run: Path) -> float:
-    from labkit.h5io import open_h5
+    from labkit.files.runs import read_run_file
 
-    with open_h5(run, kind="run_shaker") as f:
-        ok = f["points/status"].asstr()[...] == "ok"
-        if not ok.any():
-            raise InputError("the shaker run has no good point", file=run)
-        return float(f["points/drive_vpp"][...][ok][0])
+    r = read_run_file(run)          # the one run-file reader: complete points only
+    if not r.ok.any():
+        raise InputError("the shaker run has no good point", file=run)
+    return float(r.points["drive_vpp"][r.ok][0])
 
 
 def film(lab: Any, path: Path, freq_hz: float, drive_vpp: float, duration_s: float,
@@ -279,12 +278,12 @@ def reencode(src: Path, dst: Path, quality: int) -> Path:
 
 def expected_speed(robot: Any, shaker_run: Path, seed: int) -> float:
     """The simulator's speed for ``robot`` at the shaker run's first point (measured tray amplitude)."""
-    from labkit.h5io import open_h5
+    from labkit.files.runs import read_run_file
     from labkit.sim import Shaker, simulate
 
-    with open_h5(shaker_run, kind="run_shaker") as f:
-        freq = float(f["points/freq_hz"][0])
-        amp = float(f["points/tray_amp_um"][0])
+    r = read_run_file(shaker_run)
+    freq = float(r.points["freq_hz"][0])
+    amp = float(r.points["tray_amp_um"][0])
     return abs(float(simulate(robot, Shaker(freq_hz=freq, amp_um=amp), duration_s=1.0, seed=seed).mean_speed_mm_s))
 
 
