@@ -188,6 +188,21 @@ def read_fit(path: Path, f: Any) -> ModalFit:
 
 # --------------------------------------------------------------------------- simulations
 
+def _params_from_text(params_toml: str, path: Path) -> Any:
+    """The ``RobotParams`` a simulation file was run with (its ``params_toml`` attribute)."""
+    import tomllib
+
+    from labkit.sim import RobotParams
+
+    if not params_toml:
+        raise InputError("no parameters recorded", file=path, key="params_toml", expected="a labkit simulation file")
+    try:
+        table = tomllib.loads(params_toml)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"not TOML ({exc})", file=path, key="params_toml") from None
+    return RobotParams.from_dict(table, file=f"{path}:params_toml")
+
+
 @dataclass
 class SimRun(LabFile):
     """One simulator run (kind ``sim_result``): time series of body, feet, contact and knee."""
@@ -200,6 +215,11 @@ class SimRun(LabFile):
     @property
     def t_s(self) -> np.ndarray:
         return self.columns["t_s"]
+
+    @property
+    def params(self) -> Any:
+        """The robot parameters of the run (:class:`labkit.sim.RobotParams`)."""
+        return _params_from_text(self.params_toml, self.path)
 
     def summary(self) -> dict[str, Any]:
         return super().summary() | {"scenario": self.scenario, "mean_speed_mm_s": self.mean_speed_mm_s,
@@ -245,6 +265,11 @@ class SimSweep(LabFile):
     values: np.ndarray = field(default_factory=lambda: np.array([]))
     columns: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     params_toml: str = field(default="", repr=False)
+
+    @property
+    def params(self) -> Any:
+        """The nominal robot parameters of the sweep (:class:`labkit.sim.RobotParams`)."""
+        return _params_from_text(self.params_toml, self.path)
 
     def summary(self) -> dict[str, Any]:
         return super().summary() | {"quantity": self.quantity, "points": int(self.values.size),

@@ -257,6 +257,7 @@ def test_simulation_result_opens_with_time_as_coordinate(sim_files):
         assert "t_s" in ds.coords and ds["body_z_um"].dims == ("t_s",)
         np.testing.assert_array_equal(ds["body_z_um"].values, r.body_z_um)
     assert obj.to_xarray()["foot_z_um"].dims == ("t_s", "leg")
+    assert obj.params == r.params
 
 
 def test_simulated_sweep_opens_with_its_quantity_as_coordinate(sim_files):
