@@ -198,7 +198,7 @@ def choose_poles(stab: Stabilisation, n_modes: int | None, *, band_hz: tuple[flo
     ix = np.argsort(f)
     f, z, o = f[ix], z[ix], o[ix]
     clusters: list[list[int]] = []
-    stats: list[tuple[float, float]] = []           # per cluster: median frequency and damping
+    stats: list[tuple[float, float]] = []           # per cluster: mean frequency and damping (running)
     # Join a pole to the nearest open cluster of similar frequency *and* damping (a spurious,
     # heavily damped pole next to a light mode starts its own cluster instead of splitting the
     # mode's), at most one pole per order in a cluster.
@@ -216,8 +216,9 @@ def choose_poles(stab: Stabilisation, n_modes: int | None, *, band_hz: tuple[flo
                 best, best_d = k, d
         if best >= 0:
             clusters[best].append(i)
-            c = clusters[best]
-            stats[best] = (float(np.median(f[c])), float(np.median(z[c])))
+            n = len(clusters[best])
+            fc, zc = stats[best]
+            stats[best] = (fc + (f[i] - fc) / n, zc + (z[i] - zc) / n)
         else:
             clusters.append([i])
             stats.append((float(f[i]), float(z[i])))
