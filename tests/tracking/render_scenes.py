@@ -139,6 +139,7 @@ class Scene:
     jitter_px: float = 0.0                  # stroboscopic jitter of the chip (uniform +-, px)
     dust: list = field(default_factory=list)  # (u, v, a_px, b_px, angle_deg, reflectance): static ellipses
     tweezers: tuple[float, float] | None = None   # (t_in, t_out): the prongs cover the chip between
+    others: list = field(default_factory=list)   # (u0_px, v0_px, heading_rad, speed_mm_s): more chips, straight
     seed: int = 0
 
     def times(self) -> np.ndarray:
@@ -224,6 +225,10 @@ def render(sc: Scene) -> tuple[np.ndarray, Truth]:
     for k in range(n):
         cov = coverage(shape, place(polys, u[k], v[k], h[k], sc.mm_per_px))
         refl = base * (1 - cov) + sc.chip_reflectance * cov
+        for (ou, ov, oh, osp) in sc.others:
+            d = osp * (t[k] - t[0]) / sc.mm_per_px
+            oc = coverage(shape, place(polys, ou - d * np.sin(oh), ov - d * np.cos(oh), oh, sc.mm_per_px))
+            refl = refl * (1 - oc) + sc.chip_reflectance * oc
         seen = cov
         if sc.tweezers is not None and sc.tweezers[0] <= t[k] <= sc.tweezers[1]:
             t0, t1 = sc.tweezers
