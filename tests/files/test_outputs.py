@@ -274,3 +274,30 @@ def test_sample_data_refuses_existing_samples_and_a_failure_with_force_keeps_the
         main(["sample-data", "--out", str(tmp_path), "--force", "--quiet"])
     assert {p: sha(p) for p in olds} == olds
     assert not leftovers(tmp_path)
+
+
+def test_a_process_killed_mid_write_leaves_the_old_file(tmp_path):
+    """SIGKILL (no cleanup runs) in the middle of an atomic replace: the old file is whole."""
+    import signal
+    import subprocess
+    import sys
+
+    target = tmp_path / "run.h5"
+    target.write_bytes(JUNK)
+    code = ("import sys, time\n"
+            "from labkit.outputs import atomic_outputs\n"
+            "with atomic_outputs([sys.argv[1], sys.argv[1] + '.csv']) as (tmp, tmp_csv):\n"
+            "    tmp.write_bytes(b'new' * 1000)\n"
+            "    print('writing', flush=True)\n"
+            "    time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(target)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "writing"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        proc.kill()
+    assert target.read_bytes() == JUNK
+    assert not (tmp_path / "run.h5.csv").exists()
+    # the partial file stays behind (nothing ran after SIGKILL), named so that it is recognisable
+    assert all(".partial" in name for name in leftovers(tmp_path)) and leftovers(tmp_path)
