@@ -46,7 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                         help="change what a comparison is judged against, e.g. speed_relative_rms_max=0.2 "
                              "(keys and defaults: labkit.analysis.compare.Tolerances)")
     parser.add_argument("--compare", nargs=2, metavar=("A_DIR", "B_DIR"),
-                        help="instead of building a report, put two reports' headline numbers side by side")
+                        help="instead of building a report, put two reports' headline numbers and section "
+                             "verdicts side by side (with --out DIR also as DIR/compare.html and compare.json)")
     parser.add_argument("--scheduler", help="tcp://HOST:PORT of a Dask scheduler for the knee simulations")
     parser.add_argument("--workers", type=int, help="local worker processes for the knee simulations")
     parser.add_argument("--title", default="labkit: model against measurement")
@@ -99,6 +100,23 @@ def _compare(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.analysis.report.sidebyside import compare_reports, comparison_lines
 
     result = compare_reports(*args.compare)
+    if args.out:
+        from pathlib import Path
+
+        from labkit.analysis.report.sidebyside import comparison_html
+        from labkit.outputs import atomic_outputs, check_output_dir
+
+        out = Path(args.out)
+        check_output_dir(out, force=args.force, names=["compare.html", "compare.json"])
+        out.mkdir(exist_ok=True)
+        import json
+
+        with atomic_outputs([out / "compare.html", out / "compare.json"]) as (t_html, t_json):
+            t_html.write_text(comparison_html(result), encoding="utf-8")
+            t_json.write_text(json.dumps(result, indent=1), encoding="utf-8")
+        result["html"] = str(out / "compare.html")
     if not args.json:
         print("\n".join(comparison_lines(result)))
+        if args.out:
+            print(f"written: {result['html']}")
     return result

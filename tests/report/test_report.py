@@ -102,6 +102,19 @@ def test_compare_two_reports(inputs, tmp_path):
     assert rows["inchip_mode1_freq_hz"]["b_text"] == "438 \u00b1 3"
     text = run_cli("report", "--compare", str(tmp_path / "a"), str(tmp_path / "b")).stdout
     assert "inchip mode 1 frequency (Hz)" in text and "438 \u00b1 3" in text
+    # section verdicts side by side too: B has a fit (FRF judged), A has not
+    verdicts = {v["section"]: v for v in c["verdicts"]}
+    assert verdicts["frf"]["a"] == "missing" and verdicts["frf"]["b"] == "pass"
+    assert verdicts["knee"]["a"] == verdicts["knee"]["b"] == "pass"
+    # ... and as a page of its own
+    c = last_json(run_cli("report", "--compare", str(tmp_path / "a"), str(tmp_path / "b"), "--out",
+                          str(tmp_path / "cmp"), "--json"))
+    page = (tmp_path / "cmp" / "compare.html").read_text()
+    assert c["html"] == str(tmp_path / "cmp" / "compare.html")
+    assert "inchip mode 1 frequency (Hz)" in page and "438 ± 3" in page and "<script" not in page
+    assert page.count('class="badge pass"') >= 3
+    run_cli("report", "--compare", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "cmp"),
+            check=2)                                              # no silent overwrite without --force
     proc = run_cli("report", "--compare", str(tmp_path / "a"), str(tmp_path), check=2)
     assert "agreement.json" in proc.stderr
 
