@@ -401,11 +401,7 @@ class SimKeysight33500B(SimScpiInstrument):
 
     def _amp_query(self, n: int, c: Call) -> str:
         if c.params:
-            word = c.params[0].upper()[:3]
-            if word == "MAX":
-                return self.flevel(MAX_VPP_OPEN / self._factor(n))
-            if word == "MIN":
-                return self.flevel(1e-3)
+            return self.flevel(self.query_limit(c, (1e-3, MAX_VPP_OPEN / self._factor(n)), self.default_vpp))
         vpp = self._display_vpp(n)
         if self.vunit[n] == "DBM":
             return self.flevel(_vpp_to_dbm(vpp, self.load[n]))
@@ -430,10 +426,8 @@ class SimKeysight33500B(SimScpiInstrument):
         def fget(key: str, lo: float, hi: float):
             def do(c: Call) -> str:
                 n = self._chan(c)
-                if c.params and c.params[0].upper().startswith("MIN"):
-                    return self.fnum(lo)
-                if c.params and c.params[0].upper().startswith("MAX"):
-                    return self.fnum(hi)
+                if c.params:      # {MINimum|MAXimum|DEFault}: the limits and the *RST value
+                    return self.fnum(self.query_limit(c, (lo, hi), getattr(self._default(), key)))
                 return self.fnum(getattr(self.ch[n], key))
             return do
 
