@@ -265,6 +265,17 @@ def write_avi(path: Path, frames: np.ndarray, fps: float, quality: int = 95) -> 
     return Path(path)
 
 
+def write_mp4(path: Path, frames: np.ndarray, fps: float) -> Path:
+    """MPEG-4 part 2 in MP4 (inter-frame compression, as consumer cameras write)."""
+    h, w = frames.shape[1:]
+    vw = cv2.VideoWriter(str(path), cv2.CAP_FFMPEG, cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (w, h), False)
+    assert vw.isOpened(), path
+    for f in frames:
+        vw.write(f)
+    vw.release()
+    return Path(path)
+
+
 def write_mkv(path: Path, frames: np.ndarray, t_s: np.ndarray, quality: int = 95) -> Path:
     """Matroska with each frame's own time (dropped frames): JPEG packets with a 1 ms time base."""
     h, w = frames.shape[1:]

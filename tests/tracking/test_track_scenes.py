@@ -23,6 +23,7 @@ from render_scenes import (
     truncate,
     write_avi,
     write_mkv,
+    write_mp4,
     write_sequence,
 )
 
@@ -46,6 +47,8 @@ def video(tmp_path, name: str, sc: Scene, kind: str = "avi"):
         path = write_avi(tmp_path / f"{name}.avi", frames, sc.fps)
     elif kind == "mkv":
         path = write_mkv(tmp_path / f"{name}.mkv", frames, truth.t_s)
+    elif kind == "mp4":
+        path = write_mp4(tmp_path / f"{name}.mp4", frames, sc.fps)
     else:
         path = write_sequence(tmp_path / name, frames, truth.t_s if kind == "csv" else None)
     return path, truth
@@ -93,6 +96,14 @@ def test_adaptive_segmentation(tmp_path, name, kw):
     expected = 1 - kw.get("chip_reflectance", 0.2)
     assert track.meta["robot_contrast"] == pytest.approx(expected, abs=0.04)
     assert track.meta["min_contrast"] < 0.15 and np.isfinite(track.meta["noise"])
+
+
+def test_mp4_with_uneven_light(tmp_path):
+    path, truth = video(tmp_path, "ring_mp4", scene(gradient=0.3, ring=0.15, seed=2), kind="mp4")
+    track = track_video(path, mm_per_px=S)
+    assert np.all(track.quality == QUALITY_OK)
+    assert np.sqrt(np.mean(pos_err(track, truth) ** 2)) <= 0.15
+    assert track_speed(track).mean_speed_mm_s == pytest.approx(truth.speed_mm_s, rel=0.01)
 
 
 def test_static_dust_larger_than_the_chip_is_not_the_robot(tmp_path):
