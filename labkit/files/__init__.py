@@ -13,6 +13,7 @@ track table (``.csv``)       ``track_csv``        :class:`~labkit.files.kinds.Tr
 modal fit (``.fit.h5``)      ``modal_fit``        :class:`~labkit.files.kinds.ModalFit`
 simulation (``.h5``)         ``sim_result``       :class:`~labkit.files.kinds.SimRun`
 simulated sweep (``.h5``)    ``sim_sweep``        :class:`~labkit.files.kinds.SimSweep`
+scenario points (``.h5``)    ``sim_points``       :class:`~labkit.files.kinds.SimSweep`
 scenario sweeps (``.h5``)    ``sim_sweep_set``    :class:`~labkit.files.kinds.SimSweepSet`
 scenario runs (``.h5``)      ``sim_ablations``    :class:`~labkit.files.kinds.SimRunSet`
 robot parameters (``.toml``) ``robot_params``     :class:`~labkit.files.kinds.RobotParameters`
@@ -50,8 +51,8 @@ __all__ = ["open_file", "LabFile", "RunFile", "InchipRun", "ShakerRun", "Track",
 
 VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4")
 #: the ``kind`` attributes of the HDF5 files labkit writes
-H5_KINDS = ("run_inchip", "run_shaker", "track", "modal_fit", "sim_result", "sim_sweep", "sim_sweep_set",
-            "sim_ablations")
+H5_KINDS = ("run_inchip", "run_shaker", "track", "modal_fit", "sim_result", "sim_sweep", "sim_points",
+            "sim_sweep_set", "sim_ablations")
 
 
 def open_file(path: str | os.PathLike[str]) -> LabFile:
@@ -87,7 +88,7 @@ def open_file(path: str | os.PathLike[str]) -> LabFile:
             return kinds.read_fit(p, f)
         elif kind == "sim_result":
             return kinds.read_sim_result(p, f)
-        elif kind == "sim_sweep":
+        elif kind in ("sim_sweep", "sim_points"):
             return kinds.read_sim_sweep(p, f)
         elif kind == "sim_sweep_set":
             return kinds.read_sim_sweep_set(p, f)

@@ -42,6 +42,9 @@ def json_attr(attrs: Any, name: str, default: Any = None) -> Any:
 
 def column(ds: Any, n: int | None = None) -> np.ndarray:
     """A dataset's first ``n`` rows as an array (strings decoded to ``str``)."""
+    if ds.ndim == 0:                               # a scalar dataset (a run's mean speed)
+        value = ds[()]
+        return np.asarray(text(value) if isinstance(value, bytes) else value)
     sel = slice(None) if n is None else slice(0, n)
     if ds.dtype.kind in "OS":
         return np.asarray(ds.asstr()[sel], dtype=object).astype(str)

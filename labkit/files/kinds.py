@@ -259,7 +259,8 @@ def read_sim_result(path: Path, f: Any) -> SimRun:
 
 @dataclass
 class SimSweep(LabFile):
-    """A simulated sweep (kind ``sim_sweep``): speeds over the swept quantity and Monte Carlo draws."""
+    """A simulated sweep (kind ``sim_sweep``, or ``sim_points`` for a scenario's set of drive points):
+    speeds over the swept quantity and Monte Carlo draws."""
 
     quantity: str = "?"
     values: np.ndarray = field(default_factory=lambda: np.array([]))
@@ -296,14 +297,15 @@ def read_sim_sweep(path: Path, f: Any, group: Any = None, version: int | None = 
     """A sweep written by :meth:`labkit.sim.SweepResult.to_h5` (``group``: one sweep of a set)."""
     g = f if group is None else group
     cols, units = _columns(g)
-    q = text(g.attrs.get("quantity", "?"))
+    q = text(g.attrs.get("quantity", g["values"].attrs.get("quantity", "?") if "values" in g else "?"))
     for k in [k for k in cols if k not in ("values", q) and g[k].is_scale]:   # axis indices (draw, foot, mode)
         cols.pop(k)
     if "values" not in cols:
         raise InputError("missing dataset", file=path, key=f"{g.name.rstrip('/')}/values",
                          expected="the swept values")
     version = int(f.attrs.get("schema_version", 0)) if version is None else version
-    return SimSweep(path, "sim_sweep", version, root_attrs(g), units,
+    kind = text(f.attrs.get("kind", "sim_sweep")) if group is None else "sim_sweep"
+    return SimSweep(path, kind, version, root_attrs(g), units,
                     q, cols["values"], cols, text(g.attrs.get("params_toml", "")))
 
 

@@ -281,3 +281,33 @@ def test_labkit_info_covers_every_sample_file():
         info = last_json(run_cli("info", str(SAMPLE / name), "--json"))
         content = info.get("content", {})
         assert content.get("kind") == kind or info.get("kind") == kind, (name, info)
+
+
+def test_scenario_files_open(sim_files, tmp_path):
+    """The multi-run and multi-sweep files of `labkit simulate scenario`, written by their own writers."""
+    from labkit.sim.scenarios.io import write_runs, write_sweep_set
+    from labkit.sim.scenarios.runs import PointSet
+
+    r, s, _ = sim_files
+    write_runs(tmp_path / "abl.h5", "sim_ablations", [("full", r), ("no adhesion", r)], {"note": "test"})
+    runs = labkit.open(tmp_path / "abl.h5")
+    assert runs.kind == "sim_ablations" and list(runs.runs) == ["full", "no_adhesion"]
+    np.testing.assert_array_equal(runs.runs["full"]["t_s"], r.t_s)
+    assert runs.to_xarray("no_adhesion")["foot_z_um"].dims == ("t_s", "leg")
+
+    write_sweep_set(tmp_path / "set.h5", {"amp_25_um/5_uN": s, "capped/5_uN": s})
+    sset = labkit.open(tmp_path / "set.h5")
+    assert sset.kind == "sim_sweep_set" and sorted(sset.sweeps) == ["amp_25_um/5_uN", "capped/5_uN"]
+    np.testing.assert_array_equal(sset.to_xarray("capped/5_uN")["speeds_mm_s"].values, s.speeds_mm_s)
+
+    n, d = 3, 2
+    ps = PointSet(values=np.array([150.0, 240.0, 300.0]), speeds_mm_s=np.arange(n * d, dtype=float).reshape(n, d),
+                  patterns=np.full((n, d, 6), "firm_contact"), foot_rise_um=np.zeros((n, d)),
+                  leg_motion_um=np.ones((n, d)), aperiodicity=np.zeros((n, d)),
+                  contact_fraction=np.full((n, d, 6, 3), 1 / 3), drives=[{}] * n, meta={"seed": 0})
+    ps.to_h5(tmp_path / "points.h5", name="freq_hz")
+    pts = labkit.open(tmp_path / "points.h5")
+    assert pts.kind == "sim_points" and pts.quantity == "freq_hz"
+    ds = pts.to_xarray()
+    np.testing.assert_array_equal(ds["freq_hz"].values, [150.0, 240.0, 300.0])
+    np.testing.assert_array_equal(ds["speeds_mm_s"].values, ps.speeds_mm_s)
