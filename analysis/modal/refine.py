@@ -109,7 +109,7 @@ def _channel_terms(theta, channels, m, powers, want_jac=True):
     """Per channel: weighted complex residual and complex Jacobian blocks (poles, own linear part)."""
     n_lin = 2 * m + 2 * len(powers)
     f, z, lins = _unpack(theta, m, n_lin, len(channels))
-    z = np.clip(z, 1e-9, 0.999)
+    z = np.clip(z, 1e-13, 0.999)
     lam = modal_to_pole(f, z)
     wn = 2 * np.pi * f
     sq = np.sqrt(np.clip(1 - z ** 2, 1e-12, None))
@@ -196,7 +196,7 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
     m = lam0.size
     n_lin = 2 * m + 2 * len(powers)
     f0, z0 = pole_to_modal(lam0)
-    z0 = np.clip(z0, 1e-5, 0.95)
+    z0 = np.clip(z0, 1e-10, 0.95)
     lins = residues_ls(channels, lam0, powers)
     theta = np.concatenate([np.column_stack([f0, z0]).ravel(), *lins])
     free = np.ones(theta.size, dtype=bool)
@@ -242,7 +242,7 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
                 mu *= 10
                 continue
             trial = theta + step
-            trial[1:2 * m:2] = np.clip(trial[1:2 * m:2], 1e-7, 0.98)
+            trial[1:2 * m:2] = np.clip(trial[1:2 * m:2], 1e-12, 0.98)
             trial[0:2 * m:2] = np.clip(trial[0:2 * m:2], 0.25 * band_hz[0], 2.0 * band_hz[1])
             t_terms = _channel_terms(trial, channels, m, powers, want_jac=False)
             t_cost = _cost(t_terms)

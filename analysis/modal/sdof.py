@@ -104,7 +104,7 @@ def circle_fit(f: np.ndarray, mob: np.ndarray, fn0: float, zeta0: float, *, span
     """
     from scipy.optimize import least_squares
 
-    half = max(span * 2 * zeta0 * fn0, 1e-9)
+    half = max(span * 2 * zeta0 * fn0, 1e-12 * fn0)
     sel = np.flatnonzero(np.abs(f - fn0) <= half)
     if sel.size < min_points:
         sel = np.sort(np.argsort(np.abs(f - fn0))[:min_points])
@@ -123,13 +123,13 @@ def circle_fit(f: np.ndarray, mob: np.ndarray, fn0: float, zeta0: float, *, span
         return psi - (psi0 - 2 * np.arctan((w ** 2 - wn ** 2) / (2 * z * wn * w)))
 
     p0 = [psi[k0] + 2 * np.arctan((w[k0] ** 2 - (2 * np.pi * fn0) ** 2) / (2 * zeta0 * 2 * np.pi * fn0 * w[k0])),
-          fn0, max(zeta0, 1e-5)]
-    lo, hi = [-np.inf, 0.5 * fn0, 1e-7], [np.inf, 1.5 * fn0, 0.95]
+          fn0, max(zeta0, 1e-10)]
+    lo, hi = [-np.inf, 0.5 * fn0, 1e-12], [np.inf, 1.5 * fn0, 0.95]
     # x_scale in the problem's own units: the same steps whatever the frequency unit.
-    sol = least_squares(resid, p0, bounds=(lo, hi), x_scale=[1.0, max(fn0 * zeta0, 1e-12 * fn0), max(zeta0, 1e-5)])
+    sol = least_squares(resid, p0, bounds=(lo, hi), x_scale=[1.0, max(fn0 * zeta0, 1e-12 * fn0), max(zeta0, 1e-10)])
     fn, z = float(sol.x[1]), float(sol.x[2])
     for name, v, a, b in (("frequency", fn, lo[1], hi[1]), ("damping ratio", z, lo[2], hi[2])):
-        if min(abs(v - a), abs(v - b)) <= 1e-6 * max(abs(a), abs(b)):
+        if abs(v - a) <= 1e-6 * abs(a) or abs(v - b) <= 1e-6 * abs(b):
             what = ("frequency search (+-50 % of the peak's)" if name == "frequency" else
                     f"damping ratio ({v:.3g}; search {a:.3g}..{b:.3g})")
             raise CircleAtBound(f"the circle fit near {fn0:.6g} ended at the bound of its {what}")

@@ -201,3 +201,17 @@ def test_automatic_order_adds_a_mode_the_diagram_missed_while_the_misfit_is_abov
     np.testing.assert_allclose(r[:, 0], [1000.0, 1600.0], rtol=1e-4)
     assert max(fit.misfit_to_noise.values()) < MISFIT_WARN
     assert any(w.startswith("added a mode at 1600 Hz") for w in fit.warnings), fit.warnings
+
+
+@pytest.mark.parametrize("zeta", [1e-5, 1e-7])
+def test_very_high_q_resonator_over_a_band_of_a_few_bandwidths(zeta):
+    """A GHz resonator with Q up to 5e6 (no lower limit on the damping ratio short of 1e-12)."""
+    fn = 1e9
+    f = np.linspace(fn * (1 - 8 * zeta), fn * (1 + 8 * zeta), 401)
+    S = 0.01 + 0.002j + _one_mode(f, fn, zeta, 2 * np.pi * fn * zeta * 0.5) + _noise(f.size, 1.4e-3, 11)
+    fit = fit_modes(f, S, kind="scattering")
+    assert len(fit.modes) == 1
+    m = fit.modes[0]
+    assert abs(m.freq_hz - fn) < 3 * m.freq_hz_std
+    assert m.damping_ratio == pytest.approx(zeta, rel=0.005)
+    assert abs(m.damping_ratio - zeta) < 3 * m.damping_ratio_std
