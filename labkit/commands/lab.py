@@ -20,9 +20,11 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     sub = parser.add_subparsers(dest="lab_command", metavar="ACTION")
     sub.required = True
     serve = sub.add_parser("serve", parents=[common], help="start the lab and serve until interrupted",
-                           description="Start a simulated Keysight 33500B and InfiniiVision (raw SCPI "
-                                       "sockets on 127.0.0.1) and an OFV-5000 (pseudo-terminal); print "
-                                       "their resource strings as one JSON object; serve until Ctrl-C.")
+                           description="Start a simulated function generator and oscilloscope (raw SCPI "
+                                       "sockets on 127.0.0.1; default Keysight 33522B and InfiniiVision "
+                                       "DSOX3024T, or the Rigol DG1000Z/DS1000Z, 33511B, 33220A ...) and a "
+                                       "Polytec vibrometer controller (pseudo-terminal; OFV-5000 or OFV-3001); "
+                                       "print their resource strings as one JSON object; serve until Ctrl-C.")
     serve.add_argument("--robot", metavar="FILE", help="robot parameter file (TOML); default: the paper's")
     serve.add_argument("--seed", type=int, default=0, help="seed of the lab's noise (default 0)")
     serve.add_argument("--setup", choices=("inchip", "shaker"), default="inchip", help="initial set-up")

@@ -1,4 +1,5 @@
-"""A simulated Keysight 33500B (33522B, two channels) on a raw SCPI socket.
+"""Simulated function generators on a raw SCPI socket: Keysight 33500B (33511B/33521B one channel,
+33512B/33522B two), Rigol DG1000Z (its own dialect) and Agilent 33220A.
 
 Commands (long and short forms; ``SOURce#``/``OUTPut#``/``TRIGger#`` default
 to channel 1): ``FUNCtion``, ``FREQuency``, ``FREQuency:STARt|STOP``,

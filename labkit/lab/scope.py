@@ -101,6 +101,7 @@ class SimInfiniiVision(SimScpiInstrument):
     #: Programmer's Guide, :WAVeform Commands, "Data Format for Transfer")
     block_digits = 8
     suffix_limits = {"CHAN": 4}
+    query_params_default = False
 
     def __init__(self, signals: SignalFn, sync: SyncFn, seed: int = 0,
                  clock: Callable[[], float] = time.monotonic, memory_points: int = 1_000_000) -> None:
@@ -146,7 +147,8 @@ class SimInfiniiVision(SimScpiInstrument):
         self.setting(":TRIGger[:EDGE]:SOURce", "trig_source", "CHAN1",
                      lambda t: parse_enum(t, ["CHANnel1", "CHANnel2", "CHANnel3", "CHANnel4", "EXTernal", "LINE"]),
                      str)
-        self.add(":TRIGger[:EDGE]:LEVel", set=self._set_trig_level, query=self._trig_level_query)
+        self.add(":TRIGger[:EDGE]:LEVel", set=self._set_trig_level, query=self._trig_level_query,
+                 query_params=True)
         self.setting(":TRIGger[:EDGE]:SLOPe", "trig_slope", "POS",
                      lambda t: parse_enum(t, ["POSitive", "NEGative", "EITHer", "ALTernate"]), str)
         self.setting(":TRIGger:SWEep", "trig_sweep", "AUTO", lambda t: parse_enum(t, ["AUTO", "NORMal"]), str)

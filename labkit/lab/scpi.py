@@ -155,6 +155,7 @@ class Command:
     query: Callable[[Call], Any] | None = None
     answers: bool = False   # the (unusual) command form that answers, like the lab's CAM:REC
     suffix_names: tuple[str, ...] = ()
+    query_params: bool = True   # the query reads parameters (MIN/MAX, a source...)
 
 
 def _split_outside_quotes(text: str, sep: str) -> tuple[list[str], bool]:
@@ -310,6 +311,9 @@ class SimScpiInstrument:
     int_sign = True
     block_digits: int | None = None
     suffix_limits: dict[str, int] = {}
+    #: Queries take parameters unless said otherwise (the generators' ``? MIN|MAX|DEF``); the
+    #: scopes document none, so there a parameter to a query is ``-108`` unless the command says so.
+    query_params_default = True
 
     def __init__(self, name: str | None = None) -> None:
         if name:
@@ -343,9 +347,13 @@ class SimScpiInstrument:
         """Fill the command table (subclasses)."""
 
     def add(self, pattern: str, set: Callable[[Call], Any] | None = None,
-            query: Callable[[Call], Any] | None = None, answers: bool = False) -> None:
+            query: Callable[[Call], Any] | None = None, answers: bool = False,
+            query_params: bool | None = None) -> None:
+        """``query_params``: whether the query takes parameters; None: as
+        :attr:`query_params_default` says (a parameter to a query that takes none is ``-108``)."""
+        takes = self.query_params_default if query_params is None else query_params
         self.commands.append(Command(pattern, compile_pattern(pattern), set, query, answers,
-                                     tuple(suffix_names(pattern))))
+                                     tuple(suffix_names(pattern)), takes))
 
     def setting(self, pattern: str, key: str, default: Any, parse: Callable[[str], Any],
                 fmt: Callable[[Any], str] = str, per_suffix: bool = False,
@@ -373,7 +381,7 @@ class SimScpiInstrument:
             value = store[key].get(c.suffix(), default) if per_suffix else store[key]
             return fmt(value)
 
-        self.add(pattern, set=do_set, query=do_query)
+        self.add(pattern, set=do_set, query=do_query, query_params=True)
 
     def query_limit(self, c: Call, limits: tuple[float, float] | None, default: Any) -> Any:
         """The value a ``? MIN|MAX|DEF`` query names; -108 if the setting has no such query."""
@@ -555,6 +563,8 @@ class SimScpiInstrument:
             return None
         try:
             params = split_params(rest)
+            if query and params and not cmd.query_params:
+                raise ScpiError(-108)
             with self.lock:
                 result = handler(Call(params, suffixes, header, query))
             return result if (query or cmd.answers) else None
