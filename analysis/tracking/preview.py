@@ -71,8 +71,10 @@ def preview_frame(source: str | Path, frame: int, out_png: str | Path, *, scale:
         cv2.drawContours(m, [c], -1, 1, -1)
         inner = cv2.erode(m, np.ones((5, 5), np.uint8))     # clear of the blurred edge
         contrast = 1.0 - float(cv2.mean(ratio, mask=inner if inner.any() else m)[0])
-        (_cx, _cy), (a, b), _ang = cv2.minAreaRect(c)       # side lengths only (no angle convention)
-        elong = max(a, b) / max(min(a, b), 1e-9)
+        mo = cv2.moments(c)
+        a20, a02, a11 = (mo[k] / max(mo["m00"], 1e-9) for k in ("mu20", "mu02", "mu11"))
+        com = np.sqrt(((a20 - a02) / 2) ** 2 + a11 ** 2)
+        elong = float(np.sqrt(((a20 + a02) / 2 + com) / max((a20 + a02) / 2 - com, 1e-9)))
         size_ok = expected is None or 0.45 * expected < area < 1.7 * expected
         robot_like = size_ok and 1.4 < elong < 5.0
         bx, by, bw, bh = cv2.boundingRect(c)

@@ -2,24 +2,34 @@
 
 Method, per frame (the functions' docstrings say why):
 
-1. A window around the predicted position (the whole region of interest when
-   the robot is not yet found or was lost) is split into dark and light by
-   Otsu's threshold computed on that frame's window alone, so a slow lighting
-   drift never needs a fixed threshold. A dark/light contrast check rejects a
-   window holding only Teflon.
-2. The dark connected component of the robot's size nearest the prediction is
-   the robot. The static scene is modelled beforehand from 15 frames spread
-   over the video (:func:`labkit.analysis.tracking.measure.background_model`): dark
-   structure present in all of them and reaching the border (the tray's rim
-   beyond its edge) is excluded, so a robot touching the edge does not merge
-   with it, and the Teflon's texture is divided out (a flat field).
-3. Around that component (a band of ``margin_px``) each pixel gets a weight =
+1. Before the first frame, the static scene is modelled from 15 frames spread
+   over the video (:func:`labkit.analysis.tracking.measure.background_model`):
+   the tray's rim (dark, in every sample, reaching the border), static dark
+   objects (dark in every sample while the tray around them is dark in few:
+   dust, however large, is never the robot), the flat field (ring light shape,
+   Teflon texture) and the pixel noise. The contrast threshold is 5 noise
+   sigmas (at least 4 %) unless ``min_contrast`` is given.
+2. A window around the predicted position (the whole region of interest when
+   the robot is not yet found or was lost) is divided by the flat field and by
+   its own smooth background (a grey closing wider than the chip, on a coarse
+   grid: a lighting gradient and a frame's flicker go), then split into dark and
+   light by Otsu's threshold on that window; a window whose dark/light contrast
+   is below the threshold holds no robot.
+3. Identity: the dark component of the robot's expected area (from the scale
+   and the 5 x 2 mm body, then from the first confident frames) and, at
+   acquisition, elongated shape, nearest the constant-velocity prediction, is
+   the robot. A candidate beyond what the robot can walk since the last good
+   frame (``max_speed_mm_s`` plus jitter) is an occlusion: the frame is lost
+   and later bridged by the smoothed path. A second robot-sized candidate
+   within reach is counted and warned about. A robot touching a masked static
+   object and missing part of its darkness is flagged degraded.
+4. Around that component (a band of ``margin_px``) each pixel gets a weight =
    its darkness relative to a plane fitted to the surrounding background ring
    (a constant when the ring is cut on one side), divided by the robot's own
    darkness: for an anti-aliased or blurred edge this is the pixel's area
    coverage, so the weighted moments give the centroid to a small fraction of
    a pixel (a binary mask would quantise it).
-4. Orientation from the second central moments (``0.5 atan2(2 mu11, mu20 -
+5. Orientation from the second central moments (``0.5 atan2(2 mu11, mu20 -
    mu02)``; never ``minAreaRect``, whose angle convention changed in OpenCV 5).
    The axis is defined modulo 180 degrees: it is unwrapped by continuity and
    the robot's front chosen, per stretch between losses, as the end it moves
