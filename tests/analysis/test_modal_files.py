@@ -163,3 +163,22 @@ def test_bad_files_exit_2_with_one_line(tmp_path, name, content, extra, message)
     proc = run_cli("fit", str(path), *extra, "--out", str(tmp_path / "r.toml"), check=2)
     err = proc.stderr.strip().splitlines()
     assert len(err) == 1 and message in err[0] and "Traceback" not in proc.stderr, proc.stderr
+
+
+def test_two_port_touchstone_with_the_parameter_named_on_the_command_line(tmp_path):
+    h = synthetic_frf(F, FN, ZETA, SHAPES[:1], noise=0.005, seed=9)[0]
+    s21 = 0.5 * h / np.max(np.abs(h))
+    s = np.zeros((F.size, 2, 2), complex)
+    s[:, 0, 0] = 0.9 - 0.4 * s21                      # reflection: the modes as dips
+    s[:, 1, 0] = s[:, 0, 1] = s21
+    s[:, 1, 1] = 0.1
+    skrf.Network(frequency=skrf.Frequency.from_f(F, unit="hz"), s=s).write_touchstone(str(tmp_path / "dut"))
+    out = tmp_path / "r.toml"
+    got = last_json(run_cli("fit", str(tmp_path / "dut.s2p"), "--columns", "S21", "--out", str(out),
+                            "--no-figures", "--json"))
+    assert [m["dominant_location"] for m in got["fitted_modes"]] == ["S21", "S21"]
+    np.testing.assert_allclose([m["freq_hz"] for m in got["fitted_modes"]], FN, rtol=1e-3)
+    both = last_json(run_cli("fit", str(tmp_path / "dut.s2p"), "--columns", "S11,S21", "--out", str(out),
+                             "--force", "--no-figures", "--json"))
+    np.testing.assert_allclose([m["freq_hz"] for m in both["fitted_modes"]], FN, rtol=1e-3)
+    run_cli("fit", str(tmp_path / "dut.s2p"), "--columns", "S31", "--out", str(out), "--force", check=2)
