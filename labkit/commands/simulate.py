@@ -64,12 +64,21 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                           help="switch a small-scale force off (paper Fig. 12)")
     run_opts.add_argument("--out", metavar="FILE.h5", help="write the result as HDF5 (its folder must exist)")
     run_opts.add_argument("--force", action="store_true", help="replace --out if it exists")
+    single_opts = pclass(add_help=False)
+    single_opts.add_argument("--start-height-um", default=None, metavar="UM",
+                             help="start at rest in the air, the body's underside UM above its resting "
+                                  "gap (drop tests, free flight); default: resting on the feet")
+    single_opts.add_argument("--dt-check", action="store_true",
+                             help="also run 4 seeds at the default step and at a quarter of it; report "
+                                  "the difference of the mean speeds and whether the run is chaotic")
 
-    shaker = sub.add_parser("shaker", parents=[common, run_opts], help="one run on a vertically vibrating tray")
+    shaker = sub.add_parser("shaker", parents=[common, run_opts, single_opts],
+                            help="one run on a vertically vibrating tray")
     shaker.add_argument("--freq-hz", default="240", metavar="HZ", help="tray frequency, Hz (default 240)")
     shaker.add_argument("--amp-um", default="25", metavar="UM", help="tray amplitude, um (default 25)")
 
-    pzt = sub.add_parser("pzt", parents=[common, run_opts], help="one run driven by the on-board PZT (tripod gait)")
+    pzt = sub.add_parser("pzt", parents=[common, run_opts, single_opts],
+                         help="one run driven by the on-board PZT (tripod gait)")
     pzt.add_argument("--freq-hz", default="1800", metavar="HZ", help="drive frequency, Hz (default 1800)")
     pzt.add_argument("--voltage-v", default="20", metavar="V", help="square-wave amplitude, V (default 20)")
     pzt.add_argument("--mass-mg", default=None, metavar="MG", help="total robot mass with payload, mg")
@@ -217,12 +226,19 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     duration_s = number(args.duration_s, "--duration-s", positive=True)
     seed = integer(args.seed, "--seed")
     params = ablate(load_params(args.params), args.ablate)
+    height = getattr(args, "start_height_um", None)
+    height_um = None if height is None else number(height, "--start-height-um", positive=True)
     check_outputs([args.out], force=args.force, suffixes=H5_SUFFIXES)       # before simulating
-    r = simulate(params, _scenario_from(kind, values), duration_s=duration_s, seed=seed)
+    scenario = _scenario_from(kind, values)
+    r = simulate(params, scenario, duration_s=duration_s, seed=seed, start_height_um=height_um)
     summary: dict[str, Any] = {"kind": kind, **values, "duration_s": duration_s, "ablate": args.ablate,
-                               "seed": seed}
+                               "seed": seed, "start_height_um": height_um}
     for key, value in _result_summary(r).items():
         summary.setdefault(key, value)
+    if getattr(args, "dt_check", False):
+        from labkit.sim.core import dt_check
+
+        summary["dt_check"] = dt_check(params, scenario, duration_s, seed=seed, start_height_um=height_um)
     if args.out:
         with atomic_output(args.out) as tmp:
             r.to_h5(tmp)
@@ -320,6 +336,13 @@ def _print_single(s: dict[str, Any]) -> None:
     print(f"{s['kind']} run, {s['duration_s']:g} s: mean speed {s['mean_speed_mm_s']:.3f} mm/s")
     print("  patterns: " + ", ".join(s["patterns"]))
     print("  impacts:  " + ", ".join(str(i) for i in s["impacts"]))
+    if "dt_check" in s:
+        c = s["dt_check"]
+        d, q = c["default"], c["quarter"]
+        print(f"  dt check ({len(c['seeds'])} seeds): default step {c['dt_s']:.3g} s: {d['mean_mm_s']:.3f} "
+              f"+- {d['sem_mm_s']:.3f} mm/s; quarter step: {q['mean_mm_s']:.3f} +- {q['sem_mm_s']:.3f} mm/s; "
+              f"difference {c['difference_mm_s']:+.3f} mm/s ({'converged' if c['converged'] else 'NOT converged'}"
+              f"{', chaotic: ensemble means compared' if c['chaotic'] else ''})")
     if "out" in s:
         print(f"  wrote {s['out']}")
 

@@ -32,8 +32,11 @@ from labkit.sim.excitation import PZT, Shaker
 from labkit.sim.params import RobotParams
 from labkit.sim.result import SimResult, classify_pattern
 
-#: Default step: this many steps per period of the fastest of (highest mode, drive).
-STEPS_PER_PERIOD = 25
+#: Default step: this many steps per period of the fastest of (highest mode, drive) ...
+STEPS_PER_PERIOD = 50
+#: ... and at least this many per period of a shaker (the tray's acceleration A w^2 sets
+#: how fast contact forces change; measured: docs/model.md section "Numerics").
+SHAKER_STEPS_PER_PERIOD = 120
 #: Default recording interval: at most 1e-4 s, and at least 20 samples per drive period.
 RECORD_DT_MAX_S = 1e-4
 RECORD_PER_PERIOD = 20
@@ -67,11 +70,14 @@ def ablate(params: RobotParams, ablation: str | None) -> RobotParams:
 
 
 def default_dt(params: RobotParams, scenario: Shaker | PZT) -> float:
-    """:data:`STEPS_PER_PERIOD` steps per period of the fastest mode or drive; for the PZT
+    """:data:`STEPS_PER_PERIOD` steps per period of the fastest mode or drive (and at least
+    :data:`SHAKER_STEPS_PER_PERIOD` per shaker period); for the PZT
     rounded down so that a half period of the square wave is a whole number of steps
     (its edges fall on step boundaries)."""
     f_top = max(max(params.modal_freq_hz), scenario.freq_hz)
     dt = 1.0 / (STEPS_PER_PERIOD * f_top)
+    if isinstance(scenario, Shaker):
+        dt = min(dt, 1.0 / (SHAKER_STEPS_PER_PERIOD * scenario.freq_hz))
     return align_dt(dt, scenario)
 
 
@@ -234,3 +240,46 @@ def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engin
         body_impacts=int(cnt[M.CNT_BODY]), patterns=patterns, max_flight_s=out["max_air"].copy(),
         events=out["events"][:n_ev].copy(), n_steps=n_steps, wall_s=wall, seed=seed, ablation=ablation,
         counters={"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED])})
+
+
+#: dt_check: the default step and the quarter step agree when the mean speeds differ by
+#: less than this fraction, or by less than DT_CHECK_ABS_MM_S (issue 10's criterion).
+DT_CHECK_REL = 0.03
+DT_CHECK_ABS_MM_S = 0.1
+#: dt_check: seeds of the chaos probe (runs from slightly different starts, jitter_um).
+DT_CHECK_SEEDS = 4
+
+
+def dt_check(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.0, *, seeds: int = DT_CHECK_SEEDS,
+             seed: int = 0, ablation: str | None = None, engine: str = "numba",
+             start_height_um: float | None = None) -> dict:
+    """Is the default step converged for this run? Rerun at a quarter of it and compare.
+
+    Runs ``seeds`` starts (seeds ``seed .. seed+seeds-1``, each leg mode jittered by
+    :data:`JITTER_UM`) at the default step and at a quarter step. A run is *chaotic*
+    when the speeds of the starts at one step spread by more than the agreement
+    tolerance (their standard deviation > max(DT_CHECK_REL |mean|, DT_CHECK_ABS_MM_S)):
+    then single trajectories cannot converge and the ensemble means (with their
+    standard errors) are compared. Returns a JSON-able dict: per step the speeds, mean
+    and standard error, the difference, ``converged`` and ``chaotic``.
+    """
+    if seeds < 2:
+        raise InputError(f"need at least 2 seeds, got {seeds}", key="seeds", expected="an integer >= 2")
+    p = ablate(params, ablation)
+    dt = default_dt(p, scenario)
+    out: dict = {"dt_s": dt, "quarter_dt_s": align_dt(dt / 4, scenario), "seeds": list(range(seed, seed + seeds))}
+    for name, step in (("default", dt), ("quarter", dt / 4)):
+        v = np.array([simulate(p, scenario, duration_s, dt_s=step, seed=s, engine=engine,
+                               start_height_um=start_height_um).mean_speed_mm_s for s in out["seeds"]])
+        out[name] = {"speeds_mm_s": [float(x) for x in v], "mean_mm_s": float(v.mean()),
+                     "sem_mm_s": float(v.std(ddof=1) / math.sqrt(len(v))), "std_mm_s": float(v.std(ddof=1))}
+    a, b = out["default"], out["quarter"]
+    tol = max(DT_CHECK_REL * abs(b["mean_mm_s"]), DT_CHECK_ABS_MM_S)
+    out["chaotic"] = bool(max(a["std_mm_s"], b["std_mm_s"]) > tol)
+    diff = a["mean_mm_s"] - b["mean_mm_s"]
+    out["difference_mm_s"] = float(diff)
+    out["tolerance_mm_s"] = float(tol)
+    # chaotic: the means must agree within the tolerance plus two standard errors
+    allow = tol + (2 * math.hypot(a["sem_mm_s"], b["sem_mm_s"]) if out["chaotic"] else 0.0)
+    out["converged"] = bool(abs(diff) <= allow)
+    return out

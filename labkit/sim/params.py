@@ -124,7 +124,7 @@ class RobotParams:
     body_gap_um: float = 50.0
     h_min_um: float = 1.0
     mu: float = math.inf
-    v_stick_mm_s: float = 1.0
+    v_stick_mm_s: float = 0.01
     impact_modes: tuple[float, float, float] = (1.0, 1.0, 1.0)
     g_m_s2: float = G_M_S2
     provenance: dict = field(default_factory=dict, compare=False, hash=False, repr=False)

@@ -59,12 +59,28 @@ def test_sweep_pzt_mass_text_output():
     (["shaker", "--params", "/nonexistent/robot.toml"], "/nonexistent/robot.toml"),
     (["sweep", "shaker", "--freq-hz", "100:200:3", "--accel-limit-g", "0"], "--accel-limit-g"),
     (["sweep", "pzt", "--voltage-v", "1:20:3", "--workers", "0"], "--workers"),
+    (["shaker", "--start-height-um", "-3"], "--start-height-um"),
+    (["pzt", "--start-height-um", "0.001"], "start_height_um"),
 ])
 def test_bad_input_exits_2_with_one_line(args, needle):
     proc = run_cli("simulate", *args, "--duration-s", "0.01", check=2)
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1, proc.stderr
     assert needle in lines[0]
+
+
+def test_start_height_and_dt_check():
+    """A drop from 200 um: nothing touches the ground for the first 6 ms (free fall,
+    sqrt(2 H / g) = 6.4 ms); --dt-check reports both steps and a verdict."""
+    js = last_json(run_cli("simulate", "pzt", "--voltage-v", "0", "--start-height-um", "200", "--duration-s",
+                           "0.006", "--dt-check", "--json"))
+    assert js["start_height_um"] == 200.0 and sum(js["impacts"]) == 0
+    c = js["dt_check"]
+    assert c["quarter_dt_s"] == pytest.approx(c["dt_s"] / 4)
+    assert len(c["default"]["speeds_mm_s"]) == len(c["quarter"]["speeds_mm_s"]) == 4
+    assert c["converged"] is True and c["chaotic"] is False
+    text = run_cli("simulate", "shaker", "--duration-s", "0.01", "--dt-check").stdout
+    assert "dt check (4 seeds)" in text and "quarter step" in text
 
 
 def test_bad_params_file_names_file_and_key(tmp_path):
