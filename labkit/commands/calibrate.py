@@ -197,7 +197,8 @@ def _run_paper(args: argparse.Namespace) -> dict[str, Any]:
         for n, v in cal.fitted.items():
             lo, hi = cal.spread[n]
             print(f"  {n}: {cal.start[n]:.4g} -> {v:.4g} (near-optimal {lo:.3g} .. {hi:.3g})")
-        print(f"  cost (sum of squared violations): {cal.before['cost']:.3f} -> {cal.after['cost']:.3f}")
+        print(f"  cost (sum of tanh(violation), ~ observations not met): {cal.before['cost']:.3f} -> "
+              f"{cal.after['cost']:.3f}")
         for k, v in cal.after["violations"].items():
             b = cal.before["violations"][k]
             print(f"  {'PASS' if v == 0 else 'FAIL'}  {k}: violation {b:.3g} -> {v:.3g}")

@@ -36,13 +36,14 @@ import numpy as np
 
 from labkit.errors import InputError
 from labkit.sim.knee_patterns import PATTERNS
+from labkit.sim.params import RobotParams
 
 _NAME = re.compile(r"^([a-z_][a-z0-9_]*)(?:\[([0-2])\])?$")
 
 
 # --------------------------------------------------------------------------- parameter access
 
-def parse_names(params: Any, names: Sequence[str]) -> list[tuple[str, int | None]]:
+def parse_names(params: RobotParams, names: Sequence[str]) -> list[tuple[str, int | None]]:
     """``"c_r"`` -> ``("c_r", None)``, ``"k_per_s2[1]"`` -> ``("k_per_s2", 1)``; InputError if unknown."""
     fields = params.to_dict()
     out = []
@@ -70,12 +71,13 @@ def label(name: tuple[str, int | None]) -> str:
     return name[0] if name[1] is None else f"{name[0]}[{name[1]}]"
 
 
-def get_values(params: Any, names: list[tuple[str, int | None]]) -> np.ndarray:
+def get_values(params: RobotParams, names: list[tuple[str, int | None]]) -> np.ndarray:
     d = params.to_dict()
     return np.array([d[n] if i is None else d[n][i] for n, i in names], float)
 
 
-def set_values(params: Any, names: list[tuple[str, int | None]], values: Sequence[float] | np.ndarray) -> Any:
+def set_values(params: RobotParams, names: list[tuple[str, int | None]],
+               values: Sequence[float] | np.ndarray) -> RobotParams:
     changes: dict[str, Any] = {}
     d = params.to_dict()
     for (n, i), v in zip(names, values):
@@ -132,7 +134,7 @@ class Calibration:
     corr: np.ndarray
     before: dict[str, Any]
     after: dict[str, Any]
-    params: Any
+    params: RobotParams
     n_sims: int
     n_iterations: int
     status: str
@@ -184,7 +186,7 @@ def _dominant(labels: Sequence[str]) -> str:
     return max(PATTERNS, key=lambda p: labels.count(p))
 
 
-def calibrate(params: Any, names: Sequence[str], obs: Observations, *, duration_s: float = 1.0, seed: int = 0,
+def calibrate(params: RobotParams, names: Sequence[str], obs: Observations, *, duration_s: float = 1.0, seed: int = 0,
               bounds: dict[str, tuple[float, float]] | None = None, rel_step: float = 0.05,
               pattern_weight: float = 1.0, max_iterations: int = 10, min_std_mm_s: float = 0.05, scan: int = 0,
               scan_rounds: int = 3,

@@ -51,8 +51,9 @@ def shaker_speed(params: RobotParams, opts: RunOptions) -> Outcome:
     freqs = np.linspace(150, 2000, 40) if not quick else np.array([200.0, 300.0, 800.0])
     kw = dict(draws=opts.pick(10, 2, draws), duration_s=opts.pick(2.0, 0.1, duration_s),
               scheduler=scheduler, workers=workers, seed=seed, quiet=quiet)
-    s = sweep(params, Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz", freqs, **kw)
-    capped = sweep(params, Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz", freqs, accel_limit_g=ACCEL_LIMIT_G, **kw)
+    s = sweep(params, Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz", freqs.tolist(), **kw)
+    capped = sweep(params, Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz", freqs.tolist(),
+                   accel_limit_g=ACCEL_LIMIT_G, **kw)
     out: dict[str, Any] = {}
     for key, sw in (("amp_25_um", s), (f"capped_{ACCEL_LIMIT_G:g}_g", capped)):
         out[key] = {"peak_speed_150_300_hz_mm_s": band(sw.values, sw.mean_speed_mm_s, 150, 300),
@@ -101,7 +102,7 @@ def leg_patterns(params: RobotParams, opts: RunOptions) -> Outcome:
 
     dur = opts.pick(0.5, 0.1, duration_s)
     amps = np.array(PATTERN_SWEEP_UM) if not quick else np.array([2.0, 25.0])
-    s = sweep(params, Shaker(freq_hz=PATTERN_FREQ_HZ, amp_um=amps[0]), "amp_um", amps,
+    s = sweep(params, Shaker(freq_hz=PATTERN_FREQ_HZ, amp_um=amps[0]), "amp_um", amps.tolist(),
               draws=opts.pick(0, 0, draws), duration_s=dur, scheduler=scheduler, workers=workers,
               seed=seed, quiet=quiet)
     order = {"firm_contact": 0, "partial_contact": 1, "jumping": 2}
@@ -190,7 +191,7 @@ def pzt_payload(params: RobotParams, opts: RunOptions) -> Outcome:
     from labkit.sim import PZT, sweep
 
     masses = np.round(np.linspace(0.33, 2.5, 14), 3) if not quick else np.array([0.33, 2.5])
-    s = sweep(params, PZT(freq_hz=1800.0, voltage_v=20.0, mass_mg=0.33), "mass_mg", masses,
+    s = sweep(params, PZT(freq_hz=1800.0, voltage_v=20.0, mass_mg=0.33), "mass_mg", masses.tolist(),
               draws=opts.pick(10, 2, draws), duration_s=opts.pick(1.0, 0.05, duration_s),
               scheduler=scheduler, workers=workers, seed=seed, quiet=quiet)
     mean = s.mean_speed_mm_s
@@ -218,7 +219,7 @@ def pzt_frequency(params: RobotParams, opts: RunOptions) -> Outcome:
     from labkit.sim import PZT, sweep
 
     freqs = np.linspace(250, 650, 17) if not quick else np.array([400.0, 450.0])
-    s = sweep(params, PZT(freq_hz=438.0, voltage_v=20.0), "freq_hz", freqs,
+    s = sweep(params, PZT(freq_hz=438.0, voltage_v=20.0), "freq_hz", freqs.tolist(),
               draws=opts.pick(5, 2, draws), duration_s=opts.pick(1.0, 0.05, duration_s),
               scheduler=scheduler, workers=workers, seed=seed, quiet=quiet)
     i = int(np.argmax(np.abs(s.mean_speed_mm_s)))
@@ -252,8 +253,8 @@ def adhesion(params: RobotParams, opts: RunOptions) -> Outcome:
     dur = opts.pick(1.0, 0.05, duration_s)
     nd = opts.pick(0, 0, draws)
     laws = {"25 um": None, f"<= {ACCEL_LIMIT_G:g} g": ACCEL_LIMIT_G}
-    sweeps = {(law, v): sweep(params.replace(**{name: v}), Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz", freqs,
-                              draws=nd, duration_s=dur, scheduler=scheduler, workers=workers, seed=seed,
+    sweeps = {(law, v): sweep(params.replace(**{name: v}), Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz",
+                              freqs.tolist(), draws=nd, duration_s=dur, scheduler=scheduler, workers=workers, seed=seed,
                               quiet=quiet, accel_limit_g=cap)
               for law, cap in laws.items() for v in values}
 
@@ -281,8 +282,9 @@ def adhesion(params: RobotParams, opts: RunOptions) -> Outcome:
                 ax.legend(fontsize=6, ncol=2, title="adhesion", title_fontsize=6)
         fig.tight_layout()
 
-    table = {law: {f"{v * 1e6:g}": {"checks": fig8_checks(sweeps[(law, v)].values, sweeps[(law, v)].mean_speed_mm_s),
-                                    "points": _points(sweeps[(law, v)])} for v in values} for law in laws}
+    table: dict[str, dict[str, dict[str, Any]]] = {
+        law: {f"{v * 1e6:g}": {"checks": fig8_checks(sweeps[(law, v)].values, sweeps[(law, v)].mean_speed_mm_s),
+                               "points": _points(sweeps[(law, v)])} for v in values} for law in laws}
     good = {law: [k for k, t in rows.items() if all(t["checks"].values())] for law, rows in table.items()}
     return Outcome(
         numbers={"field": name, "by_law_and_adhesion_un": table, "values_reproducing_fig8_un": good},
