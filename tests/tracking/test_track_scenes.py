@@ -210,10 +210,15 @@ def test_image_sequences(tmp_path, capsys):
     # a pattern and a frame rate, through the command line
     plain, truth2 = video(tmp_path, "seq_fps", scene(n=45, seed=11), kind="png")
     pattern = str(plain / "frame_%05d.png")
-    code, out, err = run_cli(capsys, pattern, "--fps", "30", "--mm-per-px", str(S), "--json")
+    overlay = tmp_path / "seq_overlay.avi"
+    code, out, err = run_cli(capsys, pattern, "--fps", "30", "--mm-per-px", str(S), "--overlay", str(overlay), "--json")
     assert code == 0, err
     s = json.loads(out[-1])
     assert s["frames"] == 45 and s["timestamps_source"] == "fps"
+    import cv2
+    cap = cv2.VideoCapture(str(overlay))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 45
+    cap.release()
     assert s["mean_speed_mm_s"] == pytest.approx(truth2.speed_mm_s, rel=0.01)
     # no times at all: refused with the way out named
     code, _, err = run_cli(capsys, pattern, "--mm-per-px", str(S))
