@@ -147,7 +147,8 @@ def test_a_run_cut_short_keeps_only_complete_points(tmp_path):
 # --------------------------------------------------------------------------- older layouts
 
 SCHEMA1_KINDS = {"inchip_run.h5": "run_inchip", "shaker_run.h5": "run_shaker", "robot.fit.h5": "modal_fit",
-                 "shaker_240hz_track.h5": "track", "sim_result.h5": "sim_result", "sim_sweep.h5": "sim_sweep"}
+                 "shaker_240hz_track.h5": "track", "sim_result.h5": "sim_result", "sim_sweep.h5": "sim_sweep",
+                 "sim_sweep_set.h5": "sim_sweep_set", "sim_ablations.h5": "sim_ablations"}
 
 
 def test_schema1_fixtures_are_what_they_claim():
@@ -190,6 +191,12 @@ def test_schema1_files_read_like_current_ones(name):
         elif name == "sim_result.h5":
             np.testing.assert_array_equal(ds["body_z_um"].values, f["body_z_um"][()])
             np.testing.assert_array_equal(ds["t_s"].values, f["t_s"][()])
+        elif name == "sim_sweep_set.h5":
+            assert sorted(obj.sweeps) == ["amp_25_um/5_uN", "capped/5_uN"]
+            np.testing.assert_array_equal(ds["speeds_mm_s"].values, f["amp_25_um/5_uN/speeds_mm_s"][()])
+        elif name == "sim_ablations.h5":
+            assert list(obj.runs) == ["full", "no_adhesion"]
+            np.testing.assert_array_equal(ds["foot_z_um"].values, f["runs/full/foot_z_um"][()])
         else:
             np.testing.assert_array_equal(ds["freq_hz"].values, f["values"][()])
             np.testing.assert_array_equal(ds["speeds_mm_s"].values, f["speeds_mm_s"][()])
