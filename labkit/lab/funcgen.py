@@ -488,6 +488,43 @@ class SimKeysight33500B(SimScpiInstrument):
         add("TRIGger#[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
         add("*TRG", set=lambda c: self._trigger(list(self.ch), force=False))
         self._build_more()
+        self._build_status()
+
+    def _build_status(self) -> None:
+        """SCPI's STATus subsystem (SCPI 1999 vol. 1, 9; KS "STATus Subsystem"): OPERation and
+        QUEStionable condition (nothing in the simulation sets one), event (cleared by reading
+        and ``*CLS``) and enable registers; ``STATus:PRESet`` clears the enables. Their
+        summaries are status-byte bits 7 and 3."""
+        self.status_regs = {"OPER": [0, 0, 0], "QUES": [0, 0, 0]}   # condition, event, enable
+
+        def register(name: str) -> tuple[Callable[[Call], str], Callable[[Call], str],
+                                          Callable[[Call], None], Callable[[Call], str]]:
+            reg = self.status_regs[name]
+
+            def event(c: Call) -> str:
+                value, reg[1] = reg[1], 0
+                return self.fmt_int(value)
+
+            def set_enable(c: Call) -> None:
+                reg[2] = int(self.num(c.one(), "", 0, 32767))
+
+            return event, lambda c: self.fmt_int(reg[0]), set_enable, lambda c: self.fmt_int(reg[2])
+
+        for long, name in (("OPERation", "OPER"), ("QUEStionable", "QUES")):
+            event, condition, set_enable, enable = register(name)
+            self.add(f"STATus:{long}[:EVENt]", query=event)
+            self.add(f"STATus:{long}:CONDition", query=condition)
+            self.add(f"STATus:{long}:ENABle", set=set_enable, query=enable)
+        self.add("STATus:PRESet", set=lambda c: [reg.__setitem__(2, 0) for reg in self.status_regs.values()])
+
+    def summary_bits(self) -> int:
+        oper, ques = self.status_regs["OPER"], self.status_regs["QUES"]
+        return (128 if oper[1] & oper[2] else 0) | (8 if ques[1] & ques[2] else 0)
+
+    def clear_status(self) -> None:
+        super().clear_status()
+        for reg in self.status_regs.values():
+            reg[1] = 0
 
     def _set_ncycles(self, c: Call) -> None:
         n = self._chan(c)

@@ -163,6 +163,10 @@ KS_ROWS = [
         [("FREQU 1", None), ("*CLS", None), ("*ESR?", "+0"), ("SYST:ERR?", '+0,"No error"')]),
     Row("SCPI vol. 2 21.8.3 queue overflow: the last entry becomes -350",
         [(";".join(["FREQU 1"] * 25), None)], [-113] * 19 + [-350]),
+    Row("SCPI vol. 1 9 / KS STATus Subsystem: OPERation and QUEStionable registers, STATus:PRESet",
+        [("STAT:OPER:ENAB 512;:STAT:QUES:ENAB 4", None), ("STAT:OPER:ENAB?;:STAT:QUES:ENAB?", "+512;+4"),
+         ("STAT:OPER?;:STAT:QUES?;:STAT:OPER:COND?", "+0;+0;+0"), ("STAT:PRES", None),
+         ("STAT:OPER:ENAB?", "+0")]),
     Row("KS unknown command: -113 and no reply, never a hang", [("FOO:BAR?", None), ("DISP:WIND:FOO 3", None)],
         [-113, -113]),
 ]
