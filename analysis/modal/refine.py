@@ -244,7 +244,8 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
             trial = theta + step
             trial[1:2 * m:2] = np.clip(trial[1:2 * m:2], 1e-12, 0.98)
             trial[0:2 * m:2] = np.clip(trial[0:2 * m:2], 0.25 * band_hz[0], 2.0 * band_hz[1])
-            t_terms = _channel_terms(trial, channels, m, powers, want_jac=False)
+            # With the Jacobian: most trials are accepted, and then it is needed next.
+            t_terms = _channel_terms(trial, channels, m, powers)
             t_cost = _cost(t_terms)
             if t_cost < cost:
                 improved = True
@@ -257,15 +258,16 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
         small_step = np.all(np.abs(step) <= tol * 100 * (np.abs(theta) + 1e-12))
         theta, cost = trial, t_cost
         mu = max(mu / 10, 1e-12)
-        terms = _channel_terms(theta, channels, m, powers)
+        terms = t_terms
         if rel < tol or small_step:
             success = True
             break
-    return _finish(theta, channels, m, n_lin, powers, covariance, success, n_iter, free)
+    return _finish(theta, channels, m, n_lin, powers, covariance, success, n_iter, free, terms)
 
 
-def _finish(theta, channels, m, n_lin, powers, covariance, success, n_iter, free=None) -> Refined:
-    terms = _channel_terms(theta, channels, m, powers)
+def _finish(theta, channels, m, n_lin, powers, covariance, success, n_iter, free=None, terms=None) -> Refined:
+    if terms is None:
+        terms = _channel_terms(theta, channels, m, powers)
     A, _ = _normal(terms, m, n_lin)
     if free is not None and not free.all():
         # Held parameters: no variance, and no part in the others' (rows and columns zeroed).
