@@ -21,12 +21,15 @@ Methods
     scaled by the residual variance).  With ``n_modes`` given, exactly that
     many modes are returned (poles the diagram does not offer are added where
     the residual is largest) or an error is raised.  Without it, poles
-    narrower than the line spacing or with residues below 3 standard
-    uncertainties everywhere are dropped (with a warning) and the rest
-    refitted, and while the misfit is well above the noise level estimated
-    from the data (:mod:`labkit.analysis.modal.noise`) a mode is added where
-    the residual is largest and kept if it is credible and lowers the misfit.
-    With several locations each is weighted by its own noise level.
+    with residues below 3 standard uncertainties everywhere are dropped (with
+    a warning) and the rest refitted, and while the misfit is well above the
+    noise level estimated from the data (:mod:`labkit.analysis.modal.noise`) a
+    mode is added where the residual is largest and kept if it is credible
+    (also: wider than the line spacing) and lowers the misfit.  Modes from
+    the diagram narrower than the line spacing (lightly damped modes of an
+    impact test) are kept, with a warning that their damping is not
+    trustworthy.  With several locations each is weighted by its own noise
+    level estimated from the data.
     Resolves overlapping modes.
 ``"peak"``
     Peak picking on the locations' combined mobility magnitude, half-power
