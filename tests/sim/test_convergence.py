@@ -1,0 +1,39 @@
+"""Convergence of the headline output, the mean speed: default step against a quarter step.
+
+Issue 10: within 3 % (or 0.1 mm/s) for the PZT default run and shaker runs at 150,
+240, 300, 700 and 1500 Hz, for the published parameters and the documented
+alternative (``c_ad_n = 2e-6``, docs/simulator.md). None of these runs is chaotic at
+0.3 s (seeds give the same speed; :func:`labkit.sim.core.dt_check` says so), so single
+trajectories are compared. Known gap (docs/model.md, Numerics): with ``c_ad_n = 2e-6``
+at 1500 Hz the default step gives -1.41 mm/s against -1.62 at a quarter step (two
+coexisting gaits; the step selects one); it is not in this table.
+"""
+from __future__ import annotations
+
+import pytest
+
+from labkit.sim import PZT, RobotParams, Shaker, simulate
+from labkit.sim.core import DT_CHECK_ABS_MM_S, DT_CHECK_REL, default_dt, dt_check
+
+PUBLISHED = RobotParams()
+ALTERNATIVE = RobotParams(c_ad_n=2e-6)
+CASES = [(PUBLISHED, PZT(1800, 20.0))] + [(PUBLISHED, Shaker(f, 25.0)) for f in (150, 240, 300, 700, 1500)] \
+    + [(ALTERNATIVE, PZT(1800, 20.0))] + [(ALTERNATIVE, Shaker(f, 25.0)) for f in (150, 240, 300, 700)]
+
+
+@pytest.mark.parametrize("params, scenario", CASES,
+                         ids=[f"{'pub' if p is PUBLISHED else 'cad2'}-{s.kind}-{s.freq_hz:g}" for p, s in CASES])
+def test_mean_speed_default_step_against_quarter_step(params, scenario):
+    dt = default_dt(params, scenario)
+    a = simulate(params, scenario, duration_s=0.3, seed=0)
+    b = simulate(params, scenario, duration_s=0.3, seed=0, dt_s=dt / 4)
+    assert a.dt_s == dt and b.dt_s == pytest.approx(dt / 4)
+    tol = max(DT_CHECK_REL * abs(b.mean_speed_mm_s), DT_CHECK_ABS_MM_S)
+    assert abs(a.mean_speed_mm_s - b.mean_speed_mm_s) <= tol
+
+
+def test_dt_check_reports_ensembles_and_chaos():
+    c = dt_check(ALTERNATIVE, PZT(1800, 20.0), 0.1, seeds=2)
+    assert c["converged"] and not c["chaotic"]
+    assert c["default"]["mean_mm_s"] > 10 and c["quarter_dt_s"] == pytest.approx(c["dt_s"] / 4)
+    assert abs(c["difference_mm_s"]) <= c["tolerance_mm_s"]
