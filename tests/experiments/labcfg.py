@@ -52,17 +52,21 @@ scale_mm_s_per_v = {scale_mm_s_per_v}
 
 def shaker_toml(path: Path, freqs_hz: Iterable[float], tray_amp_um: Iterable[float], *,
                 robot_spot: str = "knee", video_s: float = 0.0, tray_max_um: float = 60.0,
-                settle_s: float = 0.05, dwell_cycles: float = 15, on_interlock: str = "skip") -> Path:
+                settle_s: float = 0.05, dwell_cycles: float = 15, on_interlock: str = "skip",
+                timeout_s: float = 10.0) -> Path:
     f = ", ".join(f"{x:g}" for x in freqs_hz)
     a = ", ".join(f"{x:g}" for x in tray_amp_um)
     camera = ('\n[instruments.camera]\nmodel = "LabCamera"\nresource = "TCPIP0::192.0.2.3::5025::SOCKET"\n'
               if video_s > 0 else "")
+    # generous link timeouts: on a loaded machine the lab's threads can stall for seconds while
+    # the simulator computes (a timeout would then look like a lost instrument)
+    inst = _INSTRUMENTS.replace("::SOCKET\"\n", f"::SOCKET\"\ntimeout_s = {timeout_s}\n")
     path.write_text(f"""# test config
 [run]
 robot_spot = "{robot_spot}"
 video_s = {video_s}
 on_interlock = "{on_interlock}"
-{_INSTRUMENTS}{camera}
+{inst}{camera}
 [amplifier]
 gain_db = 20.0
 attenuator_db = 0.0
