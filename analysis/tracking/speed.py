@@ -45,8 +45,10 @@ quadrature:
    scatter also shows in the residuals, so it is counted on the safe side.)
 4. **Scale** -- the image scale's relative uncertainty times the speed.
 
-The noise's bias on ``|v|`` (``E|v + e| > |v|``) is subtracted. The interval
-is ``S +- z sigma`` (normal quantile). Coverage is measured, not assumed:
+The noise's bias on ``|v|`` (``E|v + e| > |v|``) is subtracted; where the
+speed is within three noise sigmas of zero (a robot vibrating in place) the
+correction is ``sqrt(|v|^2 - var)`` and counts as uncertain by its whole size.
+The interval is ``S +- z sigma`` (normal quantile), its lower end at least 0. Coverage is measured, not assumed:
 ``tests/tracking/test_track_speed.py`` (white and AR(1) noise on an arc) and
 ``tests/tracking/test_track_scenes.py`` (24 rendered videos) count how often
 the 95 % interval holds the truth. The interval is for this recording's mean
@@ -280,11 +282,18 @@ def speed_uncertainty(t: np.ndarray, z: np.ndarray, z_s: np.ndarray, v: np.ndarr
     sig_t = max(sig_t, float(np.std(e)) / np.sqrt(2) if e.size > 4 else 0.0)
     var_time = sig_t ** 2 * float(np.sum((g * v).sum(axis=1) ** 2))
     var_time_vel = sig_t ** 2 * float(np.sum((gv * sp) ** 2))
-    # noise bias of |v|: E|v + e| ~ |v| + var(e across the path) / (2 |v|) per sample
+    # noise bias of |v|: E|v + e| ~ |v| + var(e across the path) / (2 |v|) per sample; where the
+    # speed is within 3 noise sigmas of 0 (a robot vibrating in place) E|v + e|^2 = |v|^2 + var(e)
+    # is used instead, and that correction counts as uncertain by its whole size
+    white = float(sig2[0] * (g[:, 0] @ g[:, 0]) + sig2[1] * (g[:, 1] @ g[:, 1]))
+    infl = var_noise / white if white > 0 else 1.0
     perp = sig2[0] * unit[:, 1] ** 2 + sig2[1] * unit[:, 0] ** 2
-    var_vi = c1sq * perp
-    usable = sp > 3 * np.sqrt(c1sq * sig2.sum())
-    bias = float(np.sum(wn * np.where(usable, var_vi / (2 * np.maximum(sp, 1e-30)), 0.0)))
+    var_tot = c1sq * sig2.sum() * infl
+    usable = sp > 3 * np.sqrt(var_tot)
+    b_hi = np.where(usable, c1sq * perp * infl / (2 * np.maximum(sp, 1e-30)), 0.0)
+    b_lo = np.where(usable, 0.0, sp - np.sqrt(np.maximum(sp ** 2 - var_tot, 0.0)))
+    bias = float(np.sum(wn * (b_hi + b_lo)))
+    var_noise += float(np.sum(wn * b_lo)) ** 2
     mean_speed = float(np.sum(wn * sp)) - bias
     var_scale = (mm_per_px_rel_std * mean_speed) ** 2
     mv = (float(np.sum(wn * v[:, 0])), float(np.sum(wn * v[:, 1])))
@@ -375,7 +384,7 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
     mean_speed -= unc["noise_bias_mm_s"]
     z = NormalDist().inv_cdf(0.5 + ci_level / 2)
     sd, sdv = unc["speed_std_mm_s"], unc["velocity_std_mm_s"]
-    q = np.array([[mean_speed - z * sd, mean_vel[0] - z * sdv[0], mean_vel[1] - z * sdv[1]],
+    q = np.array([[max(mean_speed - z * sd, 0.0), mean_vel[0] - z * sdv[0], mean_vel[1] - z * sdv[1]],
                   [mean_speed + z * sd, mean_vel[0] + z * sdv[0], mean_vel[1] + z * sdv[1]]])
     block = int(unc["max_lag"]) + 1
     del seed, n_boot      # kept in the signature for callers of the bootstrap version

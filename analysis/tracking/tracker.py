@@ -362,6 +362,7 @@ class PreparedScene:
     static: Any
     flat: np.ndarray | None
     warnings: list[str]
+    valid_with_objects: np.ndarray | None = None    # the mask with static objects left searchable
 
 
 def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str | None = None, mask: Any = None,
@@ -381,19 +382,46 @@ def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str |
     seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast)
     static = None
     flat = None
+    with_objects = valid
     warnings: list[str] = []
     if static_mask:
         static = background_model(read_sample_frames(cap, info, 15), seg)
         seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast, noise=static.noise)
         flat = static.flat
-        for m in (static.rim, static.objects):
-            if m is not None:
-                valid = ~m if valid is None else valid & ~m
+        if static.rim is not None:
+            valid = ~static.rim if valid is None else valid & ~static.rim
+        with_objects = valid
+        if static.objects is not None:
+            valid = ~static.objects if valid is None else valid & ~static.objects
         if static.object_boxes:
             warnings.append(f"{len(static.object_boxes)} static dark object(s) set aside (never moved: dust, "
                             f"not the robot) at x,y,w,h " + "; ".join(",".join(str(v) for v in b)
                                                                       for b in static.object_boxes[:3]))
-    return PreparedScene(roi_t, valid, seg, static, flat, warnings)
+    return PreparedScene(roi_t, valid, seg, static, flat, warnings,
+                         valid_with_objects=with_objects if static_mask else valid)
+
+
+def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path | None, size: tuple[int, int],
+                  roi: tuple[int, int, int, int] | None, valid: np.ndarray | None, seg: Segmentation,
+                  margin_px: int, expected: float | None, vmax: float | None, scale: Scale) -> dict | None:
+    """Track again with static objects searchable (and no flat field, which holds them); the result
+    only if a robot-sized, robot-long object was found in most frames."""
+    from labkit.analysis.tracking.video_io import iter_frames, open_source
+
+    cap, info = open_source(source, fps=fps, timestamps=timestamps)
+    try:
+        raw = track_frames(iter_frames(cap, info), size, roi=roi, valid=valid, flat=None, seg=seg,
+                           margin_px=margin_px, expected_area_px=expected, max_speed_px_s=vmax)
+    finally:
+        cap.release()
+    found = raw["quality"] != QUALITY_LOST
+    if expected is None or found.mean() < 0.5:
+        return None
+    area = float(np.median(raw["area_px"][found]))
+    length_mm = raw["length_px"] * scale.mm_per_px
+    if not (0.75 < area / expected < 1.33 and abs(length_mm / ROBOT_LENGTH_MM - 1) < 0.12):
+        return None
+    return raw
 
 
 def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | None = None,
@@ -464,6 +492,16 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
                                expected_area_px=expected, max_speed_px_s=vmax, progress=pb)
     finally:
         cap.release()
+    if (np.all(raw["quality"] == QUALITY_LOST) and static is not None and static.object_boxes
+            and scale is not None and raw["t_s"].size):
+        # nothing moved: a static object may still be the robot vibrating in place (a drive that
+        # does not make it walk). Only an object of the robot's size and length counts, never dust.
+        still = _static_robot(source, fps, timestamps, (W, H), roi_t if roi is not None else None,
+                              scene.valid_with_objects, seg, margin_px, expected, vmax, scale)
+        if still is not None:
+            raw = still
+            warnings.append("the robot did not move: the only robot-like object is static (its size and length "
+                            "match the robot's at this scale); its speed is ~0, not dust's")
     if raw["t_s"].size == 0:
         if info.undecodable:
             raise InputError(f"none of the {info.undecodable} frames could be decoded", file=source)

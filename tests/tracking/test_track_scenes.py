@@ -144,6 +144,19 @@ def test_a_second_chip_is_warned_and_the_first_one_kept(tmp_path):
     assert on_first.all() or not on_first.any()        # never switches from one chip to the other
 
 
+def test_robot_vibrating_in_place_is_not_dust(tmp_path):
+    # a drive that does not make it walk: the chip jitters in place beside a static speck of dust;
+    # only the object of the robot's size and length is taken, and its speed is ~0, not an error
+    dust = [(60.0, 60.0, 35.0, 15.0, 20.0, 0.15)]
+    path, truth = video(tmp_path, "still", scene(speed_mm_s=0.0, turn_rad_s=0.0, jitter_px=1.0, n=40, dust=dust))
+    track = track_video(path, mm_per_px=S)
+    assert any("did not move" in w for w in track.meta["warnings"])
+    assert np.nanmax(pos_err(track, truth)) <= 0.2
+    sp = track_speed(track)
+    lo, hi = sp.speed_ci_mm_s
+    assert lo == 0.0 and hi < 0.5                    # a jitter of 0.1 mm: the interval holds 0
+
+
 def test_tweezer_occlusion_flagged_and_bridged(tmp_path):
     sc = scene(n=90, tweezers=(1.0, 2.0), seed=5)
     path, truth = video(tmp_path, "tweezer", sc)
