@@ -137,13 +137,17 @@ def read_frf(path: str | Path, *, min_quality: float = 0.0, kind: str | None = N
     if not Path(path).is_file():
         raise InputError("no such file", file=path)
     which = formats.suffix_kind(path)
-    if which == "uff":
-        return formats.read_uff(path, kind=kind)
     if which == "csv":
         return formats.read_csv(path, columns=columns, kind=kind)
     if which == "touchstone":
         return formats.read_touchstone(path, columns=columns, kind=kind)
-    return read_run(path, min_quality=min_quality)
+    out = formats.read_uff(path, kind=kind) if which == "uff" else read_run(path, min_quality=min_quality)
+    if columns is not None:
+        out.warnings.append(f"{path}: --columns applies to CSV and Touchstone files; ignored here")
+    if kind is not None and which == "run":
+        out.warnings.append(f"{path}: --kind applies to files other than run files; ignored here (a run file "
+                            "says its own kind)")
+    return out
 
 
 def write_uff(path: str | Path, fits: dict[str, Any]) -> Path:
