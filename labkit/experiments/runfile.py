@@ -190,6 +190,15 @@ RESERVE_BYTES = 2 * 1024 * 1024
 BASE_BYTES = 256 * 1024
 
 
+class WriteFailed(InputError):
+    """Writing a point into the run file failed (the disk, the file system, HDF5): the run stops.
+
+    The runner turns the drive off before this is reported; the rows of a point are
+    written index last, so the file holds every point completed before (``--resume``
+    trims a half-written one).
+    """
+
+
 class DiskFull(InputError):
     """The disk (or the process's file-size limit) has no room for the next write; nothing was written.
 

@@ -28,9 +28,11 @@ Guarantees
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, cast
 
@@ -42,7 +44,7 @@ from labkit.experiments.config import ShakerConfig
 from labkit.experiments.kinds import POINT_OVERHEAD_BYTES, Config
 from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, SinePoint
 from labkit.experiments.rig import Rig
-from labkit.experiments.runfile import RunFile
+from labkit.experiments.runfile import RunFile, WriteFailed
 from labkit.experiments.safety import DriveGuard, Interlock, deferred, shielded, signals_raise
 from labkit.progress import progress
 
@@ -293,7 +295,7 @@ class Runner:
             self.interlocks.append({"index": p.index, "reason": il.reason})
             rows = self._empty_row(p)
             rows.update(status="interlock", reason=il.reason)
-            with deferred():
+            with deferred(), self._writing(p.index):
                 self.file.end_point(p.index, rows | {"time_unix_s": time.time(),
                                                     "duration_s": time.time() - t_start})
             if self.cfg.on_interlock == "end":
@@ -302,13 +304,23 @@ class Runner:
             self.timing.append({"waited_s": 0.0})
             return
         self.file.ensure_room(_nbytes(loc_rows, records) + POINT_OVERHEAD_BYTES)
-        with deferred():      # all of a point's rows, or none
+        with deferred(), self._writing(p.index):      # all of a point's rows, or none
             if loc_rows is not None:
                 self.file.add_location_rows(loc_rows.pop("location"), loc_rows)
             if records is not None:
                 group, dt, arrays = records
                 self.file.add_records(group, p.index, dt, arrays)
             self.file.end_point(p.index, rows | {"time_unix_s": time.time(), "duration_s": time.time() - t_start})
+
+    @contextlib.contextmanager
+    def _writing(self, index: int) -> Iterator[None]:
+        """A failed write (disk, file system, HDF5) becomes WriteFailed; run() turns the drive off first."""
+        try:
+            yield
+        except (OSError, RuntimeError, ValueError) as exc:
+            raise WriteFailed(f"writing point {index} failed ({type(exc).__name__}: {exc}); the drive was "
+                              "turned off; the file holds every point completed before it; fix the disk, "
+                              "then continue with --resume", file=self.file.path, key="--out") from exc
 
     def _empty_row(self, p: Any) -> dict[str, Any]:
         row: dict[str, Any] = {"location": getattr(p, "location", getattr(p, "robot_spot", "")),

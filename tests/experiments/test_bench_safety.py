@@ -363,3 +363,36 @@ def test_bad_config_exits_2_naming_file_and_key_nothing_sent(tmp_path, lab, caps
     assert len(err) == 1 and str(cfg) in err[0] and f"key '{key}'" in err[0], err
     assert {inst: rx_count(lab, inst) for inst in before} == before
     assert not out.exists()
+
+
+def test_writer_failure_turns_the_drive_off_then_reports(tmp_path, lab, capsys, monkeypatch):
+    """An HDF5/disk error while writing a point: the drive goes off first, then one line (exit 2);
+    the file holds every point before it and --resume completes it."""
+    from labkit.cli import main
+    from labkit.experiments import runfile
+
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS[:6], locations=("hip",)), lab)
+    out = tmp_path / "run.h5"
+    real = runfile.RunFile.add_location_rows
+    calls = []
+
+    def failing(self, location, rows):
+        calls.append(lab.now_s())
+        if len(calls) == 3:
+            raise OSError(28, "No space left on device (injected)")
+        return real(self, location, rows)
+
+    monkeypatch.setattr(runfile.RunFile, "add_location_rows", failing)
+    assert main(["sweep", "inchip", str(cfg), "--out", str(out), "--quiet"]) == 2
+    t_reported = lab.now_s()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "writing point 2 failed" in err[0] and "--resume" in err[0], err
+    # the lab's record: the output went off after the failed write and before the report
+    offs = [t for t, inst, ch, on in lab.output_timeline if inst == "funcgen" and ch == 1 and not on]
+    assert lab.output_state("funcgen", 1) is False and calls[2] <= offs[-1] <= t_reported
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"].startswith("aborted: WriteFailed")
+        assert list(f["points/index"][...]) == [0, 1]
+    monkeypatch.setattr(runfile.RunFile, "add_location_rows", real)
+    summary = run_session("inchip", cfg, None, resume=out, quiet=True)
+    assert summary["status"] == "complete" and summary["points_ok"] == 6
