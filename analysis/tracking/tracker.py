@@ -403,7 +403,7 @@ def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str |
 
 def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path | None, size: tuple[int, int],
                   roi: tuple[int, int, int, int] | None, valid: np.ndarray | None, seg: Segmentation,
-                  margin_px: int, expected: float | None, vmax: float | None, scale: Scale) -> dict | None:
+                  margin_px: int, expected: float | None, vmax: float | None, scale: Scale | None) -> dict | None:
     """Track again with static objects searchable (and no flat field, which holds them); the result
     only if a robot-sized, robot-long object was found in most frames."""
     from labkit.analysis.tracking.video_io import iter_frames, open_source
@@ -415,13 +415,15 @@ def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path 
     finally:
         cap.release()
     found = raw["quality"] != QUALITY_LOST
-    if expected is None or found.mean() < 0.5:
+    if found.mean() < 0.5 or not np.isfinite(raw["length_px"]):
         return None
     area = float(np.median(raw["area_px"][found]))
-    length_mm = raw["length_px"] * scale.mm_per_px
-    if not (0.75 < area / expected < 1.33 and abs(length_mm / ROBOT_LENGTH_MM - 1) < 0.12):
+    length = float(raw["length_px"])
+    # the size and the length at the known scale (the shape alone does not tell a chip from a speck)
+    if scale is None or expected is None:
         return None
-    return raw
+    ok = 0.75 < area / expected < 1.33 and abs(length * scale.mm_per_px / ROBOT_LENGTH_MM - 1) < 0.12
+    return raw if ok else None
 
 
 def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | None = None,
@@ -525,7 +527,9 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         if static is not None and static.object_boxes:
             boxes = "; ".join(",".join(str(v) for v in b) for b in static.object_boxes[:2])
             what = (f"only {len(static.object_boxes)} static dark object(s) (never moving: dust, or a robot that "
-                    f"never moved) at x,y,w,h {boxes} were found and set aside; otherwise {what}")
+                    f"never moved) at x,y,w,h {boxes} were found and set aside"
+                    f"{'' if scale is not None else ' (with --mm-per-px a robot that never moved is told from dust)'}"
+                    f"; otherwise {what}")
         raise InputError(f"no robot found in any of {t_s.size} frames: {what}", file=source,
                          expected="a chip darker than the tray that moves (see --preview FRAME)")
     stretches = lost_stretches(t_s, raw["quality"])
