@@ -396,3 +396,42 @@ def test_writer_failure_turns_the_drive_off_then_reports(tmp_path, lab, capsys, 
     monkeypatch.setattr(runfile.RunFile, "add_location_rows", real)
     summary = run_session("inchip", cfg, None, resume=out, quiet=True)
     assert summary["status"] == "complete" and summary["points_ok"] == 6
+
+
+def _caught(pid: int, sig: int) -> bool:
+    """Whether process ``pid`` has a handler installed for ``sig`` (/proc/PID/status SigCgt)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("SigCgt:"):
+                return bool(int(line.split()[1], 16) >> (sig - 1) & 1)
+    except OSError:
+        pass
+    return False
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGQUIT])
+def test_a_background_job_is_stopped_by_sigint_and_sigquit_from_its_start(tmp_path, lab, sig):
+    """A shell starts background jobs with SIGINT and SIGQUIT ignored: labkit handles them anyway,
+    from before it opens anything (here: while it starts up against the lab)."""
+    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",)), lab)
+    out = tmp_path / "run.h5"
+
+    def background() -> None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGQUIT, signal.SIG_IGN)
+
+    proc = subprocess.Popen([sys.executable, "-m", "labkit", "sweep", "inchip", str(cfg), "--out", str(out),
+                             "--quiet"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=background)
+    try:
+        deadline = time.monotonic() + 30
+        while not _caught(proc.pid, sig):
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.002)
+        proc.send_signal(sig)
+        _, stderr = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, stderr
+    assert f"interrupted by {signal.Signals(sig).name}" in stderr
+    assert lab.output_state("funcgen", 1) is False
