@@ -49,14 +49,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     lab.set_setup(args.setup)
     lab.set_spot(args.spot)
     stop = threading.Event()
+    from labkit.experiments.locks import announce_lab, withdraw_lab
+
     try:
         lab.start()
         emit_json(lab.resources)   # always: this line is how clients find the lab
+        announce_lab(lab.resources, lab.models)   # and this file is how `labkit off --lab` does
         if not args.json:
             models = ", ".join(f"{role}: {model}" for role, model in lab.models.items())
             print(f"virtual lab serving ({models}); Ctrl-C to stop", file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
     finally:
+        withdraw_lab()
         lab.close()
     return {}  # pragma: no cover - only reached if the wait ends without a signal
