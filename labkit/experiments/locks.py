@@ -150,3 +150,49 @@ def lock_run(resources: Iterable[tuple[str, str]], run_file: str | Path, config:
         yield locks
     finally:
         locks.release()
+
+
+# ----------------------------------------------------------------------------- a served virtual lab
+
+def lab_file() -> Path:
+    """Where ``labkit lab serve`` says which lab it serves (``labkit off --lab`` reads it)."""
+    return runtime_dir() / "lab-serve.json"
+
+
+def announce_lab(resources: dict[str, str], models: dict[str, str]) -> Path:
+    """Record a served lab (this process): its resources and driver models."""
+    p = lab_file()
+    tmp = p.with_suffix(f".{os.getpid()}.tmp")
+    tmp.write_text(json.dumps({"pid": os.getpid(), "resources": resources, "models": models,
+                               "since": time.strftime("%H:%M:%S")}))
+    os.replace(tmp, p)
+    return p
+
+
+def withdraw_lab() -> None:
+    """Remove the record of this process's served lab (another process's is left alone)."""
+    data = _read(lab_file())
+    if data is not None and data.get("pid") == os.getpid():
+        try:
+            lab_file().unlink()
+        except OSError:
+            pass
+
+
+def served_lab() -> dict[str, Any]:
+    """The running ``labkit lab serve`` (its record), or InputError when none runs."""
+    data = _read(lab_file())
+    pid = data.get("pid") if data else None
+    alive = False
+    if isinstance(pid, int):
+        try:
+            os.kill(pid, 0)
+            alive = True
+        except ProcessLookupError:
+            alive = False
+        except PermissionError:
+            alive = True
+    if not alive or not isinstance(data, dict) or not isinstance(data.get("resources"), dict):
+        raise InputError("no virtual lab is being served", key="--lab",
+                         expected="a running 'labkit lab serve' (or give a CONFIG)")
+    return data

@@ -435,3 +435,34 @@ def test_a_background_job_is_stopped_by_sigint_and_sigquit_from_its_start(tmp_pa
     assert proc.returncode == 130, stderr
     assert f"interrupted by {signal.Signals(sig).name}" in stderr
     assert lab.output_state("funcgen", 1) is False
+
+
+def test_labkit_off_lab_turns_off_the_served_labs_generator(tmp_path):
+    import json
+
+    from labkit.drivers.registry import open_instrument
+
+    env = dict(os.environ, PYTHONUNBUFFERED="1", XDG_RUNTIME_DIR=str(tmp_path))
+    serve = subprocess.Popen([sys.executable, "-m", "labkit", "lab", "serve", "--json"], cwd=REPO, env=env,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        resources = json.loads(serve.stdout.readline())
+        fg = open_instrument("33500B", resources["funcgen"], name="funcgen")
+        try:
+            fg.set_load_high_z()
+            fg.set_sine(200.0, 1.0)
+            fg.output(True)                         # a drive left on (by a run that died, say)
+            assert fg.output_on
+            off = subprocess.run([sys.executable, "-m", "labkit", "off", "--lab", "--json"], cwd=REPO, env=env,
+                                 capture_output=True, text=True, timeout=60)
+            assert off.returncode == 0, off.stderr
+            assert json.loads(off.stdout.strip().splitlines()[-1])["resource"] == resources["funcgen"]
+            assert fg.output_on is False            # read back over the generator's own link
+        finally:
+            fg.close()
+    finally:
+        serve.send_signal(signal.SIGTERM)
+        serve.communicate(timeout=30)
+    none = subprocess.run([sys.executable, "-m", "labkit", "off", "--lab"], cwd=REPO, env=env,
+                          capture_output=True, text=True, timeout=60)
+    assert none.returncode == 2 and "no virtual lab is being served" in none.stderr
