@@ -107,7 +107,7 @@ def test_lost_instrument_leaves_output_off(tmp_path, instrument, match):
         assert any("drive off" in e for e in f["events/text"].asstr()[...])
 
 
-def test_chirp_h1_and_coherence(tmp_path):
+def test_chirp_h1_and_coherence(tmp_path, capsys):
     cfg = inchip_toml(tmp_path / "chirp.toml", [400.0, 2000.0], locations=("body",))
     text = cfg.read_text()
     text = text.replace("list_hz = [400.0, 2000.0]", 'start_hz = 400.0\nstop_hz = 2000.0\ncount = 2\nspacing = "lin"')
@@ -119,6 +119,10 @@ def test_chirp_h1_and_coherence(tmp_path):
         summary = run_session("inchip", cfg, out, lab=lab, quiet=True)
         with h5py.File(out, "r") as f:
             assert f.attrs["method"] == "chirp"
+            # a sweep keeps running between triggers: the run says so, in the file and on the console
+            assert not f.attrs["drive_bounded"] and "chirp" in f.attrs["drive_bounded_note"]
+            assert any(e.startswith("DRIVE NOT BOUNDED") for e in f["events/text"].asstr()[...])
+            assert "warning: DRIVE NOT BOUNDED" in capsys.readouterr().err
             g = f["locations/body"]
             fr, h, coh = g["freq_hz"][...], g["frf"][...], g["coherence"][...]
             assert g["coherence"].attrs["units"] == "1" and fr[0] >= 400 and fr[-1] <= 2000
