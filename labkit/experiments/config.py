@@ -26,6 +26,21 @@ Common tables
     ``length_s``, ``averages``.
 ``[run]``
     ``on_interlock = "skip" | "end"``.
+
+Limits (checked here, before anything is opened; the message names file and key)
+-------------------------------------------------------------------------------
+Every number must be finite. Declared limits may be lowered, never raised above
+the published ones: ``drive.pzt_max_v`` <= 20 V (the thin-film PZT), the drive
+peak <= 10 V (the generators' range into high-Z), frequencies <= the
+generator family's maximum (20 MHz, DG1000Z 25 MHz), ``amplifier.max_input_vrms``
+<= 0.8 V rms at 20 dB (0.08 at 40 dB), the 4809 envelope in ``[shaker]``
+(``freq_min_hz`` >= 10 Hz, ``freq_max_hz`` <= 20 kHz, ``force_peak_n`` <= 44.5 N,
+``stroke_peak_mm`` <= 4 mm, ``velocity_peak_m_s`` <= 1.65 m/s,
+``moving_mass_kg`` >= 0.060 kg), ``interlock.tray_max_um`` <= 4000 um.
+``[shaker] accel_m_s2_per_v`` (optional): the tray's acceleration per volt at
+the amplifier's output; with it, a ``drive_vpp`` grid's tray travel is predicted
+and checked before anything is sent (else each point ramps up from
+``tray_control.start_vpp`` while the tray is measured: a soft start).
 """
 from __future__ import annotations
 

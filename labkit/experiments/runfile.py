@@ -16,7 +16,10 @@ root attributes
     used to match a resumed run), ``versions_json`` (python, numpy, scipy, h5py,
     pyvisa, labkit), ``started_utc``, ``ended_utc``, ``status`` (``"running"``,
     ``"complete"``, ``"interrupted: SIGINT"``, ``"aborted: <why>"``),
-    ``points_planned``, ``resumed_utc_json`` (list of resume times).
+    ``points_planned``, ``resumed_utc_json`` (list of resume times),
+    ``drive_bounded`` (bool: every acquisition was a finite generator burst, so
+    the drive stopped by itself within a point even if the computer died) and
+    ``drive_bounded_note`` (why not, e.g. a chirp).
 ``/instruments/<role>``
     attributes ``model``, ``resource``, ``snapshot_json`` (identity and settings).
 ``/points``
