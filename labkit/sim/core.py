@@ -30,7 +30,7 @@ from labkit.errors import InputError
 from labkit.sim import model as M
 from labkit.sim.excitation import PZT, Shaker
 from labkit.sim.params import RobotParams
-from labkit.sim.result import SimResult, classify_pattern
+from labkit.sim.result import SimResult, classify_pattern, foot_period
 
 #: Default step: this many steps per period of the fastest of (highest mode, drive) ...
 STEPS_PER_PERIOD = 50
@@ -228,7 +228,11 @@ def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engin
     frac = np.divide(out["frac"], tot, out=np.zeros_like(out["frac"]), where=tot > 0)
     cf = {f"leg{j + 1}": {name: float(frac[j, m]) for m, name in enumerate(M.MODE_NAMES)} for j in range(6)}
     period = 1.0 / scenario.freq_hz
-    patterns = [classify_pattern(frac[j, M.AIR], float(out["max_air"][j]), period) for j in range(6)]
+    max_h_um = out["max_h"] * 1e6
+    patterns = [classify_pattern(frac[j, M.AIR], float(out["max_air"][j]), period, float(max_h_um[j]))
+                for j in range(6)]
+    height = (rec[:, M.REC_FZ:M.REC_FZ + 6] - rec[:, [M.REC_ZG]]) * 1e6
+    periods = [foot_period(t, height[:, j], period, t_skip) for j in range(6)]
     n_ev = int(cnt[M.CNT_EVENTS])
     return SimResult(
         params=p, scenario=scenario, duration_s=float(duration_s), dt_s=float(dt), record_dt_s=float(dt * every),
@@ -239,7 +243,8 @@ def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engin
         mean_speed_mm_s=speed, contact_fraction=cf, impacts=cnt[:6].astype(int).copy(),
         body_impacts=int(cnt[M.CNT_BODY]), patterns=patterns, max_flight_s=out["max_air"].copy(),
         events=out["events"][:n_ev].copy(), n_steps=n_steps, wall_s=wall, seed=seed, ablation=ablation,
-        counters={"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED])})
+        counters={"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED])},
+        max_height_um=max_h_um.copy(), foot_periods=periods)
 
 
 #: dt_check: the default step and the quarter step agree when the mean speeds differ by

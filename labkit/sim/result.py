@@ -1,6 +1,7 @@
 """SimResult: one simulated run, its summary and its HDF5 file (kind ``sim_result``)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -9,26 +10,55 @@ import numpy as np
 
 from labkit.sim.model import MODE_NAMES
 
-#: Per-foot motion patterns (paper Fig. 9-11).
+#: Per-foot motion patterns (paper Fig. 9-11), defined from what the foot does
+#: (docs/model.md section "Pattern labels").
 PATTERNS = ("firm_contact", "partial_contact", "jumping")
-#: A foot is in firm contact when it spends less than this fraction of the time in the air.
+#: A foot is in firm contact when it spends less than this fraction of the time in the air ...
 FIRM_AIR_FRACTION = 0.01
+#: ... or when it never rises more than this above the ground (um): it follows the tray.
+FLIGHT_MIN_UM = 0.1
 #: A foot is jumping when one of its flights lasts longer than this many drive periods.
 JUMP_PERIODS = 1.0
+#: Periodicity: the foot's height repeats after k drive periods (k = 1 or 2) when, over
+#: the last PERIODIC_CYCLES periods, it differs from k periods before by less than
+#: PERIODIC_TOL of its range (or the range is below FLIGHT_MIN_UM).
+PERIODIC_TOL = 0.05
+PERIODIC_CYCLES = 5
 
 
-def classify_pattern(air_fraction: float, max_flight_s: float, drive_period_s: float) -> str:
+def classify_pattern(air_fraction: float, max_flight_s: float, drive_period_s: float,
+                     max_height_um: float = math.inf) -> str:
     """Pattern label of one foot: firm_contact | partial_contact | jumping.
 
-    ``firm_contact``: in the air less than :data:`FIRM_AIR_FRACTION` of the
-    time; ``jumping``: some flight longer than :data:`JUMP_PERIODS` drive
-    periods; otherwise ``partial_contact`` (held part of each cycle, then lets go).
+    ``firm_contact``: in the air less than :data:`FIRM_AIR_FRACTION` of the time, or
+    never higher than :data:`FLIGHT_MIN_UM` above the ground (it follows the tray);
+    ``jumping``: some flight longer than :data:`JUMP_PERIODS` drive periods;
+    otherwise ``partial_contact`` (held part of each cycle, then it lets go and rises).
     """
-    if air_fraction < FIRM_AIR_FRACTION:
+    if air_fraction < FIRM_AIR_FRACTION or max_height_um < FLIGHT_MIN_UM:
         return "firm_contact"
     if max_flight_s > JUMP_PERIODS * drive_period_s:
         return "jumping"
     return "partial_contact"
+
+
+def foot_period(t_s: np.ndarray, height_um: np.ndarray, drive_period_s: float, t_from_s: float = 0.0) -> int:
+    """1 or 2 if a foot's height (samples at ``t_s``) repeats after that many drive periods
+    over the last :data:`PERIODIC_CYCLES` periods after ``t_from_s`` (compared at 40 phases
+    per period, linearly interpolated); 0 if it does not, or the run is too short."""
+    n = 40
+    t_end = float(t_s[-1]) if len(t_s) else 0.0
+    for k in (1, 2):
+        t0 = t_end - (PERIODIC_CYCLES + k) * drive_period_s
+        if t0 < t_from_s or len(t_s) < 3:
+            return 0
+        grid = t0 + np.arange((PERIODIC_CYCLES + k) * n + 1) * (drive_period_s / n)
+        x = np.interp(grid, t_s, height_um)
+        rng = float(np.ptp(x))
+        diff = float(np.abs(x[k * n:] - x[:-k * n]).max())
+        if rng < FLIGHT_MIN_UM or diff < PERIODIC_TOL * rng:
+            return k
+    return 0
 
 
 @dataclass
@@ -45,6 +75,9 @@ class SimResult:
     transient over the time after it); ``contact_fraction`` (``"leg1"`` ..
     ``"leg6"`` -> ``{"air", "adhesion", "rest"}`` -> fraction of the time
     after the transient); ``impacts`` (6,), ``body_impacts``; ``patterns``
+    (:func:`classify_pattern`), ``max_height_um`` (highest flight per foot above the
+    ground after the transient), ``foot_periods`` (1 or 2: the foot's motion repeats
+    after that many drive periods; 0: it does not, :func:`foot_period`); ``patterns``
     (6 labels); ``events`` (impact log: t_s, leg (0-5, -1 body), relative
     vertical velocity before/after the map in m/s, lateral velocity after,
     stuck flag).
@@ -78,6 +111,8 @@ class SimResult:
     seed: int | None = None
     ablation: str | None = None
     counters: dict = field(default_factory=dict)
+    max_height_um: np.ndarray | None = None
+    foot_periods: list | None = None
 
     def summary(self) -> dict[str, Any]:
         """JSON-able key figures."""
@@ -97,6 +132,8 @@ class SimResult:
             "body_impacts": int(self.body_impacts),
             "patterns": list(self.patterns),
             "max_flight_s": [float(x) for x in self.max_flight_s],
+            "max_height_um": None if self.max_height_um is None else [float(x) for x in self.max_height_um],
+            "foot_periods": None if self.foot_periods is None else [int(k) for k in self.foot_periods],
             "seed": self.seed,
             "ablation": self.ablation,
         }

@@ -170,3 +170,23 @@ def test_kernel_equals_reference_to_round_off(params, scenario, kw):
     a = simulate(params, scenario, engine="numba", **kw)
     b = simulate(params, scenario, engine="reference", **kw)
     _same(a, b, rtol=1e-9)
+
+
+def test_pattern_labels_follow_what_the_foot_does():
+    from labkit.sim.result import FLIGHT_MIN_UM, classify_pattern, foot_period
+
+    per = 1 / 240
+    assert classify_pattern(0.5, 0.5 * per, per, max_height_um=0.5 * FLIGHT_MIN_UM) == "firm_contact"  # hovers
+    assert classify_pattern(0.005, 0.0, per, max_height_um=5.0) == "firm_contact"
+    assert classify_pattern(0.5, 0.5 * per, per, max_height_um=5.0) == "partial_contact"
+    assert classify_pattern(0.9, 3 * per, per, max_height_um=50.0) == "jumping"
+    t = np.arange(0, 40 * per, per / 25)
+    one = 10 * np.maximum(np.sin(2 * np.pi * t / per), 0)
+    two = one * (1 + 0.5 * np.sign(np.sin(np.pi * t / per)))            # alternating heights
+    rng = np.random.default_rng(0)
+    assert foot_period(t, one, per) == 1
+    assert foot_period(t, two, per) == 2
+    assert foot_period(t, 10 * rng.random(len(t)), per) == 0
+    r = simulate(RobotParams(), Shaker(240, 25), duration_s=0.1)       # pinned: firm, periodic
+    assert r.patterns == ["firm_contact"] * 6 and r.foot_periods == [1] * 6
+    assert np.all(r.max_height_um == 0.0)
