@@ -12,8 +12,14 @@ number on a shared machine):
   numba cache (cold: compiles) and in a second fresh process (warm: loads the
   cache, ``cache=True``);
 * the wall time of a paper-style sweep, 40 shaker frequencies 150..2000 Hz x
-  10 draws x 2 s, both cores (target < 60 s); ``--quick`` runs a smaller sweep
-  and says so.
+  10 draws x 2 s at the converged default step, both cores (target <= 40 s);
+  ``--quick`` runs a smaller sweep and says so.
+
+Cost of the scheme (issue 10): one implicit-midpoint step of the 23-coordinate
+coupled system is a 23 x 23 matrix-vector product with a cached inverse, a small
+solve for the contact and film rows (done twice: the films' midpoint pass), and
+the instantaneous contact forces for the located releases (another 23 x 23
+product and small solve); ``kernel_us_per_step`` reports it.
 
 The scenario is the walking robot (240 Hz, 25 um, c_ad_n = 50 nN): feet in
 the air and impacts every cycle, the expensive case. With the published
@@ -123,6 +129,7 @@ def main() -> None:
                     "cpu_s_per_run_estimate": round(cpu_per_run, 4),
                     "cpu_s_total_estimate": round(cpu_per_run * runs, 1),
                     "wall_s_on_2_idle_cores_estimate": round(cpu_per_run * runs / 2, 1),
+                    "target_wall_s": 40.0,
                     "mean_speed_mm_s_at_first_point": round(float(s.mean_speed_mm_s[0]), 3)}
     print(json.dumps(out))
 

@@ -146,12 +146,14 @@ class RobotParams:
     @property
     def modal_freq_hz(self) -> tuple[float, float, float]:
         """Undamped natural frequencies sqrt(k_i) / 2 pi."""
-        return tuple(math.sqrt(k) / (2 * math.pi) for k in self.k_per_s2)
+        f = [math.sqrt(k) / (2 * math.pi) for k in self.k_per_s2]
+        return (f[0], f[1], f[2])
 
     @property
     def modal_damping_ratio(self) -> tuple[float, float, float]:
         """Damping ratios b_i / (2 sqrt(k_i))."""
-        return tuple(b / (2 * math.sqrt(k)) for k, b in zip(self.k_per_s2, self.b_per_s))
+        z = [b / (2 * math.sqrt(k)) for k, b in zip(self.k_per_s2, self.b_per_s)]
+        return (z[0], z[1], z[2])
 
     @property
     def lateral_mode(self) -> int:

@@ -194,7 +194,8 @@ class SweepResult:
 
 def scenario_dict(scenario: Any) -> dict[str, Any]:
     """A scenario as a JSON-able dict with its type (``{"type": "shaker", ...}``)."""
-    fields = dataclasses.asdict(scenario) if dataclasses.is_dataclass(scenario) else dict(vars(scenario))
+    is_instance = dataclasses.is_dataclass(scenario) and not isinstance(scenario, type)
+    fields = dataclasses.asdict(scenario) if is_instance else dict(vars(scenario))
     return {"type": type(scenario).__name__.lower(), **fields}
 
 
@@ -207,7 +208,8 @@ def apply_value(params: Any, scenario: Any, quantity: str, value: float) -> tupl
     """
     from labkit.sim.uncertainty import params_fields
 
-    if dataclasses.is_dataclass(scenario) and quantity in {f.name for f in dataclasses.fields(scenario)}:
+    if dataclasses.is_dataclass(scenario) and not isinstance(scenario, type) \
+            and quantity in {f.name for f in dataclasses.fields(scenario)}:
         return params, dataclasses.replace(scenario, **{quantity: float(value)})
     if quantity == "mass_mg":
         extra = float(value) - params.mass_mg
@@ -329,8 +331,8 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
     from labkit.executor import map_tasks
     from labkit.sim.uncertainty import DEFAULT_TABLE, check_table
 
-    values = np.asarray([float(v) for v in values], dtype=float)
-    if values.size == 0:
+    grid = np.asarray([float(v) for v in values], dtype=float)
+    if grid.size == 0:
         raise InputError("no values to sweep", key=quantity, expected="at least one value")
     if int(draws) < 0:
         raise InputError(f"draws must be >= 0, got {draws}", key="draws", expected="an integer >= 0")
@@ -340,16 +342,16 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
     table = dict(DEFAULT_TABLE if table is None else table)
     check_table(params, table)
     # Fail on a bad quantity before any process starts.
-    apply_value(params, base_scenario, quantity, values[0])
+    apply_value(params, base_scenario, quantity, grid[0])
     n_draws = max(1, int(draws))
     if accel_limit_g is not None and not accel_limit_g > 0:
         raise InputError(f"acceleration limit must be > 0 g, got {accel_limit_g}", key="accel_limit_g",
                          expected="a peak acceleration in g, > 0")
     tasks = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table, accel_limit_g)
-             for v in values for d in range(n_draws)]
+             for v in grid for d in range(n_draws)]
     rows = map_tasks(run_point, tasks, scheduler=scheduler, workers=workers,
                      desc=f"sweep {quantity}", quiet=quiet)
-    shape = (len(values), n_draws)
+    shape = (len(grid), n_draws)
     speeds = np.array([r["speed_mm_s"] for r in rows]).reshape(shape)
     frac = np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, len(CONTACT_MODES)))
     patterns = np.array([r["patterns"] for r in rows], dtype=object).reshape(shape + (6,)).astype(str)
@@ -361,7 +363,7 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
     if accel_limit_g is not None and hasattr(base_scenario, "amp_um"):
         meta["accel_limit_g"] = float(accel_limit_g)
         meta["amp_um"] = [float(limit_acceleration(apply_value(params, base_scenario, quantity, v)[1],
-                                                   accel_limit_g).amp_um) for v in values]
-    return SweepResult(quantity=quantity, values=values, speeds_mm_s=speeds, contact_fraction=frac,
+                                                   accel_limit_g).amp_um) for v in grid]
+    return SweepResult(quantity=quantity, values=grid, speeds_mm_s=speeds, contact_fraction=frac,
                        patterns=patterns, impacts=impacts, scenario=scenario_dict(base_scenario),
                        params_toml=params.to_toml_text(), meta=meta)
