@@ -1,23 +1,21 @@
 """simulate(): run one scenario with the compiled kernel or the Python reference.
 
-Numerics (both engines run the same scheme, :mod:`labkit.sim.reference`):
+Numerics (both engines run the same scheme, :mod:`labkit.sim.scheme`; docs/model.md
+M5-M11 and its section "Numerics"):
 
-* fixed step, default ``1 / (STEPS_PER_PERIOD * max(highest mode, drive))``
-  (2.2e-5 s for the paper's robot); every mode is advanced by the exact
-  transition of its damped oscillator, so the step is set by accuracy, not
-  stability;
-* the squeeze film (rates up to ~1e8 1/s near the ground) is implicit and
-  sub-cycled when stiff, the body's film implicit;
-* impacts are located inside the step (linear interpolation of the gap),
-  applied, and the rest of the step integrated; releases are checked at the
-  start of each step;
-* convergence (tests/sim/test_engine.py): on the 240 Hz / 25 um walk the
-  mean speed at the default step is within ~1-5 % of the dt -> 0 value
-  (0.6 % at 240 Hz, ~4 % at 300 Hz, ~1 % at 150 Hz); pass ``dt_s`` for more.
+* one coupled system (23 coordinates, one mass matrix), implicit midpoint with a
+  fixed step, default :func:`default_dt` (50 steps per period of the fastest mode
+  or drive, >= 120 per shaker period; 1.1e-5 s for the paper's robot); the PZT
+  square wave's edges fall on step boundaries;
+* squeeze films implicit, at the midpoint gap; impacts and releases are events
+  located inside the step on the scheme's own trajectory;
+* convergence (tests/sim/test_convergence.py): mean speed at the default step
+  within 3 % (or 0.1 mm/s) of a quarter step for the PZT default run and shaker
+  runs at 150-700 Hz (and 1500 Hz with the published parameters);
+  :func:`dt_check` checks any run, and says when it is chaotic;
 * the start: the robot rests on its six feet in static equilibrium and rides
-  the tray (its vertical velocity is the ground's at t = 0), so a shaker run
-  does not begin with a jolt; on still ground that state is an exact fixed
-  point (no drift, not even from rounding: :mod:`labkit.sim.model`).
+  the tray (its vertical velocity is the ground's at t = 0), or, with
+  ``start_height_um``, starts at rest in the air.
 """
 from __future__ import annotations
 
