@@ -20,9 +20,10 @@ PURE = False
 
 
 def jit(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """``numba.njit(cache=True)`` normally; the identity while :data:`PURE` is set."""
+    """``numba.njit(cache=True, nogil=True)`` normally (nogil: the virtual lab runs
+    simulations in server threads); the identity while :data:`PURE` is set."""
     if PURE:
         return fn
     from numba import njit
 
-    return njit(cache=True)(fn)
+    return njit(cache=True, nogil=True)(fn)
