@@ -359,7 +359,8 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
       threshold (or 6 noise sigmas while that is not known);
     * dark in *every* sample and reaching the frame's border: the tray's rim,
       masked (a robot touching it must not merge with it);
-    * dark in every sample inside the frame, robot-sized, while the tray
+    * dark in every sample inside the frame, robot-sized, clearly dark (by at
+      least 15 % and 3 thresholds: the tray's mottling is not), while the tray
       around it is dark in under a quarter of the samples on average: a static
       object (dust, a scratch): masked. The robot passing by or touching it
       darkens its surroundings in only a few samples; a robot that moves even
@@ -427,6 +428,9 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
             x0, y0 = max(x - r - 3, 0), max(y - r - 3, 0)
             x1, y1 = min(x + bw + r + 3, w), min(y + bh + r + 3, h)
             comp = np.asarray(labels[y0:y1, x0:x1] == i, np.uint8)
+            darkness = 1.0 - float(np.mean([float(rt[y0:y1, x0:x1][comp > 0].mean()) for rt in ratios]))
+            if darkness < max(3 * thr, 0.15):
+                continue      # the tray's mottling: faint, static, divided out by the flat field
             ring = _dilate(comp, r) & (1 - _dilate(comp, 2))
             ring_frac = float(dark_count[y0:y1, x0:x1][ring > 0].mean()) / len(darks) if ring.any() else 0.0
             if ring_frac < 0.25:

@@ -137,6 +137,7 @@ class Scene:
     noise: float = 2.0                      # sensor noise, grey levels (std)
     blur_px: float = 0.0                    # Gaussian blur sigma (optics, vibration)
     jitter_px: float = 0.0                  # stroboscopic jitter of the chip (uniform +-, px)
+    mottling: float = 0.0                   # the tray's blotchy texture: std of its reflectance (share)
     dust: list = field(default_factory=list)  # (u, v, a_px, b_px, angle_deg, reflectance): static ellipses
     tweezers: tuple[float, float] | None = None   # (t_in, t_out): the prongs cover the chip between
     others: list = field(default_factory=list)   # (u0_px, v0_px, heading_rad, speed_mm_s): more chips, straight
@@ -203,6 +204,10 @@ def render(sc: Scene) -> tuple[np.ndarray, Truth]:
     shape = (sc.height, sc.width)
     light = sc.level * illumination(sc)
     base = np.ones(shape, np.float32)
+    if sc.mottling > 0:
+        blobs = cv2.GaussianBlur(np.random.default_rng(sc.seed + 7).standard_normal(shape).astype(np.float32),
+                                 (0, 0), 1.0 / sc.mm_per_px)
+        base = base * (1 + sc.mottling * blobs / blobs.std())
     for (du, dv, a, b, ang, refl) in sc.dust:
         # an ellipse as a 64-gon: coverage rasterised like the chip
         phi = np.linspace(0, 2 * np.pi, 64, endpoint=False)

@@ -84,11 +84,13 @@ def test_renderer_truth():
     ("flicker", dict(gradient=0.3, flicker=0.15)),                        # +-15 % frame to frame
     ("grey_chip", dict(chip_reflectance=0.72)),                           # 28 % contrast
     ("grey_chip_uneven", dict(chip_reflectance=0.72, gradient=0.3, flicker=0.08, noise=2.5)),
+    ("mottled_tray", dict(mottling=0.05, gradient=0.2)),                  # blotches of +-5 %, ~2 mm across
 ])
 def test_adaptive_segmentation(tmp_path, name, kw):
     path, truth = video(tmp_path, name, scene(seed=3, **kw))
     track = track_video(path, mm_per_px=S)
     assert np.all(track.quality == QUALITY_OK), track.meta["warnings"]
+    assert not track.meta["static_objects"]                 # mottling is not dust
     assert np.sqrt(np.mean(pos_err(track, truth) ** 2)) <= 0.15
     sp = track_speed(track)
     assert sp.mean_speed_mm_s == pytest.approx(truth.speed_mm_s, rel=0.01)
