@@ -139,37 +139,46 @@ def _knee_records(run: Any, data: dict[str, Any]) -> list[dict[str, Any]]:
     return records
 
 
+def open_kind(path: str | Path, kinds: tuple[str, ...], expected: str) -> Any:
+    """``labkit.open(path)``, refused (InputError naming the file and its kind) unless of ``kinds``."""
+    from labkit.files import open_file
+
+    obj = open_file(path)
+    if obj.kind not in kinds:
+        raise InputError(f"this file holds {obj.kind!r}", file=path, key="kind", expected=expected)
+    return obj
+
+
 def load_track(path: str | Path) -> dict[str, Any]:
-    """Speed of a ``track`` file (layout: :mod:`labkit.analysis.tracking.output`).
+    """Speed of a ``track`` file (read by ``labkit.open``; layout: :mod:`labkit.analysis.tracking.output`).
 
     Returns ``mean_speed_mm_s`` (NaN when the track has no speed), ``speed_ci_mm_s``
-    (lo, hi), ``ci_level``, ``freq_hz`` if the track records one, and ``videos``:
-    candidate absolute paths of the tracked video (``source_video`` as written,
-    resolved against the working folder and against the track's folder).
+    (lo, hi), ``ci_level``, ``freq_hz`` if the track records one, ``path`` (the
+    ``labkit.files.Track``) and ``videos``: candidate absolute paths of the tracked video
+    (``source_video`` as written, resolved against the working folder and the track's folder).
     """
-    from labkit.h5io import get_json, open_h5
-
     path = Path(path)
-    with open_h5(path, kind="track") as f:
-        if "mean_speed_mm_s" not in f.attrs:
-            raise InputError("missing root attribute", file=path, key="mean_speed_mm_s")
-        speed = float(f.attrs["mean_speed_mm_s"])
-        ci = np.asarray(f.attrs.get("speed_ci_mm_s", [speed, speed]), float).ravel()
-        if ci.size != 2:
-            raise InputError("expected two values", file=path, key="speed_ci_mm_s", expected="[lo, hi] in mm/s")
-        summ = get_json(f, "summary_json", {}) or {}
-        out = {"file": str(path), "kind": "track", "mean_speed_mm_s": speed, "speed_ci_mm_s": ci,
-               "ci_level": float(f.attrs.get("speed_ci_level", summ.get("ci_level", 0.95)))}
-        for key in ("freq_hz", "shaker_freq_hz"):
-            if key in f.attrs:
-                out["freq_hz"] = float(f.attrs[key])
-        out["videos"] = []
-        for key in ("source_video", "video", "source"):
-            if key in f.attrs and _s(f.attrs[key]):
-                v = Path(_s(f.attrs[key]))
-                cands = [v] if v.is_absolute() else [Path.cwd() / v, path.parent / v]
-                out["videos"] = [str(c.resolve()) for c in cands]
-                break
+    t = open_kind(path, ("track",), "a track file (labkit track --out TRACK.h5)")
+    a = t.attrs
+    if "mean_speed_mm_s" not in a:
+        raise InputError("missing root attribute", file=path, key="mean_speed_mm_s")
+    speed = float(t.mean_speed_mm_s)
+    ci = np.asarray(t.speed_ci_mm_s, float)
+    if not np.all(np.isfinite(ci)):
+        ci = np.array([speed, speed])
+    summ = a.get("summary") if isinstance(a.get("summary"), dict) else {}
+    out: dict[str, Any] = {"file": str(path), "kind": "track", "mean_speed_mm_s": speed, "speed_ci_mm_s": ci,
+                           "ci_level": float(a.get("speed_ci_level", summ.get("ci_level", 0.95))), "track": t}
+    for key in ("freq_hz", "shaker_freq_hz"):
+        if key in a:
+            out["freq_hz"] = float(a[key])
+    out["videos"] = []
+    for key in ("source_video", "video", "source"):
+        if key in a and _s(a[key]):
+            v = Path(_s(a[key]))
+            cands = [v] if v.is_absolute() else [Path.cwd() / v, path.parent / v]
+            out["videos"] = [str(c.resolve()) for c in cands]
+            break
     return out
 
 
@@ -315,65 +324,53 @@ def load_speed_table(path: str | Path) -> dict[str, Any]:
 # --------------------------------------------------------------------------- fits and simulations
 
 def load_fit(path: str | Path) -> dict[str, Any]:
-    """A ``modal_fit`` file (layout: :mod:`labkit.analysis.modal.io`), one entry per fit group.
+    """A ``modal_fit`` file (read by ``labkit.open``; layout: :mod:`labkit.analysis.modal.io`),
+    one entry per fit group.
 
     Returns ``{"file", "groups": {group: {"locations": {loc: {"freq_hz", "frf", "model_frf"}},
     "modes": [{"freq_hz", "freq_hz_std", "damping_ratio", ...}], "stabilisation": {...} | None,
     "units", "method", "quality"}}, "summary": {...}}``; group is ``inchip`` (tethered robot,
     FRF in (mm/s)/V) or ``shaker`` (released robot, transmissibility).
     """
-    from labkit.h5io import get_json, open_h5
-
     path = Path(path)
-    out: dict[str, Any] = {"file": str(path), "kind": "modal_fit", "groups": {}}
-    with open_h5(path, kind="modal_fit") as f:
-        out["summary"] = get_json(f, "summary_json", {}) or {}
-        if "groups" not in f:
-            raise InputError("no fit groups", file=path, key="groups", expected="/groups/<inchip|shaker>")
-        for name, g in f["groups"].items():
-            entry: dict[str, Any] = {"locations": {}, "method": _s(g.attrs.get("method", "?")),
-                                     "quality": float(g.attrs.get("quality", np.nan)),
-                                     "units": "(mm/s)/V" if name == "inchip" else "1"}
-            for loc, lg in (g["locations"].items() if "locations" in g else []):
-                if "freq_hz" not in lg or "frf" not in lg:
-                    raise InputError("missing freq_hz or frf", file=path, key=f"groups/{name}/locations/{loc}")
-                entry["units"] = _s(lg["frf"].attrs.get("units", entry["units"]))
-                d = {"freq_hz": lg["freq_hz"][()].astype(float), "frf": lg["frf"][()].astype(complex)}
-                if "model" in lg:
-                    d["model_frf"] = lg["model"][()].astype(complex)
-                entry["locations"][_s(lg.attrs.get("name", loc))] = d
-            entry["modes"] = _read_modes(g)
-            entry["stabilisation"] = _read_stabilisation(g)
-            out["groups"][name] = entry
+    fit = open_kind(path, ("modal_fit",), "a 'modal_fit' file (labkit fit ... --out ROBOT.toml writes ROBOT.fit.h5)")
+    if not fit.groups:
+        raise InputError("no fit groups", file=path, key="groups", expected="/groups/<inchip|shaker>")
+    out: dict[str, Any] = {"file": str(path), "kind": "modal_fit", "groups": {},
+                           "summary": fit.attrs.get("summary") or {}}
+    for name, g in fit.groups.items():
+        entry: dict[str, Any] = {"locations": {}, "method": g.method, "quality": float(g.quality),
+                                 "units": g.units.get("frf", "(mm/s)/V" if name == "inchip" else "1")}
+        for loc, cols in g.locations.items():
+            if "freq_hz" not in cols or "frf" not in cols:
+                raise InputError("missing freq_hz or frf", file=path, key=f"groups/{name}/locations/{loc}")
+            d = {"freq_hz": np.asarray(cols["freq_hz"], float), "frf": np.asarray(cols["frf"], complex)}
+            if "model" in cols:
+                d["model_frf"] = np.asarray(cols["model"], complex)
+            entry["locations"][loc] = d
+        entry["modes"] = _modes_of(g.modes)
+        st = g.stabilisation
+        entry["stabilisation"] = st if st is not None and "freq_hz" in st and "order" in st else None
+        out["groups"][name] = entry
     return out
 
 
-def _read_modes(g: Any) -> list[dict[str, Any]]:
-    """One dict per mode from the 1-D columns of ``modes/`` (2-D per-location arrays are left out)."""
-    mg = g.get("modes")
-    if mg is None or "freq_hz" not in mg:
+def _modes_of(cols: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+    """One dict per mode from the 1-D mode columns (2-D per-location arrays are left out)."""
+    if "freq_hz" not in cols:
         return []
-    freq = np.asarray(mg["freq_hz"][()], float).ravel()
+    freq = np.asarray(cols["freq_hz"], float).ravel()
     modes: list[dict[str, Any]] = [{"freq_hz": float(x)} for x in freq]
-    for k in mg:
-        if k == "freq_hz":
-            continue
-        v = mg[k][()]
-        if v.ndim != 1 or v.size != freq.size:
+    for k, v in cols.items():
+        v = np.asarray(v)
+        if k == "freq_hz" or v.ndim != 1 or v.size != freq.size:
             continue
         for i, x in enumerate(v):
-            if isinstance(x, (bytes, str)):
+            if isinstance(x, (bytes, str, np.str_)):
                 modes[i][k] = _s(x)
             elif np.isrealobj(x):
                 modes[i][k] = float(x)
     return modes
-
-
-def _read_stabilisation(g: Any) -> dict[str, np.ndarray] | None:
-    sg = g.get("stabilisation")
-    if sg is None or "freq_hz" not in sg or "order" not in sg:
-        return None
-    return {k: np.asarray(sg[k][()]) for k in sg}
 
 
 def load_sim(path: str | Path) -> dict[str, Any]:
@@ -395,26 +392,24 @@ def load_sim(path: str | Path) -> dict[str, Any]:
 
 
 def _load_sim_result(path: Path) -> dict[str, Any]:
-    from labkit.h5io import get_json, open_h5
-
-    with open_h5(path, kind="sim_result") as f:
-        out = {"t_s": np.asarray(_need(f, "t_s", path, ("", "series", "data")), float),
-               "knee_vz_mm_s": np.asarray(_need(f, "knee_vz_mm_s", path, ("", "series", "data")), float),
-               "ground_z_um": np.asarray(_need(f, "ground_z_um", path, ("", "series", "data")), float),
-               "contact": np.asarray(_need(f, "contact", path, ("", "series", "data"))),
-               "scenario": get_json(f, "scenario_json", {}) or {}}
-        for k in ("patterns",):
-            ds = _find(f, k, ("", "series", "data", "summary"))
-            if ds is not None:
-                out["patterns"] = [_s(v) for v in ds[()]]
-            elif k in f.attrs:       # SimResult.to_h5 stores the six labels as a JSON list
-                raw = f.attrs[k]
-                text = _s(raw) if isinstance(raw, (str, bytes)) else ""
-                out["patterns"] = ([str(v) for v in json.loads(text)] if text.startswith("[")
-                                   else [_s(v) for v in np.atleast_1d(raw)])
-        summary = get_json(f, "summary_json", None)
-        if summary:
-            out["summary"] = summary
+    """The series the knee section needs from a ``sim_result`` file (read by ``labkit.open``)."""
+    run = open_kind(path, ("sim_result",), "a 'sim_result' file (labkit simulate shaker --out RUN.h5)")
+    cols = run.columns
+    out: dict[str, Any] = {}
+    for key in ("t_s", "knee_vz_mm_s", "ground_z_um", "contact"):
+        if key not in cols:
+            raise InputError("missing dataset", file=path, key=key, expected="a simulated run's time series")
+        out[key] = np.asarray(cols[key]) if key == "contact" else np.asarray(cols[key], float)
+    out["scenario"] = dict(run.scenario)
+    pats = cols.get("patterns")
+    if pats is None:
+        pats = run.attrs.get("patterns")       # SimResult.to_h5 stores the six labels as a JSON list
+        if isinstance(pats, str):
+            pats = json.loads(pats) if pats.startswith("[") else [pats]
+    if pats is not None:
+        out["patterns"] = [_s(v) for v in np.atleast_1d(np.asarray(pats, dtype=object))]
+    if isinstance(run.attrs.get("summary"), dict):
+        out["summary"] = run.attrs["summary"]
     return out
 
 

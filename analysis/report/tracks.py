@@ -1,6 +1,6 @@
 """Tracked paths and a video frame for the report's tracking section.
 
-A track file (layout: :mod:`labkit.analysis.tracking.output`) holds the path in world
+A track file (read by ``labkit.open``; layout: :mod:`labkit.analysis.tracking.output`) holds the path in world
 millimetres (``x_mm``, ``y_mm``) and, when it came from a video, in image pixels
 (``u_px``, ``v_px``); the frame is read from the tracked video with the tracker's own
 reader (:mod:`labkit.analysis.tracking.video_io`).
@@ -16,19 +16,19 @@ from labkit.errors import InputError
 
 
 def load_track_path(path: str | Path) -> dict[str, Any]:
-    """``t_s``, ``x_mm``, ``y_mm`` and, if present, ``u_px``, ``v_px`` of a track file."""
-    from labkit.h5io import open_h5
+    """``t_s``, ``x_mm``, ``y_mm`` and, if present, ``u_px``, ``v_px`` of a track file (``labkit.open``)."""
+    from labkit.analysis.report.inputs import open_kind
 
     path = Path(path)
+    cols = open_kind(path, ("track", "track_csv"), "a track file (labkit track --out TRACK.h5)").columns
     out: dict[str, Any] = {"file": str(path)}
-    with open_h5(path, kind="track") as f:
-        for key in ("t_s", "x_mm", "y_mm"):
-            if key not in f:
-                raise InputError("missing dataset", file=path, key=key, expected="a track path (t_s, x_mm, y_mm)")
-            out[key] = np.asarray(f[key][()], float)
-        for key in ("u_px", "v_px"):
-            if key in f:
-                out[key] = np.asarray(f[key][()], float)
+    for key in ("t_s", "x_mm", "y_mm"):
+        if key not in cols:
+            raise InputError("missing dataset", file=path, key=key, expected="a track path (t_s, x_mm, y_mm)")
+        out[key] = np.asarray(cols[key], float)
+    for key in ("u_px", "v_px"):
+        if key in cols:
+            out[key] = np.asarray(cols[key], float)
     ok = np.isfinite(out["x_mm"]) & np.isfinite(out["y_mm"])
     for key in ("t_s", "x_mm", "y_mm", "u_px", "v_px"):
         if key in out:

@@ -147,10 +147,15 @@ def test_unreadable_input_exits_2_naming_the_file(inputs, tmp_path):
     # a file of the wrong kind passed as a fit
     proc = run_cli("report", "--fit", str(inputs["shaker"]), "--out", str(tmp_path / "r"), check=2)
     assert str(inputs["shaker"]) in proc.stderr and "modal_fit" in proc.stderr
-    # a track without its speed
+    # a track without frames, and one with frames but without its speed
     t = tmp_path / "t.h5"
     with h5py.File(t, "w") as h:
         h.attrs["kind"] = "track"
+    proc = run_cli("report", "--tracks", str(t), "--out", str(tmp_path / "r"), check=2)
+    assert "t_s" in proc.stderr and str(t) in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    with h5py.File(t, "a") as h:
+        for key in ("t_s", "x_mm", "y_mm"):
+            h[key] = np.linspace(0.0, 1.0, 5)
     proc = run_cli("report", "--tracks", str(t), "--out", str(tmp_path / "r"), check=2)
     assert "mean_speed_mm_s" in proc.stderr and str(t) in proc.stderr
 
