@@ -9,8 +9,9 @@ with an AssertionError that shows the transcript.
 Examples
 --------
 >>> from labkit.drivers.funcgen import Agilent33220A
->>> with expected_protocol(Agilent33220A,
-...         [(b"*IDN?\\n", b"Agilent Technologies,33220A,MY1,2.0\\n")]) as fg:
+>>> with expected_protocol(Agilent33220A, [(b"OUTP OFF\\n", None), (b"*OPC?\\n", b"1\\n")],
+...                        identity="Agilent Technologies,33220A,MY1,2.0") as fg:
+...     fg.safe_off()              # after the handshake on open (connect_exchanges)
 ...     fg.identity
 'Agilent Technologies,33220A,MY1,2.0'
 
