@@ -57,7 +57,8 @@ def test_interval_covers_white_and_correlated_noise(phi):
     t = np.arange(0, 3, 1 / 30)
     r, v = 8.0, 2.0
     x0, y0 = r * np.sin(v * t / r), r * (1 - np.cos(v * t / r))
-    hits, n, z = 0, 120, []
+    v_mean = np.array([x0[-1] - x0[0], y0[-1] - y0[0]]) / (t[-1] - t[0])     # the true mean velocity
+    hits, vhits, n, z = 0, 0, 120, []
     for _ in range(n):
         e = 0.05 * rng.standard_normal((t.size, 2))
         for i in range(1, t.size):
@@ -65,9 +66,12 @@ def test_interval_covers_white_and_correlated_noise(phi):
         res = speed_analysis(t, x0 + e[:, 0], y0 + e[:, 1])
         lo, hi = res.speed_ci_mm_s
         hits += lo <= v <= hi
+        (ax, bx), (ay, by) = res.velocity_ci_mm_s
+        vhits += int(ax <= v_mean[0] <= bx) + int(ay <= v_mean[1] <= by)
         z.append((res.mean_speed_mm_s - v) / res.meta["uncertainty"]["speed_std_mm_s"])
-    print(f"AR(1) {phi}: {hits} of {n} intervals hold the truth; z rms {np.sqrt(np.mean(np.square(z))):.2f}")
-    assert hits >= 0.9 * n
+    print(f"AR(1) {phi}: {hits} of {n} speed intervals hold the truth (velocity components: {vhits} of {2 * n}); "
+          f"z rms {np.sqrt(np.mean(np.square(z))):.2f}")
+    assert hits >= 0.9 * n and vhits >= 0.85 * 2 * n
     assert 0.75 < np.sqrt(np.mean(np.square(z))) < 1.3          # neither too narrow nor too wide
     assert abs(np.mean(z)) < 0.3                                # no bias (the arc's smoothing bias is removed)
 
