@@ -741,7 +741,11 @@ def _agreement_section(rows: list[dict[str, Any]], tol: Tolerances, sections: li
     sec.html.append(f"<p>{len(judged) - len(failed)} of {len(judged)} judged comparisons within tolerance. "
                     "Tolerances (change with <code>--tolerance KEY=VALUE</code>): "
                     + ", ".join(f"<code>{rh.e(k)}={v:g}</code>" for k, v in tol.as_dict().items())
-                    + ". Every number is also in <code>agreement.json</code> beside this page.</p>")
+                    + ". The defaults and the reason for each are documented in "
+                      "<code>labkit.analysis.compare.Tolerances</code>. Band statistic: each measured speed's "
+                      "percentile within the Monte Carlo draws at its frequency (mid-rank); their median is 50 "
+                      "for a model without bias, near 0 or 100 when the draws miss on one side. "
+                      "Every number is also in <code>agreement.json</code> beside this page.</p>")
     return sec
 
 
