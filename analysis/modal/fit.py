@@ -530,7 +530,17 @@ def _grow_while_misfit(ctx: _Ctx, ref: Refined, max_add: int = 3) -> Refined:
             _check_size(ctx.chans, trial_lam.size, ctx.powers)
         except InputError:
             break
-        trial = refine(ctx.chans, trial_lam, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance)
+        # Screen first with the poles held (linear, cheap): a mode that does not lower the misfit
+        # then is not worth the nonlinear refinement.
+        lin = residues_ls(ctx.chans, trial_lam, ctx.powers)
+        screen = max(misfit_to_noise(c.H, basis(c.w, trial_lam, ctx.powers) @ p, p.size + 2 * trial_lam.size /
+                                     len(ctx.chans)) for c, p in zip(ctx.chans, lin))
+        if screen > 0.95 * mis.max():
+            break
+        # A trial: a mode that does not settle in 20 iterations is not kept anyway.
+        trial = refine(ctx.chans, trial_lam, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance, max_iter=20)
+        if not trial.success:
+            break
         keep, _ = _credible(ctx.chans, trial, ctx.f_ref, check_width=True)
         lo, hi = ctx.band
         inside = (trial.freq_hz > lo) & (trial.freq_hz < hi)
