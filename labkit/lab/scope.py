@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from labkit.lab.scpi import Call, ScpiError, SimScpiInstrument, fmt_int, parse_bool, parse_enum
+from labkit.lab.scpi import Call, ScpiError, SimScpiInstrument, parse_bool, parse_enum
 
 NORMAL_MAX_POINTS = 62_500
 RAW_MAX_POINTS = 8_000_000
@@ -115,6 +115,7 @@ class SimInfiniiVision(SimScpiInstrument):
         self.run_state = "RUN"
         self.triggered = False
         self._cond = threading.Condition()
+        self.forced = False     # :TRIGger:FORCe / :TFORce: the armed acquisition triggers now
         self.trig_levels: dict[str, float] = {}
         super().__init__()
 
@@ -142,7 +143,7 @@ class SimInfiniiVision(SimScpiInstrument):
                      str)
         self.setting(":ACQuire:TYPE", "acq_type", "NORM",
                      lambda t: parse_enum(t, ["NORMal", "AVERage", "HRESolution", "PEAK"]), str)
-        self.setting(":ACQuire:COUNt", "acq_count", 8, lambda t: int(self.num(t, "", 1, 65536)), fmt_int)
+        self.setting(":ACQuire:COUNt", "acq_count", 8, lambda t: int(self.num(t, "", 1, 65536)), self.fmt_int)
         self.setting(":TRIGger:MODE", "trig_mode", "EDGE", lambda t: parse_enum(t, ["EDGE", "GLITch", "PATTern"]), str)
         self.setting(":TRIGger[:EDGE]:SOURce", "trig_source", "CHAN1",
                      lambda t: parse_enum(t, ["CHANnel1", "CHANnel2", "CHANnel3", "CHANnel4", "EXTernal", "LINE"]),
@@ -158,7 +159,7 @@ class SimInfiniiVision(SimScpiInstrument):
                      lambda v: "ASC" if v == "ASC" else v)
         self.setting(":WAVeform:POINts:MODE", "points_mode", "NORM",
                      lambda t: parse_enum(t, ["NORMal", "MAXimum", "RAW"]), str)
-        self.add(":WAVeform:POINts", set=self._set_points, query=lambda c: fmt_int(self._scaling()[5]))
+        self.add(":WAVeform:POINts", set=self._set_points, query=lambda c: self.fmt_int(self._scaling()[5]))
         self.setting(":WAVeform:BYTeorder", "byteorder", "MSBF", lambda t: parse_enum(t, ["MSBFirst", "LSBFirst"]),
                      str)
         self.setting(":WAVeform:UNSigned", "unsigned", True, parse_bool, lambda v: "1" if v else "0")
@@ -168,10 +169,11 @@ class SimInfiniiVision(SimScpiInstrument):
         self.add(":WAVeform:XORigin", query=lambda c: self.fnum(self._scaling()[1]))
         self.add(":WAVeform:YINCrement", query=lambda c: self.fnum(self._scaling()[2]))
         self.add(":WAVeform:YORigin", query=lambda c: self.fnum(self._scaling()[3]))
-        self.add(":WAVeform:YREFerence", query=lambda c: fmt_int(self._scaling()[4]))
-        self.add(":ACQuire:POINts", query=lambda c: fmt_int(self._last_acq().points))
+        self.add(":WAVeform:YREFerence", query=lambda c: self.fmt_int(self._scaling()[4]))
+        self.add(":ACQuire:POINts", query=lambda c: self.fmt_int(self._last_acq().points))
         self.add(":ACQuire:SRATe", query=lambda c: self.fnum(self._record_geometry()[0] / self.get("range")))
         self.add(":DIGitize", set=self._digitize)
+        self.add(":TRIGger:FORCe", set=lambda c: self._force())
         self.add(":SINGle", set=lambda c: self._arm("SING"))
         self.add(":RUN", set=lambda c: self._run())
         self.add(":STOP", set=lambda c: self._stop())
@@ -180,8 +182,8 @@ class SimInfiniiVision(SimScpiInstrument):
                  else "STOP")
         self.add(":ASTate", query=lambda c: self._astate())
         self.add(":TER", query=lambda c: self._ter())
-        self.add(":OPERegister:CONDition", query=lambda c: fmt_int(0 if self._stopped() else 8))
-        self.add(":OPERegister[:EVENt]", query=lambda c: fmt_int(0 if self._stopped() else 8))
+        self.add(":OPERegister:CONDition", query=lambda c: self.fmt_int(0 if self._stopped() else 8))
+        self.add(":OPERegister[:EVENt]", query=lambda c: self.fmt_int(0 if self._stopped() else 8))
         self._build_more()
 
     def _build_more(self) -> None:
@@ -205,8 +207,8 @@ class SimInfiniiVision(SimScpiInstrument):
             "range", 10 * self.num(c.one(), "S", 2e-9, 50.0)), query=lambda c: self.fnum(self.get("range") / 10))
         self.setting(":ACQuire:MODE", "acq_mode", "RTIM",
                      lambda t: parse_enum(t, ["RTIMe", "ETIMe", "SEGMented"]), str)
-        self.add(":WAVeform:XREFerence", query=lambda c: fmt_int(0))
-        self.add(":WAVeform:COUNt", query=lambda c: fmt_int(
+        self.add(":WAVeform:XREFerence", query=lambda c: self.fmt_int(0))
+        self.add(":WAVeform:COUNt", query=lambda c: self.fmt_int(
             self.get("acq_count") if self.get("acq_type") == "AVER" else 1))
         self.add(":WAVeform:TYPE", query=lambda c: {"NORM": "NORM", "PEAK": "PEAK", "AVER": "AVER",
                                                      "HRES": "HRES"}[self.get("acq_type")])
@@ -298,6 +300,7 @@ class SimInfiniiVision(SimScpiInstrument):
 
     def _arm(self, state: str) -> Acquisition:
         self._cancel()
+        self.forced = False
         points, xinc, xorig = self._record_geometry()
         self.n_acq += 1
         acq = Acquisition(points, xinc, xorig, t_arm=self.clock(), channels=self._displayed(),
@@ -320,13 +323,18 @@ class SimInfiniiVision(SimScpiInstrument):
         depth = acq.points if acq is not None else self._record_geometry()[0]
         return max(1, depth // max(1, want))
 
+    def _force(self) -> None:
+        """A forced trigger: an armed acquisition that waits for its trigger takes it now."""
+        if self.acq is not None and not self.acq.done.is_set() and self.acq.t_trig is None:
+            self.forced = True
+
     def _acquire(self, acq: Acquisition, source: str, sweep_mode: str) -> None:
         """Wait for a trigger in real time, then for the post-trigger time; compute the record."""
         try:
             t_min = acq.t_arm + max(0.0, -acq.xorig_s)  # the pre-trigger part must be filled first
             while not acq.cancelled:
                 now = self.clock()
-                t_trig = self.sync(source, t_min)
+                t_trig = max(now, t_min) if self.forced else self.sync(source, t_min)
                 if t_trig is None and sweep_mode == "AUTO" and now >= t_min + AUTO_TRIGGER_S:
                     t_trig = now   # auto trigger: no edge came
                 if t_trig is not None:
@@ -529,8 +537,15 @@ class SimRigolDS1000Z(SimInfiniiVision):
 
     def build(self) -> None:
         super().build()
-        drop = {":TIMebase:SCALe", ":TIMebase:MAIN:SCALe", ":WAVeform:FORMat"}
+        drop = {":TIMebase:SCALe", ":TIMebase:MAIN:SCALe", ":WAVeform:FORMat",
+                # InfiniiVision commands the DS1000Z does not have (-113 there)
+                ":DIGitize", ":RSTate", ":ASTate", ":TER", ":OPERegister:CONDition", ":OPERegister[:EVENt]",
+                ":WAVeform:POINts", ":WAVeform:POINts:MODE", ":WAVeform:BYTeorder", ":WAVeform:UNSigned",
+                ":WAVeform:VIEW", ":WAVeform:YORigin", ":TRIGger:FORCe"}
         self.commands = [cmd for cmd in self.commands if cmd.pattern not in drop]
+        self.add(":TFORce", set=lambda c: self._force())
+        # the Y origin is an integer code offset (:WAVeform:YORigin?, and the preamble's field)
+        self.add(":WAVeform:YORigin", query=lambda c: self.fmt_int(int(self._scaling()[3])))
         self.settings["range"] = 12 * 1e-6   # *RST: 1 us/div
         self.setting_defaults["range"] = (12e-6, False)
         self.add(":TIMebase[:MAIN]:SCALe", set=lambda c: self.settings.__setitem__(

@@ -41,6 +41,8 @@ from labkit.lab.transport import PtyServer, TcpServer
 from labkit.lab.vibrometer import SimOFV3001, SimOFV5000
 
 Expect = Any   # str | float | None | Callable[[bytes], bool]
+#: a line that is not sent: the client waits 0.2 s (an acquisition completes meanwhile)
+PAUSE = "(pause)"
 
 
 @dataclass
@@ -223,6 +225,9 @@ IV_ROWS = [
         (":FOO?", None), ("*ESR?", "+32"), ("*ESR?", "+0"), ("*ESE 1;*SRE 32;*OPC", None), ("*STB?", "+100"),
         ("*ESR?", "+1"), ("*ESE?;*SRE?", "+1;+32")], [-113]),
     Row("IV empty error queue", [(":SYST:ERR?", '+0,"No error"')]),
+    Row("IV :TRIGger:FORCe: a single acquisition waiting in NORMal sweep triggers now", [
+        (":TRIG:SWE NORM;:TRIG:EDGE:SOUR EXT", None), (":SING", None), (PAUSE, None), (":OPER:COND?", "+8"),
+        (":TRIG:FORC", None), (PAUSE, None), (":OPER:COND?", "+0"), (":WAV:DATA?", block(8, 1000))]),
 ]
 
 # ------------------------------------------------------------------------------------------------
@@ -282,6 +287,13 @@ DS_ROWS = [
     Row("SCPI 6.2.4 path rule, no leading colon", [("CHAN1:SCAL 0.5;OFFS 0.1", None),
                                                    (":CHAN1:SCAL?;OFFS?", "5.000000e-01;1.000000e-01")]),
     Row("DS :SYSTem:ERRor?, *ESR? (integers without a sign)", [(":FOO", None), ("*ESR?", "32")], [-113]),
+    Row("DS :WAVeform:XREFerence?/YORigin?/YREFerence? are integers",
+        [(":WAV:XREF?", "0"), (":WAV:YOR?", "0"), (":WAV:YREF?", "127")]),
+    Row("DS has no InfiniiVision :DIGitize, :OPERegister, :WAVeform:POINts", [
+        (":DIG", None), (":OPER:COND?", None), (":WAV:POIN?", None)], [-113, -113, -113]),
+    Row("DS :TFORce: a single acquisition waiting in NORMal sweep triggers now", [
+        (":TRIG:SWE NORM;:TRIG:EDGE:SOUR EXT", None), (":SING", None), (":TRIG:STAT?", "WAIT"),
+        (":TFOR", None), (PAUSE, None), (":TRIG:STAT?", "STOP"), (":WAV:DATA?", block(9, 1200))]),
 ]
 
 # ------------------------------------------------------------------------------------------------
@@ -306,8 +318,8 @@ def _zeros() -> Any:
     return lambda t, rng, channels: {c: np.zeros(len(t)) for c in channels}
 
 
-def _now(source: str, t_min: float) -> float:
-    return t_min          # a trigger at once
+def _now(source: str, t_min: float) -> float | None:
+    return None if source == "EXT" else t_min   # an edge at once on the inputs; nothing wired to EXT
 
 
 FACTORIES: dict[str, Callable[[], Any]] = {
@@ -394,6 +406,9 @@ def test_conformance(served, model, row):
     c = served(model)
     c.send("*RST;*CLS;*ESE 0;*SRE 0")
     for line, expect in row.exchanges:
+        if line == PAUSE:
+            time.sleep(0.2)
+            continue
         c.send(line)
         if expect is not None:
             got = c.reply()
