@@ -754,50 +754,44 @@ def _agreement_section(rows: list[dict[str, Any]], tol: Tolerances, sections: li
 def _headline(fit: dict | None, details: dict[str, Any], sections: list[Section]) -> dict[str, Any]:
     """The numbers two reports are compared by (``labkit report --compare``)."""
     h: dict[str, Any] = {}
+
+    def put(key: str, label: str, value: Any, units: str, **extra: Any) -> None:
+        h[key] = {"label": label, "value": value, "units": units, **extra}
+
     if fit:
         for name, g in fit["groups"].items():
             for i, m in enumerate(g["modes"]):
-                h[f"{name}_mode{i + 1}_freq_hz"] = {"label": f"{name} mode {i + 1} frequency",
-                                                    "value": m["freq_hz"], "std": m.get("freq_hz_std"),
-                                                    "units": "Hz"}
-                h[f"{name}_mode{i + 1}_damping_ratio"] = {"label": f"{name} mode {i + 1} damping ratio",
-                                                          "value": m.get("damping_ratio"),
-                                                          "std": m.get("damping_ratio_std"), "units": "1"}
-            h[f"{name}_fit_quality"] = {"label": f"{name} fit quality (1 - NRMSE\u00b2)", "value": g.get("quality"),
-                                        "units": "1", "digits": 6}
-    nom = details.get("speed_nominal")
-    if nom:
-        h["speed_rms_error_nominal_mm_s"] = {"label": "speed RMS error, nominal robot",
-                                             "value": nom["rms_error_mm_s"], "units": "mm/s"}
-        h["speed_relative_rms_error_nominal"] = {"label": "speed relative RMS error, nominal robot",
-                                                 "value": nom["relative_rms_error"], "units": "1"}
-    if details.get("speed_mc_mean_rms_error_mm_s") is not None:
-        h["speed_rms_error_mc_mean_mm_s"] = {"label": "speed RMS error, Monte Carlo mean",
-                                             "value": details["speed_mc_mean_rms_error_mm_s"], "units": "mm/s"}
-    cov = details.get("speed_coverage")
-    if cov:
-        h["speed_band_coverage"] = {"label": "measured speeds inside the Monte Carlo band",
-                                    "value": cov["fraction_inside"], "units": "1"}
-        h["speed_median_percentile"] = {"label": "median percentile of measured speeds in the draws",
-                                        "value": cov["median_percentile"], "units": "%"}
-    knee = details.get("knee", {})
-    if knee:
-        ratios = [a["amplitude_ratio"] for a in knee.values() if a.get("amplitude_ratio") is not None]
-        phases = [abs(a["phase_diff_deg"]) for a in knee.values() if a.get("phase_diff_deg") is not None]
-        corrs = [a["correlation"] for a in knee.values() if a.get("correlation") is not None]
-        if ratios:
-            h["knee_amplitude_ratio_median"] = {"label": "knee amplitude ratio (median over drives)",
-                                                "value": float(np.median(ratios)), "units": "1"}
-        if phases:
-            h["knee_phase_diff_max_deg"] = {"label": "knee |phase difference| (largest)", "value": max(phases),
-                                            "units": "deg"}
-        if corrs:
-            h["knee_correlation_min"] = {"label": "knee waveform correlation (smallest)", "value": min(corrs),
-                                         "units": "1"}
+                put(f"{name}_mode{i + 1}_freq_hz", f"{name} mode {i + 1} frequency", m["freq_hz"], "Hz",
+                    std=m.get("freq_hz_std"))
+                put(f"{name}_mode{i + 1}_damping_ratio", f"{name} mode {i + 1} damping ratio",
+                    m.get("damping_ratio"), "1", std=m.get("damping_ratio_std"))
+            put(f"{name}_fit_quality", f"{name} fit quality (1 - NRMSE\u00b2)", g.get("quality"), "1", digits=6)
+    nom, cov = details.get("speed_nominal"), details.get("speed_coverage")
+    speed = [("speed_rms_error_nominal_mm_s", "speed RMS error, nominal robot", nom, "rms_error_mm_s", "mm/s"),
+             ("speed_relative_rms_error_nominal", "speed relative RMS error, nominal robot", nom,
+              "relative_rms_error", "1"),
+             ("speed_rms_error_mc_mean_mm_s", "speed RMS error, Monte Carlo mean", details,
+              "speed_mc_mean_rms_error_mm_s", "mm/s"),
+             ("speed_band_coverage", "measured speeds inside the Monte Carlo band", cov, "fraction_inside", "1"),
+             ("speed_median_percentile", "median percentile of measured speeds in the draws", cov,
+              "median_percentile", "%")]
+    for key, label, src, field_, units in speed:
+        if src and src.get(field_) is not None:
+            put(key, label, src[field_], units)
+    knee = list(details.get("knee", {}).values())
+    for key, label, field_, reduce, units in (
+            ("knee_amplitude_ratio_median", "knee amplitude ratio (median over drives)", "amplitude_ratio",
+             lambda v: float(np.median(v)), "1"),
+            ("knee_phase_diff_max_deg", "knee |phase difference| (largest)", "phase_diff_deg",
+             lambda v: max(abs(x) for x in v), "deg"),
+            ("knee_correlation_min", "knee waveform correlation (smallest)", "correlation", min, "1")):
+        values = [a[field_] for a in knee if a.get(field_) is not None]
+        if values:
+            put(key, label, reduce(values), units)
     for source, a in details.get("patterns", {}).items():
-        h[f"pattern_agreement_{source.replace(' ', '_')}"] = {"label": f"leg-pattern agreement ({source}s)",
-                                                              "value": a["fraction_agree"], "units": "1"}
+        put(f"pattern_agreement_{source.replace(' ', '_')}", f"leg-pattern agreement ({source}s)",
+            a["fraction_agree"], "1")
     rows = [r for s in sections for r in s.rows if r["verdict"] in ("pass", "fail")]
-    h["comparisons_passed"] = {"label": "comparisons within tolerance",
-                               "value": sum(r["verdict"] == "pass" for r in rows), "of": len(rows), "units": ""}
+    put("comparisons_passed", "comparisons within tolerance", sum(r["verdict"] == "pass" for r in rows), "",
+        of=len(rows))
     return h
