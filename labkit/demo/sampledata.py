@@ -42,7 +42,10 @@ from labkit.outputs import staged_dir
 GENERATOR = "labkit sample-data"
 VIDEO_FREQ_HZ = 240.0
 VIDEO_AMP_UM = 25.0
+#: longest sample video (s); shorter when the robot would walk out of the camera's field in that time
 VIDEO_S = 2.0
+#: fraction of the camera's field (along the walk) the robot may cover in the video
+VIDEO_FIELD_FRACTION = 0.6
 #: JPEG quality of the sample video (the lab's camera writes 100: ~150 kB a frame)
 VIDEO_QUALITY = 70
 #: largest relative difference between the tracked speed and the simulator's for the same drive
@@ -97,6 +100,7 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
     # exist and passed the checks: a failure anywhere leaves the old sample files untouched.
     with staged_dir(out, OUTPUTS) as stage:
         summary = _generate(stage, inchip_cfg, shaker_cfg, inchip_table, shaker_table, seed, quiet, say)
+        relocate(stage, out)
     sizes = {name: (out / name).stat().st_size for name in OUTPUTS if (out / name).exists()}
     total = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     return {"out": str(out), "files": {k: str(out / k) for k in sizes}, "bytes": sizes,
@@ -150,23 +154,53 @@ def _generate(out: Path, inchip_cfg: Path, shaker_cfg: Path, inchip_table: dict[
         _check_run(run_session("shaker", cfg, shaker, lab=lab, quiet=quiet, seed=seed), shaker)
         _label_h5(shaker, tag, f"shaker run of the virtual robot: {shaker_cfg.name} reduced to one point")
         drive_vpp = _drive_of(shaker)
-        say(f"filming {VIDEO_S:g} s at {VIDEO_FREQ_HZ:g} Hz, {drive_vpp:.4g} Vpp -> shaker_240hz.mkv ...")
+        expected = expected_speed(truth, shaker, seed)
+        video_s = video_duration(expected)
+        say(f"filming {video_s:.3g} s at {VIDEO_FREQ_HZ:g} Hz, {drive_vpp:.4g} Vpp -> shaker_240hz.mkv ...")
         video = out / "shaker_240hz.mkv"
-        film(lab, tmp / "camera.mkv", VIDEO_FREQ_HZ, drive_vpp, VIDEO_S, shaker_table)
+        film(lab, tmp / "camera.mkv", VIDEO_FREQ_HZ, drive_vpp, video_s, shaker_table)
         reencode(tmp / "camera.mkv", video, VIDEO_QUALITY)
     # track, and check the walk it shows against the simulator's for the same robot and drive
     say("tracking -> shaker_240hz_track.h5 / .csv ...")
     track = track_sample(video, out / "shaker_240hz_track.h5", tag)
-    expected = expected_speed(truth, shaker, seed)
     if not abs(track["mean_speed_mm_s"] - expected) <= SPEED_CHECK_REL * expected:
         raise LabkitError(f"the sample video shows {track['mean_speed_mm_s']:.3g} mm/s, the simulator gives "
                           f"{expected:.3g} mm/s for the same robot and drive: not written as sample data "
                           "(is labkit.sim working? see the virtual lab's log)")
-    write_readme(out, seed, fit, track, peaks, inchip_cfg.name, shaker_cfg.name, expected)
+    write_readme(out, seed, fit, track, peaks, inchip_cfg.name, shaker_cfg.name, expected, video_s)
     return {"fitted_modes_hz": [m["freq_hz"] for m in fit["fitted_modes"]],
             "robot_modal_freq_hz": fit["modal_freq_hz"], "track_speed_mm_s": track["mean_speed_mm_s"],
             "simulated_speed_mm_s": expected,
             "wall_s": round(time.perf_counter() - t0, 1), "notes": notes}
+
+
+def relocate(stage: Path, out: Path) -> None:
+    """Name ``out``, not the staging folder, wherever the files record their own paths.
+
+    The writers record the paths they were given (a fit's runs, a track's video, the CSV's
+    comment); written in ``stage``, those name ``stage/...``. Every text file and every string
+    attribute of the HDF5 files has ``stage`` replaced by ``out``.
+    """
+    import h5py
+
+    old, new = str(stage), str(out)
+
+    def fix(attrs: Any) -> None:
+        for k, v in list(attrs.items()):
+            if isinstance(v, bytes) and old.encode() in v:
+                attrs[k] = v.replace(old.encode(), new.encode())
+            elif isinstance(v, str) and old in v:
+                attrs[k] = v.replace(old, new)
+
+    for p in sorted(stage.iterdir()):
+        if p.suffix in (".toml", ".csv", ".md"):
+            text = p.read_text(encoding="utf-8")
+            if old in text:
+                p.write_text(text.replace(old, new), encoding="utf-8")
+        elif p.suffix == ".h5":
+            with h5py.File(p, "r+") as f:
+                fix(f.attrs)
+                f.visititems(lambda _name, obj: fix(obj.attrs))
 
 
 def _label_h5(path: Path, tag: str, what: str) -> None:
@@ -250,6 +284,10 @@ def film(lab: Any, path: Path, freq_hz: float, drive_vpp: float, duration_s: flo
     try:
         control.set_setup("shaker")
         with open_instrument("33500B", lab.resources["funcgen"], channel=1, max_amp_vpp=cap) as fg:
+            # a continuous sine: the shaker run before left the generator in triggered-burst mode,
+            # in which an untriggered generator holds the tray (and the robot) still
+            fg.burst_off()
+            fg.sweep_off()
             fg.set_sine(freq_hz, drive_vpp)
             fg.output(True)
             time.sleep(0.2)                       # let the tray settle, as the runner does
@@ -311,8 +349,19 @@ def track_sample(video: Path, out: Path, tag: str) -> dict[str, Any]:
     return summary(tr, sp)
 
 
+def video_duration(speed_mm_s: float) -> float:
+    """How long to film: :data:`VIDEO_S`, or less, so the robot (walking at ``speed_mm_s``) covers at
+    most :data:`VIDEO_FIELD_FRACTION` of the camera's field and stays in the frame to be tracked."""
+    from labkit.lab.camera import MM_PER_PX, SIZE_PX
+
+    field_mm = min(SIZE_PX) * MM_PER_PX
+    if not speed_mm_s > 0:
+        return VIDEO_S
+    return float(min(VIDEO_S, max(0.5, round(VIDEO_FIELD_FRACTION * field_mm / speed_mm_s, 1))))
+
+
 def write_readme(out: Path, seed: int, fit: dict[str, Any], track: dict[str, Any], peaks: list[float],
-                 inchip_name: str, shaker_name: str, expected: float) -> Path:
+                 inchip_name: str, shaker_name: str, expected: float, video_s: float = VIDEO_S) -> Path:
     """``README.md``: what each file is, which command made it, and its size."""
     def size(name: str) -> str:
         p = out / name
@@ -325,7 +374,7 @@ def write_readme(out: Path, seed: int, fit: dict[str, Any], track: dict[str, Any
         f"Every data file here was **generated by `{GENERATOR}`** from labkit's virtual lab (seed {seed})",
         "and its simulator, on the demo's virtual robot (`labkit.demo.run.demo_robots()`: the paper's robot with",
         "adhesion 50 nN and a hip mode at 452 Hz, damping ratio 0.22). None of it is a measurement.",
-        "Regenerate with `labkit sample-data --force` (from the repository root; about a minute).",
+        "Regenerate with `labkit sample-data --force` (from the repository root; a few minutes).",
         "",
         f"`{inchip_name}` and `{shaker_name}` are the hand-written example configs (not generated); the",
         "command reads them.",
@@ -341,7 +390,7 @@ def write_readme(out: Path, seed: int, fit: dict[str, Any], track: dict[str, Any
         f"| `shaker_run.h5` | shaker run (`run_shaker`): `{shaker_name}` at {VIDEO_FREQ_HZ:g} Hz, "
         f"{VIDEO_AMP_UM:g} um | "
         f"`{GENERATOR}` (`labkit shaker ... --lab`) | {size('shaker_run.h5')} |",
-        f"| `shaker_240hz.mkv` | {VIDEO_S:g} s top-view video of the robot walking at that drive (virtual camera, "
+        f"| `shaker_240hz.mkv` | {video_s:g} s top-view video of the robot walking at that drive (virtual camera, "
         f"MJPEG re-encoded at quality {VIDEO_QUALITY} to stay small, per-frame timestamps) | `{GENERATOR}` (the lab's "
         f"camera, `CAM:REC`) | {size('shaker_240hz.mkv')} |",
         f"| `shaker_240hz_track.h5`, `.csv` | track of the video: mean speed {track['mean_speed_mm_s']:.2f} mm/s | "
