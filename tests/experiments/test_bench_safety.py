@@ -62,6 +62,26 @@ def start(cfg: Path, out: Path, *extra: str) -> subprocess.Popen:
                             text=True, env=env)
 
 
+def sweep_cfg(tmp_path: Path, lab: VirtualLab, freqs=FREQS, **kw) -> Path:
+    """An in-chip sweep at the hip on the lab (points of :data:`POINT_S` at most, unless ``kw`` says)."""
+    kw = {"settle_s": SETTLE_S, "dwell_cycles": DWELL_CYCLES} | kw
+    return on_lab(inchip_toml(tmp_path / "c.toml", freqs, locations=("hip",), **kw), lab)
+
+
+def act_mid_run(cfg: Path, out: Path, n: int, act, *extra: str, timeout_s: float = 120):
+    """Start a sweep in another process, call ``act(proc)`` once ``n`` points are on disk (then a
+    little into the next), wait for the process to end; return ``(proc, stdout, stderr, act's result)``."""
+    proc = start(cfg, out, *extra)
+    try:
+        wait_points(out, n, proc)
+        time.sleep(0.02)
+        result = act(proc)
+        stdout, stderr = proc.communicate(timeout=timeout_s)
+    finally:
+        proc.kill()
+    return proc, stdout, stderr, result
+
+
 def rx_count(lab: VirtualLab, instrument: str = "funcgen") -> int:
     return sum(1 for _, inst, kind, _ in lab.log if inst == instrument and kind == "rx")
 
@@ -69,18 +89,14 @@ def rx_count(lab: VirtualLab, instrument: str = "funcgen") -> int:
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGHUP, signal.SIGQUIT, signal.SIGTERM, signal.SIGINT])
 def test_stop_signals_mid_point_turn_the_drive_off_within_a_second(tmp_path, lab, sig):
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
-                             dwell_cycles=DWELL_CYCLES), lab)
-    out = tmp_path / "run.h5"
-    proc = start(cfg, out)
-    try:
-        wait_points(out, 3, proc)
-        time.sleep(0.02)                       # somewhere inside the next point
-        t_sig = lab.now_s()
+    cfg, out = sweep_cfg(tmp_path, lab), tmp_path / "run.h5"
+
+    def signal_it(proc):
+        t = lab.now_s()
         proc.send_signal(sig)
-        _, stderr = proc.communicate(timeout=30)
-    finally:
-        proc.kill()
+        return t
+
+    proc, _, stderr, t_sig = act_mid_run(cfg, out, 3, signal_it)
     name = signal.Signals(sig).name
     assert proc.returncode == 130, stderr
     assert f"interrupted by {name}" in stderr and "Traceback" not in stderr
@@ -96,18 +112,14 @@ def test_stop_signals_mid_point_turn_the_drive_off_within_a_second(tmp_path, lab
 
 @pytest.mark.slow
 def test_sigkill_the_burst_stops_by_itself_then_off_and_resume(tmp_path, lab):
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
-                             dwell_cycles=DWELL_CYCLES), lab)
-    out = tmp_path / "run.h5"
-    proc = start(cfg, out)
-    try:
-        wait_points(out, 3, proc)
-        time.sleep(0.02)
-        t_kill = lab.now_s()
+    cfg, out = sweep_cfg(tmp_path, lab), tmp_path / "run.h5"
+
+    def kill_it(proc):
+        t = lab.now_s()
         proc.send_signal(signal.SIGKILL)
-        proc.communicate(timeout=30)
-    finally:
-        proc.kill()
+        return t
+
+    proc, _, _, t_kill = act_mid_run(cfg, out, 3, kill_it)
     assert proc.returncode == -signal.SIGKILL
     # nobody turned the output off, but the point's burst ended by itself within one point
     assert lab.output_state("funcgen", 1) is True
@@ -130,12 +142,9 @@ def test_sigkill_the_burst_stops_by_itself_then_off_and_resume(tmp_path, lab):
 @pytest.mark.slow
 def test_second_run_is_refused_and_the_first_is_unharmed(tmp_path, lab):
     freqs = [float(f) for f in np.round(np.geomspace(500, 3000, 24), 2)]
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", freqs, locations=("hip",), settle_s=SETTLE_S,
-                             dwell_cycles=DWELL_CYCLES), lab)
-    out_a, out_b = tmp_path / "a.h5", tmp_path / "b.h5"
-    proc = start(cfg, out_a)
-    try:
-        wait_points(out_a, 2, proc)
+    cfg, out_a, out_b = sweep_cfg(tmp_path, lab, freqs), tmp_path / "a.h5", tmp_path / "b.h5"
+
+    def second_run(proc):
         # the file being written is reported as such (labkit info, --resume)
         with pytest.raises(InputError, match="being written by another process"):
             summarise_h5(out_a)
@@ -144,9 +153,9 @@ def test_second_run_is_refused_and_the_first_is_unharmed(tmp_path, lab):
         second = subprocess.run([sys.executable, "-m", "labkit", "sweep", "inchip", str(cfg), "--out", str(out_b)],
                                 cwd=REPO, capture_output=True, text=True, timeout=60)
         assert points_done(out_a) < len(freqs), "run A ended before run B tried: test nothing"
-        stdout, stderr = proc.communicate(timeout=120)
-    finally:
-        proc.kill()
+        return second
+
+    proc, _, stderr, second = act_mid_run(cfg, out_a, 2, second_run)
     assert second.returncode == 2
     assert f"in use by another run: PID {proc.pid}" in second.stderr and "a.h5" in second.stderr
     assert "Traceback" not in second.stderr and not out_b.exists()
@@ -164,7 +173,7 @@ def test_second_run_sends_nothing(tmp_path, lab):
     any instrument is opened: the lab receives no command at all."""
     from labkit.experiments.locks import lock_run
 
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS[:2], locations=("hip",)), lab)
+    cfg = sweep_cfg(tmp_path, lab, FREQS[:2])
     before = {inst: rx_count(lab, inst) for inst in ("funcgen", "scope", "vibrometer", "control")}
     roles = [(r, lab.resources[r]) for r in ("funcgen", "scope", "vibrometer", "control")]
     with lock_run(roles, tmp_path / "a.h5", str(cfg)):
@@ -178,17 +187,13 @@ def test_second_run_sends_nothing(tmp_path, lab):
 
 @pytest.mark.slow
 def test_output_switched_off_behind_the_runs_back_is_caught(tmp_path, lab):
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
-                             dwell_cycles=DWELL_CYCLES), lab)
-    out = tmp_path / "run.h5"
-    proc = start(cfg, out, "--json")
-    try:
-        wait_points(out, 3, proc)
+    cfg, out = sweep_cfg(tmp_path, lab), tmp_path / "run.h5"
+
+    def switch_off(proc):
         turn_off(model="33500B", resource=lab.resources["funcgen"])     # someone else's connection
-        n_off = points_done(out)
-        stdout, stderr = proc.communicate(timeout=120)
-    finally:
-        proc.kill()
+        return points_done(out)
+
+    proc, _, stderr, n_off = act_mid_run(cfg, out, 3, switch_off)
     assert proc.returncode == 0, stderr
     with h5py.File(out, "r") as f:
         status = list(f["points/status"].asstr()[...])
@@ -258,7 +263,7 @@ def _limit_fsize(soft: int):
 
 
 def test_preflight_refuses_a_run_that_does_not_fit(tmp_path, lab):
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), keep_raw=True), lab)
+    cfg = sweep_cfg(tmp_path, lab, keep_raw=True)
     out = tmp_path / "run.h5"
     before = rx_count(lab)
     proc = subprocess.run([sys.executable, "-m", "labkit", "sweep", "inchip", str(cfg), "--out", str(out)],
@@ -273,17 +278,13 @@ def test_disk_full_mid_run_drive_off_file_readable_resume_completes(tmp_path, la
     before a write could fail, with the drive off and every completed point readable."""
     import resource
 
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
-                             dwell_cycles=DWELL_CYCLES), lab)
-    out = tmp_path / "run.h5"
-    proc = start(cfg, out)
-    try:
-        wait_points(out, 3, proc)
+    cfg, out = sweep_cfg(tmp_path, lab), tmp_path / "run.h5"
+
+    def fill_up(proc):
         soft = out.stat().st_size + 3 * (1 << 19)           # 1.5 MB more: less than the reserve
         resource.prlimit(proc.pid, resource.RLIMIT_FSIZE, (soft, resource.RLIM_INFINITY))
-        _, stderr = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
+
+    proc, _, stderr, _ = act_mid_run(cfg, out, 3, fill_up)
     assert proc.returncode == 2, stderr
     assert "not enough room to write the next point" in stderr and "--resume" in stderr
     assert "Traceback" not in stderr and "Segmentation" not in stderr
@@ -304,16 +305,11 @@ def test_disk_full_mid_run_drive_off_file_readable_resume_completes(tmp_path, la
 def test_unconfirmed_off_is_loud_then_labkit_off_recovers(tmp_path, lab):
     """The generator's link fails mid-run and every reconnection too: exit 4, a banner naming it and what to do, the
     original fault too; the file says so; once it answers again, ``labkit off`` turns it off."""
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",), settle_s=SETTLE_S,
-                             dwell_cycles=DWELL_CYCLES, timeout_s=0.4), lab)
-    out = tmp_path / "run.h5"
-    proc = start(cfg, out)
+    cfg, out = sweep_cfg(tmp_path, lab, timeout_s=0.4), tmp_path / "run.h5"
     try:
-        wait_points(out, 2, proc)
-        lab.inject_fault("funcgen", "drop", count=100_000)     # every link dropped at its next reply
-        _, stderr = proc.communicate(timeout=120)
+        proc, _, stderr, _ = act_mid_run(cfg, out, 2, lambda proc: lab.inject_fault(
+            "funcgen", "drop", count=100_000))                 # every link dropped at its next reply
     finally:
-        proc.kill()
         lab.clear_faults()
     assert proc.returncode == 4, stderr
     assert "DRIVE MAY STILL BE ON: funcgen" in stderr and lab.resources["funcgen"] in stderr
@@ -371,7 +367,7 @@ def test_writer_failure_turns_the_drive_off_then_reports(tmp_path, lab, capsys, 
     from labkit.cli import main
     from labkit.experiments import runfile
 
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS[:6], locations=("hip",)), lab)
+    cfg = sweep_cfg(tmp_path, lab, FREQS[:6])
     out = tmp_path / "run.h5"
     real = runfile.RunFile.add_location_rows
     calls = []
@@ -413,7 +409,7 @@ def _caught(pid: int, sig: int) -> bool:
 def test_a_background_job_is_stopped_by_sigint_and_sigquit_from_its_start(tmp_path, lab, sig):
     """A shell starts background jobs with SIGINT and SIGQUIT ignored: labkit handles them anyway,
     from before it opens anything (here: while it starts up against the lab)."""
-    cfg = on_lab(inchip_toml(tmp_path / "c.toml", FREQS, locations=("hip",)), lab)
+    cfg = sweep_cfg(tmp_path, lab)
     out = tmp_path / "run.h5"
 
     def background() -> None:
@@ -446,7 +442,9 @@ def test_labkit_off_lab_turns_off_the_served_labs_generator(tmp_path):
     serve = subprocess.Popen([sys.executable, "-m", "labkit", "lab", "serve", "--json"], cwd=REPO, env=env,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        resources = json.loads(serve.stdout.readline())
+        line = serve.stdout.readline()
+        assert line.startswith("{"), f"lab serve: {line!r} {serve.poll()} {serve.stderr.read() if serve.poll() else ''}"
+        resources = json.loads(line)
         fg = open_instrument("33500B", resources["funcgen"], name="funcgen")
         try:
             fg.set_load_high_z()
