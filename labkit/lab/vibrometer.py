@@ -26,16 +26,32 @@ def range_text(scale: float) -> str:
     return f"{scale:g}mm/s/V"
 
 
-class SimOFV5000:
-    """The controller's state and line protocol; ``peak_velocity_mm_s()`` comes from the lab."""
+class _Controller:
+    """What both controllers share: the lab's velocity at the spot, the range, over-range."""
 
     name = "vibrometer"
+    scale_mm_s_per_v: float
 
     def __init__(self, peak_velocity_mm_s: Callable[[], float] = lambda: 0.0) -> None:
         self.peak_velocity_mm_s = peak_velocity_mm_s
         self.lock = threading.RLock()
-        self.scale_mm_s_per_v = 125.0
         self.clipped = False   # the last acquisition saw the analog output at its +-10 V limit
+
+    @property
+    def full_scale_mm_s(self) -> float:
+        return self.scale_mm_s_per_v * FULL_SCALE_V
+
+    def over_range(self) -> bool:
+        """The steady-state velocity at the spot exceeds the range, or the last record clipped."""
+        return self.clipped or self.peak_velocity_mm_s() > self.full_scale_mm_s
+
+
+class SimOFV5000(_Controller):
+    """The controller's state and line protocol; ``peak_velocity_mm_s()`` comes from the lab."""
+
+    def __init__(self, peak_velocity_mm_s: Callable[[], float] = lambda: 0.0) -> None:
+        super().__init__(peak_velocity_mm_s)
+        self.scale_mm_s_per_v = 125.0
         self.props: dict[tuple[str, int, str], str] = {
             ("Controller", 0, "Name"): "OFV-5000",
             ("Controller", 0, "Version"): "4.1",
@@ -58,14 +74,6 @@ class SimOFV5000:
             ("VeloDec", 1, "Filter"): ("Off", "20kHz", "100kHz", "1.5MHz"),
             ("VeloDec", 1, "Tracking"): ("Off", "On"),
         }
-
-    @property
-    def full_scale_mm_s(self) -> float:
-        return self.scale_mm_s_per_v * FULL_SCALE_V
-
-    def over_range(self) -> bool:
-        """The steady-state velocity at the spot exceeds the range, or the last record clipped."""
-        return self.clipped or self.peak_velocity_mm_s() > self.full_scale_mm_s
 
     def handle(self, line: str) -> bytes | None:
         parts = [p.strip() for p in line.strip().split(",")]
@@ -113,7 +121,7 @@ class SimOFV5000:
 OFV3001_OVD01 = {5: 1.0, 1: 5.0, 2: 25.0, 3: 125.0, 4: 1000.0}
 
 
-class SimOFV3001:
+class SimOFV3001(_Controller):
     """A simulated Polytec OFV-3001 controller with an OVD-01 velocity decoder.
 
     Protocol (RS-232, ``\\n``): ``REN`` puts it under remote control (no
@@ -123,25 +131,14 @@ class SimOFV3001:
     silently; unknown commands get no answer.
     """
 
-    name = "vibrometer"
-
     def __init__(self, peak_velocity_mm_s: Callable[[], float] = lambda: 0.0) -> None:
-        self.peak_velocity_mm_s = peak_velocity_mm_s
-        self.lock = threading.RLock()
+        super().__init__(peak_velocity_mm_s)
         self.range_number = 3
         self.remote = False
-        self.clipped = False
 
-    @property
-    def scale_mm_s_per_v(self) -> float:
+    @property   # read-only here: the range number decides it
+    def scale_mm_s_per_v(self) -> float:  # type: ignore[override]
         return OFV3001_OVD01[self.range_number]
-
-    @property
-    def full_scale_mm_s(self) -> float:
-        return self.scale_mm_s_per_v * FULL_SCALE_V
-
-    def over_range(self) -> bool:
-        return self.clipped or self.peak_velocity_mm_s() > self.full_scale_mm_s
 
     def handle(self, line: str) -> bytes | None:
         word = line.strip().upper()

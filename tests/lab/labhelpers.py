@@ -60,6 +60,23 @@ class Raw:
         self.buf = self.buf[2 + n + size + 1:]
         return payload
 
+    def reply(self) -> bytes:
+        """The next reply: a line, or one definite-length block (its own length says where it ends),
+        without the terminator."""
+        self._fill(1)
+        if self.buf[:1] == b"#":
+            self._fill(2)
+            n = int(self.buf[1:2])
+            self._fill(2 + n)
+            end = 2 + n + (int(self.buf[2:2 + n]) if n else 0)
+        else:
+            while b"\n" not in self.buf:
+                self._fill(len(self.buf) + 1)
+            end = self.buf.index(b"\n")
+        self._fill(end + 1)
+        out, self.buf = self.buf[:end], self.buf[end + 1:]
+        return out
+
     def close(self) -> None:
         self.sock.close()
 

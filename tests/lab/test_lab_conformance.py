@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import os
 import select
-import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -34,6 +33,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from labhelpers import Raw
 
 from labkit.lab.funcgen import SimAgilent33220A, SimKeysight33500B, SimRigolDG1000Z
 from labkit.lab.scope import SimInfiniiVision, SimRigolDS1000Z
@@ -335,54 +335,20 @@ TABLES = {"33522B": KS_ROWS, "33511B": KS1_ROWS, "DSOX3024T": IV_ROWS, "DG1062Z"
           "33220A": A2_ROWS}
 
 
-class Client:
-    """Lines out; lines or one definite-length block in (the block's own length says where it ends)."""
-
-    def __init__(self, resource: str) -> None:
-        _, host, port, _ = resource.split("::")
-        self.sock = socket.create_connection((host, int(port)), timeout=5.0)
-        self.buf = b""
-
-    def send(self, line: str) -> None:
-        self.sock.sendall(line.encode("ascii") + b"\n")
-
-    def _fill(self, n: int) -> None:
-        while len(self.buf) < n:
-            chunk = self.sock.recv(1 << 20)
-            if not chunk:
-                raise ConnectionError("closed")
-            self.buf += chunk
-
-    def reply(self) -> bytes:
-        self._fill(1)
-        if self.buf[:1] == b"#":
-            self._fill(2)
-            n = int(self.buf[1:2])
-            self._fill(2 + n)
-            end = 2 + n + (int(self.buf[2:2 + n]) if n else 0)
-        else:
-            while b"\n" not in self.buf:
-                self._fill(len(self.buf) + 1)
-            end = self.buf.index(b"\n")
-        self._fill(end + 1)
-        out, self.buf = self.buf[:end], self.buf[end + 1:]
-        return out
-
-
 @pytest.fixture(scope="module")
 def served():
-    servers: dict[str, tuple[TcpServer, Client]] = {}
+    servers: dict[str, tuple[TcpServer, Raw]] = {}
 
-    def get(model: str) -> Client:
+    def get(model: str) -> Raw:
         if model not in servers:
             server = TcpServer(FACTORIES[model](), lambda *a: None)
             server.start()
-            servers[model] = (server, Client(server.resource))
+            servers[model] = (server, Raw(server.resource))
         return servers[model][1]
 
     yield get
     for server, client in servers.values():
-        client.sock.close()
+        client.close()
         close = getattr(server.handler, "close", None)
         if close is not None:        # the scope: its acquisition thread
             close()
@@ -404,25 +370,25 @@ CASES = [pytest.param(model, row, id=f"{model}: {row.section[:60]}") for model, 
 @pytest.mark.parametrize("model, row", CASES)
 def test_conformance(served, model, row):
     c = served(model)
-    c.send("*RST;*CLS;*ESE 0;*SRE 0")
+    c.write("*RST;*CLS;*ESE 0;*SRE 0")
     for line, expect in row.exchanges:
         if line == PAUSE:
             time.sleep(0.2)
             continue
-        c.send(line)
+        c.write(line)
         if expect is not None:
             got = c.reply()
             assert _check(expect, got), f"{row.section}: {line!r} -> {got[:80]!r}, expected {expect!r}"
     err = ERR_QUERY.get(model, "SYST:ERR?")
     codes = []
     for _ in range(25):
-        c.send(err)
+        c.write(err)
         code = int(c.reply().split(b",")[0])
         if code == 0:
             break
         codes.append(code)
     assert codes == row.errors, f"{row.section}: errors {codes}, expected {row.errors}"
-    c.send("*OPC?")                           # the next line is this answer: nothing stray was sent
+    c.write("*OPC?")                          # the next line is this answer: nothing stray was sent
     assert c.reply() == b"1"
 
 
