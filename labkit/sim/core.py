@@ -5,13 +5,13 @@ M5-M11 and its section "Numerics"):
 
 * one coupled system (23 coordinates, one mass matrix), implicit midpoint with a
   fixed step, default :func:`default_dt` (50 steps per period of the fastest mode
-  or drive, >= 120 per shaker period; 1.1e-5 s for the paper's robot); the PZT
+  or drive, >= 240 per shaker period; 1.1e-5 s for the paper's robot); the PZT
   square wave's edges fall on step boundaries;
 * squeeze films implicit, at the midpoint gap; impacts and releases are events
   located inside the step on the scheme's own trajectory;
 * convergence (tests/sim/test_convergence.py): mean speed at the default step
   within 3 % (or 0.1 mm/s) of a quarter step for the PZT default run and shaker
-  runs at 150-700 Hz (and 1500 Hz with the published parameters);
+  runs at 150-1500 Hz, published parameters and c_ad_n = 2e-6;
   :func:`dt_check` checks any run, and says when it is chaotic;
 * the start: the robot rests on its six feet in static equilibrium and rides
   the tray (its vertical velocity is the ground's at t = 0), or, with
@@ -34,7 +34,7 @@ from labkit.sim.result import SimResult, classify_pattern, foot_period
 STEPS_PER_PERIOD = 50
 #: ... and at least this many per period of a shaker (the tray's acceleration A w^2 sets
 #: how fast contact forces change; measured: docs/model.md section "Numerics").
-SHAKER_STEPS_PER_PERIOD = 120
+SHAKER_STEPS_PER_PERIOD = 240
 #: Default recording interval: at most 1e-4 s, and at least 20 samples per drive period.
 RECORD_DT_MAX_S = 1e-4
 RECORD_PER_PERIOD = 20
