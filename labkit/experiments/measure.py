@@ -69,10 +69,11 @@ def acquire_burst(scope: Any, fire: Any, drive_channel: int, velocity_channel: i
     """
     scope.single()
     # a query answered after :SING means the scope has armed: only then may the burst start
-    # (the two instruments are separate links; nothing else orders their commands)
+    # (the two instruments are separate links; nothing else orders their commands). *STB? never
+    # waits (an *OPC? may be held until an armed single acquisition completes, i.e. forever here)
     confirm = getattr(scope, "query", None)
     if confirm is not None:
-        confirm("*OPC?")
+        confirm("*STB?")
     fire()
     time.sleep(settle_s + dwell_s)
     scope.wait_done(timeout_s)
