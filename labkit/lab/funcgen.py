@@ -827,3 +827,18 @@ class SimAgilent33220A(SimKeysight33500B):
                  on_output: Callable[[int, bool], None] | None = None, *, model: str = "33220A",
                  on_burst: BurstFn | None = None) -> None:
         super().__init__(clock, on_output, model=model, on_burst=on_burst)
+
+    def build(self) -> None:
+        """The 33500B table, with the 33220A's own spellings: ``PULSe:PERiod`` (not
+        ``FUNCtion:PULSe:PERiod``) and the arbitrary waveform as ``FUNCtion USER``."""
+        super().build()
+        self.commands = [cmd for cmd in self.commands if cmd.pattern != "[SOURce#:]FUNCtion[:SHAPe]"]
+        self.add("[SOURce#:]FUNCtion[:SHAPe]",
+                 set=lambda c: self._update(self._chan(c), func=parse_enum(
+                     c.one(), ["SINusoid", "SQUare", "RAMP", "PULSe", "NOISe", "DC", "USER"])),
+                 query=lambda c: self.ch[self._chan(c)].func)
+        def set_period(c: Call) -> None:   # the same setting as FUNCtion:PULSe:PERiod (reset by *RST)
+            self.settings["pulse_period"][self._chan(c)] = self.num(c.one(), "S", 200e-9, 2000.0)
+
+        self.add("[SOURce#:]PULSe:PERiod", set=set_period, query=lambda c: self.fnum(
+            self.query_limit(c, (200e-9, 2000.0), 1e-3) if c.params else self.get("pulse_period", self._chan(c))))

@@ -98,3 +98,27 @@ def test_plain_pyvisa_waits_for_opc_via_the_event_status_register(lab):  # noqa:
         assert sc.query(":SYST:ERR?") == '+0,"No error"'
     finally:
         sc.close()      # not rm.close(): pyvisa shares one session per library in a process
+
+
+def test_pymeasure_33220a_bus_triggered_burst():
+    """PyMeasure's Agilent33220A: a sine, then a 5-cycle BUS-triggered burst fired by its trigger()."""
+    from labkit.lab import VirtualLab
+
+    with VirtualLab(seed=0, funcgen_model="33220A") as lab, warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        fg = pymeasure_agilent.Agilent33220A(lab.resources["funcgen"], timeout=5000, **VISA)
+        try:
+            assert fg.id.startswith("Agilent Technologies,33220A")
+            fg.shape, fg.frequency, fg.amplitude_unit, fg.amplitude, fg.offset = "SIN", 500, "VPP", 1.5, 0.1
+            fg.output = True
+            assert (fg.shape, fg.frequency, fg.amplitude, fg.offset, fg.output) == ("SIN", 500.0, 1.5, 0.1, True)
+            assert (fg.voltage_high, fg.voltage_low) == (0.85, -0.65)
+            assert (fg.pulse_period, fg.pulse_width, fg.square_dutycycle) == (1e-3, 1e-4, 50.0)
+            fg.burst_mode, fg.burst_ncycles, fg.trigger_source, fg.burst_state = "TRIG", 5, "BUS", True
+            assert (fg.burst_state, fg.burst_ncycles, fg.burst_mode, fg.trigger_source) == (True, 5, "TRIG", "BUS")
+            fg.trigger()                              # *TRG;*WAI
+            assert fg.check_errors() == [] and int(fg.ask("*STB?")) & 4 == 0
+            (start, inst, ch, end), = lab.burst_timeline
+            assert (inst, ch) == ("funcgen", 1) and end - start == pytest.approx(5 / 500)
+        finally:
+            fg.adapter.close()
