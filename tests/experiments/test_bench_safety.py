@@ -464,3 +464,24 @@ def test_labkit_off_lab_turns_off_the_served_labs_generator(tmp_path):
     none = subprocess.run([sys.executable, "-m", "labkit", "off", "--lab"], cwd=REPO, env=env,
                           capture_output=True, text=True, timeout=60)
     assert none.returncode == 2 and "no virtual lab is being served" in none.stderr
+
+
+@pytest.mark.parametrize("lab_model, driver", [("33220A", "33220A"), ("33511B", "33500B"), ("DG1062Z", "DG1000Z")])
+def test_every_generator_drives_finite_bursts(tmp_path, lab_model, driver):
+    """Each supported generator's point is a burst that ends by itself after settle + dwell
+    (+2) cycles, and the FRF measured that way is the lab's true one."""
+    freqs = FREQS[:3]
+    with VirtualLab(seed=2, funcgen_model=lab_model) as glab:
+        cfg = sweep_cfg(tmp_path, glab, freqs)
+        cfg.write_text(cfg.read_text().replace('model = "33500B"', f'model = "{driver}"'))
+        summary = run_session("inchip", cfg, tmp_path / "r.h5", quiet=True)
+        bursts = [(start, end) for start, inst, ch, end in glab.burst_timeline if inst == "funcgen" and ch == 1]
+    assert summary["points_ok"] == len(freqs)
+    assert len(bursts) == len(freqs)             # one burst per point
+    for (start, end), f_hz in zip(bursts, freqs):
+        n = np.ceil((SETTLE_S + DWELL_CYCLES / f_hz) * f_hz) + 2
+        assert end - start == pytest.approx(n / f_hz, rel=1e-6)     # it ended by itself
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        assert bool(f.attrs["drive_bounded"])
+        frf, fr = f["locations/hip/frf"][...], f["locations/hip/freq_hz"][...]
+        assert np.all(np.abs(frf / glab.frf("hip", fr) - 1) < 0.03)
