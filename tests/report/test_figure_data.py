@@ -115,3 +115,20 @@ def test_knee_traces_share_the_tray_time_axis(inputs, tmp_path):
     assert firm["measured"] and firm["simulated"]
     assert firm["measured_phase_deg"] == pytest.approx(0.0, abs=1.0)
     assert firm["simulated_phase_deg"] == pytest.approx(0.0, abs=1.0)
+
+
+def test_stabilisation_diagram_marks_the_chosen_poles_and_names_the_locations(inputs, tmp_path):
+    """report_data.write_fit: 15 poles at orders 2..10, chosen poles at the three modes; the legend
+    names every location's FRF curve (the issue: no legend said which curve was which)."""
+    from report_data import MODES_HZ
+
+    from labkit.analysis.report import build_report
+
+    s = build_report(tmp_path / "rep", fit=str(inputs["fit"]))
+    data = json.loads(Path(s["figure_data_json"]).read_text())
+    for group in ("inchip", "shaker"):
+        st = data[f"fig_stabilisation_{group}"]
+        assert st["poles"] == 15 and st["chosen_hz"] == list(MODES_HZ)
+        svg = Path(st["svg"]).read_text()
+        for text in ("|FRF| body", "|FRF| hip", "|FRF| knee", "chosen pole", "stable frequency and damping"):
+            assert text in svg, text
