@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError
@@ -93,6 +92,9 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                             help="Dask scheduler tcp://HOST:PORT (default: local processes)")
     sweep_opts.add_argument("--workers", default=None, metavar="N",
                             help="local worker processes (default: one per core)")
+    sweep_opts.add_argument("--dt-check", action="store_true",
+                            help="also run the nominal robot at every point at a quarter of the step and "
+                                 "report whether each point's speed is converged")
     for kind, opts in SWEEPABLE.items():
         p = swsub.add_parser(kind, parents=[common, run_opts, sweep_opts],
                              help=f"sweep a {kind} run over one of {', '.join(o for o, _, _ in opts)}")
@@ -180,17 +182,9 @@ def parse_range(text: str, option: str) -> list[float]:
 
 def load_params(path: str | None):
     """The robot parameters: a preset by name, a file's (ConfigError names file and key), or the defaults."""
-    from labkit.sim import RobotParams
-    from labkit.sim.presets import preset, preset_names
+    from labkit.sim.presets import load
 
-    if path is None:
-        return RobotParams()
-    if not Path(path).is_file():
-        if path in preset_names():
-            return preset(path)
-        raise InputError("no such parameter file or preset", file=path, key="--params",
-                         expected="a TOML file or one of " + ", ".join(preset_names()))
-    return RobotParams.from_toml(path)
+    return load(path)
 
 
 # --------------------------------------------------------------------------- run
@@ -293,7 +287,8 @@ def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
     s = sweep(params, _scenario_from(kind, base), quantity=quantity, values=values, draws=draws,
               duration_s=number(args.duration_s, "--duration-s", positive=True), scheduler=args.scheduler,
               workers=workers, seed=integer(args.seed, "--seed"), quiet=args.quiet,
-              accel_limit_g=None if accel is None else number(accel, "--accel-limit-g", positive=True))
+              accel_limit_g=None if accel is None else number(accel, "--accel-limit-g", positive=True),
+              dt_check=bool(getattr(args, "dt_check", False)))
     summary = s.summary()
     summary["ablate"] = args.ablate
     if args.out:
@@ -354,6 +349,8 @@ def _print_sweep(s: dict[str, Any]) -> None:
     print(f"  {q:>12}  mean mm/s   std mm/s  pattern" + ("          amp um" if amp else ""))
     for p in s["points"]:
         print(f"  {p[q]:12.4g}  {p['mean_speed_mm_s']:9.3f}  {p['std_speed_mm_s']:9.3f}  {p['dominant_pattern']:<15}"
-              + (f"  {p['amp_um']:7.3g}" if amp else ""))
+              + (f"  {p['amp_um']:7.3g}" if amp else "")
+              + (f"  quarter step {p['quarter_step_speed_mm_s']:.3f} mm/s"
+                 f" ({'converged' if p['dt_converged'] else 'NOT converged'})" if "dt_converged" in p else ""))
     if "out" in s:
         print(f"  wrote {s['out']}")

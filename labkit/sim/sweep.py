@@ -136,6 +136,10 @@ class SweepResult:
             })
             if "amp_um" in self.meta and self.quantity != "amp_um":
                 points[-1]["amp_um"] = float(self.meta["amp_um"][i])
+            if "dt_check" in self.meta:
+                c = self.meta["dt_check"]
+                points[-1]["quarter_step_speed_mm_s"] = float(c["quarter_speed_mm_s"][i])
+                points[-1]["dt_converged"] = bool(c["converged"][i])
         return {"quantity": self.quantity, "units": units_of(self.quantity),
                 "draws": self.draws, "scenario": self.scenario,
                 "duration_s": self.meta.get("duration_s"), "seed": self.meta.get("seed"),
@@ -254,13 +258,19 @@ def run_point(task: tuple) -> dict[str, Any]:
     from labkit.sim import simulate
     from labkit.sim.uncertainty import draw_params
 
-    params, scenario, quantity, value, draw, seed, duration_s, table, accel_limit_g = task
+    params, scenario, quantity, value, draw, seed, duration_s, table, accel_limit_g = task[:9]
+    quarter = len(task) > 9 and bool(task[9])
     task_seed = _task_seed(seed, draw)
     if draw > 0:
         params = draw_params(params, np.random.default_rng(task_seed), table)
     params, scenario = apply_value(params, scenario, quantity, value)
     scenario = limit_acceleration(scenario, accel_limit_g)
-    r = simulate(params, scenario, duration_s=duration_s, seed=task_seed)
+    dt_s = None
+    if quarter:                      # the dt check: the same run at a quarter of the default step
+        from labkit.sim.core import default_dt
+
+        dt_s = default_dt(params, scenario) / 4
+    r = simulate(params, scenario, duration_s=duration_s, seed=task_seed, dt_s=dt_s)
     return result_row(r)
 
 
@@ -287,7 +297,7 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
           values: Sequence[float] = (), draws: int = 0, duration_s: float = 2.0,
           scheduler: str | None = None, workers: int | None = None, seed: int = 0,
           quiet: bool = False, table: dict[str, float] | None = None,
-          accel_limit_g: float | None = None) -> SweepResult:
+          accel_limit_g: float | None = None, dt_check: bool = False) -> SweepResult:
     """Simulate ``base_scenario`` at every value of ``quantity``, with Monte Carlo draws.
 
     Parameters
@@ -323,6 +333,11 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
         Shaker runs only: cap the tray's peak acceleration (in g) by cutting
         the amplitude (:func:`limit_acceleration`); the amplitude used at
         each point is in ``meta["amp_um"]``. ``None``: the amplitude is kept.
+    dt_check:
+        Also run the nominal robot at every point at a quarter of the default
+        step; ``meta["dt_check"]`` gets its speeds, the differences and whether
+        each point is converged (within 3 % or 0.1 mm/s,
+        :data:`labkit.sim.core.DT_CHECK_REL`, :data:`~labkit.sim.core.DT_CHECK_ABS_MM_S`).
 
     Returns
     -------
@@ -349,8 +364,13 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
                          expected="a peak acceleration in g, > 0")
     tasks = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table, accel_limit_g)
              for v in grid for d in range(n_draws)]
+    n_main = len(tasks)
+    if dt_check:
+        tasks += [(params, base_scenario, quantity, float(v), 0, int(seed), float(duration_s), table, accel_limit_g,
+                   True) for v in grid]
     rows = map_tasks(run_point, tasks, scheduler=scheduler, workers=workers,
                      desc=f"sweep {quantity}", quiet=quiet)
+    quarter_rows, rows = rows[n_main:], rows[:n_main]
     shape = (len(grid), n_draws)
     speeds = np.array([r["speed_mm_s"] for r in rows]).reshape(shape)
     frac = np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, len(CONTACT_MODES)))
@@ -360,6 +380,14 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
             "uncertainty_table": table, "scheduler": scheduler or "local",
             "draw_0": "nominal", "seeding": "SeedSequence([seed, draw]) per draw, same at every point",
             "task_seeds": [_task_seed(seed, d) for d in range(n_draws)]}
+    if dt_check:
+        from labkit.sim.core import DT_CHECK_ABS_MM_S, DT_CHECK_REL
+
+        q = np.array([r["speed_mm_s"] for r in quarter_rows])
+        diff = speeds[:, 0] - q
+        tol = np.maximum(DT_CHECK_REL * np.abs(q), DT_CHECK_ABS_MM_S)
+        meta["dt_check"] = {"quarter_speed_mm_s": [float(x) for x in q], "difference_mm_s": [float(x) for x in diff],
+                            "converged": [bool(x) for x in np.abs(diff) <= tol]}
     if accel_limit_g is not None and hasattr(base_scenario, "amp_um"):
         meta["accel_limit_g"] = float(accel_limit_g)
         meta["amp_um"] = [float(limit_acceleration(apply_value(params, base_scenario, quantity, v)[1],

@@ -157,3 +157,19 @@ def test_dask_equals_serial(params, small_sweep):
                         duration_s=DUR, scheduler=cluster.scheduler_address, seed=7, quiet=True)
     np.testing.assert_array_equal(on_dask.speeds_mm_s, small_sweep.speeds_mm_s)
     np.testing.assert_array_equal(on_dask.patterns, small_sweep.patterns)
+
+
+def test_sweep_dt_check_reruns_the_nominal_robot_at_a_quarter_step():
+    from labkit.sim import PZT, simulate
+    from labkit.sim.core import default_dt
+
+    p = RobotParams(c_ad_n=2e-6)
+    s = sweep(p, PZT(1800, 20.0), "voltage_v", [10.0, 20.0], draws=0, duration_s=0.05, scheduler="serial",
+              quiet=True, dt_check=True)
+    c = s.meta["dt_check"]
+    sc = PZT(1800, 20.0)
+    quarter = simulate(p, sc, duration_s=0.05, seed=s.meta["task_seeds"][0], dt_s=default_dt(p, sc) / 4)
+    assert c["quarter_speed_mm_s"][1] == quarter.mean_speed_mm_s
+    assert c["difference_mm_s"][1] == pytest.approx(s.speeds_mm_s[1, 0] - quarter.mean_speed_mm_s)
+    pts = s.summary()["points"]
+    assert [pt["dt_converged"] for pt in pts] == c["converged"] and all(c["converged"])
