@@ -119,3 +119,8 @@ def test_generator_runs_on_small_configs(tmp_path):
         with h5py.File(out / name) as f:
             assert f.attrs["kind"] == kind and "labkit sample-data" in f.attrs["generated_by"]
     assert not (cfgs / "robot.toml").exists() and (cfgs / "inchip.toml").read_text() == tomli_w.dumps(t)
+    # written through a staging folder inside --out (labkit.outputs.staged_dir): none left, none named
+    assert [p.name for p in out.iterdir()] and not [p for p in out.iterdir() if p.name.startswith(".staging")]
+    assert ".staging" not in (out / "robot.toml").read_text() + (out / "shaker_240hz_track.csv").read_text()
+    with h5py.File(out / "robot.fit.h5") as f:
+        assert ".staging" not in str(f.attrs["runs_json"])
