@@ -71,17 +71,9 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 
 
 def _load_params(text: str | None) -> Any:
-    from labkit.sim import RobotParams
-    from labkit.sim.presets import preset, preset_names
+    from labkit.sim.presets import load
 
-    if text is None:
-        return RobotParams()
-    if not Path(text).is_file():
-        if text in preset_names():
-            return preset(text)
-        raise InputError("no such parameter file or preset", file=text, key="--params",
-                         expected="a TOML file or one of " + ", ".join(preset_names()))
-    return RobotParams.from_toml(text)
+    return load(text)
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:

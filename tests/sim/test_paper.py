@@ -41,9 +41,9 @@ def _ps(values, speeds, patterns=None, rise=None):
     sp = np.asarray(speeds, float).reshape(n, 1)
     pats = np.array(patterns if patterns is not None else [["firm_contact"] * 6] * n).reshape(n, 1, 6)
     r = np.asarray(rise if rise is not None else np.zeros(n), float).reshape(n, 1)
-    return PointSet(values=np.asarray(values, float), speeds_mm_s=sp, patterns=pats, foot_rise_um=r,
-                    leg_motion_um=np.ones((n, 1)), aperiodicity=np.zeros((n, 1)),
-                    contact_fraction=np.zeros((n, 1, 6, 3)))
+    return PointSet(quantity="x", values=np.asarray(values, float), speeds_mm_s=sp, patterns=pats,
+                    contact_fraction=np.zeros((n, 1, 6, 3)), impacts=np.zeros((n, 1, 6)), foot_rise_um=r,
+                    leg_motion_um=np.ones((n, 1)), aperiodicity=np.zeros((n, 1)))
 
 
 def test_every_metric_of_the_table_is_measured_by_its_scenario():

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from labkit.errors import ConfigError
+from labkit.errors import ConfigError, InputError
 from labkit.sim.params import RobotParams
 
 HERE = Path(__file__).parent
@@ -45,3 +45,18 @@ def preset(name: str) -> RobotParams:
     if not name.isidentifier() or not path.is_file():
         raise ConfigError(f"no parameter preset {name!r}", key="preset", expected=" | ".join(preset_names()))
     return RobotParams.from_toml(path)
+
+
+def load(text: str | None) -> RobotParams:
+    """``--params`` of the commands: a preset name, a parameter file, or (None) the published set.
+
+    An existing file wins over a preset of the same name; neither -> InputError naming ``--params``.
+    """
+    if text is None:
+        return RobotParams()
+    if Path(text).is_file():
+        return RobotParams.from_toml(text)
+    if text in preset_names():
+        return preset(text)
+    raise InputError("no such parameter file or preset", file=text, key="--params",
+                     expected="a TOML file or one of " + ", ".join(preset_names()))

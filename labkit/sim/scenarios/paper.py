@@ -47,7 +47,7 @@ PATTERN_ORDER = {"firm_contact": 0, "partial_contact": 1, "jumping": 2}
 FIG8_FREQS_HZ = (150.0, 175.0, 200.0, 225.0, 240.0, 255.0, 270.0, 285.0, 300.0, 315.0, 330.0, 360.0, 400.0,
                  420.0, 440.0, 460.0, 480.0, 500.0, 550.0, 600.0, 700.0, 800.0, 1000.0, 1200.0, 1400.0,
                  1600.0, 1800.0)
-FIG8_FREQS_QUICK_HZ = (200.0, 240.0, 270.0, 300.0, 320.0, 440.0, 480.0, 600.0, 1000.0, 1600.0)
+FIG8_FREQS_QUICK_HZ = (200.0, 240.0, 270.0, 300.0, 320.0, 440.0, 480.0, 600.0, 1200.0)
 #: The constant generator amplitude of the Fig. 8 sweep (25 um at 240 Hz on the law).
 FIG8_DRIVE_VPP = 8.0
 #: Pattern drives, V p-p (the paper's 2, 4, 6, 8 V), at this frequency (**choice**: the
@@ -100,7 +100,7 @@ SPEED_FLOOR_MM_S = 0.05
 def fig8_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER_SHAKER) -> Plan:
     freqs = opts.pick(FIG8_FREQS_HZ, FIG8_FREQS_QUICK_HZ)
     pts = [Point(params, Shaker(freq_hz=f, amp_um=law.amp_um(f, FIG8_DRIVE_VPP)), f) for f in freqs]
-    return Plan(pts, opts.pick(5, 1, opts.draws), opts.pick(1.5, 0.5, opts.duration_s))
+    return Plan(pts, opts.pick(5, 1, opts.draws), opts.pick(1.5, 0.4, opts.duration_s))
 
 
 def fig8_measure(ps: PointSet) -> dict[str, float]:
@@ -127,7 +127,7 @@ def patterns_measure(ps: PointSet) -> dict[str, float]:
         return ps.share(idx[v], p) if v in idx else float("nan")
 
     inside = [i for i, v in enumerate(ps.values) if 2.0 <= v <= 8.0]
-    ranks = [PATTERN_ORDER[ps.dominant(i)] for i in inside]
+    ranks = [PATTERN_ORDER[ps.dominant_pattern(i)] for i in inside]
     return {"firm_share_2v": share(2.0, "firm_contact"),
             "partial_share_4_6v": float(np.nanmax([share(4.0, "partial_contact"), share(6.0, "partial_contact")])),
             "jumping_share_8v": share(8.0, "jumping"),
@@ -168,6 +168,10 @@ def payload_measure(ps: PointSet) -> dict[str, float]:
             "speed_gain_1_2_to_1_7_mg_mm_s": at(m, v, 1.7) - at(m, v, 1.2)}
 
 
+#: The coordinate of each paper scenario's points.
+AXIS = {"paper-fig8": "freq_hz", "paper-patterns": "drive_vpp", "paper-ablations": "run",
+        "paper-payload": "mass_mg"}
+
 PAPER: dict[str, PaperScenario] = {
     "paper-fig8": PaperScenario("paper-fig8", fig8_plan, fig8_measure),
     "paper-patterns": PaperScenario("paper-patterns", patterns_plan, patterns_measure),
@@ -182,7 +186,7 @@ def evaluate(name: str, params: RobotParams, opts: RunOptions,
     sc = PAPER[name]
     plan = sc.plan(params, opts, law)
     ps = run_points(plan.points, draws=plan.draws, duration_s=plan.duration_s, seed=opts.seed,
-                    scheduler=opts.scheduler, workers=opts.workers, quiet=opts.quiet, desc=name)
+                    scheduler=opts.scheduler, workers=opts.workers, quiet=opts.quiet, desc=name, quantity=AXIS[name])
     return ps, sc.measure(ps)
 
 
@@ -195,13 +199,15 @@ def _outcome(name: str, ps: PointSet, metrics: dict[str, float], axis: str, plot
     numbers = {"metrics": metrics, "points": ps.points(axis), "draws": ps.draws,
                "duration_s": ps.meta.get("duration_s"), **(extra or {})}
     return Outcome(finding=finding, checks={c.id: c.passed for c in checks}, numbers=numbers,
-                   observations=checks, plot=plot, write_data=lambda path: ps.to_h5(path, axis),
+                   observations=checks, plot=plot, write_data=ps.to_h5,
                    figure_size_in=size_in)
 
 
-def _band_text(ax: Any, lines: Sequence[str]) -> None:
-    ax.text(0.01, 0.99, "\n".join(lines), transform=ax.transAxes, va="top", ha="left", fontsize=5.5,
-            family="monospace", color="0.25")
+def _band_text(ax: Any, checks: Sequence[Any], y: float = 0.99) -> None:
+    """``PASS id`` / ``FAIL id`` lines in a corner of an axis."""
+    lines = [f"{'PASS' if c.passed else 'FAIL'} {c.id}" for c in checks]
+    ax.text(0.01, y, "\n".join(lines), transform=ax.transAxes, va="top", ha="left", fontsize=6,
+            family="monospace", color="0.2", bbox={"facecolor": "white", "alpha": 0.8, "lw": 0})
 
 
 # --------------------------------------------------------------------------- registered scenarios
@@ -213,6 +219,8 @@ def paper_fig8(params: RobotParams, opts: RunOptions) -> Outcome:
     amps = [d["amp_um"] for d in ps.drives]
 
     def plot(fig: Any) -> None:
+        import matplotlib.ticker
+
         ax = fig.add_subplot(111)
         curve_axes(ax, ps, "simulated")
         ax.errorbar([240.0], [4.0], yerr=[[2.0], [2.0]], fmt="s", color="tab:red", ms=5, capsize=3,
@@ -231,7 +239,9 @@ def paper_fig8(params: RobotParams, opts: RunOptions) -> Outcome:
         ax.set_title(f"paper-fig8: {sum(c.passed for c in check('paper-fig8', metrics))}/"
                      f"{len(observations('paper-fig8'))} observations met (cf. paper Fig. 8)", fontsize=9)
         ax.legend(fontsize=6, loc="upper right")
-        _band_text(ax, [c.line()[:78] for c in check("paper-fig8", metrics)])
+        _band_text(ax, check("paper-fig8", metrics))
+        ax.set_xticks([150, 200, 300, 500, 1000, 1800], labels=["150", "200", "300", "500", "1000", "1800"])
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         fig.tight_layout()
 
     return _outcome("paper-fig8", ps, metrics, "freq_hz", plot,
@@ -263,7 +273,7 @@ def paper_patterns(params: RobotParams, opts: RunOptions) -> Outcome:
         fig.suptitle(f"paper-patterns (cf. paper Fig. 11): {metrics_line(metrics, 'paper-patterns')}", fontsize=8)
         fig.tight_layout()
 
-    dom = [ps.dominant(i) for i in range(len(ps.values))]
+    dom = [ps.dominant_pattern(i) for i in range(len(ps.values))]
     return _outcome("paper-patterns", ps, metrics, "drive_vpp", plot,
                     {"freq_hz": PATTERN_FREQ_HZ, "dominant_pattern": dict(zip((f"{v:g}" for v in ps.values), dom))},
                     size_in=(7.0, 5.2))
@@ -292,7 +302,7 @@ def paper_ablations(params: RobotParams, opts: RunOptions) -> Outcome:
 
     runs = {label: {"mean_speed_mm_s": float(ps.mean_speed_mm_s[k]),
                     "aperiodicity": float(np.nanmean(ps.aperiodicity[k])),
-                    "leg_motion_um": float(ps.leg_motion_um[k].mean()), "dominant_pattern": ps.dominant(k)}
+                    "leg_motion_um": float(ps.leg_motion_um[k].mean()), "dominant_pattern": ps.dominant_pattern(k)}
             for k, (label, _) in enumerate(ABLATIONS_RUN)}
     return _outcome("paper-ablations", ps, metrics, "run", plot,
                     {"freq_hz": ABLATION_FREQ_HZ, "amp_um": drive.amp_um if isinstance(drive, Shaker) else None,
@@ -316,7 +326,7 @@ def paper_payload(params: RobotParams, opts: RunOptions) -> Outcome:
         ax.set_title(f"paper-payload, PZT {PAYLOAD_FREQ_HZ:g} Hz tripod {PAYLOAD_VOLTAGE_V:g} V (cf. paper Fig. 13): "
                      f"{metrics_line(metrics, 'paper-payload')}", fontsize=8)
         ax.legend(fontsize=6, loc="upper right")
-        _band_text(ax, [c.line()[:78] for c in check("paper-payload", metrics)])
+        _band_text(ax, check("paper-payload", metrics), y=0.8)
         fig.tight_layout()
 
     return _outcome("paper-payload", ps, metrics, "mass_mg", plot,

@@ -17,12 +17,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from labkit.sim.excitation import PZT, Shaker
 from labkit.sim.params import RobotParams
+from labkit.sim.sweep import SweepResult
 
 
 @dataclass(frozen=True)
@@ -69,47 +71,21 @@ def run_task(task: Task) -> dict[str, Any]:
 
 
 @dataclass
-class PointSet:
-    """The runs of :func:`run_points`: arrays with axis 0 the points, axis 1 the draws."""
+class PointSet(SweepResult):
+    """The runs of :func:`run_points`: a :class:`~labkit.sim.sweep.SweepResult` (axis 0 the
+    points, axis 1 the draws; its curve statistics, pattern counts and summary) with the
+    per-run measures the paper scenarios need and the drive of every point."""
 
-    values: np.ndarray
-    speeds_mm_s: np.ndarray
-    patterns: np.ndarray
-    foot_rise_um: np.ndarray
-    leg_motion_um: np.ndarray
-    aperiodicity: np.ndarray
-    contact_fraction: np.ndarray
+    foot_rise_um: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
+    leg_motion_um: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
+    aperiodicity: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
     drives: list[dict[str, Any]] = field(default_factory=list)
-    meta: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def draws(self) -> int:
-        return int(self.speeds_mm_s.shape[1])
-
-    @property
-    def mean_speed_mm_s(self) -> np.ndarray:
-        return self.speeds_mm_s.mean(axis=1)
-
-    @property
-    def std_speed_mm_s(self) -> np.ndarray:
-        if self.draws < 2:
-            return np.zeros(len(self.values))
-        return self.speeds_mm_s.std(axis=1, ddof=1)
-
-    @property
-    def nominal_speed_mm_s(self) -> np.ndarray:
-        return self.speeds_mm_s[:, 0]
 
     def share(self, point: int, pattern: str) -> float:
         """Share of (draw, foot) pairs at one point that show ``pattern``."""
-        labels = self.patterns[point].ravel()
-        return float(np.mean(labels == pattern)) if labels.size else float("nan")
-
-    def dominant(self, point: int) -> str:
-        """The most frequent foot pattern at one point (ties: the first of firm, partial, jumping)."""
-        from labkit.sim.sweep import PATTERNS
-
-        return max(PATTERNS, key=lambda p: self.share(point, p))
+        counts = self.pattern_counts(point)
+        total = sum(counts.values())
+        return counts.get(pattern, 0) / total if total else float("nan")
 
     def points(self, name: str) -> list[dict[str, Any]]:
         """One JSON-able row per point: the coordinate (as ``name``), speeds, pattern, drive."""
@@ -118,28 +94,25 @@ class PointSet:
             rows.append({name: float(x), "mean_speed_mm_s": float(self.mean_speed_mm_s[i]),
                          "std_speed_mm_s": float(self.std_speed_mm_s[i]),
                          "nominal_speed_mm_s": float(self.nominal_speed_mm_s[i]),
-                         "dominant_pattern": self.dominant(i),
+                         "dominant_pattern": self.dominant_pattern(i),
                          "foot_rise_um": float(np.mean(self.foot_rise_um[i])),
                          **({"drive": self.drives[i]} if i < len(self.drives) else {})})
         return rows
 
-    def to_h5(self, path: Any, name: str = "x") -> Any:
-        """Write the set (kind ``sim_points``): every array with its unit."""
+    def to_h5(self, path: str | Path) -> Path:
+        """Write the set (kind ``sim_points``): the sweep's datasets plus the per-run measures."""
         import h5py
 
         from labkit.h5io import put, put_json, stamp
 
+        path = Path(path)
         with h5py.File(path, "w") as f:
             stamp(f, "sim_points")
-            put_json(f, "meta_json", self.meta)
+            self.write_group(f)
             put_json(f, "drives_json", self.drives)
-            put(f, "values", self.values, "1", quantity=name)
-            put(f, "speeds_mm_s", self.speeds_mm_s, "mm/s", axes="point, draw (0 = nominal)")
             put(f, "foot_rise_um", self.foot_rise_um, "um", axes="point, draw")
             put(f, "leg_motion_um", self.leg_motion_um, "um", axes="point, draw")
             put(f, "aperiodicity", self.aperiodicity, "1", axes="point, draw")
-            put(f, "contact_fraction", self.contact_fraction, "1", axes="point, draw, foot, mode")
-            put(f, "patterns", self.patterns.astype("S16"), "label", axes="point, draw, foot")
         return path
 
 
@@ -151,7 +124,7 @@ def make_tasks(points: Sequence[Point], draws: int, duration_s: float, seed: int
 
 
 def collect(points: Sequence[Point], rows: Sequence[dict[str, Any]], draws: int,
-            meta: dict[str, Any] | None = None) -> PointSet:
+            meta: dict[str, Any] | None = None, quantity: str = "x") -> PointSet:
     """Assemble the rows of :func:`make_tasks`'s tasks (in order) into a :class:`PointSet`."""
     from labkit.sim.sweep import scenario_dict
 
@@ -160,23 +133,25 @@ def collect(points: Sequence[Point], rows: Sequence[dict[str, Any]], draws: int,
     def arr(key: str) -> np.ndarray:
         return np.array([r[key] for r in rows], dtype=float).reshape(shape)
 
-    return PointSet(values=np.array([p.x for p in points], float), speeds_mm_s=arr("speed_mm_s"),
+    return PointSet(quantity=quantity, values=np.array([p.x for p in points], float), speeds_mm_s=arr("speed_mm_s"),
+                    contact_fraction=np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, 3)),
                     patterns=np.array([r["patterns"] for r in rows], dtype=object).reshape(shape + (6,)).astype(str),
+                    impacts=np.array([r["impacts"] for r in rows]).reshape(shape + (6,)),
+                    params_toml=points[0].params.to_toml_text() if points else "", meta=dict(meta or {}),
                     foot_rise_um=arr("foot_rise_um"), leg_motion_um=arr("leg_motion_um"),
                     aperiodicity=arr("aperiodicity"),
-                    contact_fraction=np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, 3)),
                     drives=[scenario_dict(p.drive) | ({"ablation": p.ablation} if p.ablation else {})
-                            for p in points],
-                    meta=dict(meta or {}))
+                            for p in points])
 
 
 def run_points(points: Sequence[Point], *, draws: int = 0, duration_s: float = 1.0, seed: int = 0,
                scheduler: str | None = None, workers: int | None = None, quiet: bool = False,
-               desc: str = "scenario") -> PointSet:
+               desc: str = "scenario", quantity: str = "x") -> PointSet:
     """Run every point (``draws`` Monte Carlo robots each) and collect the measures."""
     from labkit.executor import map_tasks
 
     tasks = make_tasks(points, draws, duration_s, seed)
     rows = map_tasks(run_task, tasks, scheduler=scheduler, workers=workers, desc=desc, quiet=quiet)
     return collect(points, rows, draws, {"draws": max(1, int(draws)), "duration_s": float(duration_s),
-                                         "seed": int(seed), "seeding": "SeedSequence([seed, draw]) per draw"})
+                                         "seed": int(seed), "seeding": "SeedSequence([seed, draw]) per draw"},
+                   quantity)
