@@ -239,6 +239,7 @@ def load_inchip(path: str | Path) -> InchipConfig:
     _check_generator_band(root, "frequencies", "list_hz" if "list_hz" in root.table("frequencies") else "stop_hz",
                           freqs, instruments)
     method = _method(root.table("method"), allow_chirp=True)
+    _check_point_lengths(root.table("method"), method, freqs)
     if method.kind == "chirp":
         f = root.table("frequencies")
         if "list_hz" in f:
@@ -311,6 +312,7 @@ def load_shaker(path: str | Path) -> ShakerConfig:
         max_step_ratio=tc.number("max_step_ratio", default=4.0, minimum=1, exclusive_minimum=True))
 
     method = _method(root.table("method"), allow_chirp=False)
+    _check_point_lengths(root.table("method"), method, freqs, video_s=video_s)
     scope = _scope(root.table("scope"))
     vib = root.table("vibrometer")
     vib.only(("scale_mm_s_per_v",))
@@ -346,6 +348,30 @@ def _instruments(t: Table, required: tuple[str, ...], optional: tuple[str, ...])
             _check_driver(spec, model, settings)
         out[role] = InstrumentSpec(role, model, resource, settings)
     return out
+
+
+#: cycles one generator burst may hold (the drivers' and the generators' limit)
+MAX_BURST_CYCLES = 1e8
+
+
+def _check_point_lengths(t: Table, method: Method, freqs: tuple[float, ...], video_s: float = 0.0) -> None:
+    """Each point's record fits the scope and its burst fits the generator, at every frequency."""
+    if method.kind != "stepped":
+        return
+    for f in freqs:
+        dwell = method.dwell_time_s(f)
+        if dwell > MAX_SETTLE_S:
+            raise t.error("dwell_cycles", f"{method.dwell_cycles:g} cycles at {f:g} Hz last {dwell:.4g} s",
+                          f"a record of at most {MAX_SETTLE_S:g} s at every frequency")
+        settle = method.settle_time_s(f)
+        if settle > MAX_SETTLE_S:
+            raise t.error("settle_cycles" if method.settle_s is None else "settle_s",
+                          f"{settle:.4g} s of settling at {f:g} Hz", f"at most {MAX_SETTLE_S:g} s")
+        cycles = (settle + max(dwell, video_s)) * f + 2
+        if cycles > MAX_BURST_CYCLES:
+            key = "dwell_cycles" if dwell >= settle else ("settle_cycles" if method.settle_s is None else "settle_s")
+            raise t.error(key, f"a point at {f:g} Hz needs a burst of {cycles:.4g} cycles",
+                          f"settle + dwell of at most {MAX_BURST_CYCLES:g} cycles")
 
 
 def _envelope_defaults() -> dict[str, float]:

@@ -331,6 +331,9 @@ def test_unconfirmed_off_is_loud_then_labkit_off_recovers(tmp_path, lab):
     ("inchip", "settle_s = 0.04", "settle_s = inf", "method.settle_s"),
     ("inchip", "settle_s = 0.04", "settle_s = nan", "method.settle_s"),
     ("inchip", "list_hz = [1000.0", "list_hz = [50e6", "frequencies.list_hz[0]"),
+    ("inchip", "dwell_cycles = 20", "dwell_cycles = 1e6", "method.dwell_cycles"),      # 1000 s records
+    ("inchip", 'list_hz = [1000.0, 2000.0]\n\n[method]\nkind = "stepped"\nsettle_s = 0.04',   # a 5e8-cycle burst
+     'list_hz = [1000.0, 1e6]\n\n[method]\nkind = "stepped"\nsettle_s = 500.0', "method.settle_s"),
     ("inchip", "offset_v = 2.0", "offset_v = 2.0\npzt_max_v = 30", "drive.pzt_max_v"),
     ("inchip", "amp_vpp = 4.0\noffset_v = 2.0", "amp_vpp = 14.0\noffset_v = 5.0\npzt_max_v = 20",
      "drive.amp_vpp"),
