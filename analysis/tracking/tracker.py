@@ -179,6 +179,9 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     lengths: list[float] = []
     contrasts: list[float] = []
     cov_hist: list[float] = []      # the robot's weighted area in clear frames (what a whole robot shows)
+    shapes: list[tuple[float, float]] = []
+    shape_ref: tuple[float, float] | None = None
+    unlike = 0
     area_hist: list[float] = []
     area_ref = expected_area_px
     # with only the expected area (from the scale) the tolerance is wide: blur and legs vary it
@@ -228,6 +231,12 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
             if blob is None and g is not None:
                 jumps += int(finder.find(img, 0, 0, rw, rh, pred=None, area_ref=area_ref, area_tol=tol)[0]
                              is not None)
+        if (blob is not None and not blob.border and shape_ref is not None
+                and not (0.8 < blob.major_px / shape_ref[0] < 1.25 and 0.7 < blob.minor_px / shape_ref[1] < 1.45)):
+            # robot-sized but not robot-shaped (a tweezer's prong, the robot merged with something):
+            # not a position
+            blob = None
+            unlike += 1
         ts.append(t)
         raw_area.append(blob.area if blob is not None else np.nan)
         if blob is None:
@@ -270,6 +279,12 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                             if not 0.8 < raw_area[j] / area_ref < 1.25:
                                 qs[j] = QUALITY_DEGRADED
                 major = blob.major_px if major is None else 0.9 * major + 0.1 * blob.major_px
+                if q == QUALITY_OK:
+                    shapes.append((blob.major_px, blob.minor_px))
+                    if len(shapes) >= 5 and (len(shapes) <= 25 or len(shapes) % 10 == 0):
+                        # the robot's outline (length, width) from its first confident frames
+                        arr = np.asarray(shapes[-25:])
+                        shape_ref = (float(np.median(arr[:, 0])), float(np.median(arr[:, 1])))
                 if blob.weights is not None:
                     lengths.append(body_length_px(blob.weights, blob.u - blob.origin[0], blob.v - blob.origin[1],
                                                   blob.theta))
@@ -287,7 +302,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                                if lengths_a.size > 1 else float("nan")),
                 n_length=int(lengths_a.size), best_contrast=finder.best_contrast,
                 robot_contrast=float(np.median(contrasts)) if contrasts else float("nan"),
-                ambiguous=finder.ambiguous, jumps=jumps, min_contrast=seg.min_contrast, noise=seg.noise)
+                ambiguous=finder.ambiguous, jumps=jumps, unlike=unlike, min_contrast=seg.min_contrast, noise=seg.noise)
 
 
 def resolve_heading(t_s: np.ndarray, u_px: np.ndarray, v_px: np.ndarray, theta: np.ndarray,
@@ -541,6 +556,9 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
     if raw["ambiguous"]:
         warnings.append(f"{raw['ambiguous']} frame(s) had a second robot-sized object within reach: check the "
                         f"overlay (--overlay) or narrow the search (--roi/--mask)")
+    if raw.get("unlike"):
+        warnings.append(f"{raw['unlike']} frame(s) had a robot-sized object not shaped like the robot (its length "
+                        f"or width off: a tweezer, the robot merged with something): flagged lost")
     if raw["jumps"]:
         warnings.append(f"{raw['jumps']} frame(s) showed a robot-like object farther than the robot can walk: "
                         f"flagged lost (an occlusion), not taken as a position")
@@ -557,7 +575,8 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
                         "noise": raw["noise"], "min_contrast": raw["min_contrast"],
                         "contrast_found": raw["best_contrast"], "robot_contrast": raw["robot_contrast"],
                         "ambiguous_frames": raw["ambiguous"],
-                        "jumps_rejected": raw["jumps"], "lost_stretches_s": stretches,
+                        "jumps_rejected": raw["jumps"], "unlike_frames": raw.get("unlike", 0),
+                        "lost_stretches_s": stretches,
                         "length_samples": raw["n_length"], "warnings": warnings})
     track.scale = scale if scale is not None else scale_from_robot_length(track, robot_length_mm,
                                                                           robot_length_std_mm)

@@ -159,10 +159,17 @@ def test_robot_vibrating_in_place_is_not_dust(tmp_path):
     assert lo == 0.0 and hi < 0.5                    # a jitter of 0.1 mm: the interval holds 0
 
 
-def test_tweezer_occlusion_flagged_and_bridged(tmp_path):
-    sc = scene(n=90, tweezers=(1.0, 2.0), seed=5)
-    path, truth = video(tmp_path, "tweezer", sc)
-    track = track_video(path, mm_per_px=S)
+@pytest.mark.parametrize("grey", [False, True])
+def test_tweezer_occlusion_flagged_and_bridged(tmp_path, grey):
+    # the prongs are darker than a grey chip: then they, not the chip, are the darkest robot-sized thing
+    if grey:      # 640 x 480: the prongs cross the chip's whole window
+        sc = scene(width=640, height=480, mm_per_px=0.05, n=90, tweezers=(1.2, 2.0), speed_mm_s=2.0,
+                   turn_rad_s=-0.27, heading0_rad=2.56, chip_reflectance=0.7, gradient=0.3, ring=0.1, flicker=0.1,
+                   noise=2.5, blur_px=1.0, seed=0)
+    else:
+        sc = scene(n=90, tweezers=(1.0, 2.0), seed=5)
+    path, truth = video(tmp_path, f"tweezer_{grey}", sc)
+    track = track_video(path, mm_per_px=sc.mm_per_px)
     q = track.quality
     hidden = truth.visible_frac < 0.9
     assert hidden.sum() >= 10
@@ -172,7 +179,7 @@ def test_tweezer_occlusion_flagged_and_bridged(tmp_path):
     assert track.meta["lost_stretches_s"] and any("lost" in w for w in track.meta["warnings"])
     sp = track_speed(track)                                         # bridged by the smoothed path
     assert sp.mean_speed_mm_s == pytest.approx(truth.speed_mm_s, rel=0.01)
-    assert sp.t_s[0] < 1.0 < 2.0 < sp.t_s[-1]
+    assert sp.t_s[0] < sc.tweezers[0] < sc.tweezers[1] < sp.t_s[-1]
 
 
 def test_chip_leaving_the_frame(tmp_path):
