@@ -51,3 +51,25 @@ def test_analytic_jacobian_and_residual_covariance():
     dof = r.size - th.size
     cov = np.linalg.inv(J.T @ J) * (r @ r) / dof
     np.testing.assert_allclose(np.sqrt(np.diag(ref.cov)), np.sqrt(np.diag(cov)), rtol=1e-6)
+
+
+def test_block_covariance_equals_the_dense_one(monkeypatch):
+    """The covariance by blocks (Schur complement; linear in the locations) is the dense formula's."""
+    import labkit.analysis.modal.refine as modal_refine
+    from labkit.analysis.modal.refine import _covariance, _normal
+
+    monkeypatch.setattr(modal_refine, "BLOCK_COVARIANCE_ABOVE", 0)          # blocks even for this small case
+
+    ch = _channels(2) + _channels(3)[:1]
+    m, n_lin = 2, 2 * 2 + 2 * len(POWERS)
+    for fixed in (None, np.array([True, False])):
+        for kind in ("residual", "sandwich"):
+            ref = refine(ch, modal_to_pole(FN, ZETA), POWERS, band_hz=(200, 2000), covariance=kind, fixed_freq=fixed)
+            terms = _channel_terms(ref.theta, ch, m, POWERS)
+            A, _ = _normal(terms, m, n_lin)
+            free = np.ones(ref.theta.size, bool)
+            if fixed is not None:
+                free[0:2 * m:2] = ~fixed
+            dense = _covariance(A * np.outer(free, free), terms, m, n_lin, ref.dof, kind)
+            np.testing.assert_allclose(ref.cov, dense, rtol=0, atol=1e-10 * np.max(np.abs(dense)))
+            np.testing.assert_allclose(np.sqrt(np.diag(ref.cov))[free], np.sqrt(np.diag(dense))[free], rtol=1e-8)
