@@ -198,6 +198,8 @@ class Runner:
                     f"(+{BURST_MARGIN_CYCLES}); the generator stops by itself at its end")
         else:
             text = f"DRIVE NOT BOUNDED: {why}"
+            if callable(getattr(fg, "burst_off", None)):
+                fg.burst_off()        # a bounded run before may have left burst mode on
             import sys
 
             try:        # said even with --quiet: the person must know
