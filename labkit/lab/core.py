@@ -521,7 +521,7 @@ class VirtualLab:
         phi_g = float(np.angle(np.sum(g * np.exp(-1j * w * t_sim)))) + np.pi / 2
         # the lab's tray displacement phase: drive phase + shaker phase (velocity -> displacement)
         h = complex(np.ravel(self.chain.tray_velocity_frf(f))[0])
-        phi_lab = drive.phase_rad + np.angle(h) - np.pi / 2
+        phi_lab = (drive.burst_phase_rad if drive.burst else drive.phase_rad) + np.angle(h) - np.pi / 2
         tau = (t_abs - epoch) + (phi_lab - phi_g) / w
         # wrap into the simulation's settled part, a whole number of drive periods long
         start = t_sim[-1] / 3

@@ -47,6 +47,7 @@ class Drive:
     amp_v: float = 0.1
     offset_v: float = 0.0
     phase_rad: float = 0.0
+    burst_phase_rad: float = 0.0   # BURSt:PHASe: where each burst starts (PHASe is the waveform's)
     t_epoch: float = 0.0
     sweep: bool = False
     start_hz: float = 100.0
@@ -176,7 +177,7 @@ class Drive:
             local = np.zeros_like(t)
             for s in self.starts(float(t.min()), float(t.max())):
                 sel = (t >= s) & (t < s + length)
-                local[sel] = 2 * np.pi * self.freq_hz * (t[sel] - s) + self.phase_rad
+                local[sel] = 2 * np.pi * self.freq_hz * (t[sel] - s) + self.burst_phase_rad
             wave = np.where(gate, _shape(self.func, local), 0.0)
         return self.offset_v + self.amp_v * wave
 
@@ -474,8 +475,8 @@ class SimKeysight33500B(SimScpiInstrument):
         add(S + "BURSt:INTernal:PERiod", set=fset("burst_period_s", "S", 1e-6, 8000.0, 0.01),
             query=fget("burst_period_s", 1e-6, 8000.0))
         add(S + "BURSt:PHASe",
-            set=lambda c: self._update(self._chan(c), phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
-            query=lambda c: self.flevel(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
+            set=lambda c: self._update(self._chan(c), burst_phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
+            query=lambda c: self.flevel(np.rad2deg(self.ch[self._chan(c)].burst_phase_rad)))
         add("OUTPut#[:STATe]", set=lambda c: self._set_output(self._chan(c), parse_bool(c.one())),
             query=lambda c: "1" if self.ch[self._chan(c)].on else "0")
         add("OUTPut#:LOAD", set=self._set_load, query=self._load_query)
