@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +24,10 @@ JUMP_PERIODS = 1.0
 #: PERIODIC_TOL of its range (or the range is below FLIGHT_MIN_UM).
 PERIODIC_TOL = 0.05
 PERIODIC_CYCLES = 5
+
+if TYPE_CHECKING:
+    from labkit.sim.excitation import PZT, Shaker
+    from labkit.sim.params import RobotParams
 
 
 def classify_pattern(air_fraction: float, max_flight_s: float, drive_period_s: float,
@@ -83,8 +87,8 @@ class SimResult:
     stuck flag).
     """
 
-    params: Any
-    scenario: Any
+    params: RobotParams
+    scenario: Shaker | PZT
     duration_s: float
     dt_s: float
     record_dt_s: float
@@ -154,17 +158,17 @@ class SimResult:
             put(f, "t_s", self.t_s, "s")
             put(f, "body_y_um", self.body_y_um, "um")
             put(f, "body_z_um", self.body_z_um, "um")
-            put(f, "body_angles_rad", self.body_angles_rad, "rad", columns="phi_x, phi_y, phi_z")
-            put(f, "foot_z_um", self.foot_z_um, "um")
-            put(f, "foot_y_um", self.foot_y_um, "um")
-            put(f, "contact", self.contact, "label", codes="0 air, 1 adhesion, 2 rest")
-            put(f, "knee_vz_mm_s", self.knee_vz_mm_s, "mm/s")
+            put(f, "body_angles_rad", self.body_angles_rad, "rad", columns="phi_x, phi_y, phi_z", axes="t_s, axis")
+            put(f, "foot_z_um", self.foot_z_um, "um", axes="t_s, leg")
+            put(f, "foot_y_um", self.foot_y_um, "um", axes="t_s, leg")
+            put(f, "contact", self.contact, "label", codes="0 air, 1 adhesion, 2 rest", axes="t_s, leg")
+            put(f, "knee_vz_mm_s", self.knee_vz_mm_s, "mm/s", axes="t_s, leg")
             put(f, "ground_z_um", self.ground_z_um, "um")
-            put(f, "impacts", np.asarray(self.impacts), "1")
-            put(f, "max_flight_s", np.asarray(self.max_flight_s), "s")
+            put(f, "impacts", np.asarray(self.impacts), "1", axes="leg")
+            put(f, "max_flight_s", np.asarray(self.max_flight_s), "s", axes="leg")
             frac = np.array([[self.contact_fraction[f"leg{j + 1}"][m] for m in MODE_NAMES] for j in range(6)])
-            put(f, "contact_fraction", frac, "1", columns=", ".join(MODE_NAMES))
-            put(f, "events", self.events, "mixed",
+            put(f, "contact_fraction", frac, "1", columns=", ".join(MODE_NAMES), axes="leg, mode")
+            put(f, "events", self.events, "mixed", axes="event, field",
                 columns="t_s, leg (0-5; -1 body), vrel_pre_m_s, vrel_post_m_s, vy_post_m_s, stuck")
             f.attrs["mean_speed_mm_s"] = float(self.mean_speed_mm_s)
             put_json(f, "patterns", list(self.patterns))

@@ -24,7 +24,7 @@ import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,6 +38,10 @@ PATTERNS = ("firm_contact", "partial_contact", "jumping")
 #: Units of the quantities one can sweep, by name suffix.
 _SUFFIX_UNITS = {"_hz": "Hz", "_um": "um", "_v": "V", "_mg": "mg", "_s": "s", "_n": "N",
                  "_n_s": "N/s", "_kg": "kg", "_m": "m"}
+
+if TYPE_CHECKING:
+    from labkit.sim.excitation import PZT, Shaker
+    from labkit.sim.params import RobotParams
 
 
 def units_of(name: str) -> str:
@@ -203,7 +207,8 @@ def scenario_dict(scenario: Any) -> dict[str, Any]:
     return {"type": type(scenario).__name__.lower(), **fields}
 
 
-def apply_value(params: Any, scenario: Any, quantity: str, value: float) -> tuple[Any, Any]:
+def apply_value(params: RobotParams, scenario: Shaker | PZT, quantity: str,
+                value: float) -> tuple[RobotParams, Shaker | PZT]:
     """Set ``quantity`` to ``value`` on the scenario if it has that field, else on the params.
 
     ``mass_mg`` of a scenario without a payload field (a shaker run) sets the
@@ -214,7 +219,8 @@ def apply_value(params: Any, scenario: Any, quantity: str, value: float) -> tupl
 
     if dataclasses.is_dataclass(scenario) and not isinstance(scenario, type) \
             and quantity in {f.name for f in dataclasses.fields(scenario)}:
-        return params, dataclasses.replace(scenario, **{quantity: float(value)})
+        changes: dict[str, Any] = {quantity: float(value)}
+        return params, dataclasses.replace(scenario, **changes)
     if quantity == "mass_mg":
         extra = float(value) - params.mass_mg
         return params.replace(mass_mg=float(value), body_mass_mg=params.body_mass_mg + extra), scenario
@@ -293,7 +299,7 @@ def _feet(cf: Any) -> list:
 
 # --------------------------------------------------------------------------- sweep
 
-def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
+def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "freq_hz",
           values: Sequence[float] = (), draws: int = 0, duration_s: float = 2.0,
           scheduler: str | None = None, workers: int | None = None, seed: int = 0,
           quiet: bool = False, table: dict[str, float] | None = None,
@@ -362,8 +368,8 @@ def sweep(params: Any, base_scenario: Any, quantity: str = "freq_hz",
     if accel_limit_g is not None and not accel_limit_g > 0:
         raise InputError(f"acceleration limit must be > 0 g, got {accel_limit_g}", key="accel_limit_g",
                          expected="a peak acceleration in g, > 0")
-    tasks = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table, accel_limit_g)
-             for v in grid for d in range(n_draws)]
+    tasks: list[tuple] = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table,
+                           accel_limit_g) for v in grid for d in range(n_draws)]
     n_main = len(tasks)
     if dt_check:
         tasks += [(params, base_scenario, quantity, float(v), 0, int(seed), float(duration_s), table, accel_limit_g,

@@ -35,11 +35,14 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from labkit.errors import ConfigError
+
+if TYPE_CHECKING:
+    from labkit.sim.params import RobotParams
 
 #: Relative standard uncertainty per RobotParams field (see the module doc).
 #: ``leg_mass_mg`` is derived (``(mass_mg - body_mass_mg) / 6``): the body and
@@ -65,12 +68,12 @@ BOUNDED = {"c_r": (0.02, 0.98), "c_r_body": (0.02, 0.98)}
 DERIVED = {"leg_mass_mg"}
 
 
-def params_fields(params: Any) -> set[str]:
+def params_fields(params: RobotParams) -> set[str]:
     """The field names of a RobotParams (a dataclass), without ``provenance``."""
     return {f.name for f in dataclasses.fields(params)} - {"provenance"}
 
 
-def check_table(params: Any, table: Mapping[str, float]) -> None:
+def check_table(params: RobotParams, table: Mapping[str, float]) -> None:
     """Raise :class:`ConfigError` naming the key when a table entry is unusable."""
     names = params_fields(params) | DERIVED
     for key, sigma in table.items():
@@ -85,7 +88,8 @@ def check_table(params: Any, table: Mapping[str, float]) -> None:
                               expected="a relative standard uncertainty >= 0 (0.1 = 10 %)")
 
 
-def draw_params(params: Any, rng: np.random.Generator, table: Mapping[str, float] | None = None) -> Any:
+def draw_params(params: RobotParams, rng: np.random.Generator,
+                table: Mapping[str, float] | None = None) -> RobotParams:
     """One random robot: every field in ``table`` scaled by ``exp(sigma * N(0,1))``.
 
     Parameters
