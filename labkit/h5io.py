@@ -124,8 +124,8 @@ def label_dimensions(group: Any) -> None:
     * a simulated sweep's ``values`` gets a copy named after its ``quantity`` (``freq_hz``);
     * in a point table the other columns name ``freq_hz`` (and ``location``) as
       coordinates (the CF ``coordinates`` attribute, which xarray reads);
-    * a dataset of two or more dimensions with an ``axes`` attribute (``"point, draw, foot"``)
-      gets every dimension labelled (:func:`_label_axes`).
+    * a dataset with an ``axes`` attribute (``"point, draw, foot"``, ``"t_s, leg"``) and no
+      labelled dimension yet gets every dimension labelled (:func:`_label_axes`).
 
     Idempotent; works on empty growing tables (call it when they are created) and on
     finished files (older files can be labelled in place).
@@ -165,6 +165,8 @@ def _label_group(g: Any) -> None:
         # and others not, and a second axis (draw, leg, location) has no dataset of its own
         if name == axis or v.ndim != 1:
             continue
+        if "axes" in v.attrs and str(v.attrs["axes"]).split(",")[0].strip() not in (axis, "point"):
+            continue                    # along another axis (a per-leg array as long as the time axis)
         fits = v.maxshape[0] is None if growing else v.shape[0] == scale.shape[0]
         if not fits:
             continue
@@ -174,7 +176,7 @@ def _label_group(g: Any) -> None:
         if others:
             v.attrs["coordinates"] = " ".join(others)
     for v in list(ds.values()):
-        if v.ndim >= 2 and "axes" in v.attrs:
+        if v.ndim >= 1 and "axes" in v.attrs and not any(len(d) for d in v.dims):
             _label_axes(g, v, scale)
 
 

@@ -250,6 +250,8 @@ class SimRun(LabFile):
 
 def read_sim_result(path: Path, f: Any) -> SimRun:
     cols, units = _columns(f)
+    for k in [k for k in cols if k != "t_s" and f[k].is_scale]:        # axis indices (leg, axis, mode, ...)
+        cols.pop(k)
     if "t_s" not in cols:
         raise InputError("missing dataset", file=path, key="t_s", expected="a simulation's time axis")
     return SimRun(path, "sim_result", int(f.attrs.get("schema_version", 0)), root_attrs(f), units, cols,

@@ -263,6 +263,8 @@ def test_simulation_result_opens_with_time_as_coordinate(sim_files):
     with xr.open_dataset(d / "run.h5", engine="h5netcdf") as ds:
         assert "t_s" in ds.coords and ds["body_z_um"].dims == ("t_s",)
         np.testing.assert_array_equal(ds["body_z_um"].values, r.body_z_um)
+        assert ds["foot_z_um"].dims == ("t_s", "leg") and ds["impacts"].dims == ("leg",)
+        assert not [d for d in ds.dims if str(d).startswith("phony_dim")]
     assert obj.to_xarray()["foot_z_um"].dims == ("t_s", "leg")
     assert obj.params == r.params
 
@@ -307,14 +309,18 @@ def test_scenario_files_open(sim_files, tmp_path):
     assert sset.kind == "sim_sweep_set" and sorted(sset.sweeps) == ["amp_25_um/5_uN", "capped/5_uN"]
     np.testing.assert_array_equal(sset.to_xarray("capped/5_uN")["speeds_mm_s"].values, s.speeds_mm_s)
 
-    n, d = 3, 2
-    ps = PointSet(values=np.array([150.0, 240.0, 300.0]), speeds_mm_s=np.arange(n * d, dtype=float).reshape(n, d),
-                  patterns=np.full((n, d, 6), "firm_contact"), foot_rise_um=np.zeros((n, d)),
-                  leg_motion_um=np.ones((n, d)), aperiodicity=np.zeros((n, d)),
-                  contact_fraction=np.full((n, d, 6, 3), 1 / 3), drives=[{}] * n, meta={"seed": 0})
-    ps.to_h5(tmp_path / "points.h5", name="freq_hz")
+    import dataclasses
+
+    from labkit.sim.sweep import SweepResult
+
+    n, d = s.speeds_mm_s.shape
+    ps = PointSet(**{fl.name: getattr(s, fl.name) for fl in dataclasses.fields(SweepResult)},
+                  foot_rise_um=np.zeros((n, d)), leg_motion_um=np.ones((n, d)), aperiodicity=np.zeros((n, d)),
+                  drives=[{}] * n)
+    ps.to_h5(tmp_path / "points.h5")
     pts = labkit.open(tmp_path / "points.h5")
     assert pts.kind == "sim_points" and pts.quantity == "freq_hz"
     ds = pts.to_xarray()
-    np.testing.assert_array_equal(ds["freq_hz"].values, [150.0, 240.0, 300.0])
+    np.testing.assert_array_equal(ds["freq_hz"].values, s.values)
+    np.testing.assert_array_equal(ds["leg_motion_um"].values, np.ones((n, d)))
     np.testing.assert_array_equal(ds["speeds_mm_s"].values, ps.speeds_mm_s)
