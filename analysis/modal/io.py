@@ -17,7 +17,8 @@ Writes ``*.fit.h5`` (``kind = "modal_fit"``)::
                            peak (modes x locations: |R| / (zeta wn)), dominant_location (label)
         stabilisation/     order (1), freq_hz (Hz), damping_ratio (1), status (label codes
                            0 new, 1 stable frequency, 2 stable frequency and damping), chosen_hz (Hz)
-        covariance         parameter covariance of the refinement (mixed units)
+        covariance         parameter covariance of the refinement (mixed units; above
+                           MAX_STORED_COVARIANCE parameters only the poles' block)
 """
 from __future__ import annotations
 
@@ -33,6 +34,9 @@ from labkit.errors import InputError
 __all__ = ["RunChannels", "read_run", "read_frf", "write_fit_h5", "write_uff"]
 
 FRF_UNITS = {"inchip": "(mm/s)/V", "shaker": "1"}
+
+#: Above this many parameters (a scan of many locations) a fit file keeps the poles' covariance only.
+MAX_STORED_COVARIANCE = 1000
 
 
 @dataclass
@@ -208,9 +212,13 @@ def write_fit_h5(path: str | Path, fits: dict[str, Any], runs: dict[str, list[st
                 put(sg, "damping_ratio", s.damping_ratio, "1")
                 put(sg, "status", s.status, "label", codes="0 new, 1 stable frequency, 2 stable frequency+damping")
                 put(sg, "chosen_hz", s.chosen_hz, "Hz")
-            if fit.covariance is not None:
+            if fit.covariance is not None and fit.covariance.shape[0] <= MAX_STORED_COVARIANCE:
                 put(g, "covariance", fit.covariance, "mixed",
                     order="f_1, zeta_1, ..., then per location Re R_i, Im R_i ..., Re c_q, Im c_q")
+            elif fit.covariance is not None:       # a scan of many locations: the poles' block only
+                n = 2 * len(fit.modes)
+                put(g, "covariance", fit.covariance[:n, :n], "mixed", order="f_1, zeta_1, f_2, zeta_2, ... "
+                    f"(the poles' block only: the full matrix has {fit.covariance.shape[0]} rows)")
         label_dimensions(f)         # freq_hz as the coordinate (xarray, HDFView)
     return path
 
