@@ -46,7 +46,12 @@ def summarise(path: str | Path) -> dict[str, Any]:
         return {"file": str(path), "format": "video", "content": open_file(path).summary()}
     if suffix in SIDECARS:
         return {"file": str(path), "format": suffix[1:], "content": SIDECARS[suffix](path)}
-    return summarise_h5(path)
+    import h5py
+
+    if suffix in (".h5", ".hdf5", ".hdf") or h5py.is_hdf5(path):
+        return summarise_h5(path)
+    raise InputError("not a file labkit writes", file=path,
+                     expected="HDF5 (.h5), TOML, CSV, a video (.mkv/.avi/.mp4), PNG, HTML, JSON or UFF")
 
 
 def _json_summary(path: Path) -> dict[str, Any]:

@@ -51,3 +51,10 @@ def test_info_cli_on_a_config_and_a_bad_png(tmp_path):
     bad.write_bytes(np.zeros(30, np.uint8).tobytes())
     proc = run_cli("info", str(bad), check=2)
     assert "x.png" in proc.stderr and "PNG" in proc.stderr
+
+
+def test_a_file_of_another_kind_is_named_with_what_labkit_reads(tmp_path):
+    p = tmp_path / "notes.md"
+    p.write_text("# notes\n")
+    proc = run_cli("info", str(p), check=2)
+    assert "notes.md" in proc.stderr and "not a file labkit writes" in proc.stderr and "HDF5" in proc.stderr
