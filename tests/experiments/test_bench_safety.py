@@ -488,3 +488,46 @@ def test_every_generator_drives_finite_bursts(tmp_path, lab_model, driver):
         assert bool(f.attrs["drive_bounded"])
         frf, fr = f["locations/hip/frf"][...], f["locations/hip/freq_hz"][...]
         assert np.all(np.abs(frf / glab.frf("hip", fr) - 1) < 0.03)
+
+
+@pytest.fixture
+def small_fs(tmp_path):
+    """A 6 MB tmpfs mounted for the test (root in a container may; else the file-size-limit test
+    above covers the same path)."""
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=6m", "tmpfs", str(mnt)], capture_output=True)
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode().strip()}); see the RLIMIT_FSIZE test")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("leave_bytes", [0, 1 << 20])
+def test_full_filesystem_mid_run(tmp_path, lab, small_fs, leave_bytes):
+    """Another process fills the run file's file system mid-run (to the last byte, or to 1 MB):
+    exit 2 with one line, drive off, no crash, the file opens with every completed point, and
+    --resume completes it once space is freed."""
+    cfg, out = sweep_cfg(tmp_path, lab), small_fs / "run.h5"
+
+    def fill(proc):
+        st = os.statvfs(small_fs)
+        with open(small_fs / "filler", "wb") as f:
+            f.write(b"\0" * max(0, st.f_bavail * st.f_frsize - leave_bytes))
+
+    proc, _, stderr, _ = act_mid_run(cfg, out, 3, fill)
+    assert proc.returncode == 2, stderr
+    assert "not enough room to write the next point" in stderr and "Traceback" not in stderr
+    assert lab.output_state("funcgen", 1) is False
+    # with 1 MB left the final status is written; with nothing left the file still says "running"
+    status = summarise_h5(out)["attrs"]["status"]
+    assert status.startswith("aborted: DiskFull") if leave_bytes else status == "running", status
+    with h5py.File(out, "r") as f:
+        n = f["points/index"].shape[0]
+        assert 3 <= n < len(FREQS) and np.all(np.isfinite(f["locations/hip/frf"][:n]))
+    (small_fs / "filler").unlink()
+    summary = run_session("inchip", cfg, None, resume=out, quiet=True)
+    assert summary["status"] == "complete" and summary["points_ok"] == len(FREQS)
