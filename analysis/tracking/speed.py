@@ -343,6 +343,24 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
     window_s = float(max(window_s, (order + 1) * frame_dt))
     ops = poly_fit_weights(t, window_s, order)
     xy_s, v = local_poly_fit(t, np.column_stack([x, y]), window_s, order, weights=ops)
+    # a safety net behind the tracker's gates: a position far off the smoothed path (more than 8
+    # robust sigmas of the residuals) is an outlier; the worst one is left out and the path fitted
+    # again (one at a time: a spike also pulls its neighbours' fits), at most 20 times
+    outliers = 0
+    while outliers < 20 and t.size > 8:
+        r = np.column_stack([x, y]) - xy_s
+        mad = 1.4826 * np.median(np.abs(r - np.median(r, axis=0)), axis=0)
+        score = np.max(np.abs(r) / np.maximum(mad, 1e-12), axis=1)
+        worst = int(np.argmax(score))
+        if score[worst] <= 8 or np.hypot(*r[worst]) < 1e-6:
+            break
+        idx = np.flatnonzero(ok)
+        ok[idx[worst]] = False
+        keep = np.arange(t.size) != worst
+        t, x, y = t[keep], x[keep], y[keep]
+        ops = poly_fit_weights(t, window_s, order)
+        xy_s, v = local_poly_fit(t, np.column_stack([x, y]), window_s, order, weights=ops)
+        outliers += 1
     speed = np.hypot(v[:, 0], v[:, 1])
     # a polynomial through a stretch of an arc misjudges the speed there (a quadratic at the
     # window's centre shortens it by ~ (w omega)^2 / 40, near a shifted window's edge it
@@ -398,7 +416,8 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
         path_length_mm=mean_speed * duration, path_length_frame_to_frame_mm=path_ff, net_displacement_mm=net,
         mean_turn_rate_rad_s=mean_turn, duration_s=duration, window_s=window_s, frames_used=int(t.size),
         ci_level=ci_level, block_len=block,
-        meta={"order": order, "mm_per_px_rel_std": mm_per_px_rel_std, "uncertainty": unc})
+        meta={"order": order, "mm_per_px_rel_std": mm_per_px_rel_std, "uncertainty": unc,
+              "outliers_dropped": outliers})
 
 
 def track_speed(track, **kw) -> SpeedResult:

@@ -111,6 +111,18 @@ def test_bad_frames_left_out_and_too_few_frames_refused():
         speed_analysis(t[:5], x[:5], y[:5])
 
 
+def test_a_far_off_position_is_left_out():
+    rng = np.random.default_rng(5)
+    t = np.arange(90) / 30
+    x, y = 0.01 * rng.standard_normal(90), 2.0 * t + 0.01 * rng.standard_normal(90)
+    y_bad = y.copy()
+    y_bad[40] += 4.0              # a frame on a tweezer's prong that no gate caught
+    res = speed_analysis(t, x, y_bad)
+    assert res.meta["outliers_dropped"] == 1 and res.frames_used == 89
+    assert res.mean_speed_mm_s == pytest.approx(2.0, rel=0.005)
+    assert speed_analysis(t, x, y).meta["outliers_dropped"] == 0
+
+
 def test_block_bootstrap_shapes_and_mean():
     rng = np.random.default_rng(4)
     s = rng.standard_normal((100, 2)) + [3.0, -1.0]
