@@ -196,6 +196,9 @@ class Runner:
         if self.bounded:
             text = ("drive bounded: each acquisition is a burst of settle + dwell cycles "
                     f"(+{BURST_MARGIN_CYCLES}); the generator stops by itself at its end")
+            offset = float(getattr(self.cfg, "offset_v", 0.0) or 0.0)
+            if offset:
+                text += f" (between bursts its output holds the {offset:g} V DC offset)"
         else:
             text = f"DRIVE NOT BOUNDED: {why}"
             if callable(getattr(fg, "burst_off", None)):
