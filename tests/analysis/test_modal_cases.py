@@ -178,7 +178,7 @@ def test_stated_uncertainty_covers_the_truth_in_repeated_noisy_trials(case):
     """The truth lies within 2 standard uncertainties in >= 90 % of trials (expected ~95 %)."""
     if case.startswith("narrow"):
         s = 1.0 if case == "narrow_hz" else 1e6          # 990-1010 Hz or 0.99-1.01 GHz
-        cf, cz = _coverage(lambda k: (_narrow(100 + k)[0] * s, _narrow(100 + k)[1]), [1000.0 * s], [0.001], 60)
+        cf, cz = _coverage(lambda k: (_narrow(100 + k)[0] * s, _narrow(100 + k)[1]), [1000.0 * s], [0.001], 100)
     elif case == "pair":
         cf, cz = _coverage(_pair, [1000.0, 1020.0], [0.01, 0.01], 40, n_modes=2)
     else:
