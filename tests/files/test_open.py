@@ -324,3 +324,13 @@ def test_scenario_files_open(sim_files, tmp_path):
     np.testing.assert_array_equal(ds["freq_hz"].values, s.values)
     np.testing.assert_array_equal(ds["leg_motion_um"].values, np.ones((n, d)))
     np.testing.assert_array_equal(ds["speeds_mm_s"].values, ps.speeds_mm_s)
+
+
+@pytest.mark.parametrize("name", sorted(SCHEMA1_KINDS))
+def test_labkit_info_summarises_schema1_files(name):
+    from labkit.commands.info import summarise
+
+    s = summarise(SCHEMA1 / name)
+    json.dumps(s, default=str)
+    assert s["kind"] == SCHEMA1_KINDS[name] and s["schema_version"] == 1
+    assert "error" not in s["content"] and s["content"]["kind"] == SCHEMA1_KINDS[name]
