@@ -118,14 +118,22 @@ class Oscilloscope(ScpiInstrument):
 
     def setup_channel(self, ch: int, volts_per_div: float, offset_v: float = 0.0,
                       coupling: str = "DC") -> None:
-        """Display channel ``ch`` with ``volts_per_div``, ``offset_v`` and ``coupling`` (DC/AC)."""
+        """Display channel ``ch`` with ``volts_per_div`` and ``coupling`` (DC/AC), the input
+        voltage ``offset_v`` at the screen's vertical centre (on every model: the command that
+        puts it there is the model's, see :meth:`_offset_command`)."""
         c = self._ch(ch)
         vdiv = check_range("volts_per_div", volts_per_div, 1e-4, self.max_volts_per_div, "V/div")
         off = check_range("offset_v", offset_v, -1e3, 1e3, "V")
         cp = check_choice("coupling", coupling, ("DC", "AC"))
         self._send_all([f":CHAN{c}:DISP 1", f":CHAN{c}:COUP {cp}", f":CHAN{c}:SCAL {vdiv:.6g}",
-                        f":CHAN{c}:OFFS {off:.6g}"])
+                        self._offset_command(c, off)])
         self.state["channels"][str(c)] = {"volts_per_div": vdiv, "offset_v": off, "coupling": cp}
+
+    def _offset_command(self, ch: int, centre_v: float) -> str:
+        """The command that puts ``centre_v`` at the screen's centre. InfiniiVision:
+        ``:CHANnel<n>:OFFSet`` *is* the centre voltage ("the value represented at center
+        screen", 3000 X-Series Programmer's Guide, :CHANnel<n>:OFFSet)."""
+        return f":CHAN{ch}:OFFS {centre_v:.6g}"
 
     def _timebase_command(self, scale_s: float) -> str:
         return f":TIM:SCAL {scale_s:.6g}"
@@ -324,6 +332,15 @@ class RigolDS1000Z(Oscilloscope):
 
     def _timebase_command(self, scale_s: float) -> str:
         return f":TIM:MAIN:SCAL {scale_s:.6g}"
+
+    def _offset_command(self, ch: int, centre_v: float) -> str:
+        """The DS1000Z's ``:CHANnel<n>:OFFSet`` is added to the signal on screen: the screen's
+        centre shows ``-OFFSet`` (DS1000Z Programming Guide: the edge trigger level ranges over
+        ``(-5 x VerticalScale - OFFSet) to (5 x VerticalScale - OFFSet)``, i.e. about
+        ``-OFFSet``; and ``:WAVeform:PREamble?`` volts ``(code - YORigin - YREFerence) x
+        YINCrement`` give ``-YORigin x YINCrement`` at the centre code YREFerence). So the
+        centre voltage is sent negated."""
+        return f":CHAN{ch}:OFFS {0.0 - centre_v:.6g}"
 
     record_delay = True
 

@@ -537,13 +537,15 @@ class SimRigolDS1000Z(SimInfiniiVision):
 
     def build(self) -> None:
         super().build()
-        drop = {":TIMebase:SCALe", ":TIMebase:MAIN:SCALe", ":WAVeform:FORMat",
+        drop = {":TIMebase:SCALe", ":TIMebase:MAIN:SCALe", ":WAVeform:FORMat", ":CHANnel#:OFFSet",
                 # InfiniiVision commands the DS1000Z does not have (-113 there)
                 ":DIGitize", ":RSTate", ":ASTate", ":TER", ":OPERegister:CONDition", ":OPERegister[:EVENt]",
                 ":WAVeform:POINts", ":WAVeform:POINts:MODE", ":WAVeform:BYTeorder", ":WAVeform:UNSigned",
                 ":WAVeform:VIEW", ":WAVeform:YORigin", ":TRIGger:FORCe"}
         self.commands = [cmd for cmd in self.commands if cmd.pattern not in drop]
         self.add(":TFORce", set=lambda c: self._force())
+        self.add(":CHANnel#:OFFSet", set=self._set_offset,
+                 query=lambda c: self.fnum(self.get("offset", self._ch(c))))
         # the Y origin is an integer code offset (:WAVeform:YORigin?, and the preamble's field)
         self.add(":WAVeform:YORigin", query=lambda c: self.fmt_int(int(self._scaling()[3])))
         self.settings["range"] = 12 * 1e-6   # *RST: 1 us/div
@@ -563,6 +565,20 @@ class SimRigolDS1000Z(SimInfiniiVision):
                      lambda t: int(self.num(t, "", 1, 24_000_000)), self.fmt_int)
         self.add(":TRIGger:STATus", query=lambda c: self._trigger_status())
         self.add(":ACQuire:MDEPth", set=lambda c: None, query=lambda c: self.fmt_int(self._record_geometry()[0]))
+
+    def offset_limit(self, ch: int) -> float:
+        """The largest ``|:CHANnel<n>:OFFSet|`` at the channel's scale and probe ratio (DS1000Z
+        Programming Guide, :CHANnel<n>:OFFSet: probe 1X, scale >= 500 mV/div: +-100 V, below:
+        +-2 V; 10X: >= 5 V/div +-1000 V, below +-20 V)."""
+        probe, scale = self.get("probe", ch), self.get("scale", ch)
+        return probe * (100.0 if scale / probe >= 0.5 else 2.0)
+
+    def _set_offset(self, c: Call) -> None:
+        """The offset is added to the signal on screen: the centre shows ``-OFFSet`` (see
+        :meth:`_scaling`); beyond :meth:`offset_limit` it is clipped there and -222 queued."""
+        ch = self._ch(c)
+        lim = self.offset_limit(ch)
+        self.settings["offset"][ch] = self.num(c.one(), "V", -lim, lim)
 
     def _trigger_status(self) -> str:
         if self._stopped():
@@ -589,6 +605,8 @@ class SimRigolDS1000Z(SimInfiniiVision):
         step = self._step_for(acq)
         points = len(range(0, points, step))
         yinc = self.get("scale", ch) / 25.0
+        # the offset is added to the signal: code = volts / yinc + yorigin + yreference, so the
+        # centre code (yreference) is the input voltage -offset
         yorig = float(round(self.get("offset", ch) / yinc))
         return xinc * step, xorig, yinc, yorig, 127, points
 

@@ -42,6 +42,27 @@ def test_infiniivision_setup_and_timebase():
     assert sc.state["channels"]["1"]["coupling"] == "AC" and sc.state["time_per_div_s"] == 0.001
 
 
+@pytest.mark.parametrize("cls, ok, offs", [
+    # InfiniiVision :CHANnel<n>:OFFSet: "the value represented at center screen" (3000 X-Series
+    # Programmer's Guide); DS1000Z: the offset is added to the signal, the centre shows -OFFSet
+    # (DS1000Z Programming Guide: edge trigger level range (-5 x VerticalScale - OFFSet) to
+    # (5 x VerticalScale - OFFSet))
+    (InfiniiVision, OK, [b":CHAN1:OFFS 2\n", b":CHAN2:OFFS -0.5\n", b":CHAN3:OFFS 0\n"]),
+    (RigolDS1000Z, R_OK, [b":CHAN1:OFFS -2\n", b":CHAN2:OFFS 0.5\n", b":CHAN3:OFFS 0\n"]),
+])
+def test_offset_puts_the_given_voltage_at_the_screen_centre(cls, ok, offs):
+    """``setup_channel(offset_v=V)`` means V at the screen's centre on every model: the bytes."""
+    script = []
+    for ch, off in zip((1, 2, 3), offs):
+        script += [(f":CHAN{ch}:DISP 1\n".encode(), None), (f":CHAN{ch}:COUP DC\n".encode(), None),
+                   (f":CHAN{ch}:SCAL 0.625\n".encode(), None), (off, None), (b":SYST:ERR?\n", ok)]
+    with expected_protocol(cls, script) as sc:
+        sc.setup_channel(1, 0.625, offset_v=2.0)
+        sc.setup_channel(2, 0.625, offset_v=-0.5)
+        sc.setup_channel(3, 0.625, offset_v=0.0)
+    assert [sc.state["channels"][str(c)]["offset_v"] for c in (1, 2, 3)] == [2.0, -0.5, 0.0]
+
+
 def test_scope_limits_before_sending():
     with expected_protocol(InfiniiVision, [], identity="KEYSIGHT TECHNOLOGIES,DSOX1102G,CN1,02.10") as sc:
         assert sc.n_channels == 2          # from the identity's model word

@@ -214,6 +214,10 @@ IV_ROWS = [
     Row("IV :WAVeform:DATA?: the fixed 8-digit block header #800001000",
         [(":WAV:POIN 1000", None), (":STOP", None), (":WAV:PRE?", fields(10, f0="+0", f2="+1000", f6="+0")),
          (":WAV:DATA?", block(8, 1000))]),
+    Row("IV :CHANnel<n>:OFFSet: the value represented at center screen; 0 V at 1 V/div, offset 2 V: BYTE code "
+        "(0 - YORigin) / YINCrement + YREFerence = -2 / (10/256) + 128 = 76.8 -> 77",
+        [(":CHAN1:SCAL 1;OFFS 2;:WAV:POIN 1000", None), (":STOP", None),
+         (":WAV:DATA?", lambda r: r[:10] == b"#800001000" and set(r[10:]) == {77})]),
     Row("IV WORD format: two bytes a point", [(":WAV:FORM WORD;POIN 1000", None), (":STOP", None),
                                                (":WAV:DATA?", block(8, 2000))]),
     Row("IV :WAVeform:POINts:MODE RAW: the whole record only while stopped",
@@ -292,6 +296,15 @@ DS_ROWS = [
     Row("DS :SYSTem:ERRor?, *ESR? (integers without a sign)", [(":FOO", None), ("*ESR?", "32")], [-113]),
     Row("DS :WAVeform:XREFerence?/YORigin?/YREFerence? are integers",
         [(":WAV:XREF?", "0"), (":WAV:YOR?", "0"), (":WAV:YREF?", "127")]),
+    Row("DS :CHANnel<n>:OFFSet is added to the signal: the centre shows -OFFSet (:TRIGger:EDGe:LEVel range "
+        "(-5 x VerticalScale - OFFSet) to (5 x VerticalScale - OFFSet)); :WAVeform:YORigin? = OFFSet/YINCrement, "
+        "so 0 V reads (code - YORigin - YREFerence) x YINCrement = 0 at code 127 + 50",
+        [(":CHAN1:SCAL 1;OFFS 2", None), (":WAV:YOR?", "50"), (":STOP", None),
+         (":WAV:DATA?", lambda r: r[:11] == b"#9000001200" and set(r[11:]) == {177})]),
+    Row("DS :CHANnel<n>:OFFSet range, probe 1X: +-100 V from 500 mV/div, +-2 V below",
+        [(":CHAN1:SCAL 0.5;OFFS -50", None), (":CHAN1:OFFS?", "-5.000000e+01"),
+         (":CHAN1:SCAL 0.2;OFFS 1.5", None), (":CHAN1:OFFS?", "1.500000e+00"),
+         (":CHAN1:OFFS 3", None), (":CHAN1:OFFS?", "2.000000e+00")], [-222]),
     Row("DS has no InfiniiVision :DIGitize, :OPERegister, :WAVeform:POINts", [
         (":DIG", None), (":OPER:COND?", None), (":WAV:POIN?", None)], [-113, -113, -113]),
     Row("DS :TFORce: a single acquisition waiting in NORMal sweep triggers now", [
