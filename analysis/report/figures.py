@@ -21,21 +21,24 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from labkit.analysis.report.numbers import format_uncertain
+from labkit.analysis.plotting import (
+    PNG_DPI,
+    loc_colour,
+    log_freq_axis,
+    mode_label,
+    mode_marks,
+    wrap_x,
+    wrapped_phase_deg,
+)
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-#: PNG resolution for slides.
-PNG_DPI = 200
 #: Contact-mode codes of SimResult.contact and their colours in timelines.
 CONTACT_NAMES = ("air", "adhesion", "rest")
 CONTACT_COLOURS = ("#f2f2f2", "#e69f00", "#009e73")
-#: One colour per measurement location, the same in every figure (Okabe-Ito, colour-blind safe).
-LOC_COLOURS = {"body": "#d55e00", "hip": "#0072b2", "knee": "#009e73"}
-_EXTRA = ("#cc79a7", "#e69f00", "#56b4e9", "#000000")
 #: Leg-motion patterns (labkit.analysis.compare.PATTERNS) and their colours.
 PATTERN_COLOURS = {"firm_contact": "#1b9e77", "partial_contact": "#d95f02", "jumping": "#7570b3"}
 MEAS_COLOUR = "#c0392b"
@@ -49,10 +52,6 @@ class FigureFiles:
     png: Path
     svg: Path
     data: dict[str, Any] = field(default_factory=dict)
-
-
-def loc_colour(loc: str, k: int = 0) -> str:
-    return LOC_COLOURS.get(loc, _EXTRA[k % len(_EXTRA)])
 
 
 def _figure(w: float, h: float) -> Figure:
@@ -76,35 +75,6 @@ def _save(fig: Figure, stem: Path, data: dict[str, Any] | None = None) -> Figure
     return FigureFiles(png, svg, data or {})
 
 
-def log_freq_axis(ax: Axes) -> None:
-    """A log frequency axis labelled in plain numbers (300, 500, 1000, 2000 Hz, not 3x10^2): major
-    ticks at 1, 2, 5 (and 3 when a decade or less is shown) times the powers of ten."""
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-
-    lo, hi = ax.get_xlim()
-    subs = (1.0, 2.0, 3.0, 5.0) if hi / max(lo, 1e-300) <= 40 else (1.0, 2.0, 5.0)
-    ax.xaxis.set_major_locator(LogLocator(base=10.0, subs=subs))
-    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: f"{x:g}"))
-    ax.xaxis.set_minor_locator(LogLocator(base=10.0, subs=tuple(float(k) for k in range(1, 10))))
-    ax.xaxis.set_minor_formatter(NullFormatter())
-
-
-def wrapped_phase_deg(h: np.ndarray) -> np.ndarray:
-    """Phase in degrees in (-180, 180], NaN inserted where it wraps so a line is not drawn across
-    the plot at a +-180 deg jump. Returns an array one longer per wrap: use with
-    :func:`wrap_x` on the frequencies."""
-    ph = np.degrees(np.angle(np.asarray(h, complex)))
-    jumps = np.flatnonzero(np.abs(np.diff(ph)) > 180.0) + 1
-    return np.insert(ph, jumps, np.nan)
-
-
-def wrap_x(x: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """The abscissae matching :func:`wrapped_phase_deg` (the same NaN-separated breaks)."""
-    ph = np.degrees(np.angle(np.asarray(h, complex)))
-    jumps = np.flatnonzero(np.abs(np.diff(ph)) > 180.0) + 1
-    return np.insert(np.asarray(x, float), jumps, np.nan)
-
-
 def _legend_outside(ax: Axes, **kw: Any) -> None:
     handles, labels = ax.get_legend_handles_labels()
     if handles:
@@ -113,31 +83,6 @@ def _legend_outside(ax: Axes, **kw: Any) -> None:
 
 
 # --------------------------------------------------------------------------- FRF
-
-def mode_label(m: dict[str, Any]) -> str:
-    """``452.0 ± 0.04 Hz, ζ 0.2200 ± 0.0001`` for a mode dict of the fit file."""
-    text = format_uncertain(m["freq_hz"], m.get("freq_hz_std"), "Hz")
-    if m.get("damping_ratio") is not None:
-        text += ", \u03b6 " + format_uncertain(m["damping_ratio"], m.get("damping_ratio_std"))
-    return text
-
-
-def _mode_marks(am: Axes, ap: Axes, modes: list[dict[str, Any]]) -> None:
-    """Dotted lines at the modes, labels in the margin above the magnitude (never on a peak);
-    labels closer than 0.3 decade to the previous one go up a row."""
-    from matplotlib.transforms import blended_transform_factory
-
-    tr = blended_transform_factory(am.transData, am.transAxes)
-    last_x, row = -np.inf, 0
-    for i, m in enumerate(sorted(modes, key=lambda m: m["freq_hz"])):
-        fx = float(m["freq_hz"])
-        for ax in (am, ap):
-            ax.axvline(fx, color="0.45", lw=0.8, ls=":", zorder=1)
-        row = (row + 1) % 3 if math.log10(fx) - last_x < 0.3 else 0
-        last_x = math.log10(fx)
-        am.text(fx, 1.02 + 0.09 * row, f"{i + 1}: {mode_label(m)}", transform=tr, fontsize=7, ha="center",
-                va="bottom", color="0.15", clip_on=False)
-
 
 def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]], stem: Path, *,
                fine: dict[str, Any] | None = None, title: str = "", units: str = "(mm/s)/V") -> FigureFiles:
@@ -172,7 +117,7 @@ def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]]
         ap.semilogx(f, np.degrees(np.angle(h)), "o", ms=2.2, mfc=c, mec="none", color=c, zorder=3)
         data["locations"][loc] = entry
     if modes:
-        _mode_marks(am, ap, modes)
+        mode_marks(am, ap, modes)
     am.set_ylabel(f"|FRF| ({units})" if units != "1" else "|transmissibility|")
     ap.set_ylabel("phase (deg)")
     ap.set_yticks([-180, -90, 0, 90, 180])

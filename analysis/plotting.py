@@ -1,0 +1,115 @@
+"""Plotting conventions shared by every labkit figure (the fit's own PNGs and the report's figures).
+
+One colour per measurement location, the same in every figure; log frequency axes labelled in
+plain numbers (300, 500, 1000 Hz, never 3x10^2); phase broken where it wraps, so no line is drawn
+across the plot at a +-180 deg jump; mode labels (value +- uncertainty, significant figures set by
+the uncertainty) in the margin above the magnitude axes, never on a peak.
+
+Matplotlib's object API only (no pyplot state), so safe in any process.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+__all__ = ["PNG_DPI", "LOC_COLOURS", "loc_colour", "log_freq_axis", "wrapped_phase_deg", "wrap_x",
+           "mode_label", "mode_marks"]
+
+#: PNG resolution (slides, print).
+PNG_DPI = 200
+#: One colour per measurement location, the same in every figure (Okabe-Ito, colour-blind safe).
+LOC_COLOURS = {"body": "#d55e00", "hip": "#0072b2", "knee": "#009e73"}
+_EXTRA = ("#cc79a7", "#e69f00", "#56b4e9", "#000000")
+
+
+def loc_colour(loc: str, k: int = 0) -> str:
+    """The colour of location ``loc`` (``k``: its index, for locations without a fixed colour)."""
+    return LOC_COLOURS.get(loc, _EXTRA[k % len(_EXTRA)])
+
+
+def _plain(x: float, decimals: int) -> str:
+    return f"{x:.{decimals}f}" if decimals > 0 else f"{x:g}" if abs(x) < 1e6 else f"{x:.0f}"
+
+
+def log_freq_axis(ax: Axes) -> None:
+    """A log frequency axis (x) labelled in plain numbers (300, 500, 1000, 2000 Hz, not 3x10^2).
+
+    Major ticks at 1, 2, 5 times the powers of ten over more than 40:1; also at 3 up to 40:1;
+    at 1, 1.5, 2, 3, 4, 5, 7 up to 6:1; and evenly spaced round numbers (as on a linear axis) over
+    a band narrower than 2.5:1, where a decade's subdivisions would leave one tick or none.
+    Call it after the data are drawn (it reads the axis limits).
+    """
+    from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter, NullLocator
+
+    ax.set_xscale("log")
+    lo, hi = ax.get_xlim()
+    ratio = hi / max(lo, 1e-300)
+    if ratio < 2.5:
+        loc = MaxNLocator(nbins=5, steps=[1, 2, 2.5, 5, 10])
+        ticks = loc.tick_values(lo, hi)
+        step = float(np.min(np.diff(ticks))) if ticks.size > 1 else abs(hi)
+        dec = max(0, -math.floor(math.log10(step) + 1e-9)) if step > 0 else 0
+        ax.xaxis.set_major_locator(loc)
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: _plain(x, dec)))
+        ax.xaxis.set_minor_locator(NullLocator())
+        return
+    subs = ((1.0, 2.0, 5.0) if ratio > 40 else (1.0, 2.0, 3.0, 5.0) if ratio > 6
+            else (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 7.0))
+    ax.xaxis.set_major_locator(LogLocator(base=10.0, subs=subs))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: _plain(x, 0)))
+    ax.xaxis.set_minor_locator(LogLocator(base=10.0, subs=tuple(float(k) for k in range(1, 10))))
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
+def _wraps(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    ph = np.degrees(np.angle(np.asarray(h, complex)))
+    return ph, np.flatnonzero(np.abs(np.diff(ph)) > 180.0) + 1
+
+
+def wrapped_phase_deg(h: np.ndarray) -> np.ndarray:
+    """Phase in degrees in (-180, 180], NaN inserted where it wraps so a line is not drawn across
+    the plot at a +-180 deg jump. Returns an array one longer per wrap: use with
+    :func:`wrap_x` on the frequencies."""
+    ph, jumps = _wraps(h)
+    return np.insert(ph, jumps, np.nan)
+
+
+def wrap_x(x: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """The abscissae matching :func:`wrapped_phase_deg` (the same NaN-separated breaks)."""
+    _, jumps = _wraps(h)
+    return np.insert(np.asarray(x, float), jumps, np.nan)
+
+
+def mode_label(m: Mapping[str, Any]) -> str:
+    """``452.0 ± 0.04 Hz, ζ 0.2200 ± 0.0001`` for a mode dict (``Mode.to_dict`` / the fit file's)."""
+    from labkit.analysis.report.numbers import format_uncertain
+
+    text = format_uncertain(m["freq_hz"], m.get("freq_hz_std"), "Hz")
+    if m.get("damping_ratio") is not None:
+        text += ", \u03b6 " + format_uncertain(m["damping_ratio"], m.get("damping_ratio_std"))
+    return text
+
+
+def mode_marks(am: Axes, ap: Axes | None, modes: Sequence[Mapping[str, Any]], *, fontsize: float = 7.0) -> None:
+    """Dotted lines at the modes on both axes; labels ``n: f ± sf Hz, ζ ...`` in the margin above
+    the magnitude axes ``am`` (never on a peak). A label closer than 0.3 decade to the previous one
+    goes up a row (three rows, then back to the first)."""
+    from matplotlib.transforms import blended_transform_factory
+
+    tr = blended_transform_factory(am.transData, am.transAxes)
+    last_x, row = -np.inf, 0
+    for i, m in enumerate(sorted(modes, key=lambda m: m["freq_hz"])):
+        fx = float(m["freq_hz"])
+        for ax in (am, ap):
+            if ax is not None:
+                ax.axvline(fx, color="0.45", lw=0.8, ls=":", zorder=1)
+        row = (row + 1) % 3 if math.log10(fx) - last_x < 0.3 else 0
+        last_x = math.log10(fx)
+        am.text(fx, 1.02 + 0.09 * row, f"{i + 1}: {mode_label(m)}", transform=tr, fontsize=fontsize,
+                ha="center", va="bottom", color="0.15", clip_on=False)
