@@ -120,7 +120,19 @@ class _Finder:
     def __init__(self, valid: np.ndarray | None, margin_px: int, seg: Segmentation, min_area_px: int,
                  flat: np.ndarray | None = None):
         self.valid = None if valid is None else valid.astype(np.uint8)  # 0 = never the robot
-        self.flat = flat  # tray texture (float32, ~1), ROI-sized, or None
+        self.flat = flat  # the static scene's brightness (float32, ~1), ROI-sized, or None
+        # its fine part (the tray's texture, without the ring light's smooth shape): the robot is
+        # opaque, so its brightness follows the light but not the tray's texture under it
+        self.tex: np.ndarray | None = None
+        if flat is not None:
+            # the smooth part from the searchable tray only (the rim and dust would darken it beside them)
+            known = np.ones(flat.shape, np.float32) if valid is None else valid.astype(np.float32)
+            sig = max(2.5 * seg.body_width_px, 8.0)
+            smooth = _wide_blur(flat * known, sig) / np.maximum(_wide_blur(known, sig), np.float32(1e-3))
+            tex = flat / np.maximum(smooth, np.float32(1e-3))
+            if valid is not None:
+                tex[~valid.astype(bool)] = 1.0
+            self.tex = np.asarray(tex, np.float32)
         self.margin = margin_px
         self.seg = seg
         self.min_area = min_area_px
@@ -205,7 +217,8 @@ class _Finder:
         comp = np.zeros((cy1 - cy0, cx1 - cx0), np.uint8)
         cv2.drawContours(comp, [contour], -1, 1, thickness=-1, offset=(-cx0, -cy0))
         blob = self._measure(ratio[cy0:cy1, cx0:cx1], comp, binary[cy0:cy1, cx0:cx1],
-                             None if vmask is None else vmask[cy0:cy1, cx0:cx1], keep_weights, None)
+                             None if vmask is None else vmask[cy0:cy1, cx0:cx1], keep_weights,
+                             None if self.tex is None else self.tex[y0 + cy0:y0 + cy1, x0 + cx0:x0 + cx1])
         if blob is None:
             return None, bool(touched)
         ox, oy = x0 + cx0, y0 + cy0
@@ -217,7 +230,7 @@ class _Finder:
         return blob, bool(touched and not border)
 
     def _measure(self, win: np.ndarray, comp: np.ndarray, binary: np.ndarray, vmask: np.ndarray | None,
-                 keep_weights: bool, flat: np.ndarray | None = None) -> _Blob | None:
+                 keep_weights: bool, tex: np.ndarray | None = None) -> _Blob | None:
         import cv2
 
         m = self.margin
@@ -235,8 +248,6 @@ class _Finder:
             band &= vmask
             ring &= vmask
         f = win.astype(np.float32)
-        if flat is not None:
-            f /= flat   # flat-field: divides out the Teflon's texture
         # background under the robot: least-squares plane through the ring around it
         # (lighting gradients), from the ring's moments: no pixel lists needed
         mr = cv2.moments(ring, binaryImage=True)
@@ -265,11 +276,21 @@ class _Finder:
         inner = cv2.erode(comp, _square(2))
         if cv2.countNonZero(inner) < 5:
             inner = comp
-        rho = float(cv2.mean(ratio, mask=inner)[0])
-        if 1.0 - rho < 0.5 * self.seg.min_contrast:
-            return None
-        # weight = darkness / the robot's darkness = area coverage of each pixel (1 inside)
-        w = np.clip((1.0 - ratio) * np.float32(1.0 / (1.0 - rho)), -0.5, 1.5)
+        if tex is None:
+            rho = float(cv2.mean(ratio, mask=inner)[0])
+            if 1.0 - rho < 0.5 * self.seg.min_contrast:
+                return None
+            # weight = darkness / the robot's darkness = area coverage of each pixel (1 inside)
+            w = np.clip((1.0 - ratio) * np.float32(1.0 / (1.0 - rho)), -0.5, 1.5)
+        else:
+            # ratio = I / (light x texture); the robot's own level, relative to the light alone, is
+            # rho = mean(ratio x texture) inside it, so a pixel covered by a share c of robot shows
+            # 1 - ratio = c (1 - rho / texture): the weight divides by that, pixel by pixel
+            rho = float(cv2.mean(ratio * tex, mask=inner)[0])
+            if 1.0 - rho < 0.5 * self.seg.min_contrast:
+                return None
+            denom = np.maximum(1.0 - np.float32(rho) / np.maximum(tex, np.float32(1e-3)), np.float32(1e-3))
+            w = np.clip((1.0 - ratio) / denom, -0.5, 1.5)
         w *= band
         mo = cv2.moments(w)
         if mo["m00"] <= 0:

@@ -249,7 +249,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
             q = QUALITY_OK
             if blob.border or (area_ref and not 0.8 < blob.area / area_ref < 1.25):
                 q = QUALITY_DEGRADED
-            elif blob.masked and cov_hist and abs(blob.coverage / float(np.median(cov_hist[-25:])) - 1) > 0.015:
+            elif blob.masked and cov_hist and abs(blob.coverage / float(np.median(cov_hist[-25:])) - 1) > 0.01:
                 # touching static dust (or the rim) and missing part of its darkness: partly hidden by it
                 q = QUALITY_DEGRADED
             if q == QUALITY_OK and not blob.masked:
