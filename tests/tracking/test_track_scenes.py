@@ -85,6 +85,7 @@ def test_renderer_truth():
     ("grey_chip", dict(chip_reflectance=0.72)),                           # 28 % contrast
     ("grey_chip_uneven", dict(chip_reflectance=0.72, gradient=0.3, flicker=0.08, noise=2.5)),
     ("mottled_tray", dict(mottling=0.05, gradient=0.2)),                  # blotches of +-5 %, ~2 mm across
+    ("grey_chip_mottled", dict(chip_reflectance=0.7, mottling=0.03, gradient=0.3)),   # the chip is opaque
 ])
 def test_adaptive_segmentation(tmp_path, name, kw):
     path, truth = video(tmp_path, name, scene(seed=3, **kw))
