@@ -15,11 +15,13 @@ import numpy as np
 
 from labkit.tomlio import dump_toml
 
-#: placeholder resources (TEST-NET addresses): replaced by the virtual lab's with ``--lab``
+#: placeholder resources (TEST-NET addresses): replaced by the virtual lab's with ``--lab``.
+#: ``timeout_s`` 10 s instead of the drivers' 2 s: the virtual lab computes the robot's motion
+#: in the same machine, and on a loaded two-core machine a reply can wait seconds for it.
 INSTRUMENTS = {
-    "funcgen": {"model": "33500B", "resource": "TCPIP0::192.0.2.10::5025::SOCKET"},
-    "scope": {"model": "InfiniiVision", "resource": "TCPIP0::192.0.2.11::5025::SOCKET"},
-    "vibrometer": {"model": "OFV-5000", "resource": "ASRL/dev/ttyUSB0::INSTR"},
+    "funcgen": {"model": "33500B", "resource": "TCPIP0::192.0.2.10::5025::SOCKET", "timeout_s": 10.0},
+    "scope": {"model": "InfiniiVision", "resource": "TCPIP0::192.0.2.11::5025::SOCKET", "timeout_s": 10.0},
+    "vibrometer": {"model": "OFV-5000", "resource": "ASRL/dev/ttyUSB0::INSTR", "timeout_s": 10.0},
 }
 
 
@@ -70,7 +72,7 @@ def write_shaker_config(path: str | Path, freqs_hz: Sequence[float], tray_amp_um
     """
     instruments = {k: dict(v) for k, v in INSTRUMENTS.items()}
     # the virtual lab's camera, reached over its control channel (resource replaced with --lab)
-    instruments["camera"] = {"model": "LabCamera", "resource": "TCPIP0::192.0.2.12::5025::SOCKET"}
+    instruments["camera"] = {"model": "LabCamera", "resource": "TCPIP0::192.0.2.12::5025::SOCKET", "timeout_s": 10.0}
     table = {
         "run": {"robot_spot": "knee", "video_s": float(video_s), "on_interlock": "skip"},
         "instruments": instruments,
