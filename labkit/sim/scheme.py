@@ -120,7 +120,9 @@ W_MF = W_FI + NQ          # M^-1 times them
 W_LI0 = W_MF + NQ         # instantaneous contact forces at the start of a trial (NR)
 W_LI1 = W_LI0 + NR        # ... at its end
 W_G0 = W_LI1 + NR         # release margins at the start (7: feet, body)
-W_SIZE = W_G0 + 7
+W_CT = W_G0 + 7           # time at which W_LI1 holds the contact forces of the current state (cache)
+W_CV = W_CT + 1           # ... and the drive voltage they were computed with
+W_SIZE = W_CV + 1
 # ---- int scratch I
 I_ROWS = 0                # active rows
 I_KIND = I_ROWS + NI      # 0 film, 1 pinned
@@ -712,8 +714,16 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count):
     tv = t + 0.5 * dt          # the drive is constant over a step (edges on step boundaries)
     n_ev = 0
     tol = P[P_POSTOL]
+    first = True
     while True:
-        contact_force(P, A, S, mode, now, tv, W, I, W_LI0)
+        if first and abs(W[W_CT] - now) <= 1e-9 * dt and W[W_CV] == volts(P, tv):
+            # the last step ended without events: its end-of-step forces are this state's
+            for r in range(NR):
+                W[W_LI0 + r] = W[W_LI1 + r]
+        else:
+            contact_force(P, A, S, mode, now, tv, W, I, W_LI0)
+        first = False
+        W[W_CT] = -1.0
         if release(P, A, S, mode, count, W, W_LI0) > 0:
             contact_force(P, A, S, mode, now, tv, W, I, W_LI0)
         for j in range(7):
@@ -749,6 +759,8 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count):
                 who = j
                 rel = False
         if who < 0:
+            W[W_CT] = now + rem
+            W[W_CV] = volts(P, tv)
             break
         if n_ev >= P[P_MAXEV]:
             count[CNT_FORCED] += 1
@@ -838,6 +850,7 @@ def integrate(P, A, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac,
               events):
     """Run n_steps steps of dt; fill the outputs (statistics after n_skip steps)."""
     W = np.zeros(W_SIZE)
+    W[W_CT] = -1.0                  # no cached contact forces yet
     I = np.zeros(I_SIZE, np.int64)
     T = np.zeros(S_SIZE)
     air_run = np.zeros(6)
