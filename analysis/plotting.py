@@ -37,30 +37,62 @@ def _plain(x: float, decimals: int) -> str:
     return f"{x:.{decimals}f}" if decimals > 0 else f"{x:g}" if abs(x) < 1e6 else f"{x:.0f}"
 
 
+def text_width_pt(text: str, fontsize: float) -> float:
+    """The width of ``text`` set in the default font at ``fontsize`` points, in points (no renderer)."""
+    from matplotlib.textpath import TextPath
+
+    return float(TextPath((0, 0), text, size=fontsize).get_extents().width) if text.strip() else 0.0
+
+
+def axes_width_pt(ax: Axes, shrink: float = 0.8) -> float:
+    """The axes' width in points, times ``shrink``: a layout engine (constrained layout, a legend
+    outside) may still narrow the axes after this is asked, so estimates stay on the safe side."""
+    fig = ax.get_figure()
+    assert fig is not None
+    return float(ax.bbox.width / fig.dpi * 72.0 * shrink)
+
+
+def _fontsize_pt(ax: Axes) -> float:
+    from matplotlib.font_manager import FontProperties
+
+    ticks = ax.xaxis.get_major_ticks()
+    return float(ticks[0].label1.get_fontsize()) if ticks else float(FontProperties(size="medium").get_size_in_points())
+
+
+#: Major-tick multiples of the powers of ten, finest first, with the smallest gap between two
+#: neighbours in decades (4 -> 5: log10(1.25), 2 -> 3: log10(1.5), 1 -> 2: log10(2), one decade).
+_LOG_SUBS = (((1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 7.0), math.log10(1.25)), ((1.0, 2.0, 3.0, 5.0), math.log10(1.5)),
+             ((1.0, 2.0, 5.0), math.log10(2.0)), ((1.0,), 1.0))
+
+
 def log_freq_axis(ax: Axes) -> None:
     """A log frequency axis (x) labelled in plain numbers (300, 500, 1000, 2000 Hz, not 3x10^2).
 
-    Major ticks at 1, 2, 5 times the powers of ten over more than 40:1; also at 3 up to 40:1;
-    at 1, 1.5, 2, 3, 4, 5, 7 up to 6:1; and evenly spaced round numbers (as on a linear axis) over
-    a band narrower than 2.5:1, where a decade's subdivisions would leave one tick or none.
+    Major ticks at 1, 1.5, 2, 3, 4, 5, 7 / 1, 2, 3, 5 / 1, 2, 5 / 1 times the powers of ten: the
+    finest set whose closest labels do not touch at the axes' width (estimated from the font,
+    before layout, with a margin); over a band narrower than 2.5:1, where a decade's
+    subdivisions would leave one tick or none, evenly spaced round numbers as on a linear axis.
     Call it after the data are drawn (it reads the axis limits).
     """
     from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter, NullLocator
 
     ax.set_xscale("log")
     lo, hi = ax.get_xlim()
-    ratio = hi / max(lo, 1e-300)
+    lo = max(lo, 1e-300)
+    ratio = hi / lo
+    size = _fontsize_pt(ax)
     if ratio < 2.5:
         loc = MaxNLocator(nbins=5, steps=[1, 2, 2.5, 5, 10])
-        ticks = loc.tick_values(lo, hi)
+        ticks = np.asarray(loc.tick_values(lo, hi), float)
         step = float(np.min(np.diff(ticks))) if ticks.size > 1 else abs(hi)
         dec = max(0, -math.floor(math.log10(step) + 1e-9)) if step > 0 else 0
         ax.xaxis.set_major_locator(loc)
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: _plain(x, dec)))
         ax.xaxis.set_minor_locator(NullLocator())
         return
-    subs = ((1.0, 2.0, 5.0) if ratio > 40 else (1.0, 2.0, 3.0, 5.0) if ratio > 6
-            else (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 7.0))
+    pt_per_decade = axes_width_pt(ax) / math.log10(ratio)
+    widest = text_width_pt(_plain(float(10 ** math.floor(math.log10(hi))) * 7.0, 0), size)
+    subs = next((s for s, gap in _LOG_SUBS if gap * pt_per_decade >= 1.3 * widest + 4.0), (1.0,))
     ax.xaxis.set_major_locator(LogLocator(base=10.0, subs=subs))
     ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: _plain(x, 0)))
     ax.xaxis.set_minor_locator(LogLocator(base=10.0, subs=tuple(float(k) for k in range(1, 10))))
@@ -98,18 +130,37 @@ def mode_label(m: Mapping[str, Any]) -> str:
 
 def mode_marks(am: Axes, ap: Axes | None, modes: Sequence[Mapping[str, Any]], *, fontsize: float = 7.0) -> None:
     """Dotted lines at the modes on both axes; labels ``n: f ± sf Hz, ζ ...`` in the margin above
-    the magnitude axes ``am`` (never on a peak). A label closer than 0.3 decade to the previous one
-    goes up a row (three rows, then back to the first)."""
+    the magnitude axes ``am`` (never on a peak).
+
+    Each label is centred on its mode (left- or right-aligned at the axes' ends) in the lowest row
+    where it does not touch the labels already placed; widths come from the font and the axes'
+    width before layout (:func:`axes_width_pt`), so call it after the x limits are set.
+    """
     from matplotlib.transforms import blended_transform_factory
 
     tr = blended_transform_factory(am.transData, am.transAxes)
-    last_x, row = -np.inf, 0
+    lo, hi = (math.log10(max(v, 1e-300)) for v in am.get_xlim())
+    log_x = am.get_xscale() == "log"
+    xlo, xhi = am.get_xlim()
+    width = axes_width_pt(am)
+    pad = 0.6 * fontsize / width                     # between two labels, in axes fractions
+    rows: list[float] = []                           # per row: right end of its last label (axes fraction)
     for i, m in enumerate(sorted(modes, key=lambda m: m["freq_hz"])):
         fx = float(m["freq_hz"])
         for ax in (am, ap):
             if ax is not None:
                 ax.axvline(fx, color="0.45", lw=0.8, ls=":", zorder=1)
-        row = (row + 1) % 3 if math.log10(fx) - last_x < 0.3 else 0
-        last_x = math.log10(fx)
-        am.text(fx, 1.02 + 0.09 * row, f"{i + 1}: {mode_label(m)}", transform=tr, fontsize=fontsize,
-                ha="center", va="bottom", color="0.15", clip_on=False)
+        text = f"{i + 1}: {mode_label(m)}"
+        w = text_width_pt(text, fontsize) / width
+        u = (math.log10(fx) - lo) / (hi - lo) if log_x else (fx - xlo) / (xhi - xlo)
+        ha, left = "center", u - w / 2
+        if left < 0.0:
+            ha, left = "left", u
+        elif u + w / 2 > 1.0:
+            ha, left = "right", u - w
+        row = next((r for r, end in enumerate(rows) if left >= end + pad), len(rows))
+        if row == len(rows):
+            rows.append(0.0)
+        rows[row] = left + w
+        am.text(fx, 1.02 + 0.09 * row, text, transform=tr, fontsize=fontsize, ha=ha, va="bottom",
+                color="0.15", clip_on=False)

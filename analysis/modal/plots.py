@@ -1,97 +1,181 @@
 """Figures of a modal fit: FRF magnitude and phase with the fitted model, the stabilisation diagram.
 
-Uses ``matplotlib.figure.Figure`` with the Agg canvas directly, so no global
-backend is chosen and nothing needs a display.
+The conventions are the report's (:mod:`labkit.analysis.plotting`): magnitude on log-log axes
+with the phase below (broken where it wraps), measured lines as markers in one colour per
+location, the fitted model as a line on a fine grid (so an anti-resonance between measured lines
+is drawn as the model has it), plain-number log frequency ticks, modes labelled with frequency
+and damping +- their uncertainty in the margin above the axes, PNG at
+:data:`~labkit.analysis.plotting.PNG_DPI`.
+
+Each ``*_figure`` function returns the ``matplotlib.figure.Figure`` (Agg canvas attached, no
+pyplot state, no display needed); each ``plot_*`` function also saves it as PNG to the path
+given (``labkit fit`` hands a temporary name of its all-or-nothing output set) and returns the
+figure.
 """
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-__all__ = ["plot_frf_fit", "plot_stabilisation"]
+from labkit.analysis.plotting import PNG_DPI, loc_colour, log_freq_axis, mode_marks, wrap_x, wrapped_phase_deg
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = ["FINE_POINTS", "fine_grid", "frf_fit_figure", "plot_frf_fit", "stabilisation_figure",
+           "plot_stabilisation"]
+
+#: Least number of points of the fine grid the model is drawn on.
+FINE_POINTS = 2000
+#: Locations named in the legend at most (a scan's other locations are drawn, not listed).
+LEGEND_LOCATIONS = 8
 
 
-def _figure(w_in: float, h_in: float):
+def _figure(w_in: float, h_in: float) -> Figure:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(w_in, h_in), dpi=110)
+    fig = Figure(figsize=(w_in, h_in), layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
 
-def plot_frf_fit(fit: Any, path: str | Path, *, title: str = "", units: str = "") -> Path:
-    """Magnitude (log) and phase per location: measured points, fitted model, mode markers."""
-    n = len(fit.locations)
-    fig = _figure(4.2 * n + 0.6, 6.0)
-    axes = fig.subplots(2, n, sharex="col", squeeze=False)
+def _save(fig: Figure, path: str | Path) -> None:
+    fig.savefig(Path(path), dpi=PNG_DPI, format="png")
+
+
+def fine_grid(freq_hz: np.ndarray, n: int = FINE_POINTS) -> np.ndarray:
+    """Log-spaced frequencies over the measured band: at least ``n`` points and 4 per measured line."""
+    f = np.asarray(freq_hz, float)
+    return np.geomspace(f.min(), f.max(), max(n, 4 * f.size))
+
+
+def _loc_colours(locations: list[str]) -> list[Any]:
+    if len(locations) <= 7:
+        return [loc_colour(loc, k) for k, loc in enumerate(locations)]
+    from matplotlib import colormaps
+
+    return [colormaps["viridis"](x) for x in np.linspace(0.0, 0.9, len(locations))]
+
+
+def _legend_outside(ax: Any, handles: list[Any]) -> None:
+    if handles:
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+                  frameon=False, borderaxespad=0.0)
+
+
+def frf_fit_figure(fit: Any, *, title: str = "", units: str = "") -> Figure:
+    """Magnitude (log-log) and phase below, every location on the same axes.
+
+    Measured lines: markers, one colour per location (gid ``measured:<loc>``); the model
+    ``fit.model`` on :func:`fine_grid` over each location's lines: a line in the same colour
+    (gid ``fit:<loc>``; its phase ``fit-phase:<loc>``, NaN where it wraps); dotted lines at the
+    modes and their labels (``n: f ± sf Hz, ζ z ± sz``) above the magnitude axes.
+    """
+    fig = _figure(8.0, 6.4)
+    am, ap = fig.subplots(2, 1, sharex=True, height_ratios=[2.2, 1])
+    colours = _loc_colours(list(fit.locations))
+    handles: list[Any] = []
     for k, loc in enumerate(fit.locations):
-        f, H = fit.freq_hz[k], fit.frf[k]
-        logx = f.max() / f.min() > 5
-        fm = (np.geomspace if logx else np.linspace)(f.min(), f.max(), max(2000, 4 * f.size))
-        Hm = fit.model(fm, k)
-        am, ap = axes[0, k], axes[1, k]
-        am.semilogy(f, np.abs(H), ".", ms=2.5, color="0.45", label="measured")
-        am.semilogy(fm, np.abs(Hm), "-", lw=1.2, color="C3", label=f"fit ({fit.method})")
-        ap.plot(f, np.degrees(np.angle(H)), ".", ms=2.5, color="0.45")
-        ap.plot(fm, np.degrees(np.angle(Hm)), "-", lw=1.2, color="C3")
-        for i, m in enumerate(fit.modes):
-            for ax in (am, ap):
-                ax.axvline(m.freq_hz, color="C0", lw=0.6, ls=":")
-            am.annotate(f"{m.freq_hz:.4g} Hz\nzeta {m.damping_ratio:.3g}", (m.freq_hz, 1.0 - 0.1 * (i % 3)),
-                        xycoords=("data", "axes fraction"), xytext=(2, -2), textcoords="offset points",
-                        fontsize=6.5, va="top", color="C0")
-        am.set_title(f"{loc}  (nrmse {fit.nrmse.get(loc, float('nan')):.3g})", fontsize=9)
-        am.set_ylabel(f"|H| {units}".strip(), fontsize=8)
-        ap.set_ylabel("phase (deg)", fontsize=8)
-        ap.set_xlabel("frequency (Hz)", fontsize=8)
-        ap.set_ylim(-190, 190)
-        if logx:
-            ap.set_xscale("log")
-        ap.set_yticks([-180, -90, 0, 90, 180])
-        for ax in (am, ap):
-            ax.tick_params(which="both", labelsize=7)
-            ax.grid(True, lw=0.3, alpha=0.5)
-        if k == 0:
-            am.legend(fontsize=7, loc="lower left")
+        c = colours[k]
+        f, h = np.asarray(fit.freq_hz[k], float), np.asarray(fit.frf[k], complex)
+        fm = fine_grid(f)
+        hm = np.asarray(fit.model(fm, k), complex)
+        named = k < LEGEND_LOCATIONS
+        (fl,) = am.loglog(fm, np.abs(hm), "-", color=c, lw=1.1, zorder=2, gid=f"fit:{loc}",
+                          label=f"{loc}: fit ({fit.method})")
+        ap.semilogx(wrap_x(fm, hm), wrapped_phase_deg(hm), "-", color=c, lw=0.9, zorder=2, gid=f"fit-phase:{loc}")
+        nrmse = fit.nrmse.get(loc, float("nan"))
+        (ml,) = am.loglog(f, np.abs(h), "o", ms=3.0, mfc=c, mec="white", mew=0.3, color=c, zorder=3,
+                          gid=f"measured:{loc}", label=f"{loc}: measured (nrmse {nrmse:.2g})")
+        ap.semilogx(f, np.degrees(np.angle(h)), "o", ms=2.2, mfc=c, mec="none", color=c, zorder=3,
+                    gid=f"measured-phase:{loc}")
+        if named:
+            handles += [ml, fl]
+    if len(fit.locations) > LEGEND_LOCATIONS:
+        from matplotlib.lines import Line2D
+
+        handles.append(Line2D([], [], ls="none", label=f"... {len(fit.locations) - LEGEND_LOCATIONS} more locations"))
+    if fit.modes:
+        mode_marks(am, ap, [m.to_dict(fit.locations) for m in fit.modes])
+    am.set_ylabel(f"|H| ({units})" if units and units != "1" else "|H|")
+    ap.set_ylabel("phase (deg)")
+    ap.set_yticks([-180, -90, 0, 90, 180])
+    ap.set_ylim(-190, 190)
+    ap.set_xlabel("frequency (Hz)")
+    log_freq_axis(ap)
+    for ax in (am, ap):
+        ax.grid(True, which="major", alpha=0.35)
+        ax.grid(True, which="minor", alpha=0.12)
+    _legend_outside(am, handles)
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    return path
+    return fig
 
 
-def plot_stabilisation(stab: Any, path: str | Path, *, fit: Any = None, title: str = "") -> Path:
-    """Stabilisation diagram: poles per model order, marked by stability, over the FRFs' magnitude."""
-    fig = _figure(7.5, 4.5)
+def plot_frf_fit(fit: Any, path: str | Path, *, title: str = "", units: str = "") -> Figure:
+    """:func:`frf_fit_figure`, saved as PNG at ``path``."""
+    fig = frf_fit_figure(fit, title=title, units=units)
+    _save(fig, path)
+    return fig
+
+
+#: Stabilisation status code -> (marker, colour, legend text), as in the report.
+STATUS_STYLE = {0: ("x", "0.55", "new pole"), 1: ("^", "#e69f00", "stable frequency"),
+                2: ("o", "#009e73", "stable frequency and damping")}
+CHOSEN_COLOUR = "#c0392b"
+
+
+def stabilisation_figure(stab: Any, *, fit: Any = None, title: str = "stabilisation diagram") -> Figure:
+    """Poles per model order marked by stability, the chosen poles marked (dashed line and a star
+    above the highest order, gid ``chosen``), the measured |H| per location behind them (right
+    axis, location colours), all in one legend."""
+    fig = _figure(8.0, 4.6)
     ax = fig.subplots()
-    styles = {0: ("x", "0.6", "new"), 1: ("o", "C1", "stable frequency"),
-              2: ("o", "C2", "stable frequency + damping")}
-    for st, (mk, col, lab) in styles.items():
-        sel = stab.status == st
-        if mk == "o":
-            ax.scatter(stab.freq_hz[sel], stab.order[sel], marker=mk, s=12, facecolors="none",
-                       edgecolors=col, lw=0.8, label=lab)
-        else:
-            ax.scatter(stab.freq_hz[sel], stab.order[sel], marker=mk, s=8, color=col, lw=0.8, label=lab)
-    for f0 in np.atleast_1d(stab.chosen_hz):
-        ax.axvline(f0, color="C3", lw=0.8, ls="--")
-    ax.set_xlabel("frequency (Hz)", fontsize=8)
-    ax.set_ylabel("model order", fontsize=8)
-    ax.tick_params(labelsize=7)
+    f = np.asarray(stab.freq_hz, float).ravel()
+    order = np.asarray(stab.order, float).ravel()
+    status = np.asarray(stab.status, int).ravel()
+    handles: list[Any] = []
     if fit is not None:
-        ax2 = ax.twinx()
+        twin = ax.twinx()
+        colours = _loc_colours(list(fit.locations))
         for k, loc in enumerate(fit.locations):
-            ax2.semilogy(fit.freq_hz[k], np.abs(fit.frf[k]), lw=0.7, alpha=0.6, label=f"|H| {loc}")
-        ax2.set_ylabel("|H|", fontsize=8)
-        ax2.tick_params(labelsize=7)
-        ax2.legend(fontsize=6.5, loc="upper right")
-    ax.legend(fontsize=6.5, loc="upper left")
-    ax.set_title(title or "stabilisation diagram (dashed: chosen poles)", fontsize=9)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path)
-    return path
+            (ln,) = twin.semilogy(fit.freq_hz[k], np.abs(fit.frf[k]), "-", lw=0.9, alpha=0.55, color=colours[k],
+                                  label=f"|H| {loc} (right axis)")
+            if k < LEGEND_LOCATIONS:
+                handles.append(ln)
+        twin.set_ylabel("|H| measured")
+        ax.set_zorder(twin.get_zorder() + 1)
+        ax.patch.set_visible(False)
+    for code, (marker, colour, name) in STATUS_STYLE.items():
+        sel = status == code
+        if sel.any():
+            (ln,) = ax.plot(f[sel], order[sel], marker, mfc="none", color=colour, ms=4.5, ls="none",
+                            label=name, gid=f"status:{code}")
+            handles.append(ln)
+    chosen = np.atleast_1d(np.asarray(stab.chosen_hz, float))
+    top = float(order.max()) if order.size else 1.0
+    for fc in chosen:
+        ax.axvline(float(fc), color=CHOSEN_COLOUR, lw=0.9, ls="--", zorder=1)
+    if chosen.size:
+        (ln,) = ax.plot(chosen, np.full(chosen.size, top + 1), "*", color=CHOSEN_COLOUR, ms=9, ls="none",
+                        gid="chosen", label=f"chosen poles ({chosen.size}, dashed)")
+        handles.append(ln)
+    log_freq_axis(ax)
+    ax.set_ylim(0, top + 2.5)
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("model order")
+    ax.grid(True, which="major", alpha=0.25)
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.12 if fit is not None else 1.01, 1.0),
+              fontsize=7, frameon=False, borderaxespad=0.0)
+    ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_stabilisation(stab: Any, path: str | Path, *, fit: Any = None, title: str = "stabilisation diagram") -> Figure:
+    """:func:`stabilisation_figure`, saved as PNG at ``path``."""
+    fig = stabilisation_figure(stab, fit=fit, title=title)
+    _save(fig, path)
+    return fig
