@@ -696,9 +696,14 @@ class SimKeysight33500B(SimScpiInstrument):
             if d.burst and d.trig_times and d.trig_times[-1] >= d.t_epoch and \
                     now < d.trig_times[-1] + d.burst_length_s():
                 continue
-            self.ch[n] = replace(d, trig_times=(d.trig_times + (now,))[-64:])
+            start = now + self.trigger_delay(n)
+            self.ch[n] = replace(d, trig_times=(d.trig_times + (start,))[-64:])
             if d.burst and d.on and not d.burst_gated:
-                self.on_burst(n, now, now + d.burst_length_s())
+                self.on_burst(n, start, start + d.burst_length_s())
+
+    def trigger_delay(self, n: int) -> float:
+        """Seconds from a trigger to the triggered burst or sweep (``TRIGger<n>:DELay``)."""
+        return float(self.get("trig_delay", n))
 
     def external_trigger(self) -> None:
         """A rising edge at the rear-panel Ext Trig input (channels with ``TRIG:SOUR EXT``)."""
@@ -769,6 +774,21 @@ class SimRigolDG1000Z(SimKeysight33500B):
         add(S + "SWEep:TRIGger:SOURce", set=self._set_rigol_trig, query=self._rigol_trig_query)
         add(S + "BURSt:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
         add(S + "SWEep:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
+        # burst settings QCoDeS's RigolDG1062 reads on snapshot (DG1000Z Programming Guide,
+        # PGB09103-1110, :SOURce:BURSt and :OUTPut): stored, answered, reset by *RST. TDELay
+        # delays a triggered burst (external/manual trigger: 0 to 100 s). The guide has no
+        # :BURSt:IDLE (a DG4000/DG800 command): -113 here too.
+        self.setting(S + "BURSt:TDELay", "burst_tdelay", 0.0, lambda t: self.num(t, "S", 0.0, 100.0), self.fnum,
+                     True, (0.0, 100.0))
+        self.setting(S + "BURSt:TRIGger:SLOPe", "burst_trig_slope", "POS",
+                     lambda t: parse_enum(t, ["POSitive", "NEGative"]), str, True)
+        self.setting("OUTPut#:GATe:POLarity", "gate_out_pol", "POSITIVE",
+                     lambda t: {"POS": "POSITIVE", "NEG": "NEGATIVE"}[parse_enum(t, ["POSitive", "NEGative"])],
+                     str, True)
+
+    def trigger_delay(self, n: int) -> float:
+        """``:SOURce<n>:BURSt:TDELay``: the burst starts this long after its trigger."""
+        return float(self.get("burst_tdelay", n)) if self.ch[n].burst else 0.0
 
     def _load_query(self, c: Call) -> str:
         load = self.load[self._chan(c)]

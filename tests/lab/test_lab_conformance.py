@@ -257,6 +257,16 @@ DG_ROWS = [
         [(":SOUR1:BURS ON", None), (":SOUR1:BURS?", "ON"), (":SOUR1:BURS:NCYC 5", None),
          (":SOUR1:BURS:NCYC?", "5.000000E+00"), (":SOUR1:BURS:MODE INF", None), (":SOUR1:BURS:MODE?", "INF"),
          (":SOUR1:BURS:TRIG:SOUR MAN", None), (":SOUR1:BURS:TRIG:SOUR?", "MAN")]),
+    Row("DG [:SOURce[<n>]]:BURSt:TDELay (0 to 100 s, *RST 0), :BURSt:TRIGger:SLOPe POSitive|NEGative (*RST "
+        "POSitive), :OUTPut[<n>]:GATe:POLarity POSitive|NEGative (*RST POSitive; answered as the full word, the "
+        "form QCoDeS's RigolDG1062 maps)",
+        [(":SOUR1:BURS:TDEL?;TRIG:SLOP?", "0.000000E+00;POS"), (":OUTP1:GAT:POL?", "POSITIVE"),
+         (":SOUR1:BURS:TDEL 0.25;TRIG:SLOP NEG", None), (":OUTP1:GAT:POL NEGATIVE", None),
+         (":SOUR1:BURS:TDEL?;TRIG:SLOP?", "2.500000E-01;NEG"), (":OUTP1:GAT:POL?", "NEGATIVE"),
+         (":SOUR2:BURS:TDEL?", "0.000000E+00"), ("*RST", None), (":SOUR1:BURS:TDEL?", "0.000000E+00"),
+         (":OUTP1:GAT:POL?", "POSITIVE")]),
+    Row("DG the guide's :SOURce:BURSt subsystem has no :IDLE (QCoDeS's RigolDG1062 asks :BURST:IDLE?): -113",
+        [(":SOUR1:BURST:IDLE?", None)], [-113]),
     Row("DG :SOURce<n>:APPLy:SINusoid <freq>,<amp>,<offset>,<phase> turns the output on",
         [(":SOUR1:APPL:SIN 2000,2,0.5,90", None), (":OUTP1?", "ON"),
          (":SOUR1:APPL?", '"SIN,2.000000E+03,2.000000E+00,5.000000E-01,9.000000E+01"')]),
