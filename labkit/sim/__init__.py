@@ -8,10 +8,10 @@ Public API (``docs/model.md`` is the specification; every "choice" there is a
     r.mean_speed_mm_s, r.contact_fraction, r.patterns, r.summary(), r.to_h5("run.h5")
 
 Modules: :mod:`~labkit.sim.params` (RobotParams, TOML files, validation),
-:mod:`~labkit.sim.excitation` (Shaker, PZT), :mod:`~labkit.sim.model` (SI
-constants, static equilibrium, array layouts), :mod:`~labkit.sim.kernel`
-(numba integrator), :mod:`~labkit.sim.reference` (plain-Python integrator of
-the same scheme), :mod:`~labkit.sim.core` (``simulate``),
+:mod:`~labkit.sim.excitation` (Shaker, PZT), :mod:`~labkit.sim.model` (mass
+matrix, static equilibrium, array layouts), :mod:`~labkit.sim.scheme` (the
+implicit-midpoint scheme with impacts and releases), :mod:`~labkit.sim.kernel`
+(it compiled by numba), :mod:`~labkit.sim.reference` (it as plain Python), :mod:`~labkit.sim.core` (``simulate``),
 :mod:`~labkit.sim.result` (SimResult); sweeps, Monte Carlo and named
 scenarios are in :mod:`~labkit.sim.sweep`, :mod:`~labkit.sim.uncertainty`,
 :mod:`~labkit.sim.scenarios`.
@@ -29,11 +29,13 @@ Switches for ablations and checks (all plain RobotParams fields or
   the paper; the normal load is the compression plus the adhesion force);
 * ``body_no_slip`` (default true): a body-ground impact also stops the body's
   lateral velocity, as a foot impact does;
-* ``base_participation``: how the attachment's acceleration drives the modes
-  (0, the default: the same participation as gravity, so a falling robot does
-  not deform; 1: model.md's literal ``M_i (Cz a_z + Cy a_y)``);
+* ``impact_modes=(1, 1, 1)``: which leg modes take part in an impact (0 holds a
+  mode rigid during it: the stiff-leg limit, the robot rebounds as a whole);
+  ``v_stick_mm_s``: rebounds slower than this stick (ends chattering);
 * ``simulate(..., engine="numba" | "reference")``, ``dt_s``, ``record_dt_s``,
-  ``seed`` (small random start of the free modes), ``transient_s``.
+  ``seed`` (small random start of the free modes), ``transient_s``,
+  ``start_height_um`` (start in the air); :func:`labkit.sim.core.dt_check`
+  (default step against a quarter step, with a chaos probe over seeds).
 """
 from labkit.sim.core import ABLATIONS, simulate
 from labkit.sim.excitation import PZT, Shaker

@@ -59,13 +59,15 @@ _SPECS: dict[str, _Spec] = {
     "knee_to_foot": _Spec("1", 0, True, n=3, doc="knee : foot amplitude ratio per mode (vibrometer spot)"),
     "act_um_per_v": _Spec("um/V", 0, False, n=3,
                           doc="static modal deflection per volt of the PZT drive (actuator gain)"),
-    "foot_mass_fraction": _Spec("1", 0, False, 1, doc="share of a leg's mass concentrated at its foot"),
+    "foot_mass_fraction": _Spec("1", 0, False, 1, doc="kept for old parameter files; does not enter the coupled "
+                                "model (the modal masses carry the legs' weight, docs/model.md M2)"),
     "modal_participation": _Spec("1", 0, True, 1, doc="modal mass M_i = participation x leg mass"),
-    "m_imp_factor": _Spec("1", 0, True, doc="m_i,imp / M_i (effective mass for foot forces)"),
-    "m_dis_factor": _Spec("1", 0, True, doc="m_i,dis / M_i (effective mass for distributed forces)"),
-    "base_participation": _Spec("1", 0, doc="participation of the attachment's acceleration in each mode; "
-                                "0 = the same as gravity's, m_f/m_imp + m_l/m_dis (a falling robot does "
-                                "not deform); 1 = model.md's literal M_i (Cz a_z + Cy a_y)"),
+    "m_imp_factor": _Spec("1", 0, True, doc="m_i,imp / M_i (effective mass for foot forces); must be 1 in "
+                          "the coupled model (one mass matrix, docs/model.md M2)"),
+    "m_dis_factor": _Spec("1", 0, True, doc="m_i,dis / M_i (effective mass for distributed forces); must be 1 "
+                          "in the coupled model"),
+    "base_participation": _Spec("1", 0, doc="kept for old parameter files: 0 or 1, both mean the mass "
+                                "matrix's own coupling (docs/model.md M2); other values are refused"),
     "leg_half_width_mm": _Spec("mm", 0, True, doc="|x_j| of the leg attachments"),
     "leg_pitch_mm": _Spec("mm", 0, False, doc="spacing along y of the leg attachments (y_j in -p, 0, +p)"),
     "leg_z_mm": _Spec("mm", doc="z_j of the leg attachments relative to the body's centre of mass"),
