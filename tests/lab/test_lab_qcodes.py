@@ -98,14 +98,16 @@ def test_qcodes_keysight_33522b_configures_a_sine_and_a_burst(caplog):
         ch.burst_mode("N Cycle")
         ch.burst_ncycles(3)
         ch.trigger_source("BUS")
+        ch.trigger_delay(0.05)                         # TRIGger1:DELay: trigger to burst
         ch.burst_state("ON")
-        assert (ch.burst_mode(), ch.burst_ncycles(), ch.trigger_source(), ch.burst_state()) == \
-            ("N Cycle", 3, "BUS", "ON")
+        assert (ch.burst_mode(), ch.burst_ncycles(), ch.trigger_source(), ch.trigger_delay(), ch.burst_state()) == \
+            ("N Cycle", 3, "BUS", 0.05, "ON")
         before = len(lab.burst_timeline)
+        t0 = lab.now_s()
         fg.force_trigger()
         fg.ask("*OPC?")
-        starts = lab.burst_timeline[before:]
-        assert len(starts) == 1 and starts[0][3] - starts[0][0] == pytest.approx(3 / 1234.5)
+        (start, _, _, end), = lab.burst_timeline[before:]
+        assert start - t0 == pytest.approx(0.05, abs=0.02) and end - start == pytest.approx(3 / 1234.5)
         ch.output("OFF")
         assert fg.error() == OK_KS
 
