@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
 __all__ = ["PNG_DPI", "LOC_COLOURS", "loc_colour", "log_freq_axis", "wrapped_phase_deg", "wrap_x",
-           "mode_label", "mode_marks"]
+           "mode_label", "mode_marks", "style_frf_axes"]
 
 #: PNG resolution (slides, print).
 PNG_DPI = 200
@@ -164,3 +164,17 @@ def mode_marks(am: Axes, ap: Axes | None, modes: Sequence[Mapping[str, Any]], *,
         rows[row] = left + w
         am.text(fx, 1.02 + 0.09 * row, text, transform=tr, fontsize=fontsize, ha=ha, va="bottom",
                 color="0.15", clip_on=False)
+
+
+def style_frf_axes(am: Axes, ap: Axes, ylabel: str) -> None:
+    """The FRF pair's axes: magnitude label, phase ticks every 90 deg, plain-number log frequency
+    axis (:func:`log_freq_axis`), major and minor grids. Call after the data are drawn."""
+    am.set_ylabel(ylabel)
+    ap.set_ylabel("phase (deg)")
+    ap.set_yticks([-180, -90, 0, 90, 180])
+    ap.set_ylim(-190, 190)
+    ap.set_xlabel("frequency (Hz)")
+    log_freq_axis(ap)
+    for ax in (am, ap):
+        ax.grid(True, which="major", alpha=0.35)
+        ax.grid(True, which="minor", alpha=0.12)

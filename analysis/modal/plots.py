@@ -19,7 +19,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from labkit.analysis.plotting import PNG_DPI, loc_colour, log_freq_axis, mode_marks, wrap_x, wrapped_phase_deg
+from labkit.analysis.plotting import (
+    PNG_DPI,
+    loc_colour,
+    log_freq_axis,
+    mode_marks,
+    style_frf_axes,
+    wrap_x,
+    wrapped_phase_deg,
+)
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -100,15 +108,7 @@ def frf_fit_figure(fit: Any, *, title: str = "", units: str = "") -> Figure:
         handles.append(Line2D([], [], ls="none", label=f"... {len(fit.locations) - LEGEND_LOCATIONS} more locations"))
     if fit.modes:
         mode_marks(am, ap, [m.to_dict(fit.locations) for m in fit.modes])
-    am.set_ylabel(f"|H| ({units})" if units and units != "1" else "|H|")
-    ap.set_ylabel("phase (deg)")
-    ap.set_yticks([-180, -90, 0, 90, 180])
-    ap.set_ylim(-190, 190)
-    ap.set_xlabel("frequency (Hz)")
-    log_freq_axis(ap)
-    for ax in (am, ap):
-        ax.grid(True, which="major", alpha=0.35)
-        ax.grid(True, which="minor", alpha=0.12)
+    style_frf_axes(am, ap, f"|H| ({units})" if units and units != "1" else "|H|")
     _legend_outside(am, handles)
     if title:
         fig.suptitle(title, fontsize=10)
