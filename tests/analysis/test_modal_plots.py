@@ -204,3 +204,17 @@ def test_many_locations_stay_readable(tmp_path):
     assert len(legend) == 2 * 8 + 1 and legend[-1] == "... 4 more locations"
     colours = {tuple(_line(fig, f"measured:p{i:02d}").get_markerfacecolor()) for i in range(12)}
     assert len(colours) == 12
+
+
+def test_labkit_fit_writes_its_figures_at_200_dpi(tmp_path, capsys):
+    from fit_runfiles import write_inchip
+    from PIL import Image
+
+    from labkit.cli import main
+
+    run = write_inchip(tmp_path / "inchip.h5", np.geomspace(200, 5000, 300), seed=3)
+    assert main(["fit", str(run), "--out", str(tmp_path / "robot.toml")]) == 0, capsys.readouterr().err
+    for what in ("frf", "stabilisation"):
+        with Image.open(tmp_path / f"robot.fit.inchip.{what}.png") as im:
+            assert im.info["dpi"] == pytest.approx((200, 200), abs=0.01)
+    assert not list(tmp_path.glob("*.svg"))          # PNG only: the fit's output set lists no SVG
