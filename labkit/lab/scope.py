@@ -103,6 +103,13 @@ class SimInfiniiVision(SimScpiInstrument):
     suffix_limits = {"CHAN": 4}
     query_params_default = False
 
+    def fnum(self, value: float) -> str:
+        """An NR3 reply with 13 significant digits, ``+1.000000000000E+00``: what a DSOX1102G
+        (firmware 01.01.2016092800) answers to ``:TIMebase:POSition?`` after ``:TIMebase:POSition
+        1`` (PyMeasure's with-device test, tests/instruments/keysight/test_keysightDSOX1102G.py,
+        test_autoscale). The Programmer's Guide gives the values, not their digits."""
+        return f"{value:+.12E}"
+
     def __init__(self, signals: SignalFn, sync: SyncFn, seed: int = 0,
                  clock: Callable[[], float] = time.monotonic, memory_points: int = 1_000_000) -> None:
         self.signals = signals

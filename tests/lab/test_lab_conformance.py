@@ -201,6 +201,10 @@ IV_ROWS = [
         [(":CHAN1:SCAL 0.5;OFFS 0.1", None), (":CHAN1:SCAL?", 0.5), (":CHAN1:OFFS?", 0.1),
          (":TIM:SCAL 1e-4;POS 0", None), (":TIM:SCAL?", 1e-4), (":TIM:POS?", 0.0)]),
     Row("488.2 7.4.3 tab between header and value", [(":CHAN1:SCAL\t0.2", None), (":CHAN1:SCAL?", 0.2)]),
+    Row("IV NR3 replies: 13 significant digits, as a DSOX1102G answers :TIMebase:POSition? (PyMeasure's "
+        "with-device test)", [(":TIM:POS 1", None), (":TIM:POS?", "+1.000000000000E+00"),
+                              (":CHAN1:SCAL 0.05", None), (":CHAN1:SCAL?", "+5.000000000000E-02")]),
+
     Row("IV :CHANnel<n>, n = 1..4: :CHAN5 is -114 and no value", [(":CHAN5:SCAL?", None)], [-114]),
     Row("IV queries take no MIN/MAX: -108, no reply", [(":TIM:SCAL? MIN", None), (":CHAN1:SCAL? MAX", None)],
         [-108, -108]),
