@@ -548,8 +548,11 @@ class SimRigolDS1000Z(SimInfiniiVision):
                 # InfiniiVision commands the DS1000Z does not have (-113 there)
                 ":DIGitize", ":RSTate", ":ASTate", ":TER", ":OPERegister:CONDition", ":OPERegister[:EVENt]",
                 ":WAVeform:POINts", ":WAVeform:POINts:MODE", ":WAVeform:BYTeorder", ":WAVeform:UNSigned",
-                ":WAVeform:VIEW", ":WAVeform:YORigin", ":TRIGger:FORCe"}
+                ":WAVeform:VIEW", ":WAVeform:YORigin", ":TRIGger:FORCe", ":TRIGger[:EDGE]:SLOPe"}
         self.commands = [cmd for cmd in self.commands if cmd.pattern not in drop]
+        # :TRIGger:EDGe:SLOPe {POSitive|NEGative|RFALl} (DS1000Z guide; no EITHer/ALTernate)
+        self.setting(":TRIGger[:EDGE]:SLOPe", "trig_slope", "POS",
+                     lambda t: parse_enum(t, ["POSitive", "NEGative", "RFALl"]), str)
         self.add(":TFORce", set=lambda c: self._force())
         self.add(":CHANnel#:OFFSet", set=self._set_offset,
                  query=lambda c: self.fnum(self.get("offset", self._ch(c))))

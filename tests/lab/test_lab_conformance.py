@@ -319,6 +319,10 @@ DS_ROWS = [
         [(":CHAN1:SCAL 0.5;OFFS -50", None), (":CHAN1:OFFS?", "-5.000000e+01"),
          (":CHAN1:SCAL 0.2;OFFS 1.5", None), (":CHAN1:OFFS?", "1.500000e+00"),
          (":CHAN1:OFFS 3", None), (":CHAN1:OFFS?", "2.000000e+00")], [-222]),
+    Row("DS :TRIGger:EDGe:SLOPe {POSitive|NEGative|RFALl} (answers POS, NEG, RFAL); the InfiniiVision's "
+        "EITHer is a parameter error", [(":TRIG:EDGE:SLOP?", "POS"), (":TRIG:EDGE:SLOP RFAL", None),
+                                        (":TRIG:EDGE:SLOP?", "RFAL"), (":TRIG:EDGE:SLOP EITH", None),
+                                        (":TRIG:EDGE:SLOP?", "RFAL")], [-224]),
     Row("DS has no InfiniiVision :DIGitize, :OPERegister, :WAVeform:POINts", [
         (":DIG", None), (":OPER:COND?", None), (":WAV:POIN?", None)], [-113, -113, -113]),
     Row("DS :TFORce: a single acquisition waiting in NORMal sweep triggers now", [
