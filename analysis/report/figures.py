@@ -27,6 +27,7 @@ from labkit.analysis.plotting import (
     log_freq_axis,
     mode_label,
     mode_marks,
+    style_frf_axes,
     wrap_x,
     wrapped_phase_deg,
 )
@@ -118,15 +119,7 @@ def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]]
         data["locations"][loc] = entry
     if modes:
         mode_marks(am, ap, modes)
-    am.set_ylabel(f"|FRF| ({units})" if units != "1" else "|transmissibility|")
-    ap.set_ylabel("phase (deg)")
-    ap.set_yticks([-180, -90, 0, 90, 180])
-    ap.set_ylim(-190, 190)
-    ap.set_xlabel("frequency (Hz)")
-    log_freq_axis(ap)
-    for ax in (am, ap):
-        ax.grid(True, which="major", alpha=0.35)
-        ax.grid(True, which="minor", alpha=0.12)
+    style_frf_axes(am, ap, f"|FRF| ({units})" if units != "1" else "|transmissibility|")
     _legend_outside(am)
     if title:
         fig.suptitle(title, fontsize=10)
