@@ -55,7 +55,9 @@ def virtual_lab(cfg: Any, seed: int = 0, lab: Any = None) -> Iterator[tuple[Any,
 
     with (contextlib.nullcontext(lab.start()) if lab is not None else VirtualLab(seed=seed)) as lab:
         res = dict(lab.resources)
-        models = dict(LAB_MODELS)
+        # the driver models of the lab's simulated instruments (a lab served as DG1062Z/DS1104Z needs
+        # the Rigol drivers); the defaults only for a lab object that does not name them
+        models = dict(LAB_MODELS) | dict(getattr(lab, "models", None) or {})
         inst = dict(cfg.instruments)
         for role in ("funcgen", "scope", "vibrometer", "control"):
             if role not in res:
