@@ -1,4 +1,4 @@
-"""The integration scheme of the coupled hybrid model (docs/model.md sections 3-6, 10).
+"""The integration scheme of the coupled hybrid model (docs/model.md, equations M1-M12).
 
 One source, two engines: compiled by numba (:mod:`labkit.sim.kernel`) or run as
 plain Python (:mod:`labkit.sim.reference`), see :mod:`labkit.sim._jit`.
@@ -8,7 +8,7 @@ Everything is on flat float64 arrays so the compiled loop allocates nothing:
   :mod:`labkit.sim.model` (layout ``OFF_*``), ``S``: the state (``S_*``),
   ``mode``: contact mode of the 6 feet and the body (AIR / ADHESION / REST).
 
-The mechanics (docs/model.md section 10, equation numbers M1-M12 there):
+The mechanics (docs/model.md M1-M4):
 generalised coordinates ``q = (y_b, z_b, phi_x, phi_y, phi_z, x_11 .. x_63)``
 (23), one constant symmetric mass matrix ``M``, diagonal modal stiffness
 ``K`` and damping ``D``, constant forces ``f_c`` (gravity minus the static
@@ -24,10 +24,12 @@ One step of length h (implicit midpoint = trapezoidal rule, M5):
 
 where ``alpha_a = h lambda_a`` for a pinned row (``R_a . q1`` = its target at
 t + h) and ``alpha_a = -h c_a (R_a . vbar - v_g)`` for a squeeze-film row (the
-film is implicit: its rate reaches 1e8 1/s near the ground). The small system
-for ``alpha`` is solved by Gauss elimination; ``lambda`` is the contact force,
-used for release. Without damping the scheme conserves the energy of the
-linear system exactly and every linear momentum exactly (to round-off).
+film is implicit: its rate reaches 1e8 1/s near the ground; M6, M7). The small
+system for ``alpha`` is solved by Gauss elimination. Impacts (M9) and releases
+(M10, with the instantaneous contact force of :func:`contact_force`) are events
+located inside the step (:func:`step`). Without damping the scheme conserves
+the energy of the linear system exactly and every linear momentum exactly (to
+round-off; M12).
 """
 from __future__ import annotations
 
