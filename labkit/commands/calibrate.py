@@ -202,7 +202,7 @@ def _run_paper(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _sensitivity_figure(sens: dict[str, Any], path: Path) -> None:
-    """Heat map: change of each observation's violation per parameter step (rows) and observation (columns)."""
+    """Heat map: change of each observation's cost ``tanh(violation)`` per parameter step (rows) and observation."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -211,18 +211,17 @@ def _sensitivity_figure(sens: dict[str, Any], path: Path) -> None:
 
     ids = list(sens["base"])
     rows = sens["rows"]
-    d = np.array([[r["violations"][i] - sens["base"][i] for i in ids] for r in rows])
+    d = np.array([[np.tanh(r["violations"][i]) - np.tanh(sens["base"][i]) for i in ids] for r in rows])
     fig, ax = plt.subplots(figsize=(9.0, 0.28 * len(rows) + 2.4), dpi=100)
     try:
-        lim = max(1e-6, float(np.abs(d).max()))
-        im = ax.imshow(d, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
+        im = ax.imshow(d, cmap="RdBu_r", vmin=-1.0, vmax=1.0, aspect="auto")
         ax.set_xticks(range(len(ids)), ids, rotation=60, ha="right", fontsize=6)
         ax.set_yticks(range(len(rows)), [f"{r['parameter']} {r['direction']}" for r in rows], fontsize=6)
         for y, r in enumerate(rows):
             for x, i in enumerate(ids):
                 if i in r["lost"] or i in r["gained"]:
                     ax.text(x, y, "x" if i in r["lost"] else "o", ha="center", va="center", fontsize=6)
-        fig.colorbar(im, ax=ax, label="change of violation (red: worse)")
+        fig.colorbar(im, ax=ax, label="change of tanh(violation) (red: worse)")
         ax.set_title(f"one-at-a-time sensitivity around {sens.get('params', '')} (x{sens['factor']:g}; "
                      "x: observation lost, o: gained)", fontsize=8)
         fig.tight_layout()
