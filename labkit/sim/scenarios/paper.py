@@ -86,6 +86,12 @@ class PaperScenario:
     measure: Callable[[PointSet], dict[str, float]]
 
 
+def unsigned_speed(ps: PointSet) -> np.ndarray:
+    """Mean over draws of |speed| at every point: the paper compares speeds, not velocities (a
+    tracked robot has no sign), and Monte Carlo robots may walk either way."""
+    return np.abs(ps.speeds_mm_s).mean(axis=1)
+
+
 def _ratio(a: float, b: float, floor: float = 0.0) -> float:
     """``a / b``; NaN (a failed test) when ``b`` is not above ``floor``."""
     return a / b if b > floor and np.isfinite(a) else float("nan")
@@ -104,7 +110,7 @@ def fig8_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER_SHAK
 
 
 def fig8_measure(ps: PointSet) -> dict[str, float]:
-    f, v = ps.values, ps.mean_speed_mm_s
+    f, v = ps.values, unsigned_speed(ps)
     return {"speed_240_hz_mm_s": at(f, v, 240.0),
             "speed_ratio_270_to_200": _ratio(at(f, v, 270.0), at(f, v, 200.0), SPEED_FLOOR_MM_S),
             "speed_rise_near_300_hz_mm_s": band(f, v, 285.0, 330.0) - at(f, v, 270.0),
@@ -146,7 +152,7 @@ def ablations_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER
 def ablations_measure(ps: PointSet) -> dict[str, float]:
     ap = np.nanmean(ps.aperiodicity, axis=1)
     lm = ps.leg_motion_um.mean(axis=1)
-    v = np.abs(ps.mean_speed_mm_s)
+    v = unsigned_speed(ps)
     return {"aperiodicity_full": float(ap[0]), "aperiodicity_gain_no_adhesion": float(ap[1] - ap[0]),
             "leg_motion_ratio_no_squeeze": _ratio(float(lm[2]), float(lm[0])),
             "speed_gain_no_squeeze_mm_s": float(v[2] - v[0])}
@@ -161,7 +167,7 @@ def payload_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER_S
 
 
 def payload_measure(ps: PointSet) -> dict[str, float]:
-    m, v = ps.values, np.abs(ps.mean_speed_mm_s)
+    m, v = ps.values, unsigned_speed(ps)
     low, high = v[m <= 1.6 + 1e-9], v[m >= 2.0 - 1e-9]
     return {"min_speed_to_1_6_mg_mm_s": float(low.min()) if low.size else float("nan"),
             "max_speed_from_2_0_mg_mm_s": float(high.max()) if high.size else float("nan"),
