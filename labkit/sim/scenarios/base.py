@@ -32,6 +32,10 @@ class RunOptions:
     def quick(self) -> bool:
         return self.size == "quick"
 
+    def executor_kw(self) -> dict[str, Any]:
+        """``scheduler``, ``workers``, ``seed``, ``quiet`` as keywords of :func:`labkit.sim.sweep`."""
+        return {"scheduler": self.scheduler, "workers": self.workers, "seed": self.seed, "quiet": self.quiet}
+
     def pick(self, full: Any, small: Any, override: Any = None) -> Any:
         """The scenario's value for this size; an override wins (capped at ``small`` for quick counts)."""
         if override is not None:

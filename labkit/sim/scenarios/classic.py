@@ -44,13 +44,11 @@ def _points(s: Any) -> list[dict[str, Any]]:
            "a few mm/s between 150 and 300 Hz (falling from 200 Hz, a bump near 300 Hz); "
            "no motion from 500 Hz to 1.8 kHz")
 def shaker_speed(params: RobotParams, opts: RunOptions) -> Outcome:
-    quick, draws, duration_s, seed = opts.quick, opts.draws, opts.duration_s, opts.seed
-    scheduler, workers, quiet = opts.scheduler, opts.workers, opts.quiet
     from labkit.sim import Shaker, sweep
 
-    freqs = np.linspace(150, 2000, 40) if not quick else np.array([200.0, 300.0, 800.0])
-    kw = dict(draws=opts.pick(10, 2, draws), duration_s=opts.pick(2.0, 0.1, duration_s),
-              scheduler=scheduler, workers=workers, seed=seed, quiet=quiet)
+    freqs = np.linspace(150, 2000, 40) if not opts.quick else np.array([200.0, 300.0, 800.0])
+    kw = dict(draws=opts.pick(10, 2, opts.draws), duration_s=opts.pick(2.0, 0.1, opts.duration_s),
+              **opts.executor_kw())
     s = sweep(params, Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz", freqs.tolist(), **kw)
     capped = sweep(params, Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz", freqs.tolist(),
                    accel_limit_g=ACCEL_LIMIT_G, **kw)
@@ -96,15 +94,12 @@ PATTERN_SWEEP_UM = (1.0, 2.0, 4.0, 6.25, 9.0, 12.5, 18.75, 25.0, 35.0, 50.0, 70.
            "firm contact at small amplitude, partial (adhesion-held) contact, then jumping "
            "with foot motion far above the tray's")
 def leg_patterns(params: RobotParams, opts: RunOptions) -> Outcome:
-    quick, draws, duration_s, seed = opts.quick, opts.draws, opts.duration_s, opts.seed
-    scheduler, workers, quiet = opts.scheduler, opts.workers, opts.quiet
     from labkit.sim import Shaker, simulate, sweep
 
-    dur = opts.pick(0.5, 0.1, duration_s)
-    amps = np.array(PATTERN_SWEEP_UM) if not quick else np.array([2.0, 25.0])
+    dur = opts.pick(0.5, 0.1, opts.duration_s)
+    amps = np.array(PATTERN_SWEEP_UM) if not opts.quick else np.array([2.0, 25.0])
     s = sweep(params, Shaker(freq_hz=PATTERN_FREQ_HZ, amp_um=amps[0]), "amp_um", amps.tolist(),
-              draws=opts.pick(0, 0, draws), duration_s=dur, scheduler=scheduler, workers=workers,
-              seed=seed, quiet=quiet)
+              draws=opts.pick(0, 0, opts.draws), duration_s=dur, **opts.executor_kw())
     order = {"firm_contact": 0, "partial_contact": 1, "jumping": 2}
     dominant = [s.dominant_pattern(i) for i in range(len(amps))]
     # Traces: the paper's headline 25 um and, for each pattern the map found,
@@ -115,7 +110,7 @@ def leg_patterns(params: RobotParams, opts: RunOptions) -> Outcome:
         if hits:
             picks.add(float(hits[len(hits) // 2]))
     trace_amps = sorted(picks)
-    runs = [(f"{a:g} um", simulate(params, Shaker(freq_hz=PATTERN_FREQ_HZ, amp_um=a), duration_s=dur, seed=seed))
+    runs = [(f"{a:g} um", simulate(params, Shaker(freq_hz=PATTERN_FREQ_HZ, amp_um=a), duration_s=dur, seed=opts.seed))
             for a in trace_amps]
     frac = {p: [s.pattern_counts(i)[p] / (6 * s.draws) for i in range(len(amps))] for p in order}
     seen = [p for p in order if p in dominant]
@@ -160,12 +155,11 @@ LEG_MOTION_RATIO = 1.2
            "without adhesion the partial-contact motion is no longer periodic; "
            "without squeeze-film damping the leg motion grows")
 def ablations(params: RobotParams, opts: RunOptions) -> Outcome:
-    duration_s, seed = opts.duration_s, opts.seed
     from labkit.sim import Shaker, simulate
 
-    dur = opts.pick(1.0, 0.1, duration_s)
+    dur = opts.pick(1.0, 0.1, opts.duration_s)
     sc = Shaker(**ABLATION_SHAKER)
-    runs = [(label, simulate(ablate(params, what), sc, duration_s=dur, seed=seed))
+    runs = [(label, simulate(ablate(params, what), sc, duration_s=dur, seed=opts.seed))
             for label, what in (("full model", "none"), ("no adhesion", "no_adhesion"),
                                 ("no squeeze film", "no_squeeze_film"))]
     info = {label: run_info(r, sc.freq_hz) for label, r in runs}
@@ -186,14 +180,12 @@ def ablations(params: RobotParams, opts: RunOptions) -> Outcome:
 @register("pzt-payload", "speed vs total mass, on-board PZT at 1.8 kHz, tripod, 20 V (paper Fig. 13)",
            "more than 1 mm/s up to about 1.7 mg total mass, stopping above; speed rising between 1.2 and 1.7 mg")
 def pzt_payload(params: RobotParams, opts: RunOptions) -> Outcome:
-    quick, draws, duration_s, seed = opts.quick, opts.draws, opts.duration_s, opts.seed
-    scheduler, workers, quiet = opts.scheduler, opts.workers, opts.quiet
     from labkit.sim import PZT, sweep
 
-    masses = np.round(np.linspace(0.33, 2.5, 14), 3) if not quick else np.array([0.33, 2.5])
+    masses = np.round(np.linspace(0.33, 2.5, 14), 3) if not opts.quick else np.array([0.33, 2.5])
     s = sweep(params, PZT(freq_hz=1800.0, voltage_v=20.0, mass_mg=0.33), "mass_mg", masses.tolist(),
-              draws=opts.pick(10, 2, draws), duration_s=opts.pick(1.0, 0.05, duration_s),
-              scheduler=scheduler, workers=workers, seed=seed, quiet=quiet)
+              draws=opts.pick(10, 2, opts.draws), duration_s=opts.pick(1.0, 0.05, opts.duration_s),
+              **opts.executor_kw())
     mean = s.mean_speed_mm_s
     moving = masses[np.abs(mean) > 1.0]
     limit = float(moving.max()) if moving.size else float("nan")
@@ -214,14 +206,12 @@ def pzt_payload(params: RobotParams, opts: RunOptions) -> Outcome:
 @register("pzt-frequency", "speed vs PZT frequency near the 438 Hz lateral resonance, 20 V (paper Fig. 14)",
            "a speed trend with frequency around the first lateral resonance")
 def pzt_frequency(params: RobotParams, opts: RunOptions) -> Outcome:
-    quick, draws, duration_s, seed = opts.quick, opts.draws, opts.duration_s, opts.seed
-    scheduler, workers, quiet = opts.scheduler, opts.workers, opts.quiet
     from labkit.sim import PZT, sweep
 
-    freqs = np.linspace(250, 650, 17) if not quick else np.array([400.0, 450.0])
+    freqs = np.linspace(250, 650, 17) if not opts.quick else np.array([400.0, 450.0])
     s = sweep(params, PZT(freq_hz=438.0, voltage_v=20.0), "freq_hz", freqs.tolist(),
-              draws=opts.pick(5, 2, draws), duration_s=opts.pick(1.0, 0.05, duration_s),
-              scheduler=scheduler, workers=workers, seed=seed, quiet=quiet)
+              draws=opts.pick(5, 2, opts.draws), duration_s=opts.pick(1.0, 0.05, opts.duration_s),
+              **opts.executor_kw())
     i = int(np.argmax(np.abs(s.mean_speed_mm_s)))
     peak_f = float(s.values[i])
     checks = {"speed_varies_with_frequency": bool(np.ptp(s.mean_speed_mm_s) > 2 * float(np.mean(s.std_speed_mm_s)))}
@@ -243,19 +233,16 @@ ADHESION_FREQS_HZ = (150.0, 200.0, 240.0, 300.0, 400.0, 500.0, 600.0, 800.0, 100
 @register("adhesion", "speed vs shaker frequency for adhesion magnitudes 0-50 uN (25 um; and capped at 5.8 g)",
            "not a paper figure: which adhesion magnitude (if any) gives Fig. 8's behaviour")
 def adhesion(params: RobotParams, opts: RunOptions) -> Outcome:
-    quick, draws, duration_s, seed = opts.quick, opts.draws, opts.duration_s, opts.seed
-    scheduler, workers, quiet = opts.scheduler, opts.workers, opts.quiet
     from labkit.sim import Shaker, sweep
 
     name = ADHESION_FIELD
-    values = ADHESION_VALUES_N if not quick else (0.0, 50e-6)
-    freqs = np.array(ADHESION_FREQS_HZ if not quick else (240.0, 800.0))
-    dur = opts.pick(1.0, 0.05, duration_s)
-    nd = opts.pick(0, 0, draws)
+    values = ADHESION_VALUES_N if not opts.quick else (0.0, 50e-6)
+    freqs = np.array(ADHESION_FREQS_HZ if not opts.quick else (240.0, 800.0))
+    dur = opts.pick(1.0, 0.05, opts.duration_s)
+    nd = opts.pick(0, 0, opts.draws)
     laws = {"25 um": None, f"<= {ACCEL_LIMIT_G:g} g": ACCEL_LIMIT_G}
     sweeps = {(law, v): sweep(params.replace(**{name: v}), Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz",
-                              freqs.tolist(), draws=nd, duration_s=dur, scheduler=scheduler, workers=workers, seed=seed,
-                              quiet=quiet, accel_limit_g=cap)
+                              freqs.tolist(), draws=nd, duration_s=dur, **opts.executor_kw(), accel_limit_g=cap)
               for law, cap in laws.items() for v in values}
 
     def plot(fig):
