@@ -32,3 +32,37 @@ def last_json(proc: subprocess.CompletedProcess) -> dict:
     assert lines, f"no stdout; stderr:\n{proc.stderr}"
     return json.loads(lines[-1])
 
+
+
+def stepped_inchip_toml(instruments: str, freqs_hz, *, locations=("knee",), run_extra: str = "") -> str:
+    """An in-chip config for the virtual lab: a stepped sine of 4 Vpp about 2 V at ``freqs_hz``.
+
+    ``instruments`` holds the ``[instruments.*]`` tables (they differ per test: models,
+    resources, timeouts); ``run_extra`` adds lines to ``[run]``.
+    """
+    locs = ", ".join(f'"{loc}"' for loc in locations)
+    freqs = ", ".join(repr(float(f)) for f in freqs_hz)
+    return f"""[run]
+locations = [{locs}]
+{run_extra}
+{instruments}
+
+[drive]
+amp_vpp = 4.0
+offset_v = 2.0
+
+[frequencies]
+list_hz = [{freqs}]
+
+[method]
+kind = "stepped"
+settle_s = 0.03
+dwell_cycles = 12
+
+[scope]
+drive_channel = 1
+velocity_channel = 2
+
+[vibrometer]
+scale_mm_s_per_v = 25.0
+"""

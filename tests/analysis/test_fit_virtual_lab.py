@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
-from clihelpers import last_json, run_cli
+from clihelpers import last_json, run_cli, stepped_inchip_toml
 from labkit.experiments.session import lab_instruments_toml
 from labkit.sim import RobotParams
 
@@ -29,31 +29,9 @@ def _grid() -> list[float]:
 
 @pytest.mark.slow
 def test_virtual_lab_inchip_sweep_fits_within_one_percent(tmp_path):
-    freqs = ", ".join(repr(float(f)) for f in _grid())
     cfg = tmp_path / "inchip.toml"
-    cfg.write_text(f"""[run]
-locations = ["body", "hip", "knee"]
-on_interlock = "skip"
-{INSTRUMENTS}
-[drive]
-amp_vpp = 4.0
-offset_v = 2.0
-
-[frequencies]
-list_hz = [{freqs}]
-
-[method]
-kind = "stepped"
-settle_s = 0.03
-dwell_cycles = 12
-
-[scope]
-drive_channel = 1
-velocity_channel = 2
-
-[vibrometer]
-scale_mm_s_per_v = 25.0
-""")
+    cfg.write_text(stepped_inchip_toml(INSTRUMENTS, _grid(), locations=("body", "hip", "knee"),
+                                       run_extra='on_interlock = "skip"'))
     run = tmp_path / "run.h5"
     sweep = last_json(run_cli("sweep", "inchip", str(cfg), "--out", str(run), "--lab", "--json", "--quiet"))
     assert sweep["status"] == "complete" and sweep["points_interlocked"] == 0

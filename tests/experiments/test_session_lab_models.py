@@ -10,13 +10,11 @@ from __future__ import annotations
 import h5py
 import numpy as np
 
+from clihelpers import stepped_inchip_toml
 from labkit.experiments.session import run_session
 from labkit.lab import VirtualLab
 
-CONFIG = """[run]
-locations = ["knee"]
-
-[instruments.funcgen]
+INSTRUMENTS = """[instruments.funcgen]
 model = "33500B"
 resource = "TCPIP0::192.0.2.1::5025::SOCKET"
 channel = 1
@@ -31,31 +29,12 @@ timeout_s = 10
 model = "OFV-5000"
 resource = "ASRL/dev/ttyUSB0::INSTR"
 timeout_s = 10
-
-[drive]
-amp_vpp = 4.0
-offset_v = 2.0
-
-[frequencies]
-list_hz = [800.0, 3400.0]
-
-[method]
-kind = "stepped"
-settle_s = 0.03
-dwell_cycles = 12
-
-[scope]
-drive_channel = 1
-velocity_channel = 2
-
-[vibrometer]
-scale_mm_s_per_v = 25.0
 """
 
 
 def test_lab_run_uses_the_drivers_of_the_labs_models(tmp_path):
     cfg = tmp_path / "inchip.toml"
-    cfg.write_text(CONFIG)
+    cfg.write_text(stepped_inchip_toml(INSTRUMENTS, [800.0, 3400.0]))
     out = tmp_path / "run.h5"
     with VirtualLab(seed=4, funcgen_model="DG1062Z", scope_model="DS1104Z", vibrometer_model="OFV-3001",
                     scope_memory_points=200_000) as lab:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from labhelpers import fit_sine, lab, raw, settle  # noqa: F401  (lab, raw are fixtures)
 
+from clihelpers import stepped_inchip_toml
 from labkit.drivers import registry
 from labkit.drivers.funcgen import Keysight33500B
 from labkit.drivers.scope import InfiniiVision
@@ -161,10 +162,7 @@ def test_inchip_run_with_a_rigol_scope_measures_the_commanded_drive(tmp_path):
     with VirtualLab(seed=3, scope_model="DS1104Z", scope_memory_points=200_000) as lab:
         res = lab.resources
         cfg = tmp_path / "inchip.toml"
-        cfg.write_text(f"""[run]
-locations = ["knee"]
-
-[instruments.funcgen]
+        instruments = f"""[instruments.funcgen]
 model = "33500B"
 resource = "{res['funcgen']}"
 
@@ -180,26 +178,8 @@ resource = "{res['vibrometer']}"
 [instruments.control]
 model = "LabControl"
 resource = "{res['control']}"
-
-[drive]
-amp_vpp = 4.0
-offset_v = 2.0
-
-[frequencies]
-list_hz = [800.0, 3400.0]
-
-[method]
-kind = "stepped"
-settle_s = 0.03
-dwell_cycles = 12
-
-[scope]
-drive_channel = 1
-velocity_channel = 2
-
-[vibrometer]
-scale_mm_s_per_v = 25.0
-""")
+"""
+        cfg.write_text(stepped_inchip_toml(instruments, [800.0, 3400.0]))
         out = tmp_path / "run.h5"
         summary = run_session("inchip", cfg, out, quiet=True)
     assert summary["status"] == "complete" and summary["points_ok"] == 2, summary
