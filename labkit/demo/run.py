@@ -273,20 +273,39 @@ def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = Fa
     files["configs"] = sorted(str(p) for p in (out / "configs").glob("*.toml"))
 
     # 5. tracking
-    from labkit.analysis.tracking import track_file
+    from labkit.analysis.tracking import Scale, track_file
 
     points = shaker_points(shaker)
     with st.stage("track", f"tracking {sum(1 for p in points if p['video'])} videos"):
+        # Each video is scaled by the robot's length in it. A robot that stood still (no walk at
+        # that drive) cannot be told from dust without a scale, so those videos are tracked again
+        # with the scale the other videos of the same run found (one camera, one zoom), as a user
+        # at the bench would calibrate once per session.
+        scales: list[tuple[float, float]] = []
+        unscaled: list[tuple[dict[str, Any], Path, Path, InputError]] = []
         for p in points:
             if not p["video"]:
                 continue
             video = (shaker.parent / p["video"]).resolve()     # absolute: the track names its video
             track_path = out / "tracks" / f"{video.stem}.h5"
-            summ = track_file(video, out=track_path, quiet=True).summary
-            p.update(track=str(track_path), speed_mm_s=float(summ["mean_speed_mm_s"]),
-                     speed_ci_mm_s=[float(v) for v in summ["speed_ci_mm_s"]],
-                     frames=int(summ["frames"]), lost_frames=int(summ["lost_frames"]),
-                     degraded_frames=int(summ.get("degraded_frames", 0)))
+            try:
+                summ = track_file(video, out=track_path, quiet=True).summary
+            except InputError as exc:
+                unscaled.append((p, video, track_path, exc))
+                continue
+            scales.append((float(summ["mm_per_px"]), float(summ["mm_per_px_std"])))
+            _record_track(p, track_path, summ)
+        if unscaled and not scales:
+            raise unscaled[0][3]
+        if unscaled:
+            mm = np.array([m for m, _ in scales])
+            run_scale = Scale(float(np.mean(mm)), float(max(np.std(mm), np.mean([d for _, d in scales]))),
+                              "other videos of the run", {"videos": len(scales)})
+            for p, video, track_path, _exc in unscaled:
+                summ = track_file(video, out=track_path, quiet=True, scale=run_scale).summary
+                _record_track(p, track_path, summ)
+                notes.append(f"{video.name}: scaled by the other videos of the run "
+                             f"({run_scale.mm_per_px:.5f} mm/px; the robot did not walk enough to measure it)")
     tracks = [p["track"] for p in points if p.get("track")]
     files["tracks"] = tracks
     files["videos"] = [str(shaker.parent / p["video"]) for p in points if p["video"]]
@@ -405,6 +424,14 @@ def fit_and_assign(runs: list[str], out: Path, base_file: Path, notes: list[str]
                      "(the tethered robot shows a tether mode and an in-chip knee mode instead)",
         "recorded_in": str(out) + " [provenance] assignment_rule / assignment"}
     return summ
+
+
+def _record_track(p: dict[str, Any], track_path: Path, summ: dict[str, Any]) -> None:
+    """Put a track's headline numbers on its shaker point."""
+    p.update(track=str(track_path), speed_mm_s=float(summ["mean_speed_mm_s"]),
+             speed_ci_mm_s=[float(v) for v in summ["speed_ci_mm_s"]],
+             frames=int(summ["frames"]), lost_frames=int(summ["lost_frames"]),
+             degraded_frames=int(summ.get("degraded_frames", 0)))
 
 
 def shaker_points(path: Path) -> list[dict[str, Any]]:
