@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from labkit.analysis.modal.io import RunChannels, _clean
+from labkit.analysis.modal.io import RunChannels
 from labkit.errors import InputError
 
 __all__ = ["read_uff", "read_csv", "read_touchstone", "parse_columns", "write_uff", "UFF_SUFFIXES",
@@ -94,13 +94,7 @@ def read_uff(path: str | Path, *, kind: str | None = None) -> RunChannels:
         h = np.asarray(s["data"])
         if not np.iscomplexobj(h):
             out.warnings.append(f"{path}: {name} holds real values; fitted as a real FRF")
-        f, h, q, bad = _clean(path, name, f, h.astype(complex), np.ones(f.size), 0.0)
-        out.dropped += bad
-        if f.size:
-            out.names.append(name)
-            out.freq_hz.append(f)
-            out.frf.append(h)
-            out.quality.append(q)
+        out.add(name, name, f, h.astype(complex))
     if kind is not None:
         out.frf_kind = kind
     elif len(kinds) == 1 and "?" not in kinds:
@@ -261,13 +255,7 @@ def read_csv(path: str | Path, *, columns: str | None = None, kind: str | None =
         else:
             mag = 10 ** (a / 20) if ra == "db" else a
             h = mag * np.exp(1j * (np.radians(b) if rb == "deg" else b))
-        fr, hh, q, bad = _clean(path, name, f.copy(), h, np.ones(f.size), 0.0)
-        out.dropped += bad
-        if fr.size:
-            out.names.append(name)
-            out.freq_hz.append(fr)
-            out.frf.append(hh)
-            out.quality.append(q)
+        out.add(name, name, f, h)
     return _finish(out)
 
 
@@ -293,13 +281,7 @@ def read_touchstone(path: str | Path, *, columns: str | None = None, kind: str |
     out = RunChannels(path, "touchstone", "frf", "complete", frf_kind=kind or "scattering", units="1")
     for w in wanted:
         i, j = int(w[1]) - 1, int(w[2]) - 1
-        fr, h, q, bad = _clean(path, w, f.copy(), s[:, i, j].astype(complex), np.ones(f.size), 0.0)
-        out.dropped += bad
-        if fr.size:
-            out.names.append(w)
-            out.freq_hz.append(fr)
-            out.frf.append(h)
-            out.quality.append(q)
+        out.add(w, w, f, s[:, i, j].astype(complex))
     return _finish(out)
 
 

@@ -62,6 +62,20 @@ class RunChannels:
         if not self.units:
             self.units = FRF_UNITS.get(self.group, "")
 
+    def add(self, name: str, key: str, f: np.ndarray, h: np.ndarray, q: np.ndarray | None = None,
+            min_quality: float = 0.0) -> bool:
+        """Keep channel ``name`` without its unusable lines (non-finite, ``f <= 0``, quality below
+        ``min_quality``; counted in :attr:`dropped`). False when no line is left (nothing kept)."""
+        fr, hh, qq, bad = _clean(self.path, key, f, h, np.ones(f.size) if q is None else q, min_quality)
+        self.dropped += bad
+        if not fr.size:
+            return False
+        self.names.append(name)
+        self.freq_hz.append(fr)
+        self.frf.append(hh)
+        self.quality.append(qq)
+        return True
+
 
 def _clean(path: str, key: str, f: np.ndarray, h: np.ndarray, q: np.ndarray, min_quality: float):
     if not (f.shape == h.shape == q.shape):
@@ -91,16 +105,9 @@ def read_run(path: str | Path, *, min_quality: float = 0.0) -> RunChannels:
             if "freq_hz" not in lg.columns or "frf" not in lg.columns:
                 name = "freq_hz" if "freq_hz" not in lg.columns else "frf"
                 raise InputError("missing dataset", file=path, key=f"locations/{loc}/{name}")
-            fr, h, q, bad = _clean(path, f"locations/{loc}", lg.freq_hz.astype(float), lg.frf.astype(complex),
-                                   lg.quality.astype(float), min_quality)
-            out.dropped += bad
-            if fr.size == 0:
+            if not out.add(loc, f"locations/{loc}", lg.freq_hz.astype(float), lg.frf.astype(complex),
+                           lg.quality.astype(float), min_quality):
                 out.warnings.append(f"{path}: location {loc} has no usable lines")
-                continue
-            out.names.append(loc)
-            out.freq_hz.append(fr)
-            out.frf.append(h)
-            out.quality.append(q)
     else:
         out = RunChannels(path, run.kind, "shaker", status)
         pts = run.points
@@ -112,13 +119,8 @@ def read_run(path: str | Path, *, min_quality: float = 0.0) -> RunChannels:
         h = np.asarray(pts["transmissibility"], dtype=complex)
         q = np.asarray(pts["quality"], dtype=float) if "quality" in pts else np.ones(n)
         sel = run.ok
-        fr, h, q, bad = _clean(path, "points", fr[sel], h[sel], q[sel], min_quality)
-        out.dropped += bad + int(np.sum(~sel))
-        if fr.size:
-            out.names.append(run.robot_spot if run.robot_spot != "?" else "robot")
-            out.freq_hz.append(fr)
-            out.frf.append(h)
-            out.quality.append(q)
+        out.dropped += int(np.sum(~sel))
+        out.add(run.robot_spot if run.robot_spot != "?" else "robot", "points", fr[sel], h[sel], q[sel], min_quality)
     if not out.names:
         raise InputError("no usable FRF lines (all NaN, interlocked or below --min-quality)", file=path)
     if not status.startswith("complete"):
