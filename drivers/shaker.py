@@ -25,6 +25,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from labkit import specs
 from labkit.errors import ConfigError, LimitError
 
 SQRT2 = math.sqrt(2.0)
@@ -108,12 +109,12 @@ class Amplifier2718:
 class Shaker4809Envelope:
     """The B&K 4809's operating envelope; :meth:`check` rejects a drive outside it."""
 
-    freq_min_hz: float = 10.0
-    freq_max_hz: float = 20e3
-    force_peak_n: float = 44.5
-    stroke_peak_mm: float = 4.0
-    velocity_peak_m_s: float = 1.65
-    moving_mass_kg: float = 0.060
+    freq_min_hz: float = specs.BK4809_FREQ_MIN_HZ
+    freq_max_hz: float = specs.BK4809_FREQ_MAX_HZ
+    force_peak_n: float = specs.BK4809_FORCE_PEAK_N
+    stroke_peak_mm: float = specs.BK4809_STROKE_PEAK_MM
+    velocity_peak_m_s: float = specs.BK4809_VELOCITY_PEAK_M_S
+    moving_mass_kg: float = specs.BK4809_MOVING_MASS_KG
     model: str = field(default="B&K 4809", init=False)
 
     def check(self, freq_hz: float, disp_amp_um: float,

@@ -64,6 +64,7 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from labkit import specs
 from labkit.errors import InputError
 
 G0_M_S2 = 9.80665
@@ -78,11 +79,11 @@ class ShakerLaw:
     ref_drive_vpp: float = 8.0
     suspension_hz: float = 150.0
     suspension_damping_ratio: float = 0.5
-    force_peak_n: float = 44.5
-    moving_mass_kg: float = 0.060
+    force_peak_n: float = specs.BK4809_FORCE_PEAK_N
+    moving_mass_kg: float = specs.BK4809_MOVING_MASS_KG
     tray_mass_kg: float = 0.0
-    stroke_peak_mm: float = 4.0
-    velocity_peak_m_s: float = 1.65
+    stroke_peak_mm: float = specs.BK4809_STROKE_PEAK_MM
+    velocity_peak_m_s: float = specs.BK4809_VELOCITY_PEAK_M_S
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
