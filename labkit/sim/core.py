@@ -31,10 +31,10 @@ from labkit.sim.params import RobotParams
 from labkit.sim.result import SimResult, classify_pattern, foot_period
 
 #: Default step: this many steps per period of the fastest of (highest mode, drive) ...
-STEPS_PER_PERIOD = 50
+STEPS_PER_PERIOD = 80
 #: ... and at least this many per period of a shaker (the tray's acceleration A w^2 sets
 #: how fast contact forces change; measured: docs/model.md section "Numerics").
-SHAKER_STEPS_PER_PERIOD = 240
+SHAKER_STEPS_PER_PERIOD = 40
 #: Default recording interval: at most 1e-4 s, and at least 20 samples per drive period.
 RECORD_DT_MAX_S = 1e-4
 RECORD_PER_PERIOD = 20

@@ -140,22 +140,28 @@ class Model:
         M = self.mass
         Minv = np.linalg.inv(M)
         Minv = 0.5 * (Minv + Minv.T)
-        S = 2 * M + dt * np.diag(self.damp) + 0.5 * dt * dt * np.diag(self.stiff)
-        Sinv = np.linalg.inv(S)
         RI = np.zeros((NQ, K.NI))
         RI[:, :NR] = self.rows
         for k in range(18):
             RI[NB + k, NR + k] = 1.0
         MRI = Minv @ RI
         WI = RI.T @ MRI
-        Z = Sinv @ self.rows
-        Q = self.rows.T @ Z
-        for off, arr in ((K.OFF_M, M), (K.OFF_MINV, Minv), (K.OFF_SINV, Sinv), (K.OFF_RI, RI), (K.OFF_MRI, MRI),
-                         (K.OFF_WI, WI), (K.OFF_Z, Z), (K.OFF_Q, Q), (K.OFF_K, self.stiff), (K.OFF_D, self.damp),
+        for off, arr in ((K.OFF_M, M), (K.OFF_MINV, Minv), (K.OFF_RT, RI.T), (K.OFF_MRT, MRI.T),
+                         (K.OFF_WI, WI), (K.OFF_K, self.stiff), (K.OFF_D, self.damp),
                          (K.OFF_FC, self.f_const), (K.OFF_FA, self.f_act), (K.OFF_KV, self.knee),
                          (K.OFF_YFEQ, self.y_foot_eq), (K.OFF_HELD, self.held)):
             flat = np.ascontiguousarray(arr, dtype=float).ravel()
             A[off:off + flat.size] = flat
+        # the step's matrices for dt and its halvings (exact powers of two: the scheme
+        # recognises a level by h == dt / 2^k)
+        for lev in range(K.NLEV):
+            h = dt * 0.5 ** lev
+            Sinv = np.linalg.inv(2 * M + h * np.diag(self.damp) + 0.5 * h * h * np.diag(self.stiff))
+            Z = Sinv @ self.rows
+            base = K.OFF_LEV + lev * K.LEV_SIZE
+            for off, arr in ((K.LEV_SINV, Sinv), (K.LEV_ZT, Z.T), (K.LEV_Q, self.rows.T @ Z)):
+                flat = np.ascontiguousarray(arr, dtype=float).ravel()
+                A[base + off:base + off + flat.size] = flat
         return P, A
 
     # ---------------------------------------------------------------- invariants

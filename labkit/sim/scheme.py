@@ -50,6 +50,18 @@ AIR, ADHESION, REST = 0, 1, 2
 #: at the midpoint gap of the first (second order; the first alone freezes them at the
 #: step's start, a first-order error where the gap changes fast).
 FILM_PASSES = 2
+#: Sub-steps (:func:`film_too_coarse`): a step is halved when a squeeze film's gap changes
+#: by more than this factor over it ...
+FILM_RATIO = 1.5
+#: ... unless the film would take less than this fraction of the row's velocity in a step.
+FILM_WEAK = 0.05
+#: The second film pass is skipped when it would change no film's effect on its row's
+#: velocity by more than this fraction (weak films far from the ground).
+FILM_PASS_SKIP = 1e-6
+EVENT_REFINE = False
+#: A film row whose film takes more than this fraction of its velocity in a step (h c / m_row)
+#: gets its end velocity relaxed to the step's mean relative velocity (:func:`advance`).
+FILM_STIFF_MIN = 0.01
 #: A point reaching the ground slower than this (m/s) touches down: it is pinned without an
 #: impact being counted (round-off approach speeds of a foot that was just released).
 V_TOUCH = 1e-9
@@ -62,20 +74,26 @@ P_SIZE = 22
 # ---- matrices A (row-major blocks)
 OFF_M = 0
 OFF_MINV = OFF_M + NQ * NQ
-OFF_SINV = OFF_MINV + NQ * NQ          # (2M + dt D + dt^2/2 K)^-1 for the default step
-OFF_RI = OFF_SINV + NQ * NQ            # NQ x NI: contact rows then mode rows (columns)
-OFF_MRI = OFF_RI + NQ * NI             # M^-1 RI
-OFF_WI = OFF_MRI + NQ * NI             # RI^T M^-1 RI
-OFF_Z = OFF_WI + NI * NI               # NQ x NR: Sinv R
-OFF_Q = OFF_Z + NQ * NR                # NR x NR: R^T Sinv R
-OFF_K = OFF_Q + NR * NR                # diagonal of K
+OFF_RT = OFF_MINV + NQ * NQ            # NI x NQ: contact rows then mode rows (R_I^T, rows contiguous)
+OFF_MRT = OFF_RT + NI * NQ             # NI x NQ: (M^-1 R_I)^T
+OFF_WI = OFF_MRT + NI * NQ             # R_I^T M^-1 R_I
+OFF_K = OFF_WI + NI * NI               # diagonal of K
 OFF_D = OFF_K + NQ
 OFF_FC = OFF_D + NQ                    # constant forces (deviation coordinates)
 OFF_FA = OFF_FC + NQ                   # actuator forces per volt (tripod phases included)
 OFF_KV = OFF_FA + NQ                   # 6 x NQ: knee vertical velocity rows
 OFF_YFEQ = OFF_KV + 6 * NQ             # 6: lateral foot position at rest
 OFF_HELD = OFF_YFEQ + 6                # 18: 1 = the mode is held rigid in impacts
-A_SIZE = OFF_HELD + 18
+#: Step levels with cached matrices: the default step dt and its halvings dt / 2^k,
+#: k < NLEV (the sub-steps of :func:`integrate`); other lengths (partial steps up to
+#: an event) solve their own system.
+NLEV = 7
+OFF_LEV = OFF_HELD + 18                # per level: Sinv, Z, Q below
+LEV_SINV = 0                           # (2M + h D + h^2/2 K)^-1
+LEV_ZT = LEV_SINV + NQ * NQ            # NR x NQ: (Sinv R)^T
+LEV_Q = LEV_ZT + NR * NQ               # NR x NR: R^T Sinv R
+LEV_SIZE = LEV_Q + NR * NR
+A_SIZE = OFF_LEV + NLEV * LEV_SIZE
 
 # ---- state S
 S_Q = 0
@@ -84,7 +102,9 @@ S_TC = S_V + NQ          # time in contact per foot
 S_YPIN = S_TC + 6        # lateral position where a pinned foot is held
 S_LAM = S_YPIN + 6       # last contact force per row (N; + pushes the foot up)
 S_SLIP = S_LAM + NR      # friction force of a slipping pinned foot (0: it sticks)
-S_SIZE = S_SLIP + 6
+S_FV = S_SLIP + 6        # per film row (feet z, body z): its mean velocity relative to the ground
+S_FH = S_FV + 7          # over the last step, and that step's length (0: none; M7)
+S_SIZE = S_FH + 7
 
 # ---- recorded trajectory columns (SI)
 REC_T, REC_Y, REC_Z, REC_PH, REC_ZG, REC_FZ, REC_FY, REC_KV = 0, 1, 2, 3, 6, 7, 13, 19
@@ -118,8 +138,8 @@ W_GAP0 = W_V1 + NQ        # 7 gaps at the start
 W_GAP1 = W_GAP0 + 7       # 7 gaps at the end of a trial
 W_VREL = W_GAP1 + 7
 W_FI = W_VREL + 7         # forces at a state (contact_force)
-W_MF = W_FI + NQ          # M^-1 times them
-W_LI0 = W_MF + NQ         # instantaneous contact forces at the start of a trial (NR)
+W_RY = W_FI + NQ          # R_a . Sinv r per active row (NI)
+W_LI0 = W_RY + NI         # instantaneous contact forces at the start of a trial (NR)
 W_LI1 = W_LI0 + NR        # ... at its end
 W_G0 = W_LI1 + NR         # release margins at the start (7: feet, body)
 W_CT = W_G0 + 7           # time at which W_LI1 holds the contact forces of the current state (cache)
@@ -211,10 +231,11 @@ def gauss(Am, oa, lda, Bm, ob, ldb, n, m):
 
 @jit
 def row_dot(A, r, x, xo):
-    """Contact/impulse row r (column r of RI) dotted with x[xo:xo+NQ]."""
+    """Contact/impulse row r dotted with x[xo:xo+NQ]."""
     s = 0.0
+    o = OFF_RT + r * NQ
     for i in range(NQ):
-        s += A[OFF_RI + i * NI + r] * x[xo + i]
+        s += A[o + i] * x[xo + i]
     return s
 
 
@@ -241,19 +262,19 @@ def forces(P, A, S, mode, t_mid, q, qo, v, vo, F, fo):
                 vz = 0.0
                 vy = 0.0
                 for i in range(NQ):
-                    vz += A[OFF_RI + i * NI + j] * v[vo + i]
-                    vy += A[OFF_RI + i * NI + 6 + j] * v[vo + i]
+                    vz += A[OFF_RT + j * NQ + i] * v[vo + i]
+                    vy += A[OFF_RT + (6 + j) * NQ + i] * v[vo + i]
                 fz = -ad * vz * abs(vz)
                 fy = -ad * vy * abs(vy)
                 for i in range(NQ):
-                    F[fo + i] += A[OFF_RI + i * NI + j] * fz + A[OFF_RI + i * NI + 6 + j] * fy
+                    F[fo + i] += A[OFF_RT + j * NQ + i] * fz + A[OFF_RT + (6 + j) * NQ + i] * fy
         F[fo + 0] -= ad * v[vo + 0] * abs(v[vo + 0])
         F[fo + 1] -= ad * v[vo + 1] * abs(v[vo + 1])
     for j in range(6):
         fr = S[S_SLIP + j]
         if mode[j] != AIR and fr != 0.0:
             for i in range(NQ):
-                F[fo + i] += A[OFF_RI + i * NI + 6 + j] * fr
+                F[fo + i] += A[OFF_RT + (6 + j) * NQ + i] * fr
 
 
 @jit
@@ -306,11 +327,22 @@ def row_target(P, S, r, zg):
 
 
 @jit
+def step_level(P, h):
+    """k when h is the default step halved k times (k < NLEV; its matrices are cached), else -1."""
+    hk = P[P_DT]
+    for k in range(NLEV):
+        if h == hk:
+            return k
+        hk *= 0.5
+    return -1
+
+
+@jit
 def advance(P, A, S, mode, t, h, W, I, out):
     """One midpoint step of length h from S (M5); the end state goes to ``out`` (q, v, lam).
 
-    ``h`` equal to the default step uses the precomputed inverse; any other
-    length (a partial step up to an event) solves its own system.
+    ``h`` equal to the default step or one of its halvings (:func:`step_level`) uses the
+    cached inverse; any other length (a partial step up to an event) solves its own system.
     """
     for i in range(NQ):
         W[W_Q0 + i] = S[S_Q + i]
@@ -322,12 +354,14 @@ def advance(P, A, S, mode, t, h, W, I, out):
         for k in range(NQ):
             s += A[OFF_M + i * NQ + k] * W[W_V0 + k]
         W[W_R + i] = 2.0 * s + h * (W[W_F + i] - A[OFF_K + i] * W[W_Q0 + i])
-    full = h == P[P_DT]
+    lev = step_level(P, h)
+    full = lev >= 0
+    base = OFF_LEV + lev * LEV_SIZE
     if full:
         for i in range(NQ):
             s = 0.0
             for k in range(NQ):
-                s += A[OFF_SINV + i * NQ + k] * W[W_R + k]
+                s += A[base + LEV_SINV + i * NQ + k] * W[W_R + k]
             W[W_Y0 + i] = s
     else:
         for i in range(NQ):
@@ -336,7 +370,7 @@ def advance(P, A, S, mode, t, h, W, I, out):
             W[W_SM + i * NQ + i] += h * A[OFF_D + i] + 0.5 * h * h * A[OFF_K + i]
             W[W_B + i * (1 + NR)] = W[W_R + i]
             for r in range(NR):
-                W[W_B + i * (1 + NR) + 1 + r] = A[OFF_RI + i * NI + r]
+                W[W_B + i * (1 + NR) + 1 + r] = A[OFF_RT + r * NQ + i]
         gauss(W, W_SM, NQ, W, W_B, 1 + NR, NQ, 1 + NR)
         for i in range(NQ):
             W[W_Y0 + i] = W[W_B + i * (1 + NR)]
@@ -346,7 +380,7 @@ def advance(P, A, S, mode, t, h, W, I, out):
             for b in range(NR):
                 s = 0.0
                 for i in range(NQ):
-                    s += A[OFF_RI + i * NI + a] * W[W_ZH + i * NR + b]
+                    s += A[OFF_RT + a * NQ + i] * W[W_ZH + i * NR + b]
                 W[W_QH + a * NR + b] = s
     zg1, vg1, _ = ground(P, t + h)
     zg0, _, _ = ground(P, t)
@@ -354,53 +388,65 @@ def advance(P, A, S, mode, t, h, W, I, out):
     # by its film follows the ground's displacement exactly and does not sink into it
     vgm = (zg1 - zg0) / h
     n = active_rows(P, A, S, mode, t, I, W)
+    # per active row, what does not change between the passes: R_a . Sinv r and the
+    # right-hand side of a pinned row (W_T), its position at the start (film rows, W_LAMS)
+    for a in range(n):
+        ra = I[I_ROWS + a]
+        W[W_RY + a] = row_dot(A, ra, W, W_Y0)
+        if I[I_KIND + a] == 1:
+            W[W_T + a] = (row_target(P, S, ra, zg1) - row_dot(A, ra, W, W_Q0)) / h - W[W_RY + a]
+        else:
+            W[W_T + a] = row_dot(A, ra, W, W_Q0)
     for it in range(FILM_PASSES):
         if it > 0:
-            # the films' coefficients again, at the gap of the step's midpoint (M7)
-            nfilm = 0
+            # the films' coefficients again, at the gap of the step's midpoint (M7); a
+            # pass that would change no film's effect by 1e-6 of its row's velocity is skipped
+            change = 0.0
             for a in range(n):
                 if I[I_KIND + a] == 0:
-                    nfilm += 1
                     ra = I[I_ROWS + a]
                     off = P[P_H0] if ra == ROW_BZ else 0.0
-                    g0 = row_dot(A, ra, W, W_Q0) + off - zg0
-                    g1 = row_dot(A, ra, W, W_Q0) + off - zg1 + h * row_dot(A, ra, W, W_VB)
+                    g0 = W[W_T + a] + off - zg0
+                    g1 = W[W_T + a] + off - zg1 + h * row_dot(A, ra, W, W_VB)
                     hm = 0.5 * (g0 + g1)
                     if hm < P[P_HMIN]:
                         hm = P[P_HMIN]
-                    W[W_C + a] = (P[P_BGB] if ra == ROW_BZ else P[P_BGF]) / (hm * hm * hm)
-            if nfilm == 0:
+                    c = (P[P_BGB] if ra == ROW_BZ else P[P_BGF]) / (hm * hm * hm)
+                    d = abs(c - W[W_C + a]) * h * A[OFF_WI + ra * NI + ra]
+                    if d > change:
+                        change = d
+                    W[W_C + a] = c
+            if change < FILM_PASS_SKIP:
                 break
         for a in range(n):
             ra = I[I_ROWS + a]
-            ry = 0.0
-            for i in range(NQ):
-                ry += A[OFF_RI + i * NI + ra] * W[W_Y0 + i]
+            kind = I[I_KIND + a]
             for b in range(n):
                 rb = I[I_ROWS + b]
-                qab = A[OFF_Q + ra * NR + rb] if full else W[W_QH + ra * NR + rb]
-                if I[I_KIND + a] == 1:
+                qab = A[base + LEV_Q + ra * NR + rb] if full else W[W_QH + ra * NR + rb]
+                if kind == 1:
                     W[W_AS + a * NI + b] = qab
                 else:
                     W[W_AS + a * NI + b] = h * W[W_C + a] * qab + (1.0 if a == b else 0.0)
-            if I[I_KIND + a] == 1:
-                tgt = row_target(P, S, ra, zg1)
-                rq = 0.0
-                for i in range(NQ):
-                    rq += A[OFF_RI + i * NI + ra] * W[W_Q0 + i]
-                W[W_BS + a] = (tgt - rq) / h - ry
+            if kind == 1:
+                W[W_BS + a] = W[W_T + a]
             else:
                 vg = vgm if ra != ROW_BY else 0.0
-                W[W_BS + a] = -h * W[W_C + a] * (ry - vg)
+                W[W_BS + a] = -h * W[W_C + a] * (W[W_RY + a] - vg)
         if n > 0:
             gauss(W, W_AS, NI, W, W_BS, 1, n, 1)
         for i in range(NQ):
-            s = W[W_Y0 + i]
-            for a in range(n):
-                ra = I[I_ROWS + a]
-                z = A[OFF_Z + i * NR + ra] if full else W[W_ZH + i * NR + ra]
-                s += z * W[W_BS + a]
-            W[W_VB + i] = s
+            W[W_VB + i] = W[W_Y0 + i]
+        for a in range(n):
+            ra = I[I_ROWS + a]
+            al = W[W_BS + a]
+            if full:
+                o = base + LEV_ZT + ra * NQ
+                for i in range(NQ):
+                    W[W_VB + i] += A[o + i] * al
+            else:
+                for i in range(NQ):
+                    W[W_VB + i] += W[W_ZH + i * NR + ra] * al
     for r in range(NR):
         out[S_LAM + r] = 0.0
     for a in range(n):
@@ -413,14 +459,36 @@ def advance(P, A, S, mode, t, h, W, I, out):
         out[k] = S[k]
     for k in range(S_SLIP, S_SIZE):
         out[k] = S[k]
-    # pinned rows: velocities exactly the ground's (an impulse through the constraints, M8)
+    # pinned rows: velocities exactly the ground's (an impulse through the constraints, M8).
+    # Stiff film rows (M7): the midpoint's v1 = 2 vbar - v0 would carry any deviation of the
+    # row's velocity from the film's quasi-static one unchanged, with its sign flipped, to
+    # every later step (the trapezoidal rule does not damp infinitely stiff components). The
+    # end velocity relative to the ground is instead extrapolated from the mean relative
+    # velocities of this step and the last (second order), weight x / (1 + x), x = h c / m_row.
+    for j in range(7):
+        out[S_FH + j] = 0.0
     m = 0
     for a in range(n):
+        ra = I[I_ROWS + a]
         if I[I_KIND + a] == 1:
-            ra = I[I_ROWS + a]
             I[I_ROWS + m] = ra
             W[W_T + m] = vg1 if (ra < 6 or ra == ROW_BZ) else 0.0
             m += 1
+        elif ra < 6 or ra == ROW_BZ:
+            j = ra if ra < 6 else 6
+            vrel = row_dot(A, ra, W, W_VB) - vgm
+            out[S_FV + j] = vrel
+            out[S_FH + j] = h
+            x = h * W[W_C + a] * A[OFF_WI + ra * NI + ra]
+            if x > FILM_STIFF_MIN:
+                hp = S[S_FH + j]
+                end = vrel
+                if hp > 0.0:
+                    end += h * (vrel - S[S_FV + j]) / (h + hp)
+                w = x / (1.0 + x)
+                I[I_ROWS + m] = ra
+                W[W_T + m] = (1.0 - w) * row_dot(A, ra, out, S_V) + w * (vg1 + end)
+                m += 1
     if m > 0:
         impulse(A, out, S_V, I, W, m)
 
@@ -435,11 +503,11 @@ def impulse(A, X, xo, I, W, m):
             W[W_AS + a * NI + b] = A[OFF_WI + ra * NI + I[I_ROWS + b]]
         W[W_BS + a] = W[W_T + a] - row_dot(A, ra, X, xo)
     gauss(W, W_AS, NI, W, W_BS, 1, m, 1)
-    for i in range(NQ):
-        s = 0.0
-        for a in range(m):
-            s += A[OFF_MRI + i * NI + I[I_ROWS + a]] * W[W_BS + a]
-        X[xo + i] += s
+    for a in range(m):
+        o = OFF_MRT + I[I_ROWS + a] * NQ
+        p = W[W_BS + a]
+        for i in range(NQ):
+            X[xo + i] += A[o + i] * p
 
 
 @jit
@@ -606,16 +674,11 @@ def contact_force(P, A, S, mode, t, tv, W, I, o):
                 h = gap if gap > hmin else hmin
                 fz = -P[P_BGF] / (h * h * h) * (row_dot(A, j, S, S_V) - vg)
                 for i in range(NQ):
-                    W[W_FI + i] += A[OFF_RI + i * NI + j] * fz
+                    W[W_FI + i] += A[OFF_RT + j * NQ + i] * fz
     if mode[6] != REST and P[P_BGB] > 0.0:
         gap = P[P_H0] + S[S_Q + 1] - zg
         h = gap if gap > hmin else hmin
         W[W_FI + 1] -= P[P_BGB] / (h * h * h) * (S[S_V + 1] - vg)
-    for i in range(NQ):
-        s = 0.0
-        for k in range(NQ):
-            s += A[OFF_MINV + i * NQ + k] * W[W_FI + k]
-        W[W_MF + i] = s
     for r in range(NR):
         W[o + r] = 0.0
     m = pinned_rows(S, mode, I, 0)
@@ -626,7 +689,12 @@ def contact_force(P, A, S, mode, t, tv, W, I, o):
         for b in range(m):
             W[W_AS + a * NI + b] = A[OFF_WI + ra * NI + I[I_ROWS + b]]
         acc = ag if (ra < 6 or ra == ROW_BZ) else 0.0
-        W[W_BS + a] = acc - row_dot(A, ra, W, W_MF)
+        # R_a^T M^-1 F, with the row of (M^-1 R)^T
+        s = 0.0
+        mo = OFF_MRT + ra * NQ
+        for i in range(NQ):
+            s += A[mo + i] * W[W_FI + i]
+        W[W_BS + a] = acc - s
     gauss(W, W_AS, NI, W, W_BS, 1, m, 1)
     for a in range(m):
         W[o + I[I_ROWS + a]] = W[W_BS + a]
@@ -703,13 +771,45 @@ def event_value(P, A, S, T, mode, now, tau, tv, W, I, who, rel):
 
 
 @jit
-def step(P, A, S, T, mode, t, dt, W, I, events, count):
+def film_too_coarse(P, A, mode, h, W):
+    """True when a squeeze film changes too much over a trial step of length h (M7).
+
+    The film's coefficient goes as gap^-3; the step resolves it when the gap (floored
+    at h_min) changes by less than the factor FILM_RATIO over the step, or when the film
+    is too weak to matter: it would take less than FILM_WEAK of the row's relative
+    velocity in one step (h c / m_row, with 1 / m_row = R^T M^-1 R). Uses the gaps at the
+    trial's start and end in W_GAP0, W_GAP1.
+    """
+    hmin = P[P_HMIN]
+    for j in range(7):
+        if mode[j] != AIR:
+            continue
+        b = P[P_BGF] if j < 6 else P[P_BGB]
+        if b <= 0.0:
+            continue
+        g0 = W[W_GAP0 + j] if W[W_GAP0 + j] > hmin else hmin
+        g1 = W[W_GAP1 + j] if W[W_GAP1 + j] > hmin else hmin
+        lo = g0 if g0 < g1 else g1
+        hi = g1 if g0 < g1 else g0
+        if hi > FILM_RATIO * lo:
+            r = j if j < 6 else ROW_BZ
+            if h * b / (lo * lo * lo) * A[OFF_WI + r * NI + r] > FILM_WEAK:
+                return True
+    return False
+
+
+@jit
+def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
     """One full step with event location (M9, M10); the new state is left in S.
 
     Events inside the step: a free foot (or the body) reaching the ground, and a
     pinned foot (or the resting body) whose pull exceeds what holds it. The
     earliest is located on the scheme's own trajectory (secant), the step is
     advanced to it, the event applied, and the rest of the step integrated.
+
+    With ``refine``, a step whose trial shows a squeeze film it does not resolve
+    (:func:`film_too_coarse`) is refused before anything is integrated: it returns True
+    and the caller halves it (:func:`substeps`). Returns False when the step was taken.
     """
     now = t
     rem = dt
@@ -734,6 +834,8 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count):
         advance(P, A, S, mode, now, rem, W, I, T)
         gaps(P, A, S, now, W, W_GAP0)
         gaps(P, A, T, now + rem, W, W_GAP1)
+        if refine and n_ev == 0 and film_too_coarse(P, A, mode, rem, W):
+            return True
         contact_force(P, A, T, mode, now + rem, tv, W, I, W_LI1)
         who = -1
         rel = False
@@ -760,6 +862,8 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count):
                 best = frac
                 who = j
                 rel = False
+        if refine and n_ev == 0 and who >= 0 and EVENT_REFINE:
+            return True
         if who < 0:
             W[W_CT] = now + rem
             W[W_CV] = volts(P, tv)
@@ -804,7 +908,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count):
                 S[S_SLIP + who] = 0.0
                 count[CNT_RELEASES] += 1
             if rem <= 0.0:
-                return
+                return False
             continue
         # every free point at or below the ground and approaching it impacts now
         gaps(P, A, S, now, W, W_GAP0)
@@ -820,12 +924,39 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count):
                     I[I_IMP + j] = 1
         impact(P, A, S, mode, now, W, I, events, count)
         if rem <= 0.0:
-            return
+            return False
     for k in range(S_SIZE):
         S[k] = T[k]
     for j in range(6):
         if mode[j] != AIR:
             S[S_TC + j] += rem
+    return False
+
+
+@jit
+def substeps(P, A, S, T, mode, t, dt, W, I, events, count):
+    """One default step dt from t, halved where a squeeze film needs it (M7, "Numerics").
+
+    A step refused by :func:`step` is halved (down to dt / 2^(NLEV-1), whose matrices are
+    cached like dt's); after each accepted sub-step that ends on the grid of the next
+    coarser level, that level is tried again. The drive is constant over dt (its edges
+    fall on default-step boundaries), so every sub-step sees the same voltage.
+    """
+    top = NLEV - 1
+    units = 1 << top
+    unit = dt / units
+    pos = 0
+    k = 0
+    h = dt
+    while pos < units:
+        if step(P, A, S, T, mode, t + pos * unit, h, W, I, events, count, k < top):
+            k += 1
+            h *= 0.5
+            continue
+        pos += 1 << (top - k)
+        if k > 0 and pos % (1 << (top - k + 1)) == 0:
+            k -= 1
+            h *= 2.0
 
 
 @jit
@@ -864,7 +995,7 @@ def integrate(P, A, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac,
             row += 1
         if n == n_steps:
             break
-        step(P, A, S, T, mode, t, dt, W, I, events, count)
+        substeps(P, A, S, T, mode, t, dt, W, I, events, count)
         if n >= n_skip:
             zg, _, _ = ground(P, t + dt)
             for j in range(6):

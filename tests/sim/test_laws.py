@@ -96,10 +96,11 @@ def test_undamped_free_vibration_energy_error_is_bounded():
     s[M.S_V:M.S_V + M.NQ] += 1e-3 * rng.standard_normal(M.NQ)
     e0 = mdl.energy(s)
     n = int(round(0.01 / dt))
-    errs = [abs(mdl.energy(st) - e0) / e0 for st in _chunks(mdl, s, 20, n, dt)]   # 0.2 s, 9000 steps
+    errs = [abs(mdl.energy(st) - e0) / e0 for st in _chunks(mdl, s, 20, n, dt)]   # 0.2 s, 14400 steps
     assert max(errs) < 1e-10
-    # no growth: the last quarter's error is not above the first quarter's by more than round-off
-    assert max(errs[-5:]) < max(errs[:5]) + 1e-12
+    # no growth beyond round-off: a scheme error would grow with the steps (the explicit
+    # coupling grew x3e6 in 50 ms); round-off wanders like sqrt(steps), ~1e-12 here
+    assert max(errs[-5:]) < 1e-11
 
 
 def _stiff(**kw):
@@ -139,16 +140,31 @@ def test_drop_of_a_stiff_robot_rebounds_with_c_r_and_rests_on_time(c_r):
 
 
 def test_restitution_changes_the_shaker_walk():
-    """240 Hz, 100 um, published robot: c_r decides how the feet bounce, hence the gait and
-    the speed. (Small: the squeeze film slows the feet to ~0.24 mm/s before they touch, so
-    rebounds are small; the default sticking threshold, 0.01 mm/s, is below them.)"""
-    runs = [simulate(RobotParams(c_r=c), Shaker(240, 100), duration_s=0.3, seed=0) for c in (0.2, 0.8)]
+    """240 Hz, 100 um, feet that reach the ground moving: c_r decides how they bounce, hence
+    the gait and the speed. That needs the squeeze films off (the paper's Fig. 12 ablation):
+    with them, a foot is stopped by its film before it touches (next test), and the published
+    adhesion (50 uN) never lets a foot go, so the demo robot's c_ad_n = 50 nN is used."""
+    runs = [simulate(RobotParams(c_r=c, c_ad_n=50e-9), Shaker(240, 100), duration_s=0.3, seed=0,
+                     ablation="no_squeeze_film") for c in (0.2, 0.8)]
     assert all(r.impacts.sum() > 20 for r in runs)
     ev = [r.events[r.events[:, M.EV_LEG] >= 0] for r in runs]
     assert all((e[:, M.EV_STUCK] == 0).mean() > 0.9 for e in ev)       # nearly all rebound
     v = [r.mean_speed_mm_s for r in runs]
     assert abs(v[0] - v[1]) > 0.2 * max(abs(v[0]), abs(v[1])) and abs(v[0] - v[1]) > 0.005   # mm/s
     assert runs[0].impacts.sum() != runs[1].impacts.sum()
+
+
+def test_squeeze_film_stops_a_falling_foot_before_it_touches():
+    """The film's law, F = -b (v - v_g) / max(h, h_min)^3, takes from a foot of modal mass m
+    falling from far above the velocity b / (2 m h^2) by the time it reaches the gap h (the
+    integral of b / (m h^3) dh): ~30 m/s at h_min for the published feet, far more than any
+    foot ever has. So with the films on, feet land at the film's creep speed: no impact
+    faster than the sticking threshold, whatever c_r."""
+    for c_r in (0.2, 0.8):
+        r = simulate(RobotParams(c_r=c_r, c_ad_n=2e-6), Shaker(240, 100), duration_s=0.3, seed=0)
+        ev = r.events[r.events[:, M.EV_LEG] >= 0]
+        assert np.all(np.abs(ev[:, M.EV_VPRE]) * c_r < RobotParams().v_stick_mm_s * 1e-3)
+        assert np.all(ev[:, M.EV_STUCK] == 1)
 
 
 def _same(a, b, rtol):
