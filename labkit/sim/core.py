@@ -4,11 +4,11 @@ Numerics (both engines run the same scheme, :mod:`labkit.sim.scheme`; docs/model
 M5-M11 and its section "Numerics"):
 
 * one coupled system (23 coordinates, one mass matrix), implicit midpoint with a
-  fixed step, default :func:`default_dt` (50 steps per period of the fastest mode
-  or drive, >= 240 per shaker period; 1.1e-5 s for the paper's robot); the PZT
-  square wave's edges fall on step boundaries;
-* squeeze films implicit, at the midpoint gap; impacts and releases are events
-  located inside the step on the scheme's own trajectory;
+  fixed step, default :func:`default_dt` (64 steps per period of the fastest mode
+  or drive, >= 40 per shaker period; 8.7e-6 s for the paper's robot), halved where
+  a squeeze film needs it; the PZT square wave's edges fall on step boundaries;
+* squeeze films implicit, at the midpoint gap, stiff ones without ringing; impacts
+  and releases are events located inside the step on the scheme's own trajectory;
 * convergence (tests/sim/test_convergence.py): mean speed at the default step
   within 3 % (or 0.1 mm/s) of a quarter step for the PZT default run and shaker
   runs at 150-1500 Hz, published parameters and c_ad_n = 2e-6;
@@ -31,9 +31,8 @@ from labkit.sim.params import RobotParams
 from labkit.sim.result import SimResult, classify_pattern, foot_period
 
 #: Default step: this many steps per period of the fastest of (highest mode, drive) ...
-STEPS_PER_PERIOD = 80
-#: ... and at least this many per period of a shaker (the tray's acceleration A w^2 sets
-#: how fast contact forces change; measured: docs/model.md section "Numerics").
+STEPS_PER_PERIOD = 64
+#: ... and at least this many per shaker period (measured: docs/model.md M5 and "Numerics").
 SHAKER_STEPS_PER_PERIOD = 40
 #: Default recording interval: at most 1e-4 s, and at least 20 samples per drive period.
 RECORD_DT_MAX_S = 1e-4
@@ -241,7 +240,8 @@ def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engin
         mean_speed_mm_s=speed, contact_fraction=cf, impacts=cnt[:6].astype(int).copy(),
         body_impacts=int(cnt[M.CNT_BODY]), patterns=patterns, max_flight_s=out["max_air"].copy(),
         events=out["events"][:n_ev].copy(), n_steps=n_steps, wall_s=wall, seed=seed, ablation=ablation,
-        counters={"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED])},
+        counters={"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED]),
+                  "steps_halved": int(cnt[M.CNT_HALVED]), "trial_steps": int(cnt[M.CNT_ADV])},
         max_height_um=max_h_um.copy(), foot_periods=periods)
 
 

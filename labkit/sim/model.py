@@ -72,6 +72,7 @@ EV_T, EV_LEG, EV_VPRE, EV_VPOST, EV_VYPOST, EV_STUCK = (K.EV_T, K.EV_LEG, K.EV_V
 EV_COLS = K.EV_COLS
 CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED, CNT_RELEASES = (K.CNT_BODY, K.CNT_EVENTS, K.CNT_LOST, K.CNT_FORCED,
                                                             K.CNT_RELEASES)
+CNT_HALVED, CNT_ADV = K.CNT_HALVED, K.CNT_ADV
 CNT_SIZE = K.CNT_SIZE
 
 #: An event is located when the gap is within this of zero (m): 0.1 nm.

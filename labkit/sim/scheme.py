@@ -59,8 +59,8 @@ FILM_WEAK = 0.05
 #: velocity by more than this fraction (weak films far from the ground).
 FILM_PASS_SKIP = 1e-6
 EVENT_REFINE = False
-#: A film row whose film takes more than this fraction of its velocity in a step (h c / m_row)
-#: gets its end velocity relaxed to the step's mean relative velocity (:func:`advance`).
+#: A film row whose film takes more than this fraction of its velocity in a step (x = h c /
+#: m_row) gets its end velocity from the film's slow motion, weight x / (1 + x) (:func:`advance`).
 FILM_STIFF_MIN = 0.01
 #: A point reaching the ground slower than this (m/s) touches down: it is pinned without an
 #: impact being counted (round-off approach speeds of a foot that was just released).
@@ -113,8 +113,8 @@ REC_COLS = 25
 EV_T, EV_LEG, EV_VPRE, EV_VPOST, EV_VYPOST, EV_STUCK = range(6)
 EV_COLS = 6
 # ---- counters: 0..5 impacts per foot
-CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED, CNT_RELEASES = 6, 7, 8, 9, 10
-CNT_SIZE = 11
+CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED, CNT_RELEASES, CNT_HALVED, CNT_ADV = 6, 7, 8, 9, 10, 11, 12
+CNT_SIZE = 13
 
 # ---- float scratch W
 W_F = 0                   # forces at the step's midpoint
@@ -144,12 +144,20 @@ W_LI1 = W_LI0 + NR        # ... at its end
 W_G0 = W_LI1 + NR         # release margins at the start (7: feet, body)
 W_CT = W_G0 + 7           # time at which W_LI1 holds the contact forces of the current state (cache)
 W_CV = W_CT + 1           # ... and the drive voltage they were computed with
-W_SIZE = W_CV + 1
+#: Cached inverses of R^T M^-1 R over a set of rows (the pinned rows, with or without stiff
+#: film rows): NSLOT slots, direct-mapped by the set's bit mask (rows 0-12); the sets
+#: change only at events, so nearly every step finds its matrix here.
+NSLOT = 64
+NC = 13
+W_CACHE = W_CV + 1
+W_SIZE = W_CACHE + NSLOT * NC * NC
 # ---- int scratch I
 I_ROWS = 0                # active rows
 I_KIND = I_ROWS + NI      # 0 film, 1 pinned
 I_IMP = I_KIND + NI       # impacting flags (7)
-I_SIZE = I_IMP + 7
+I_TAG = I_IMP + 7          # mask held by each cache slot (-1: empty)
+I_POS = I_TAG + NSLOT     # position of row r in the cached set's order
+I_SIZE = I_POS + NC
 
 
 @jit
@@ -278,21 +286,24 @@ def forces(P, A, S, mode, t_mid, q, qo, v, vo, F, fo):
 
 
 @jit
-def active_rows(P, A, S, mode, t, I, W):
+def active_rows(P, A, S, mode, t, h, I, W):
     """The rows of the step's small system: pinned rows (kind 1) and film rows (kind 0).
 
-    Returns their number; film coefficients c (N s/m) are frozen at the step's start.
+    Returns their number. Film coefficients c (N s/m) are taken at the gap predicted for the
+    step's midpoint from the start's velocity (:func:`advance` corrects them in a second
+    pass when that changes a film's effect).
     """
-    zg, _, _ = ground(P, t)
+    zg, vg, _ = ground(P, t)
+    hmin = P[P_HMIN]
     n = 0
     for j in range(6):
         if mode[j] == AIR:
             if P[P_BGF] > 0.0:
-                gap = row_dot(A, j, S, S_Q) - zg
-                h = gap if gap > P[P_HMIN] else P[P_HMIN]
+                gap = row_dot(A, j, S, S_Q) - zg + 0.5 * h * (row_dot(A, j, S, S_V) - vg)
+                g = gap if gap > hmin else hmin
                 I[I_ROWS + n] = j
                 I[I_KIND + n] = 0
-                W[W_C + n] = P[P_BGF] / (h * h * h)
+                W[W_C + n] = P[P_BGF] / (g * g * g)
                 n += 1
         else:
             I[I_ROWS + n] = j
@@ -307,11 +318,11 @@ def active_rows(P, A, S, mode, t, I, W):
         I[I_KIND + n] = 1
         n += 1
     elif P[P_BGB] > 0.0:
-        gap = P[P_H0] + S[S_Q + 1] - zg
-        h = gap if gap > P[P_HMIN] else P[P_HMIN]
+        gap = P[P_H0] + S[S_Q + 1] - zg + 0.5 * h * (S[S_V + 1] - vg)
+        g = gap if gap > hmin else hmin
         I[I_ROWS + n] = ROW_BZ
         I[I_KIND + n] = 0
-        W[W_C + n] = P[P_BGB] / (h * h * h)
+        W[W_C + n] = P[P_BGB] / (g * g * g)
         n += 1
     return n
 
@@ -387,7 +398,7 @@ def advance(P, A, S, mode, t, h, W, I, out):
     # the films see the ground's mean velocity over the step (its chord), so a foot held
     # by its film follows the ground's displacement exactly and does not sink into it
     vgm = (zg1 - zg0) / h
-    n = active_rows(P, A, S, mode, t, I, W)
+    n = active_rows(P, A, S, mode, t, h, I, W)
     # per active row, what does not change between the passes: R_a . Sinv r and the
     # right-hand side of a pinned row (W_T), its position at the start (film rows, W_LAMS)
     for a in range(n):
@@ -480,8 +491,8 @@ def advance(P, A, S, mode, t, h, W, I, out):
             out[S_FV + j] = vrel
             out[S_FH + j] = h
             x = h * W[W_C + a] * A[OFF_WI + ra * NI + ra]
+            hp = S[S_FH + j]
             if x > FILM_STIFF_MIN:
-                hp = S[S_FH + j]
                 end = vrel
                 if hp > 0.0:
                     end += h * (vrel - S[S_FV + j]) / (h + hp)
@@ -494,9 +505,65 @@ def advance(P, A, S, mode, t, h, W, I, out):
 
 
 @jit
+def cached_inverse(A, W, I, mask):
+    """Offset in W of the inverse of R^T M^-1 R over the rows in ``mask`` (bits 0-12), rows
+    in ascending order; computed by :func:`gauss` on first use (so a dependent row gets the
+    same zero unknown as a direct solve). Sets I_POS[r], the position of row r."""
+    m = 0
+    for r in range(NC):
+        if (mask >> r) & 1:
+            I[I_POS + r] = m
+            m += 1
+    slot = (mask * 40503) % NSLOT
+    off = W_CACHE + slot * NC * NC
+    if I[I_TAG + slot] == mask:
+        return off
+    a = 0
+    for r in range(NC):
+        if (mask >> r) & 1:
+            b = 0
+            for c in range(NC):
+                if (mask >> c) & 1:
+                    W[W_AS + a * NI + b] = A[OFF_WI + r * NI + c]
+                    W[W_B + a * NC + b] = 1.0 if a == b else 0.0
+                    b += 1
+            a += 1
+    gauss(W, W_AS, NI, W, W_B, NC, m, m)
+    for a in range(m):
+        for b in range(m):
+            W[off + a * NC + b] = W[W_B + a * NC + b]
+    I[I_TAG + slot] = mask
+    return off
+
+
+@jit
 def impulse(A, X, xo, I, W, m):
     """Change X[xo:xo+NQ] (velocities, or positions) by M^-1 R_a P so that rows I_ROWS[:m]
     take the values W[W_T:W_T+m] (the impact law M9 with the mass matrix); returns nothing."""
+    mask = 0
+    for a in range(m):
+        r = I[I_ROWS + a]
+        if r >= NC or (mask >> r) & 1:
+            mask = -1
+            break
+        mask |= 1 << r
+    if mask > 0:
+        off = cached_inverse(A, W, I, mask)
+        for a in range(m):
+            r = I[I_ROWS + a]
+            W[W_BS + I[I_POS + r]] = W[W_T + a] - row_dot(A, r, X, xo)
+        for a in range(m):
+            s = 0.0
+            for b in range(m):
+                s += W[off + a * NC + b] * W[W_BS + b]
+            W[W_AS + a] = s
+        for r in range(NC):
+            if (mask >> r) & 1:
+                mo = OFF_MRT + r * NQ
+                p = W[W_AS + I[I_POS + r]]
+                for i in range(NQ):
+                    X[xo + i] += A[mo + i] * p
+        return
     for a in range(m):
         ra = I[I_ROWS + a]
         for b in range(m):
@@ -684,20 +751,26 @@ def contact_force(P, A, S, mode, t, tv, W, I, o):
     m = pinned_rows(S, mode, I, 0)
     if m == 0:
         return
+    mask = 0
+    for a in range(m):
+        mask |= 1 << I[I_ROWS + a]
+    off = cached_inverse(A, W, I, mask)
     for a in range(m):
         ra = I[I_ROWS + a]
-        for b in range(m):
-            W[W_AS + a * NI + b] = A[OFF_WI + ra * NI + I[I_ROWS + b]]
         acc = ag if (ra < 6 or ra == ROW_BZ) else 0.0
         # R_a^T M^-1 F, with the row of (M^-1 R)^T
         s = 0.0
         mo = OFF_MRT + ra * NQ
         for i in range(NQ):
             s += A[mo + i] * W[W_FI + i]
-        W[W_BS + a] = acc - s
-    gauss(W, W_AS, NI, W, W_BS, 1, m, 1)
+        W[W_BS + I[I_POS + ra]] = acc - s
     for a in range(m):
-        W[o + I[I_ROWS + a]] = W[W_BS + a]
+        ra = I[I_ROWS + a]
+        k = I[I_POS + ra]
+        s = 0.0
+        for b in range(m):
+            s += W[off + k * NC + b] * W[W_BS + b]
+        W[o + ra] = s
 
 
 @jit
@@ -831,6 +904,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
         for j in range(7):
             if (j < 6 and mode[j] != AIR) or (j == 6 and mode[6] == REST):
                 W[W_G0 + j] = release_margin(P, S, mode, W, W_LI0, j, 0.0)
+        count[CNT_ADV] += 1
         advance(P, A, S, mode, now, rem, W, I, T)
         gaps(P, A, S, now, W, W_GAP0)
         gaps(P, A, T, now + rem, W, W_GAP1)
@@ -882,6 +956,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
             if tau <= 0.0:
                 tau = 0.0
                 break
+            count[CNT_ADV] += 1
             g = event_value(P, A, S, T, mode, now, tau, tv, W, I, who, rel)
             if (not rel and abs(g) <= tol) or hi - lo <= 1e-9 * rem:
                 break
@@ -893,6 +968,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
                 ghi = g
             tau = lo + (hi - lo) * glo / (glo - ghi) if glo > 0.0 else lo
         if tau > 0.0:
+            count[CNT_ADV] += 1
             advance(P, A, S, mode, now, tau, W, I, T)
             for k in range(S_SIZE):
                 S[k] = T[k]
@@ -950,6 +1026,7 @@ def substeps(P, A, S, T, mode, t, dt, W, I, events, count):
     h = dt
     while pos < units:
         if step(P, A, S, T, mode, t + pos * unit, h, W, I, events, count, k < top):
+            count[CNT_HALVED] += 1
             k += 1
             h *= 0.5
             continue
@@ -985,6 +1062,8 @@ def integrate(P, A, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac,
     W = np.zeros(W_SIZE)
     W[W_CT] = -1.0                  # no cached contact forces yet
     I = np.zeros(I_SIZE, np.int64)
+    for k in range(NSLOT):
+        I[I_TAG + k] = -1
     T = np.zeros(S_SIZE)
     air_run = np.zeros(6)
     row = 0

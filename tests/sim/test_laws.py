@@ -158,13 +158,19 @@ def test_squeeze_film_stops_a_falling_foot_before_it_touches():
     """The film's law, F = -b (v - v_g) / max(h, h_min)^3, takes from a foot of modal mass m
     falling from far above the velocity b / (2 m h^2) by the time it reaches the gap h (the
     integral of b / (m h^3) dh): ~30 m/s at h_min for the published feet, far more than any
-    foot ever has. So with the films on, feet land at the film's creep speed: no impact
-    faster than the sticking threshold, whatever c_r."""
-    for c_r in (0.2, 0.8):
-        r = simulate(RobotParams(c_r=c_r, c_ad_n=2e-6), Shaker(240, 100), duration_s=0.3, seed=0)
+    foot ever has. So with the films on, feet land at the film's creep speed (force / c),
+    if at all, and c_r hardly changes the walk."""
+    runs = [simulate(RobotParams(c_r=c_r, c_ad_n=2e-6), Shaker(240, 100), duration_s=0.3, seed=0)
+            for c_r in (0.2, 0.8)]
+    for r in runs:
         ev = r.events[r.events[:, M.EV_LEG] >= 0]
-        assert np.all(np.abs(ev[:, M.EV_VPRE]) * c_r < RobotParams().v_stick_mm_s * 1e-3)
-        assert np.all(ev[:, M.EV_STUCK] == 1)
+        assert np.all(np.abs(ev[:, M.EV_VPRE]) < 5e-5)                          # m/s: < 0.05 mm/s
+        # released by the 2 uN adhesion, the feet ride the tray on their films within h_min
+        assert r.contact_fraction["leg1"]["air"] > 0.5 and r.max_height_um.max() < r.params.h_min_um
+        # the tray moves at 150 mm/s; the feet follow it on their films
+        assert np.abs(np.diff(r.foot_z_um[:, 0])).max() / r.record_dt_s * 1e-3 > 50.0
+    v = [r.mean_speed_mm_s for r in runs]
+    assert abs(v[0] - v[1]) < 0.02 * max(abs(v[0]), abs(v[1]))
 
 
 def _same(a, b, rtol):

@@ -1,0 +1,59 @@
+"""Convergence of the mean speed, default step against a quarter step; prints ONE JSON object.
+
+    python bench/convergence_table.py [--markdown]
+
+The cases of ``tests/sim/test_convergence.py`` (0.3 s runs, seed 0) plus 2 kHz and the
+demo robot (``c_ad_n = 5e-8``); ``--markdown`` prints the table of docs/model.md
+("Numerics") instead. Also reports each run's CPU time and its steps (default step).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from labkit.sim import PZT, RobotParams, Shaker, simulate
+from labkit.sim.core import DT_CHECK_ABS_MM_S, DT_CHECK_REL, default_dt
+
+SETS = {"published": RobotParams(), "c_ad 2 uN": RobotParams(c_ad_n=2e-6),
+        "demo (c_ad 50 nN)": RobotParams(c_ad_n=5e-8)}
+SCENARIOS = [PZT(1800, 20.0)] + [Shaker(f, 25.0) for f in (150, 240, 300, 700, 1500, 2000)]
+
+
+def _label(sc: Shaker | PZT) -> str:
+    return f"PZT {sc.freq_hz / 1000:g} kHz, 20 V" if isinstance(sc, PZT) else f"shaker {sc.freq_hz:g} Hz, 25 um"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--markdown", action="store_true", help="print the docs/model.md table")
+    args = ap.parse_args()
+    simulate(RobotParams(), Shaker(240, 25), 0.002)          # compile outside the timings
+    rows = []
+    for sc in SCENARIOS:
+        row: dict = {"run": _label(sc)}
+        for name, p in SETS.items():
+            dt = default_dt(p, sc)
+            c0 = time.process_time()
+            a = simulate(p, sc, 0.3, seed=0)
+            cpu = time.process_time() - c0
+            b = simulate(p, sc, 0.3, seed=0, dt_s=dt / 4)
+            tol = max(DT_CHECK_REL * abs(b.mean_speed_mm_s), DT_CHECK_ABS_MM_S)
+            row[name] = {"default_mm_s": round(a.mean_speed_mm_s, 4), "quarter_mm_s": round(b.mean_speed_mm_s, 4),
+                         "agree": abs(a.mean_speed_mm_s - b.mean_speed_mm_s) <= tol, "dt_s": dt,
+                         "cpu_s_default": round(cpu, 3), "steps": a.n_steps, "counters": a.counters}
+        rows.append(row)
+    if args.markdown:
+        print("| run | " + " | ".join(f"{n}: default / quarter (mm/s)" for n in SETS) + " |")
+        print("|---|" + "---|" * len(SETS))
+        for row in rows:
+            cells = [f"{row[n]['default_mm_s']:.4g} / {row[n]['quarter_mm_s']:.4g}"
+                     + ("" if row[n]["agree"] else " (!)") for n in SETS]
+            print(f"| {row['run']} | " + " | ".join(cells) + " |")
+        return
+    tol = f"max({DT_CHECK_REL:g} x speed, {DT_CHECK_ABS_MM_S:g} mm/s)"
+    print(json.dumps({"duration_s": 0.3, "seed": 0, "tolerance": tol, "rows": rows}))
+
+
+if __name__ == "__main__":
+    main()
