@@ -135,8 +135,37 @@ def summarise_toml(path: Path) -> dict[str, Any]:
     return out
 
 
+def writer_of(path: str | Path) -> dict[str, Any] | None:
+    """The run writing ``path`` now (its lock record: ``pid``, ``host``, ``command``, ``since``), else None."""
+    from labkit.experiments.locks import file_key, holder
+
+    return holder(file_key(path))
+
+
 def summarise_h5(path: Path) -> dict[str, Any]:
-    """Root attributes, every dataset's shape, dtype and units, and the typed summary of known kinds."""
+    """Root attributes, every dataset's shape, dtype and units, and the typed summary of known kinds.
+
+    A file that a run is writing (it holds the file's lock) gets ``being_written_by`` (the
+    writer's PID, host, command and start time); its listing is empty when HDF5 refuses to
+    open it while the writer has it open.
+    """
+    busy = writer_of(path)
+    try:
+        out = _summarise_h5(path)
+    except InputError:
+        if busy is None:
+            raise
+        out = {"file": str(path), "format": "hdf5", "kind": None, "schema_version": None, "attrs": {},
+               "groups": [], "datasets": [], "dims": {}}
+    if busy is not None:
+        from labkit.experiments.locks import describe
+
+        out["being_written_by"] = {k: busy[k] for k in ("pid", "host", "command", "since") if k in busy}
+        out["being_written"] = f"being written by {describe(busy)}"
+    return out
+
+
+def _summarise_h5(path: Path) -> dict[str, Any]:
     import h5py
 
     from labkit.files import H5_KINDS, open_file
@@ -207,6 +236,9 @@ def _print(summary: dict[str, Any]) -> None:
             if k != "file":
                 print(f"  {k}: {v}")
         return
+    if summary.get("being_written"):
+        print(f"  {summary['being_written']}" + ("" if summary["datasets"] else
+                                                 "; its contents can be listed when that run has ended"))
     for key, value in summary["attrs"].items():
         print(f"  {key}: {value}")
     for key, value in content.items():

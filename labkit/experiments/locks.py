@@ -19,6 +19,7 @@ import hashlib
 import json
 import os
 import re
+import socket
 import sys
 import time
 from collections.abc import Iterable, Iterator
@@ -80,8 +81,8 @@ def _read(p: Path) -> dict[str, Any] | None:
 
 
 def describe(info: dict[str, Any]) -> str:
-    """``PID 123 (labkit sweep inchip a.toml --out run.h5, run file run.h5, since 16:40:02)``."""
-    parts = [f"PID {info.get('pid', '?')}"]
+    """``PID 123 on bench-pc (labkit sweep inchip a.toml --out run.h5, run file run.h5, since 16:40:02)``."""
+    parts = [f"PID {info.get('pid', '?')}" + (f" on {info['host']}" if info.get("host") else "")]
     extra = []
     if info.get("command"):
         extra.append(str(info["command"]))
@@ -134,7 +135,8 @@ class RunLocks:
 @contextlib.contextmanager
 def lock_run(resources: Iterable[tuple[str, str]], run_file: str | Path, config: str) -> Iterator[RunLocks]:
     """Lock every ``(role, resource)`` and the run file, for the block; RigBusy if any is held."""
-    record = {"pid": os.getpid(), "command": " ".join(["labkit", *sys.argv[1:]]) if sys.argv else "",
+    record = {"pid": os.getpid(), "host": socket.gethostname(),
+              "command": " ".join(["labkit", *sys.argv[1:]]) if sys.argv else "",
               "run_file": os.fspath(run_file), "config": config, "since": time.strftime("%H:%M:%S")}
     locks = RunLocks()
     try:

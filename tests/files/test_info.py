@@ -58,3 +58,41 @@ def test_a_file_of_another_kind_is_named_with_what_labkit_reads(tmp_path):
     p.write_text("# notes\n")
     proc = run_cli("info", str(p), check=2)
     assert "notes.md" in proc.stderr and "not a file labkit writes" in proc.stderr and "HDF5" in proc.stderr
+
+
+WRITER = """
+import sys, time, h5py
+from labkit.experiments.locks import lock_run
+from labkit.h5io import stamp
+path = sys.argv[1]
+with lock_run([], path, "cfg.toml"), h5py.File(path, "w") as f:   # a run's lock, the file open for writing
+    stamp(f, "run_inchip")
+    f.flush()
+    print("ready", flush=True)
+    time.sleep(60)
+"""
+
+
+def test_info_names_the_pid_and_host_of_the_run_writing_the_file(tmp_path):
+    import socket
+    import subprocess
+    import sys
+
+    out = tmp_path / "run.h5"
+    writer = subprocess.Popen([sys.executable, "-c", WRITER, str(out)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert writer.stdout is not None and writer.stdout.readline().strip() == "ready"
+        s = summarise(out)
+        assert s["being_written_by"]["pid"] == writer.pid
+        assert s["being_written_by"]["host"] == socket.gethostname()
+        assert f"being written by PID {writer.pid} on {socket.gethostname()}" in s["being_written"]
+        j = last_json(run_cli("info", str(out), "--json"))
+        assert j["being_written_by"]["pid"] == writer.pid and j["format"] == "hdf5"
+        text = run_cli("info", str(out)).stdout
+        assert f"being written by PID {writer.pid}" in text and "when that run has ended" in text
+    finally:
+        writer.kill()
+        writer.wait()
+    # the writer gone (its lock dropped by the kernel), the same file is an ordinary file again
+    s = summarise(out)
+    assert "being_written_by" not in s and s["kind"] == "run_inchip"
