@@ -19,6 +19,13 @@ Writes ``*.fit.h5`` (``kind = "modal_fit"``)::
                            0 new, 1 stable frequency, 2 stable frequency and damping), chosen_hz (Hz)
         covariance         parameter covariance of the refinement (mixed units; above
                            MAX_STORED_COVARIANCE parameters only the poles' block)
+
+Every array's dimensions are named (HDF5 dimension scales, :func:`label_fit_dimensions`), so
+xarray/h5netcdf and HDFView show coordinates: ``freq_hz`` in ``locations/<loc>/`` (the lines)
+and ``modes/`` (one per mode), ``modes/location`` (the locations' names, label) as the second
+axis of the modes x locations arrays, ``stabilisation/freq_hz`` and ``chosen_hz``, and index
+scales ``parameter_i``, ``parameter_j`` (1) beside ``covariance``. Fit files written before
+carry only the ``freq_hz`` scales (the rest opens as ``phony_dim``); they read the same.
 """
 from __future__ import annotations
 
@@ -31,7 +38,7 @@ import numpy as np
 
 from labkit.errors import InputError
 
-__all__ = ["RunChannels", "read_run", "read_frf", "write_fit_h5", "write_uff"]
+__all__ = ["RunChannels", "label_fit_dimensions", "read_run", "read_frf", "write_fit_h5", "write_uff"]
 
 FRF_UNITS = {"inchip": "(mm/s)/V", "shaker": "1"}
 
@@ -171,7 +178,7 @@ def write_fit_h5(path: str | Path, fits: dict[str, Any], runs: dict[str, list[st
     """Write the ``modal_fit`` file (layout in the module docstring)."""
     import h5py
 
-    from labkit.h5io import label_dimensions, put, put_json, stamp
+    from labkit.h5io import put, put_json, stamp
 
     path = Path(path)
     with h5py.File(path, "w") as f:
@@ -221,8 +228,73 @@ def write_fit_h5(path: str | Path, fits: dict[str, Any], runs: dict[str, list[st
                 n = 2 * len(fit.modes)
                 put(g, "covariance", fit.covariance[:n, :n], "mixed", order="f_1, zeta_1, f_2, zeta_2, ... "
                     f"(the poles' block only: the full matrix has {fit.covariance.shape[0]} rows)")
-        label_dimensions(f)         # freq_hz as the coordinate (xarray, HDFView)
+        label_fit_dimensions(f)     # named dimensions and coordinates (xarray, HDFView)
     return path
+
+
+def label_fit_dimensions(f: Any) -> None:
+    """Name every dimension of a fit file's arrays with HDF5 dimension scales (``f``: open for writing).
+
+    Per fit group: ``modes/freq_hz`` and a ``modes/location`` label scale (from the group's
+    ``locations_json``) on the modes x locations arrays, ``stabilisation/chosen_hz`` its own
+    scale, ``parameter_i``/``parameter_j`` index scales on ``covariance``; then the ``freq_hz``
+    axes of every group (:func:`labkit.h5io.label_dimensions`). Idempotent; labels an older fit
+    file in place (an array whose shape does not match is left as it is).
+    """
+    import h5py
+
+    from labkit.h5io import label_dimensions, put
+
+    def own_scale(ds: Any, name: str) -> Any:
+        # "axes" naming itself: label_dimensions then neither attaches the group's axis to it nor relabels it
+        ds.attrs["axes"] = name
+        if not ds.is_scale:
+            ds.make_scale(name)
+        return ds
+
+    def attach(ds: Any, *scales: Any) -> None:
+        if ds.ndim != len(scales) or any(len(d) for d in ds.dims) or ds.is_scale:
+            return                  # labelled already (or a scale itself)
+        if any(ds.shape[i] != sc.shape[0] for i, sc in enumerate(scales)):
+            return
+        for i, sc in enumerate(scales):
+            ds.dims[i].attach_scale(sc)
+
+    for g in (f["groups"].values() if "groups" in f else []):
+        try:
+            locations = [str(x) for x in json.loads(g.attrs.get("locations_json", "[]"))]
+        except (TypeError, ValueError):
+            locations = []
+        mg = g.get("modes")
+        if isinstance(mg, h5py.Group) and isinstance(mg.get("freq_hz"), h5py.Dataset) and locations:
+            two_d = [v for v in mg.values() if isinstance(v, h5py.Dataset) and v.ndim == 2]
+            if two_d and all(v.shape[1] == len(locations) for v in two_d):
+                loc = mg.get("location")
+                if loc is None:
+                    loc = mg.create_dataset("location", data=np.array(locations, dtype=object),
+                                            dtype=h5py.string_dtype())
+                    loc.attrs["units"] = "label"
+                own_scale(loc, "location")
+                freq = mg["freq_hz"]
+                if not freq.is_scale:
+                    freq.make_scale("freq_hz")
+                for v in two_d:
+                    attach(v, freq, loc)
+        sg = g.get("stabilisation")
+        if isinstance(sg, h5py.Group) and isinstance(sg.get("chosen_hz"), h5py.Dataset):
+            chosen = sg["chosen_hz"]
+            if chosen.ndim == 1 and not any(len(d) for d in chosen.dims):
+                own_scale(chosen, "chosen_hz")
+        cov = g.get("covariance")
+        if isinstance(cov, h5py.Dataset) and cov.ndim == 2 and not any(len(d) for d in cov.dims):
+            scales = []
+            for axis, n in zip(("parameter_i", "parameter_j"), cov.shape, strict=True):
+                sc = g.get(axis)
+                if sc is None:
+                    sc = put(g, axis, np.arange(n), "1")
+                scales.append(own_scale(sc, axis))
+            attach(cov, *scales)
+    label_dimensions(f)
 
 
 def runs_json(runs: list[RunChannels]) -> dict[str, list[str]]:

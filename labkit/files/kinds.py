@@ -178,6 +178,8 @@ def read_fit(path: Path, f: Any) -> ModalFit:
             units |= u
             locs[text(lg.attrs.get("name", key))] = cols
         modes, mu = _columns(g["modes"]) if "modes" in g else ({}, {})
+        if "location" in modes and g["modes"]["location"].is_scale:    # the modes x locations arrays' axis
+            del modes["location"], mu["location"]
         units |= {f"modes/{k}": v for k, v in mu.items()}
         stab = _columns(g["stabilisation"])[0] if "stabilisation" in g else None
         groups[name] = FitGroup(name, text(g.attrs.get("method", "?")), float(g.attrs.get("quality", np.nan)),

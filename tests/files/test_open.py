@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import warnings
 from pathlib import Path
 
 import h5py
@@ -83,12 +84,33 @@ def test_xarray_h5netcdf_sees_the_coordinates_of_every_sample_file(name):
             assert ds[var].dims == (coord,), (name, group, var, ds[var].dims)
             np.testing.assert_array_equal(ds[coord].values, g[coord][()])
             assert ds[coord].attrs["units"] == g[coord].attrs["units"]
-    # and no group of a sample file fails to open or names a 1-D dataset's axis anonymously
+    # and no group of a sample file fails to open or names any axis anonymously (an unlabelled
+    # dimension is a phony_dim, and xarray warns about the phony_dims default: an error here)
     for group in _h5_groups(path):
-        with xr.open_dataset(path, engine="h5netcdf", group=group, phony_dims="access") as ds:
-            for k, v in ds.data_vars.items():
-                if v.ndim == 1 and name != "robot.fit.h5":
-                    assert not v.dims[0].startswith("phony_dim"), (name, group, k)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("error", message=".*phony_dims")
+            with xr.open_dataset(path, engine="h5netcdf", group=group) as ds:
+                for k, v in ds.variables.items():
+                    assert not [d for d in v.dims if str(d).startswith("phony_dim")], (name, group, k, v.dims)
+
+
+def test_fit_file_names_modes_locations_and_covariance_axes():
+    path = SAMPLE / "robot.fit.h5"
+    with h5py.File(path, "r") as f:
+        locations = json.loads(f["groups/inchip"].attrs["locations_json"])
+        n_modes = f["groups/inchip/modes/freq_hz"].shape[0]
+        n_par = f["groups/inchip/covariance"].shape[0]
+    with xr.open_dataset(path, engine="h5netcdf", group="groups/inchip/modes") as ds:
+        assert ds["amplitude"].dims == ds["peak"].dims == ("freq_hz", "location")
+        assert list(ds["location"].values) == locations and ds.sizes["freq_hz"] == n_modes
+        assert ds["damping_ratio"].dims == ("freq_hz",)
+    with xr.open_dataset(path, engine="h5netcdf", group="groups/inchip") as ds:
+        assert ds["covariance"].dims == ("parameter_i", "parameter_j")
+        np.testing.assert_array_equal(ds["parameter_i"].values, np.arange(n_par))
+    with xr.open_dataset(path, engine="h5netcdf", group="groups/inchip/stabilisation") as ds:
+        assert "chosen_hz" in ds.coords and ds["order"].dims == ("freq_hz",)
+    # the label scale is an axis, not a mode column: labkit.open reads the modes it always did
+    assert "location" not in labkit.open(path).groups["inchip"].modes
 
 
 def test_frequency_and_time_are_coordinates_in_xarray():
@@ -212,6 +234,28 @@ def test_a_schema1_file_can_be_labelled_in_place_for_xarray(tmp_path):
     with xr.open_dataset(path, engine="h5netcdf", group="locations/knee") as ds:
         assert "freq_hz" in ds.coords and ds["frf"].dims == ("freq_hz",)
     assert labkit.open(path).complete_points == labkit.open(SCHEMA1 / "inchip_run.h5").complete_points
+
+
+def test_an_older_fit_file_can_be_labelled_in_place_and_reads_the_same(tmp_path):
+    from labkit.analysis.modal.io import label_fit_dimensions
+
+    path = tmp_path / "old.fit.h5"
+    shutil.copy(SCHEMA1 / "robot.fit.h5", path)
+    with h5py.File(path, "r+") as f:
+        label_fit_dimensions(f)
+        label_fit_dimensions(f)                 # idempotent
+    for group in _h5_groups(path):
+        with warnings.catch_warnings():
+            warnings.filterwarnings("error", message=".*phony_dims")
+            with xr.open_dataset(path, engine="h5netcdf", group=group) as ds:
+                for k, v in ds.variables.items():
+                    assert not [d for d in v.dims if str(d).startswith("phony_dim")], (group, k, v.dims)
+    old, new = labkit.open(SCHEMA1 / "robot.fit.h5"), labkit.open(path)
+    for g, fg in old.groups.items():
+        assert sorted(new.groups[g].modes) == sorted(fg.modes)
+        for k, v in fg.modes.items():
+            np.testing.assert_array_equal(new.groups[g].modes[k], v)
+    xr.testing.assert_identical(new.to_xarray().drop_attrs(), old.to_xarray().drop_attrs())
 
 
 def test_a_file_from_a_newer_labkit_is_refused_with_exit_2(tmp_path):
