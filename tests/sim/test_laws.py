@@ -186,12 +186,18 @@ def _same(a, b, rtol):
     (FLOAT, PZT(1800, 20.0), {"start_height_um": 1000.0, "duration_s": 0.004}),
     (_stiff(c_r=0.5), Shaker(240, 0.0), {"start_height_um": 5.0, "duration_s": 0.003}),
     (RobotParams(), PZT(1800, 20.0), {"duration_s": 0.004}),
+    (RobotParams(c_ad_n=5e-8), Shaker(2000, 25.0), {"duration_s": 0.002}),
 ])
 def test_kernel_equals_reference_to_round_off(params, scenario, kw):
-    """Non-chaotic runs (free flight, a drop, the pinned published robot under PZT drive)."""
+    """Non-chaotic runs (free flight, a drop, the pinned published robot under PZT drive) and a
+    short stretch of the demo robot at 2 kHz: releases, feet on stiff films, halved sub-steps
+    and the cached inverses all run (checked by the counters)."""
     a = simulate(params, scenario, engine="numba", **kw)
     b = simulate(params, scenario, engine="reference", **kw)
     _same(a, b, rtol=1e-9)
+    assert a.counters == b.counters
+    if isinstance(scenario, Shaker) and scenario.freq_hz == 2000:
+        assert a.counters["steps_halved"] > 0 and a.counters["trial_steps"] > a.n_steps
 
 
 def test_pattern_labels_follow_what_the_foot_does():
