@@ -147,6 +147,23 @@ def scale_from_robot_length(track: Track, length_mm: float = ROBOT_LENGTH_MM,
 
 
 # ----------------------------------------------------------------------------- the tracker
+def finish_progress(pb: Any, decoded: int, listed: int) -> None:
+    """End the bar at the frames that decoded, not at the container's count.
+
+    A truncated or damaged file lists more frames than decode (80 listed, the last cut
+    mid-write): the bar's total becomes the decoded count, its label says
+    ``79 of 80 frames decodable``, and it stays on the terminal so the shortfall is seen.
+    A container that listed fewer (an estimate) just gets the count it really had.
+    """
+    if pb.total is None or pb.total == decoded:
+        return
+    pb.total = decoded
+    if listed and decoded < listed:
+        pb.set_description_str(f"track: {decoded} of {listed} frames decodable", refresh=False)
+        pb.leave = True
+    pb.refresh()
+
+
 def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[int, int], *,
                  roi: tuple[int, int, int, int] | None = None, valid: np.ndarray | None = None,
                  flat: np.ndarray | None = None, seg: Segmentation | None = None,
@@ -507,6 +524,7 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
             raw = track_frames(iter_frames(cap, info), (W, H), roi=roi_t if roi is not None else None,
                                valid=valid, flat=flat, seg=seg, margin_px=margin_px,
                                expected_area_px=expected, max_speed_px_s=vmax, progress=pb)
+            finish_progress(pb, int(raw["t_s"].size), info.frame_count)
     finally:
         cap.release()
     if (np.all(raw["quality"] == QUALITY_LOST) and static is not None and static.object_boxes

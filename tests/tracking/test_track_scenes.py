@@ -223,6 +223,36 @@ def test_truncated_file_keeps_every_decodable_frame(tmp_path, capsys):
     assert code == 0 and s["frames"] == k and s["undecodable_frames"] == 50 - k
 
 
+def test_truncated_file_progress_ends_at_the_decodable_frames(tmp_path, monkeypatch):
+    """The container lists 80 frames, the last is cut mid-write: the bar must not stop at 79/80."""
+    import io
+
+    from tqdm import tqdm
+
+    import labkit.progress
+
+    path, _ = video(tmp_path, "trunc80", scene(n=80, seed=9))
+    truncate(path)
+    bars, text = [], io.StringIO()
+
+    def visible_bar(total=None, desc="", *, quiet=False, unit="pt"):    # labkit.progress.progress, shown
+        bars.append(tqdm(total=total, desc=desc, unit=unit, file=text, leave=False, ascii=True))
+        return bars[-1]
+
+    monkeypatch.setattr(labkit.progress, "progress", visible_bar)
+    track = track_video(path, mm_per_px=S)
+    k = track.frames
+    assert k == 79 and track.meta["undecodable_frames"] == 1        # as the decoder sees the file
+    (pb,) = bars
+    assert (pb.n, pb.total) == (k, k) and pb.leave                 # finished, and left on the terminal
+    assert f"{k} of 80 frames decodable" in text.getvalue().rsplit("\r", 1)[-1]
+    # an intact file keeps the container's total and its plain label
+    bars.clear()
+    whole, _ = video(tmp_path, "whole", scene(n=40, seed=9))
+    track_video(whole, mm_per_px=S)
+    assert (bars[0].n, bars[0].total, bars[0].desc, bars[0].leave) == (40, 40, "track", False)
+
+
 def test_image_sequences(tmp_path, capsys):
     rng = np.random.default_rng(10)
     t = np.cumsum(np.r_[0.0, rng.choice([1, 2], 44, p=[0.8, 0.2]) / 30])
