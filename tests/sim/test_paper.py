@@ -185,3 +185,19 @@ def test_cli_bad_params_and_calibrate_modes(tmp_path):
     assert "--paper" in proc.stderr
     proc = run_cli("calibrate", "--paper", "--free", "gravity", "--out", str(tmp_path / "x.toml"), check=2)
     assert "gravity" in proc.stderr and "c_ad_n" in proc.stderr
+
+
+def test_scales_are_relative_to_the_published_set_whatever_the_start():
+    """A search started from another robot (the ``paper`` preset, a user's file) sets the free
+    parameters of that robot, with the films' and the actuator's scales (and so their bounds)
+    relative to Tables 1-2: squeeze_scale 1 is the published film, from any start."""
+    from labkit.sim.paper.fit import FREE, apply, current
+
+    published = RobotParams()
+    start = RobotParams.preset("paper").replace(k_per_s2=(8e6, 6e7, 1.3e8))
+    p = apply(start, {"squeeze_scale": 1.0, "act_scale": 2.0}, published)
+    assert p.b_g_foot_n_m2_s == published.b_g_foot_n_m2_s and p.b_g_body_n_m2_s == published.b_g_body_n_m2_s
+    assert p.act_um_per_v == tuple(2.0 * a for a in published.act_um_per_v)
+    assert p.k_per_s2 == (8e6, 6e7, 1.3e8) and p.c_ad_n == start.c_ad_n      # the rest is the start's
+    squeeze = next(f for f in FREE if f.name == "squeeze_scale")
+    assert current(start, published, squeeze) == pytest.approx(start.b_g_foot_n_m2_s / published.b_g_foot_n_m2_s)

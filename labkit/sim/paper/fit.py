@@ -116,8 +116,12 @@ def current(base: RobotParams, reference: RobotParams, f: Free) -> float:
     return float(getattr(base, f.name))
 
 
-def apply(reference: RobotParams, values: dict[str, float]) -> RobotParams:
-    """``reference`` with the free parameters set (scales apply to the reference's values)."""
+def apply(base: RobotParams, values: dict[str, float], reference: RobotParams | None = None) -> RobotParams:
+    """``base`` with the free parameters set; the scales (``squeeze_scale``, ``act_scale``)
+    multiply the ``reference``'s values (default ``base``'s; the calibration and the
+    sensitivity pass the published set, so the scales and their bounds mean the same
+    whatever robot a search starts from)."""
+    reference = base if reference is None else reference
     ch: dict[str, Any] = {}
     for name, v in values.items():
         if name == "squeeze_scale":
@@ -126,7 +130,7 @@ def apply(reference: RobotParams, values: dict[str, float]) -> RobotParams:
         elif name == "act_scale":
             ch["act_um_per_v"] = tuple(a * v for a in reference.act_um_per_v)
         elif name.startswith("cy_sign["):
-            signs = list(ch.get("cy_sign", reference.cy_sign))
+            signs = list(ch.get("cy_sign", base.cy_sign))
             signs[int(name[8])] = 1.0 if v > 0 else -1.0
             ch["cy_sign"] = tuple(signs)
         elif name == "c_r":
@@ -134,7 +138,7 @@ def apply(reference: RobotParams, values: dict[str, float]) -> RobotParams:
             ch["c_r_body"] = v
         else:
             ch[name] = v
-    return reference.replace(**ch)
+    return base.replace(**ch)
 
 
 # --------------------------------------------------------------------------- batched evaluation
@@ -253,8 +257,10 @@ def calibrate_paper(start: RobotParams | None = None, *, free: Sequence[str] | N
     Parameters
     ----------
     start:
-        The reference robot (default the published set); the scales
-        (``squeeze_scale``, ``act_scale``) multiply its values.
+        The robot to start from (default the published set): the search sets
+        the free parameters of a copy of it. The scales (``squeeze_scale``,
+        ``act_scale``) and their bounds are relative to the published set
+        (Tables 1-2), whatever the start.
     free:
         Names of :data:`FREE` to fit (default all).
     scan, rounds, zoom, polish:
@@ -268,7 +274,8 @@ def calibrate_paper(start: RobotParams | None = None, *, free: Sequence[str] | N
     from scipy.optimize import minimize
 
     t0 = time.perf_counter()
-    ref = RobotParams() if start is None else start
+    base = RobotParams() if start is None else start
+    ref = RobotParams()
     names = [f.name for f in FREE] if free is None else list(free)
     known = {f.name: f for f in FREE}
     for n in names:
@@ -283,7 +290,7 @@ def calibrate_paper(start: RobotParams | None = None, *, free: Sequence[str] | N
         return {f.name: f.from_unit(x) for f, x in zip(fr, u)}
 
     def run(us: list[np.ndarray], stage: str) -> list[float]:
-        sets = [apply(ref, values_of(u)) for u in us]
+        sets = [apply(base, values_of(u), ref) for u in us]
         mets = evaluate_many(sets, seed=seed, scheduler=scheduler, workers=workers, quiet=quiet)
         costs = []
         for u, m in zip(us, mets):
@@ -294,7 +301,7 @@ def calibrate_paper(start: RobotParams | None = None, *, free: Sequence[str] | N
             costs.append(c)
         return costs
 
-    u_start = np.array([f.to_unit(min(max(current(ref, ref, f), f.lo), f.hi)) for f in fr])
+    u_start = np.array([f.to_unit(min(max(current(base, ref, f), f.lo), f.hi)) for f in fr])
     start_cost = run([u_start], "start")[0]
     say(f"start: cost {start_cost:.3f}")
     cands = [np.asarray(c, float) for c in _sobol(len(fr), int(scan), seed)]
@@ -343,7 +350,7 @@ def calibrate_paper(start: RobotParams | None = None, *, free: Sequence[str] | N
     first = history[0]
     return PaperCalibration(
         free=fr, start={k: float(v) for k, v in first["values"].items()}, fitted=fitted, spread=spread,
-        params=apply(ref, fitted), before={"cost": first["cost"], "violations": first["violations"],
+        params=apply(base, fitted, ref), before={"cost": first["cost"], "violations": first["violations"],
                                            "metrics": first["metrics"]},
         after={"cost": best["cost"], "violations": best["violations"], "metrics": best["metrics"]},
         never_together=never, correlation=corr,
@@ -402,7 +409,7 @@ def sensitivity(params: RobotParams, reference: RobotParams | None = None, *, fa
             continue
         variants.append((f.name, "down", max(f.lo, v / factor)))
         variants.append((f.name, "up", min(f.hi, v * factor)))
-    sets = [params] + [apply(ref, {**base_vals, n: x}) for n, _, x in variants]
+    sets = [params] + [apply(params, {**base_vals, n: x}, ref) for n, _, x in variants]
     mets = evaluate_many(sets, seed=seed, scheduler=scheduler, workers=workers, quiet=quiet)
     obs = observations()
     base = violations(mets[0], obs)
