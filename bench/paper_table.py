@@ -21,12 +21,12 @@ from labkit.sim import RobotParams
 from labkit.sim.scenarios import run_scenario
 
 SCENARIOS = ("paper-fig8", "paper-patterns", "paper-ablations", "paper-payload")
-COLUMNS = (("published", "published", dict(quick=True)), ("paper", "paper", dict(quick=True)),
-           ("paper, 3 draws x 1 s", "paper", dict(draws=3, duration_s=1.0)))
+COLUMNS = (("`published`, quick", "published", dict(quick=True)), ("`paper`, quick", "paper", dict(quick=True)),
+           ("`paper`, 3 draws x 1 s", "paper", dict(draws=3, duration_s=1.0)))
 
 
 def _fmt(v: float | None) -> str:
-    if v is None:
+    if v is None or v != v:
         return "n/a"
     return f"{v:.3g}"
 
@@ -43,12 +43,12 @@ def main() -> None:
             t0 = time.perf_counter()
             rows: dict[str, dict] = {}
             for name in SCENARIOS:
-                out = Path(tmp) / f"{label.replace(' ', '_').replace(',', '')}_{name}"
+                out = Path(tmp) / f"{preset}_{len(cols)}_{name}"
                 r = run_scenario(name, RobotParams.preset(preset), out, workers=args.workers, quiet=True, **kw)
                 for o in r.observations:
                     rows[o.id] = {"value": o.value, "passed": bool(o.passed), "band": o.band, "source": o.source,
                                  "metric": o.metric}
-                if args.figures and label == "paper" and r.figure:
+                if args.figures and preset == "paper" and kw.get("quick") and r.figure:
                     Path(args.figures).mkdir(parents=True, exist_ok=True)
                     shutil.copy(r.figure, Path(args.figures) / f"sim_{name}_paper.png")
             cols[label] = {"observations": rows, "met": sum(v["passed"] for v in rows.values()), "of": len(rows),
@@ -56,11 +56,11 @@ def main() -> None:
     if not args.markdown:
         print(json.dumps(cols))
         return
-    ids = list(cols["published"]["observations"])
-    print("| observation | source | paper (pass band) | " + " | ".join(f"`{c[0]}`" for c in COLUMNS) + " |")
+    ids = list(cols[COLUMNS[0][0]]["observations"])
+    print("| observation | source | paper (pass band) | " + " | ".join(c[0] for c in COLUMNS) + " |")
     print("|---|---|---|" + "---|" * len(COLUMNS))
     for i in ids:
-        first = cols["published"]["observations"][i]
+        first = cols[COLUMNS[0][0]]["observations"][i]
         band = first["band"].replace(first["metric"], "x")
         cells = []
         for label, _, _ in COLUMNS:
@@ -68,7 +68,7 @@ def main() -> None:
             cells.append(f"{_fmt(o['value'])} " + ("**pass**" if o["passed"] else "fail"))
         print(f"| `{i}` | {first['source']} | {band} | " + " | ".join(cells) + " |")
     print()
-    print("| | " + " | ".join(f"`{c[0]}`" for c in COLUMNS) + " |")
+    print("| | " + " | ".join(c[0] for c in COLUMNS) + " |")
     print("|---|" + "---|" * len(COLUMNS))
     print("| observations met | " + " | ".join(f"{cols[c[0]]['met']} / {cols[c[0]]['of']}" for c in COLUMNS) + " |")
 
