@@ -83,8 +83,11 @@ def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None):
         f = h5py.File(path, mode)
     except OSError as exc:
         if "lock" in str(exc).lower():      # another process has it open for writing
-            raise InputError("being written by another process (a run in progress holds it); read it "
-                             "when that run has ended", file=path) from None
+            from labkit.lockfiles import describe, writer_of
+
+            who = writer_of(path)
+            by = f"by {describe(who)}" if who else "by another process (a run in progress holds it)"
+            raise InputError(f"being written {by}; read it when that run has ended", file=path) from None
         raise InputError(f"not a readable HDF5 file ({exc})", file=path) from None
     if kind is not None:
         found = f.attrs.get("kind")

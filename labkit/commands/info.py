@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import ConfigError, InputError
+from labkit.lockfiles import describe, writer_of
 
 NAME = "info"
 HELP = ("summarise a labkit file: run file, track, fit, simulation (HDF5), parameter file or config (TOML), "
@@ -135,13 +136,6 @@ def summarise_toml(path: Path) -> dict[str, Any]:
     return out
 
 
-def writer_of(path: str | Path) -> dict[str, Any] | None:
-    """The run writing ``path`` now (its lock record: ``pid``, ``host``, ``command``, ``since``), else None."""
-    from labkit.experiments.locks import file_key, holder
-
-    return holder(file_key(path))
-
-
 def summarise_h5(path: Path) -> dict[str, Any]:
     """Root attributes, every dataset's shape, dtype and units, and the typed summary of known kinds.
 
@@ -158,8 +152,6 @@ def summarise_h5(path: Path) -> dict[str, Any]:
         out = {"file": str(path), "format": "hdf5", "kind": None, "schema_version": None, "attrs": {},
                "groups": [], "datasets": [], "dims": {}}
     if busy is not None:
-        from labkit.experiments.locks import describe
-
         out["being_written_by"] = {k: busy[k] for k in ("pid", "host", "command", "since") if k in busy}
         out["being_written"] = f"being written by {describe(busy)}"
     return out

@@ -15,10 +15,8 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import hashlib
 import json
 import os
-import re
 import socket
 import sys
 import time
@@ -27,70 +25,17 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError
+from labkit.lockfiles import describe, file_key, holder, lock_path, read_record, runtime_dir
+
+__all__ = ["RigBusy", "RunLocks", "describe", "file_key", "holder", "lock_path", "lock_run", "runtime_dir",
+           "announce_lab", "withdraw_lab", "served_lab", "lab_file"]
 
 
 class RigBusy(InputError):
     """Another run holds one of the instruments (or the run file): nothing was opened or sent (exit 2)."""
 
 
-def runtime_dir() -> Path:
-    """The per-user folder of the lock files (created with mode 0700)."""
-    base = os.environ.get("XDG_RUNTIME_DIR")
-    folder = Path(base) / "labkit" if base and Path(base).is_dir() else Path(f"/tmp/labkit-{os.getuid()}")
-    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
-    return folder
-
-
-def lock_path(key: str) -> Path:
-    """The lock file for a resource string or a run file's absolute path."""
-    slug = re.sub(r"[^A-Za-z0-9._-]+", "_", key)[-60:]
-    digest = hashlib.sha1(key.encode()).hexdigest()[:12]
-    return runtime_dir() / f"{slug}.{digest}.lock"
-
-
-def file_key(path: str | Path) -> str:
-    return "file:" + os.path.realpath(path)
-
-
-def holder(key: str) -> dict[str, Any] | None:
-    """Who holds the lock on ``key`` now (its JSON record), or None when nobody does."""
-    p = lock_path(key)
-    if not p.exists():
-        return None
-    try:
-        fd = os.open(p, os.O_RDONLY)
-    except OSError:
-        return None
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-        except BlockingIOError:
-            return _read(p) or {"pid": "?"}
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        return None
-    finally:
-        os.close(fd)
-
-
-def _read(p: Path) -> dict[str, Any] | None:
-    try:
-        data = json.loads(p.read_text() or "{}")
-        return data if isinstance(data, dict) else None
-    except (OSError, ValueError):
-        return None
-
-
-def describe(info: dict[str, Any]) -> str:
-    """``PID 123 on bench-pc (labkit sweep inchip a.toml --out run.h5, run file run.h5, since 16:40:02)``."""
-    parts = [f"PID {info.get('pid', '?')}" + (f" on {info['host']}" if info.get("host") else "")]
-    extra = []
-    if info.get("command"):
-        extra.append(str(info["command"]))
-    if info.get("run_file"):
-        extra.append(f"run file {info['run_file']}")
-    if info.get("since"):
-        extra.append(f"since {info['since']}")
-    return parts[0] + (f" ({', '.join(extra)})" if extra else "")
+_read = read_record
 
 
 class RunLocks:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from clihelpers import REPO, last_json, run_cli
 from labkit.commands.info import summarise
@@ -90,6 +91,13 @@ def test_info_names_the_pid_and_host_of_the_run_writing_the_file(tmp_path):
         assert j["being_written_by"]["pid"] == writer.pid and j["format"] == "hdf5"
         text = run_cli("info", str(out)).stdout
         assert f"being written by PID {writer.pid}" in text and "when that run has ended" in text
+        # labkit.open (every reader) names the writer too, with a clear error, not an HDF5 one
+        import labkit
+        from labkit.errors import InputError
+
+        with pytest.raises(InputError) as e:
+            labkit.open(out)
+        assert f"being written by PID {writer.pid} on {socket.gethostname()}" in str(e.value)
     finally:
         writer.kill()
         writer.wait()

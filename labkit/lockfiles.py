@@ -1,0 +1,85 @@
+"""Where run locks live and who holds one (base layer: read by ``labkit.h5io`` too).
+
+A run takes an exclusive ``flock`` on one small file per instrument resource and per
+run file (:mod:`labkit.experiments.locks`), in the user's runtime folder
+(``$XDG_RUNTIME_DIR/labkit``, else ``/tmp/labkit-<uid>``); the file holds the
+holder's PID, host, command and run file as JSON. This module only finds those
+files and reads who holds one, so that anything that meets a file being written
+(``labkit.open``, ``labkit info``, ``--resume``) can name the run writing it.
+"""
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import os
+import re
+from pathlib import Path
+from typing import Any
+
+
+def runtime_dir() -> Path:
+    """The per-user folder of the lock files (created with mode 0700)."""
+    base = os.environ.get("XDG_RUNTIME_DIR")
+    folder = Path(base) / "labkit" if base and Path(base).is_dir() else Path(f"/tmp/labkit-{os.getuid()}")
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    return folder
+
+
+def lock_path(key: str) -> Path:
+    """The lock file for a resource string or a run file's absolute path."""
+    slug = re.sub(r"[^A-Za-z0-9._-]+", "_", key)[-60:]
+    digest = hashlib.sha1(key.encode()).hexdigest()[:12]
+    return runtime_dir() / f"{slug}.{digest}.lock"
+
+
+def file_key(path: str | Path) -> str:
+    """The lock key of a run file (its real path)."""
+    return "file:" + os.path.realpath(path)
+
+
+def read_record(p: Path) -> dict[str, Any] | None:
+    """The JSON record in a lock file, or None when it cannot be read."""
+    try:
+        data = json.loads(p.read_text() or "{}")
+        return data if isinstance(data, dict) else None
+    except (OSError, ValueError):
+        return None
+
+
+def holder(key: str) -> dict[str, Any] | None:
+    """Who holds the lock on ``key`` now (its JSON record), or None when nobody does."""
+    p = lock_path(key)
+    if not p.exists():
+        return None
+    try:
+        fd = os.open(p, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return read_record(p) or {"pid": "?"}
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return None
+    finally:
+        os.close(fd)
+
+
+def writer_of(path: str | Path) -> dict[str, Any] | None:
+    """The run writing ``path`` now (its lock record: ``pid``, ``host``, ``command``, ``since``), else None."""
+    return holder(file_key(path))
+
+
+def describe(info: dict[str, Any]) -> str:
+    """``PID 123 on bench-pc (labkit sweep inchip a.toml --out run.h5, run file run.h5, since 16:40:02)``."""
+    parts = [f"PID {info.get('pid', '?')}" + (f" on {info['host']}" if info.get("host") else "")]
+    extra = []
+    if info.get("command"):
+        extra.append(str(info["command"]))
+    if info.get("run_file"):
+        extra.append(f"run file {info['run_file']}")
+    if info.get("since"):
+        extra.append(f"since {info['since']}")
+    return parts[0] + (f" ({', '.join(extra)})" if extra else "")
