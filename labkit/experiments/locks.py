@@ -10,6 +10,8 @@ process ends in any way (SIGKILL, a crash), so a stale file never blocks.
 
 A run file being written is locked the same way, so ``labkit info`` and
 ``--resume`` can say "being written by PID n" instead of an HDF5 locking error.
+Finding lock files and reading who holds one is :mod:`labkit.lockfiles` (base layer:
+``labkit.open`` reads it too); this module takes and releases the locks.
 """
 from __future__ import annotations
 
@@ -25,17 +27,11 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError
-from labkit.lockfiles import describe, file_key, holder, lock_path, read_record, runtime_dir
-
-__all__ = ["RigBusy", "RunLocks", "describe", "file_key", "holder", "lock_path", "lock_run", "runtime_dir",
-           "announce_lab", "withdraw_lab", "served_lab", "lab_file"]
+from labkit.lockfiles import describe, file_key, lock_path, read_record, runtime_dir
 
 
 class RigBusy(InputError):
     """Another run holds one of the instruments (or the run file): nothing was opened or sent (exit 2)."""
-
-
-_read = read_record
 
 
 class RunLocks:
@@ -53,7 +49,7 @@ class RunLocks:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            other = _read(p) or {"pid": "?"}
+            other = read_record(p) or {"pid": "?"}
             raise RigBusy(f"{what} is in use by another run: {describe(other)}; wait for it to end "
                           f"(or stop it), then start this one", file=file, key=conf_key) from None
         os.ftruncate(fd, 0)
@@ -118,7 +114,7 @@ def announce_lab(resources: dict[str, str], models: dict[str, str]) -> Path:
 
 def withdraw_lab() -> None:
     """Remove the record of this process's served lab (another process's is left alone)."""
-    data = _read(lab_file())
+    data = read_record(lab_file())
     if data is not None and data.get("pid") == os.getpid():
         try:
             lab_file().unlink()
@@ -128,7 +124,7 @@ def withdraw_lab() -> None:
 
 def served_lab() -> dict[str, Any]:
     """The running ``labkit lab serve`` (its record), or InputError when none runs."""
-    data = _read(lab_file())
+    data = read_record(lab_file())
     pid = data.get("pid") if data else None
     alive = False
     if isinstance(pid, int):

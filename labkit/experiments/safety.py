@@ -206,7 +206,7 @@ def turn_off(config: str | None = None, *, model: str | None = None, resource: s
     """
     from labkit.drivers.registry import open_instrument
     from labkit.errors import ConfigError, InputError
-    from labkit.experiments.locks import describe, holder
+    from labkit.lockfiles import describe, holder
 
     settings: dict[str, Any] = {}
     if config is not None:

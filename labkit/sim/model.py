@@ -147,7 +147,7 @@ class Model:
             RI[NB + k, NR + k] = 1.0
         MRI = Minv @ RI
         WI = RI.T @ MRI
-        for off, arr in ((K.OFF_M, M), (K.OFF_MINV, Minv), (K.OFF_RT, RI.T), (K.OFF_MRT, MRI.T),
+        for off, arr in ((K.OFF_M, M), (K.OFF_RT, RI.T), (K.OFF_MRT, MRI.T),
                          (K.OFF_WI, WI), (K.OFF_K, self.stiff), (K.OFF_D, self.damp),
                          (K.OFF_FC, self.f_const), (K.OFF_FA, self.f_act), (K.OFF_KV, self.knee),
                          (K.OFF_YFEQ, self.y_foot_eq), (K.OFF_HELD, self.held)):

@@ -46,9 +46,9 @@ NI = NR + 18     # impulse rows: the contact rows, then one per leg mode (held r
 ROW_BZ = 12
 ROW_BY = 13
 AIR, ADHESION, REST = 0, 1, 2
-#: Passes of the step's small system: the second takes the squeeze films' coefficients
-#: at the midpoint gap of the first (second order; the first alone freezes them at the
-#: step's start, a first-order error where the gap changes fast).
+#: Passes of the step's small system: the first takes the squeeze films' coefficients at the
+#: midpoint gap predicted from the start's velocity, the second at the midpoint gap of the
+#: first's solution (skipped where that changes nothing, FILM_PASS_SKIP).
 FILM_PASSES = 2
 #: Sub-steps (:func:`film_too_coarse`): a step is halved when a squeeze film's gap changes
 #: by more than this factor over it ...
@@ -58,7 +58,6 @@ FILM_WEAK = 0.05
 #: The second film pass is skipped when it would change no film's effect on its row's
 #: velocity by more than this fraction (weak films far from the ground).
 FILM_PASS_SKIP = 1e-6
-EVENT_REFINE = False
 #: A film row whose film takes more than this fraction of its velocity in a step (x = h c /
 #: m_row) gets its end velocity from the film's slow motion, weight x / (1 + x) (:func:`advance`).
 FILM_STIFF_MIN = 0.01
@@ -73,8 +72,7 @@ P_SIZE = 22
 
 # ---- matrices A (row-major blocks)
 OFF_M = 0
-OFF_MINV = OFF_M + NQ * NQ
-OFF_RT = OFF_MINV + NQ * NQ            # NI x NQ: contact rows then mode rows (R_I^T, rows contiguous)
+OFF_RT = OFF_M + NQ * NQ              # NI x NQ: contact rows then mode rows (R_I^T, rows contiguous)
 OFF_MRT = OFF_RT + NI * NQ             # NI x NQ: (M^-1 R_I)^T
 OFF_WI = OFF_MRT + NI * NQ             # R_I^T M^-1 R_I
 OFF_K = OFF_WI + NI * NI               # diagonal of K
@@ -400,7 +398,7 @@ def advance(P, A, S, mode, t, h, W, I, out):
     vgm = (zg1 - zg0) / h
     n = active_rows(P, A, S, mode, t, h, I, W)
     # per active row, what does not change between the passes: R_a . Sinv r and the
-    # right-hand side of a pinned row (W_T), its position at the start (film rows, W_LAMS)
+    # right-hand side of a pinned row, the position at the start of a film row (both in W_T)
     for a in range(n):
         ra = I[I_ROWS + a]
         W[W_RY + a] = row_dot(A, ra, W, W_Y0)
@@ -936,8 +934,6 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
                 best = frac
                 who = j
                 rel = False
-        if refine and n_ev == 0 and who >= 0 and EVENT_REFINE:
-            return True
         if who < 0:
             W[W_CT] = now + rem
             W[W_CV] = volts(P, tv)
