@@ -139,6 +139,18 @@ class Model:
             P[getattr(K, "P_" + key)] = value
         A = np.zeros(K.A_SIZE)
         M = self.mass
+        if not np.array_equal(M, M.T):        # the scheme multiplies by M's columns as rows
+            raise ValueError("the mass matrix is not exactly symmetric")
+        if np.count_nonzero(M[NB:, NB:] - np.diag(np.diag(M[NB:, NB:]))):   # scheme.partial_system
+            raise ValueError("the legs' modal coordinates are coupled in the mass matrix")
+        # the scheme's row products visit only the body and the row's own leg (scheme.leg_of_row)
+        for r in range(NR):
+            span = np.zeros(NQ, bool)
+            span[:NB] = True
+            if r < 12:
+                span[NB + 3 * (r % 6):NB + 3 * (r % 6) + 3] = True
+            if np.any(self.rows[~span, r] != 0.0):
+                raise ValueError(f"contact row {r} involves another leg's modes")
         Minv = np.linalg.inv(M)
         Minv = 0.5 * (Minv + Minv.T)
         RI = np.zeros((NQ, K.NI))
@@ -160,7 +172,7 @@ class Model:
             Sinv = np.linalg.inv(2 * M + h * np.diag(self.damp) + 0.5 * h * h * np.diag(self.stiff))
             Z = Sinv @ self.rows
             base = K.OFF_LEV + lev * K.LEV_SIZE
-            for off, arr in ((K.LEV_SINV, Sinv), (K.LEV_ZT, Z.T), (K.LEV_Q, self.rows.T @ Z)):
+            for off, arr in ((K.LEV_SINVT, Sinv.T), (K.LEV_ZT, Z.T), (K.LEV_Q, self.rows.T @ Z)):
                 flat = np.ascontiguousarray(arr, dtype=float).ravel()
                 A[base + off:base + off + flat.size] = flat
         return P, A

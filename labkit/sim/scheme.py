@@ -87,8 +87,8 @@ OFF_HELD = OFF_YFEQ + 6                # 18: 1 = the mode is held rigid in impac
 #: an event) solve their own system.
 NLEV = 7
 OFF_LEV = OFF_HELD + 18                # per level: Sinv, Z, Q below
-LEV_SINV = 0                           # (2M + h D + h^2/2 K)^-1
-LEV_ZT = LEV_SINV + NQ * NQ            # NR x NQ: (Sinv R)^T
+LEV_SINVT = 0                          # (2M + h D + h^2/2 K)^-1, transposed
+LEV_ZT = LEV_SINVT + NQ * NQ           # NR x NQ: (Sinv R)^T
 LEV_Q = LEV_ZT + NR * NQ               # NR x NR: R^T Sinv R
 LEV_SIZE = LEV_Q + NR * NR
 A_SIZE = OFF_LEV + NLEV * LEV_SIZE
@@ -236,13 +236,44 @@ def gauss(Am, oa, lda, Bm, ob, ldb, n, m):
 
 
 @jit
+def leg_of_row(r):
+    """The leg whose modes a contact/impulse row involves besides the body's coordinates
+    (-1: none, a body row). A foot's rows involve only the body and its own leg (M3; checked
+    by :meth:`labkit.sim.model.Model.pack`), so row products skip the other legs' modes:
+    the skipped terms are exact zeros, the sum's order is kept, the result is the same."""
+    if r < 12:
+        return r % 6
+    return -1
+
+
+@jit
 def row_dot(A, r, x, xo):
-    """Contact/impulse row r dotted with x[xo:xo+NQ]."""
-    s = 0.0
+    """Contact/impulse row r dotted with x[xo:xo+NQ] (its nonzero span only)."""
     o = OFF_RT + r * NQ
-    for i in range(NQ):
+    if r >= NR:                       # a mode row: one unit entry
+        k = NB + r - NR
+        return A[o + k] * x[xo + k]
+    # two independent sums (body, leg): the additions of one do not wait on the other's
+    s = 0.0
+    for i in range(NB):
         s += A[o + i] * x[xo + i]
+    leg = leg_of_row(r)
+    if leg >= 0:
+        for i in range(NB + 3 * leg, NB + 3 * leg + 3):
+            s += A[o + i] * x[xo + i]
     return s
+
+
+@jit
+def row_axpy(A, r, X, xo, f):
+    """X[xo:xo+NQ] += f R_r (the row's nonzero span only, as :func:`row_dot`)."""
+    o = OFF_RT + r * NQ
+    for i in range(NB):
+        X[xo + i] += A[o + i] * f
+    leg = leg_of_row(r)
+    if leg >= 0:
+        for i in range(NB + 3 * leg, NB + 3 * leg + 3):
+            X[xo + i] += A[o + i] * f
 
 
 @jit
@@ -265,22 +296,23 @@ def forces(P, A, S, mode, t_mid, q, qo, v, vo, F, fo):
     if ad > 0.0:
         for j in range(6):
             if mode[j] == AIR:
-                vz = 0.0
-                vy = 0.0
-                for i in range(NQ):
-                    vz += A[OFF_RT + j * NQ + i] * v[vo + i]
-                    vy += A[OFF_RT + (6 + j) * NQ + i] * v[vo + i]
+                vz = row_dot(A, j, v, vo)
+                vy = row_dot(A, 6 + j, v, vo)
                 fz = -ad * vz * abs(vz)
                 fy = -ad * vy * abs(vy)
-                for i in range(NQ):
-                    F[fo + i] += A[OFF_RT + j * NQ + i] * fz + A[OFF_RT + (6 + j) * NQ + i] * fy
+                # both rows of foot j span the body and leg j (:func:`leg_of_row`)
+                oz = OFF_RT + j * NQ
+                oy = OFF_RT + (6 + j) * NQ
+                for i in range(NB):
+                    F[fo + i] += A[oz + i] * fz + A[oy + i] * fy
+                for i in range(NB + 3 * j, NB + 3 * j + 3):
+                    F[fo + i] += A[oz + i] * fz + A[oy + i] * fy
         F[fo + 0] -= ad * v[vo + 0] * abs(v[vo + 0])
         F[fo + 1] -= ad * v[vo + 1] * abs(v[vo + 1])
     for j in range(6):
         fr = S[S_SLIP + j]
         if mode[j] != AIR and fr != 0.0:
-            for i in range(NQ):
-                F[fo + i] += A[OFF_RT + (6 + j) * NQ + i] * fr
+            row_axpy(A, 6 + j, F, fo, fr)
 
 
 @jit
@@ -347,6 +379,72 @@ def step_level(P, h):
 
 
 @jit
+def partial_system(A, h, W, I, n):
+    """The step's system for a length h without cached matrices (a partial step up to an
+    event): W_Y0 = Sinv r, and for the n active rows Z = Sinv R (W_ZH) and R^T Z (W_QH).
+
+    ``S = 2M + hD + h^2/2 K`` is solved through its body block: the legs' modal coordinates
+    are mutually uncoupled in M (M2; checked by :meth:`labkit.sim.model.Model.pack`), so the
+    leg block is diagonal and the body's 5 x 5 Schur complement is all that is eliminated
+    (S is symmetric positive definite: no pivoting is needed for the legs).
+    """
+    nc = 1 + n                          # right-hand sides: r, then the active rows' columns
+    ld = 1 + NR
+    for i in range(NQ):
+        W[W_B + i * ld] = W[W_R + i]
+    for a in range(n):
+        ra = I[I_ROWS + a]
+        o = OFF_RT + ra * NQ
+        for i in range(NQ):
+            W[W_B + i * ld + 1 + a] = A[o + i]
+    # inverse diagonal of the leg block (kept in W_SM's last row, unused by the 5 x 5 below)
+    dg = W_SM + (NQ - 1) * NQ
+    for i in range(NB, NQ):
+        W[dg + i] = 1.0 / (2.0 * A[OFF_M + i * NQ + i] + h * A[OFF_D + i] + 0.5 * h * h * A[OFF_K + i])
+    # Schur complement of the body, and the body's right-hand sides (the sums over the legs'
+    # coordinates run outermost: independent accumulators, no chain of dependent additions)
+    for a in range(NB):
+        for b in range(NB):
+            W[W_SM + a * NQ + b] = 2.0 * A[OFF_M + a * NQ + b]
+        W[W_SM + a * NQ + a] += h * A[OFF_D + a] + 0.5 * h * h * A[OFF_K + a]
+    for i in range(NB, NQ):
+        for a in range(NB):
+            f = 4.0 * A[OFF_M + a * NQ + i] * W[dg + i]
+            if f == 0.0:
+                continue
+            for b in range(NB):
+                W[W_SM + a * NQ + b] -= f * A[OFF_M + i * NQ + b]
+            for c in range(nc):
+                W[W_B + a * ld + c] -= 0.5 * f * W[W_B + i * ld + c]
+    gauss(W, W_SM, NQ, W, W_B, ld, NB, nc)
+    for i in range(NB, NQ):
+        for b in range(NB):
+            f = 2.0 * A[OFF_M + i * NQ + b]
+            for c in range(nc):
+                W[W_B + i * ld + c] -= f * W[W_B + b * ld + c]
+        for c in range(nc):
+            W[W_B + i * ld + c] *= W[dg + i]
+    for i in range(NQ):
+        W[W_Y0 + i] = W[W_B + i * ld]
+        for a in range(n):
+            W[W_ZH + i * NR + I[I_ROWS + a]] = W[W_B + i * ld + 1 + a]
+    # R^T Z over the active rows (each row spans the body and its own leg, row_dot)
+    for a in range(n):
+        ra = I[I_ROWS + a]
+        o = OFF_RT + ra * NQ
+        for b in range(n):
+            W[W_QH + ra * NR + I[I_ROWS + b]] = 0.0
+        leg = leg_of_row(ra)
+        for i in range(NQ):
+            if i >= NB and (leg < 0 or i < NB + 3 * leg or i >= NB + 3 * leg + 3):
+                continue
+            x = A[o + i]
+            for b in range(n):
+                rb = I[I_ROWS + b]
+                W[W_QH + ra * NR + rb] += x * W[W_ZH + i * NR + rb]
+
+
+@jit
 def advance(P, A, S, mode, t, h, W, I, out):
     """One midpoint step of length h from S (M5); the end state goes to ``out`` (q, v, lam).
 
@@ -357,46 +455,37 @@ def advance(P, A, S, mode, t, h, W, I, out):
         W[W_Q0 + i] = S[S_Q + i]
         W[W_V0 + i] = S[S_V + i]
     forces(P, A, S, mode, t + 0.5 * h, S, S_Q, S, S_V, W, W_F)
-    # r = 2 M v0 + h (f - K q0)
+    # r = 2 M v0 + h (f - K q0). The matrix-vector products go by columns (M is symmetric,
+    # Sinv stored transposed): each sum takes the same terms in the same order as by rows,
+    # but the additions of one sum no longer wait on each other.
     for i in range(NQ):
-        s = 0.0
-        for k in range(NQ):
-            s += A[OFF_M + i * NQ + k] * W[W_V0 + k]
-        W[W_R + i] = 2.0 * s + h * (W[W_F + i] - A[OFF_K + i] * W[W_Q0 + i])
+        W[W_R + i] = 0.0
+    for k in range(NQ):
+        vk = W[W_V0 + k]
+        o = OFF_M + k * NQ
+        for i in range(NQ):
+            W[W_R + i] += A[o + i] * vk
+    for i in range(NQ):
+        W[W_R + i] = 2.0 * W[W_R + i] + h * (W[W_F + i] - A[OFF_K + i] * W[W_Q0 + i])
     lev = step_level(P, h)
     full = lev >= 0
     base = OFF_LEV + lev * LEV_SIZE
+    n = active_rows(P, A, S, mode, t, h, I, W)
     if full:
         for i in range(NQ):
-            s = 0.0
-            for k in range(NQ):
-                s += A[base + LEV_SINV + i * NQ + k] * W[W_R + k]
-            W[W_Y0 + i] = s
+            W[W_Y0 + i] = 0.0
+        for k in range(NQ):
+            rk = W[W_R + k]
+            o = base + LEV_SINVT + k * NQ
+            for i in range(NQ):
+                W[W_Y0 + i] += A[o + i] * rk
     else:
-        for i in range(NQ):
-            for k in range(NQ):
-                W[W_SM + i * NQ + k] = 2.0 * A[OFF_M + i * NQ + k]
-            W[W_SM + i * NQ + i] += h * A[OFF_D + i] + 0.5 * h * h * A[OFF_K + i]
-            W[W_B + i * (1 + NR)] = W[W_R + i]
-            for r in range(NR):
-                W[W_B + i * (1 + NR) + 1 + r] = A[OFF_RT + r * NQ + i]
-        gauss(W, W_SM, NQ, W, W_B, 1 + NR, NQ, 1 + NR)
-        for i in range(NQ):
-            W[W_Y0 + i] = W[W_B + i * (1 + NR)]
-            for r in range(NR):
-                W[W_ZH + i * NR + r] = W[W_B + i * (1 + NR) + 1 + r]
-        for a in range(NR):
-            for b in range(NR):
-                s = 0.0
-                for i in range(NQ):
-                    s += A[OFF_RT + a * NQ + i] * W[W_ZH + i * NR + b]
-                W[W_QH + a * NR + b] = s
+        partial_system(A, h, W, I, n)
     zg1, vg1, _ = ground(P, t + h)
     zg0, _, _ = ground(P, t)
     # the films see the ground's mean velocity over the step (its chord), so a foot held
     # by its film follows the ground's displacement exactly and does not sink into it
     vgm = (zg1 - zg0) / h
-    n = active_rows(P, A, S, mode, t, h, I, W)
     # per active row, what does not change between the passes: R_a . Sinv r and the
     # right-hand side of a pinned row, the position at the start of a film row (both in W_T)
     for a in range(n):
@@ -727,6 +816,11 @@ def contact_force(P, A, S, mode, t, tv, W, I, o):
     y rows). So the pull on a foot counts the actuator, the leg's weight, the films and
     the body's motion, as the paper's force balance (eq. 10) does.
     """
+    for r in range(NR):
+        W[o + r] = 0.0
+    m = pinned_rows(S, mode, I, 0)
+    if m == 0:
+        return
     forces(P, A, S, mode, tv, S, S_Q, S, S_V, W, W_FI)
     zg, vg, ag = ground(P, t)
     hmin = P[P_HMIN]
@@ -738,17 +832,11 @@ def contact_force(P, A, S, mode, t, tv, W, I, o):
                 gap = row_dot(A, j, S, S_Q) - zg
                 h = gap if gap > hmin else hmin
                 fz = -P[P_BGF] / (h * h * h) * (row_dot(A, j, S, S_V) - vg)
-                for i in range(NQ):
-                    W[W_FI + i] += A[OFF_RT + j * NQ + i] * fz
+                row_axpy(A, j, W, W_FI, fz)
     if mode[6] != REST and P[P_BGB] > 0.0:
         gap = P[P_H0] + S[S_Q + 1] - zg
         h = gap if gap > hmin else hmin
         W[W_FI + 1] -= P[P_BGB] / (h * h * h) * (S[S_V + 1] - vg)
-    for r in range(NR):
-        W[o + r] = 0.0
-    m = pinned_rows(S, mode, I, 0)
-    if m == 0:
-        return
     mask = 0
     for a in range(m):
         mask |= 1 << I[I_ROWS + a]
@@ -948,6 +1036,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
         hi = rem
         ghi = -release_margin(P, S, mode, W, W_LI1, who, rem) if rel else W[W_GAP1 + who]
         tau = best * rem
+        fresh = False           # T holds the trial advanced to tau
         for _ in range(12):
             if tau <= 0.0:
                 tau = 0.0
@@ -955,6 +1044,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
             count[CNT_ADV] += 1
             g = event_value(P, A, S, T, mode, now, tau, tv, W, I, who, rel)
             if (not rel and abs(g) <= tol) or hi - lo <= 1e-9 * rem:
+                fresh = True
                 break
             if g > 0.0:
                 lo = tau
@@ -964,8 +1054,9 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
                 ghi = g
             tau = lo + (hi - lo) * glo / (glo - ghi) if glo > 0.0 else lo
         if tau > 0.0:
-            count[CNT_ADV] += 1
-            advance(P, A, S, mode, now, tau, W, I, T)
+            if not fresh:
+                count[CNT_ADV] += 1
+                advance(P, A, S, mode, now, tau, W, I, T)
             for k in range(S_SIZE):
                 S[k] = T[k]
             for j in range(6):
