@@ -147,7 +147,8 @@ W_CV = W_CT + 1           # ... and the drive voltage they were computed with
 #: change only at events, so nearly every step finds its matrix here.
 NSLOT = 64
 NC = 13
-W_CACHE = W_CV + 1
+W_GRND = W_CV + 1         # ground(): two remembered (t, zg, vg, ag), then the slot to replace next
+W_CACHE = W_GRND + 9
 W_SIZE = W_CACHE + NSLOT * NC * NC
 # ---- int scratch I
 I_ROWS = 0                # active rows
@@ -159,7 +160,7 @@ I_SIZE = I_POS + NC
 
 
 @jit
-def ground(P, t):
+def ground_at(P, t):
     """Ground height, velocity and acceleration (model.md section 7): shaker sine, else still."""
     if P[P_KIND] != 0.0:
         return 0.0, 0.0, 0.0
@@ -168,6 +169,24 @@ def ground(P, t):
     s = math.sin(w * t)
     c = math.cos(w * t)
     return a * s, a * w * c, -a * w * w * s
+
+
+@jit
+def ground(P, W, t):
+    """:func:`ground_at`, remembered for the last two times asked (a step asks for its start
+    and end several times; the sine and cosine cost more than the rest of the lookup)."""
+    for k in range(2):
+        o = W_GRND + 4 * k
+        if W[o] == t:
+            return W[o + 1], W[o + 2], W[o + 3]
+    zg, vg, ag = ground_at(P, t)
+    o = W_GRND + 4 * int(W[W_GRND + 8])
+    W[o] = t
+    W[o + 1] = zg
+    W[o + 2] = vg
+    W[o + 3] = ag
+    W[W_GRND + 8] = 1.0 - W[W_GRND + 8]
+    return zg, vg, ag
 
 
 @jit
@@ -279,7 +298,7 @@ def row_axpy(A, r, X, xo, f):
 @jit
 def gaps(P, A, S, t, W, o):
     """Gap of each foot (0-5) and of the body (6) above the ground at t, into W[o:o+7]."""
-    zg, _, _ = ground(P, t)
+    zg, _, _ = ground(P, W, t)
     for j in range(6):
         W[o + j] = row_dot(A, j, S, S_Q) - zg
     W[o + 6] = P[P_H0] + S[S_Q + 1] - zg
@@ -323,7 +342,7 @@ def active_rows(P, A, S, mode, t, h, I, W):
     step's midpoint from the start's velocity (:func:`advance` corrects them in a second
     pass when that changes a film's effect).
     """
-    zg, vg, _ = ground(P, t)
+    zg, vg, _ = ground(P, W, t)
     hmin = P[P_HMIN]
     n = 0
     for j in range(6):
@@ -481,8 +500,8 @@ def advance(P, A, S, mode, t, h, W, I, out):
                 W[W_Y0 + i] += A[o + i] * rk
     else:
         partial_system(A, h, W, I, n)
-    zg1, vg1, _ = ground(P, t + h)
-    zg0, _, _ = ground(P, t)
+    zg1, vg1, _ = ground(P, W, t + h)
+    zg0, _, _ = ground(P, W, t)
     # the films see the ground's mean velocity over the step (its chord), so a foot held
     # by its film follows the ground's displacement exactly and does not sink into it
     vgm = (zg1 - zg0) / h
@@ -726,7 +745,7 @@ def impact(P, A, S, mode, t, W, I, events, count):
     foot (body) is pinned instead (perfectly plastic), so chattering ends after
     finitely many impacts.
     """
-    zg, vg, _ = ground(P, t)
+    zg, vg, _ = ground(P, W, t)
     vstick = P[P_VSTICK]
     # relative normal velocities before
     for j in range(7):
@@ -822,7 +841,7 @@ def contact_force(P, A, S, mode, t, tv, W, I, o):
     if m == 0:
         return
     forces(P, A, S, mode, tv, S, S_Q, S, S_V, W, W_FI)
-    zg, vg, ag = ground(P, t)
+    zg, vg, ag = ground(P, W, t)
     hmin = P[P_HMIN]
     for i in range(NQ):
         W[W_FI + i] -= A[OFF_K + i] * S[S_Q + i] + A[OFF_D + i] * S[S_V + i]
@@ -1075,7 +1094,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
             continue
         # every free point at or below the ground and approaching it impacts now
         gaps(P, A, S, now, W, W_GAP0)
-        _, vg, _ = ground(P, now)
+        _, vg, _ = ground(P, W, now)
         for j in range(7):
             I[I_IMP + j] = 0
             free = mode[j] == AIR
@@ -1125,7 +1144,7 @@ def substeps(P, A, S, T, mode, t, dt, W, I, events, count):
 
 @jit
 def record(P, A, S, mode, t, rec, rec_contact, row):
-    zg, _, _ = ground(P, t)
+    zg, _, _ = ground_at(P, t)
     rec[row, REC_T] = t
     rec[row, REC_Y] = S[S_Q + 0]
     rec[row, REC_Z] = P[P_H0] + S[S_Q + 1]
@@ -1148,6 +1167,8 @@ def integrate(P, A, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac,
     """Run n_steps steps of dt; fill the outputs (statistics after n_skip steps)."""
     W = np.zeros(W_SIZE)
     W[W_CT] = -1.0                  # no cached contact forces yet
+    W[W_GRND] = math.nan            # nor ground values
+    W[W_GRND + 4] = math.nan
     I = np.zeros(I_SIZE, np.int64)
     for k in range(NSLOT):
         I[I_TAG + k] = -1
@@ -1163,7 +1184,7 @@ def integrate(P, A, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac,
             break
         substeps(P, A, S, T, mode, t, dt, W, I, events, count)
         if n >= n_skip:
-            zg, _, _ = ground(P, t + dt)
+            zg, _, _ = ground(P, W, t + dt)
             for j in range(6):
                 frac[j, mode[j]] += dt
                 if mode[j] == AIR:
