@@ -266,6 +266,58 @@ def leg_of_row(r):
 
 
 @jit
+def spd_solve(W, oa, lda, ob, n):
+    """Solve A x = b in place for a symmetric positive (semi)definite A (n x n at W[oa],
+    row stride lda; b at W[ob], overwritten by x): LDL^T without pivoting, A destroyed.
+
+    A pivot below 1e-12 of the largest diagonal entry marks a redundant equation (as in
+    :func:`gauss`: e.g. dependent lateral rows, cy_sign = 0): its unknown is set to 0.
+    """
+    scale = 0.0
+    for i in range(n):
+        v = W[oa + i * lda + i]
+        if v > scale:
+            scale = v
+    eps = 1e-12 * scale
+    for j in range(n):
+        oj = oa + j * lda
+        d = W[oj + j]
+        for k in range(j):
+            lk = W[oj + k]
+            d -= lk * lk * W[oa + k * lda + k]
+        if d <= eps:
+            W[oj + j] = 0.0
+            for i in range(j + 1, n):
+                W[oa + i * lda + j] = 0.0
+            continue
+        W[oj + j] = d
+        for i in range(j + 1, n):
+            oi = oa + i * lda
+            v = W[oi + j]
+            for k in range(j):
+                v -= W[oi + k] * W[oj + k] * W[oa + k * lda + k]
+            W[oi + j] = v / d
+    # L y = b, D z = y, L^T x = z (a dead pivot's unknown is 0)
+    for i in range(n):
+        oi = oa + i * lda
+        v = W[ob + i]
+        for k in range(i):
+            v -= W[oi + k] * W[ob + k]
+        W[ob + i] = v
+    for i in range(n):
+        d = W[oa + i * lda + i]
+        W[ob + i] = W[ob + i] / d if d != 0.0 else 0.0
+    for i in range(n - 1, -1, -1):
+        if W[oa + i * lda + i] == 0.0:
+            W[ob + i] = 0.0
+            continue
+        v = W[ob + i]
+        for k in range(i + 1, n):
+            v -= W[oa + k * lda + i] * W[ob + k]
+        W[ob + i] = v
+
+
+@jit
 def row_dot(A, r, x, xo):
     """Contact/impulse row r dotted with x[xo:xo+NQ] (its nonzero span only)."""
     o = OFF_RT + r * NQ
@@ -535,23 +587,22 @@ def advance(P, A, S, mode, t, h, W, I, out):
                     W[W_C + a] = c
             if change < FILM_PASS_SKIP:
                 break
+        # pinned row a: Q_a. alpha = t_a; film row a, divided by h c_a:
+        # Q_a. alpha + alpha_a / (h c_a) = -(R_a . Sinv r - v_g). Symmetric positive
+        # (semi)definite: Q = R^T Sinv R, plus a positive diagonal (spd_solve).
         for a in range(n):
             ra = I[I_ROWS + a]
-            kind = I[I_KIND + a]
             for b in range(n):
                 rb = I[I_ROWS + b]
-                qab = A[base + LEV_Q + ra * NR + rb] if full else W[W_QH + ra * NR + rb]
-                if kind == 1:
-                    W[W_AS + a * NI + b] = qab
-                else:
-                    W[W_AS + a * NI + b] = h * W[W_C + a] * qab + (1.0 if a == b else 0.0)
-            if kind == 1:
+                W[W_AS + a * NI + b] = A[base + LEV_Q + ra * NR + rb] if full else W[W_QH + ra * NR + rb]
+            if I[I_KIND + a] == 1:
                 W[W_BS + a] = W[W_T + a]
             else:
                 vg = vgm if ra != ROW_BY else 0.0
-                W[W_BS + a] = -h * W[W_C + a] * (W[W_RY + a] - vg)
+                W[W_AS + a * NI + a] += 1.0 / (h * W[W_C + a])
+                W[W_BS + a] = -(W[W_RY + a] - vg)
         if n > 0:
-            gauss(W, W_AS, NI, W, W_BS, 1, n, 1)
+            spd_solve(W, W_AS, NI, W_BS, n)
         for i in range(NQ):
             W[W_VB + i] = W[W_Y0 + i]
         for a in range(n):
