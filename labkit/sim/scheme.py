@@ -710,10 +710,11 @@ def impulse(A, X, xo, I, W, m):
             r = I[I_ROWS + a]
             W[W_BS + I[I_POS + r]] = W[W_T + a] - row_dot(A, r, X, xo)
         for a in range(m):
-            s = 0.0
-            for b in range(m):
-                s += W[off + a * NC + b] * W[W_BS + b]
-            W[W_AS + a] = s
+            W[W_AS + a] = 0.0
+        for b in range(m):                  # side by side, as in contact_force
+            x = W[W_BS + b]
+            for a in range(m):
+                W[W_AS + a] += W[off + a * NC + b] * x
         for r in range(NC):
             if (mask >> r) & 1:
                 mo = OFF_MRT + r * NQ
@@ -911,22 +912,27 @@ def contact_force(P, A, S, mode, t, tv, W, I, o):
     for a in range(m):
         mask |= 1 << I[I_ROWS + a]
     off = cached_inverse(A, W, I, mask)
+    # R_a^T M^-1 F for every pinned row a (rows of (M^-1 R)^T); the sums run side by side
+    # (i outermost), each in its own order, so none waits on another's additions
+    for a in range(m):
+        W[W_AS + a] = 0.0
+    for i in range(NQ):
+        f = W[W_FI + i]
+        for a in range(m):
+            W[W_AS + a] += A[OFF_MRT + I[I_ROWS + a] * NQ + i] * f
     for a in range(m):
         ra = I[I_ROWS + a]
         acc = ag if (ra < 6 or ra == ROW_BZ) else 0.0
-        # R_a^T M^-1 F, with the row of (M^-1 R)^T
-        s = 0.0
-        mo = OFF_MRT + ra * NQ
-        for i in range(NQ):
-            s += A[mo + i] * W[W_FI + i]
-        W[W_BS + I[I_POS + ra]] = acc - s
+        W[W_BS + I[I_POS + ra]] = acc - W[W_AS + a]
+    for k in range(m):
+        W[W_AS + k] = 0.0
+    for b in range(m):
+        x = W[W_BS + b]
+        for k in range(m):
+            W[W_AS + k] += W[off + k * NC + b] * x
     for a in range(m):
         ra = I[I_ROWS + a]
-        k = I[I_POS + ra]
-        s = 0.0
-        for b in range(m):
-            s += W[off + k * NC + b] * W[W_BS + b]
-        W[o + ra] = s
+        W[o + ra] = W[W_AS + I[I_POS + ra]]
 
 
 @jit
