@@ -25,7 +25,8 @@ One step of length h (implicit midpoint = trapezoidal rule, M5):
 where ``alpha_a = h lambda_a`` for a pinned row (``R_a . q1`` = its target at
 t + h) and ``alpha_a = -h c_a (R_a . vbar - v_g)`` for a squeeze-film row (the
 film is implicit: its rate reaches 1e8 1/s near the ground; M6, M7). The small
-system for ``alpha`` is solved by Gauss elimination. Impacts (M9) and releases
+system for ``alpha`` is symmetric positive (semi)definite once the film rows are
+divided by ``h c_a``, and is solved by LDL^T (:func:`spd_solve`). Impacts (M9) and releases
 (M10, with the instantaneous contact force of :func:`contact_force`) are events
 located inside the step (:func:`step`). Without damping the scheme conserves
 the energy of the linear system exactly and every linear momentum exactly (to
@@ -121,10 +122,9 @@ W_Y0 = W_R + NQ           # Sinv r
 W_VB = W_Y0 + NQ          # vbar
 W_Q0 = W_VB + NQ
 W_V0 = W_Q0 + NQ
-W_SM = W_V0 + NQ          # NQ x NQ system matrix of a partial step
-W_B = W_SM + NQ * NQ      # NQ x (1 + NR) right-hand sides of a partial step
-W_ZH = W_B + NQ * (1 + NR)
-W_QH = W_ZH + NQ * NR
+W_SM = W_V0 + NQ          # a partial step: D_l^-1, the Schur complement, u_a (partial_system)
+W_B = W_SM + NQ * NQ      # its right-hand sides (also scratch of cached_inverse)
+W_QH = W_B + NQ * (1 + NR)
 W_AS = W_QH + NR * NR     # small system NI x NI
 W_BS = W_AS + NI * NI     # small right-hand side NI
 W_C = W_BS + NI           # film coefficient per active row
@@ -452,67 +452,100 @@ def step_level(P, h):
 @jit
 def partial_system(A, h, W, I, n):
     """The step's system for a length h without cached matrices (a partial step up to an
-    event): W_Y0 = Sinv r, and for the n active rows Z = Sinv R (W_ZH) and R^T Z (W_QH).
+    event): W_Y0 = Sinv r, and R^T Sinv R over the n active rows (W_QH).
 
     ``S = 2M + hD + h^2/2 K`` is solved through its body block: the legs' modal coordinates
     are mutually uncoupled in M (M2; checked by :meth:`labkit.sim.model.Model.pack`), so the
-    leg block is diagonal and the body's 5 x 5 Schur complement is all that is eliminated
-    (S is symmetric positive definite: no pivoting is needed for the legs).
+    leg block is a diagonal ``D_l`` and only the body's 5 x 5 Schur complement
+    ``Sc = S_bb - S_bl D_l^-1 S_lb`` is eliminated. With ``u_a = R_a,b - S_bl D_l^-1 R_a,l``
+    (the row's own leg only) and ``X_a = Sc^-1 u_a`` (kept for :func:`partial_vbar`):
+    ``R_a^T Sinv R_b = u_a . X_b + R_a,l . D_l^-1 R_b,l``, the last term for rows of one leg.
     """
-    nc = 1 + n                          # right-hand sides: r, then the active rows' columns
-    ld = 1 + NR
-    for i in range(NQ):
-        W[W_B + i * ld] = W[W_R + i]
-    for a in range(n):
-        ra = I[I_ROWS + a]
-        o = OFF_RT + ra * NQ
-        for i in range(NQ):
-            W[W_B + i * ld + 1 + a] = A[o + i]
-    # inverse diagonal of the leg block (kept in W_SM's last row, unused by the 5 x 5 below)
-    dg = W_SM + (NQ - 1) * NQ
+    di = W_SM                       # D_l^-1 (leg coordinates)
+    sc = W_SM + NQ                  # Sc, NB x NB
+    uu = sc + NB * NB               # u_a, n x NB
+    ld = 1 + NR                     # right-hand sides of Sc: r's, then u_a (then X_a)
     for i in range(NB, NQ):
-        W[dg + i] = 1.0 / (2.0 * A[OFF_M + i * NQ + i] + h * A[OFF_D + i] + 0.5 * h * h * A[OFF_K + i])
-    # Schur complement of the body, and the body's right-hand sides (the sums over the legs'
-    # coordinates run outermost: independent accumulators, no chain of dependent additions)
+        W[di + i] = 1.0 / (2.0 * A[OFF_M + i * NQ + i] + h * A[OFF_D + i] + 0.5 * h * h * A[OFF_K + i])
     for a in range(NB):
         for b in range(NB):
-            W[W_SM + a * NQ + b] = 2.0 * A[OFF_M + a * NQ + b]
-        W[W_SM + a * NQ + a] += h * A[OFF_D + a] + 0.5 * h * h * A[OFF_K + a]
-    for i in range(NB, NQ):
+            W[sc + a * NB + b] = 2.0 * A[OFF_M + a * NQ + b]
+        W[sc + a * NB + a] += h * A[OFF_D + a] + 0.5 * h * h * A[OFF_K + a]
+        W[W_B + a * ld] = W[W_R + a]
+    for i in range(NB, NQ):           # (sums over the legs outermost: independent accumulators)
+        d = W[di + i]
+        ri = W[W_R + i]
         for a in range(NB):
-            f = 4.0 * A[OFF_M + a * NQ + i] * W[dg + i]
-            if f == 0.0:
-                continue
+            f = 2.0 * A[OFF_M + a * NQ + i] * d
             for b in range(NB):
-                W[W_SM + a * NQ + b] -= f * A[OFF_M + i * NQ + b]
-            for c in range(nc):
-                W[W_B + a * ld + c] -= 0.5 * f * W[W_B + i * ld + c]
-    gauss(W, W_SM, NQ, W, W_B, ld, NB, nc)
+                W[sc + a * NB + b] -= f * 2.0 * A[OFF_M + i * NQ + b]
+            W[W_B + a * ld] -= f * ri
+    for c in range(n):
+        ra = I[I_ROWS + c]
+        o = OFF_RT + ra * NQ
+        for a in range(NB):
+            W[uu + c * NB + a] = A[o + a]
+        leg = leg_of_row(ra)
+        if leg >= 0:
+            for i in range(NB + 3 * leg, NB + 3 * leg + 3):
+                x = A[o + i] * W[di + i]
+                for a in range(NB):
+                    W[uu + c * NB + a] -= 2.0 * A[OFF_M + a * NQ + i] * x
+        for a in range(NB):
+            W[W_B + a * ld + 1 + c] = W[uu + c * NB + a]
+    gauss(W, sc, NB, W, W_B, ld, NB, 1 + n)
+    for a in range(NB):
+        W[W_Y0 + a] = W[W_B + a * ld]
     for i in range(NB, NQ):
+        v = W[W_R + i]
         for b in range(NB):
-            f = 2.0 * A[OFF_M + i * NQ + b]
-            for c in range(nc):
-                W[W_B + i * ld + c] -= f * W[W_B + b * ld + c]
-        for c in range(nc):
-            W[W_B + i * ld + c] *= W[dg + i]
-    for i in range(NQ):
-        W[W_Y0 + i] = W[W_B + i * ld]
-        for a in range(n):
-            W[W_ZH + i * NR + I[I_ROWS + a]] = W[W_B + i * ld + 1 + a]
-    # R^T Z over the active rows (each row spans the body and its own leg, row_dot)
+            v -= 2.0 * A[OFF_M + i * NQ + b] * W[W_Y0 + b]
+        W[W_Y0 + i] = v * W[di + i]
     for a in range(n):
         ra = I[I_ROWS + a]
-        o = OFF_RT + ra * NQ
+        la = leg_of_row(ra)
+        oa = OFF_RT + ra * NQ
         for b in range(n):
-            W[W_QH + ra * NR + I[I_ROWS + b]] = 0.0
+            rb = I[I_ROWS + b]
+            v = 0.0
+            for k in range(NB):
+                v += W[uu + a * NB + k] * W[W_B + k * ld + 1 + b]
+            if la >= 0 and la == leg_of_row(rb):
+                ob = OFF_RT + rb * NQ
+                for i in range(NB + 3 * la, NB + 3 * la + 3):
+                    v += A[oa + i] * W[di + i] * A[ob + i]
+            W[W_QH + ra * NR + rb] = v
+
+
+@jit
+def partial_vbar(A, W, I, n):
+    """vbar = Sinv r + Sinv R alpha for a partial step (:func:`partial_system`'s parts):
+    with xi = sum_a X_a alpha_a, the body's part is y0_b + xi and a leg coordinate's
+    ``y0_i + (sum_a R_a,i alpha_a - S_ib xi) / D_i``."""
+    di = W_SM
+    ld = 1 + NR
+    for k in range(NB):
+        x = 0.0
+        for a in range(n):
+            x += W[W_B + k * ld + 1 + a] * W[W_BS + a]
+        W[W_VB + k] = x                           # xi, for now
+    for i in range(NB, NQ):
+        W[W_VB + i] = 0.0
+    for a in range(n):
+        ra = I[I_ROWS + a]
         leg = leg_of_row(ra)
-        for i in range(NQ):
-            if i >= NB and (leg < 0 or i < NB + 3 * leg or i >= NB + 3 * leg + 3):
-                continue
-            x = A[o + i]
-            for b in range(n):
-                rb = I[I_ROWS + b]
-                W[W_QH + ra * NR + rb] += x * W[W_ZH + i * NR + rb]
+        if leg >= 0:
+            o = OFF_RT + ra * NQ
+            al = W[W_BS + a]
+            for i in range(NB + 3 * leg, NB + 3 * leg + 3):
+                W[W_VB + i] += A[o + i] * al
+    for i in range(NB, NQ):
+        v = W[W_VB + i]
+        for b in range(NB):
+            v -= 2.0 * A[OFF_M + i * NQ + b] * W[W_VB + b]
+        W[W_VB + i] = W[W_Y0 + i] + v * W[di + i]
+    for k in range(NB):
+        W[W_VB + k] += W[W_Y0 + k]
 
 
 @jit
@@ -603,18 +636,16 @@ def advance(P, A, S, mode, t, h, W, I, out):
                 W[W_BS + a] = -(W[W_RY + a] - vg)
         if n > 0:
             spd_solve(W, W_AS, NI, W_BS, n)
-        for i in range(NQ):
-            W[W_VB + i] = W[W_Y0 + i]
-        for a in range(n):
-            ra = I[I_ROWS + a]
-            al = W[W_BS + a]
-            if full:
-                o = base + LEV_ZT + ra * NQ
+        if full:
+            for i in range(NQ):
+                W[W_VB + i] = W[W_Y0 + i]
+            for a in range(n):
+                al = W[W_BS + a]
+                o = base + LEV_ZT + I[I_ROWS + a] * NQ
                 for i in range(NQ):
                     W[W_VB + i] += A[o + i] * al
-            else:
-                for i in range(NQ):
-                    W[W_VB + i] += W[W_ZH + i * NR + ra] * al
+        else:
+            partial_vbar(A, W, I, n)
     for r in range(NR):
         out[S_LAM + r] = 0.0
     for a in range(n):

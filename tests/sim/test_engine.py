@@ -199,3 +199,69 @@ def test_body_contact_restitution_and_rest():
     np.testing.assert_allclose(vpost[bounced], -p.c_r_body * vpre[bounced], rtol=1e-9)
     assert bounced.any()
     assert np.abs(np.diff(r.body_z_um[-100:])).max() < 0.5   # um per sample: settled
+
+
+@pytest.mark.parametrize("params", [RobotParams(), RobotParams.preset("paper"), RobotParams(cy_sign=(0.0, 0.0, 0.0))],
+                         ids=["published", "paper", "cy_sign_0"])
+def test_partial_step_system_equals_a_dense_solve(params):
+    """The Schur-complement solve of a partial step (scheme.partial_system / partial_vbar)
+    against numpy's dense solve of (2M + hD + h^2/2 K) on the same rows."""
+    from labkit.sim.reference import scheme_python
+
+    K = scheme_python()
+    mdl = M.build_model(params, Shaker(240, 25))
+    h = 3.7e-6
+    P, A = mdl.pack(8.68e-6)
+    S = np.linalg.inv(2 * mdl.mass + h * np.diag(mdl.damp) + 0.5 * h * h * np.diag(mdl.stiff))
+    rng = np.random.default_rng(1)
+    W = np.zeros(K.W_SIZE)
+    Iw = np.zeros(K.I_SIZE, np.int64)
+    rows = [0, 6, 2, 8, 5, 11, K.ROW_BZ]
+    n = len(rows)
+    Iw[K.I_ROWS:K.I_ROWS + n] = rows
+    r = rng.normal(size=K.NQ)
+    W[K.W_R:K.W_R + K.NQ] = r
+    K.partial_system(A, h, W, Iw, n)
+    R = mdl.rows[:, rows]
+    assert np.allclose(W[K.W_Y0:K.W_Y0 + K.NQ], S @ r, rtol=1e-10, atol=1e-12 * np.abs(S @ r).max())
+    Q = np.array([[W[K.W_QH + a * K.NR + b] for b in rows] for a in rows])
+    assert np.allclose(Q, R.T @ S @ R, rtol=1e-10, atol=1e-12 * np.abs(R.T @ S @ R).max())
+    alpha = rng.normal(size=n)
+    W[K.W_BS:K.W_BS + n] = alpha
+    K.partial_vbar(A, W, Iw, n)
+    want = S @ (r + R @ alpha)
+    assert np.allclose(W[K.W_VB:K.W_VB + K.NQ], want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
+
+
+def test_small_system_solver_on_semidefinite_systems():
+    """scheme.spd_solve: LDL^T of a positive definite system equals numpy's solve; with a
+    dependent row (a singular, consistent system) the dependent unknown is 0 and the
+    equations hold, as scheme.gauss does."""
+    from labkit.sim.reference import scheme_python
+
+    K = scheme_python()
+    rng = np.random.default_rng(2)
+    n, lda = 6, 8
+    B = rng.normal(size=(n, n))
+    Amat = B @ B.T + np.diag(rng.uniform(0, 3, n))
+    b = rng.normal(size=n)
+    W = np.zeros(lda * lda + lda)
+    W[:lda * lda].reshape(lda, lda)[:n, :n] = Amat
+    W[lda * lda:lda * lda + n] = b
+    K.spd_solve(W, 0, lda, lda * lda, n)
+    assert np.allclose(W[lda * lda:lda * lda + n], np.linalg.solve(Amat, b), rtol=1e-10)
+    # rows 0 and 1 the same constraint (like the lateral rows of legs without lateral
+    # compliance): their Gram matrix is singular, the system consistent
+    G = rng.normal(size=(4, n))
+    G[1] = G[0]
+    Q = G @ G.T
+    x_true = rng.normal(size=4)
+    x_true[1] = 0.0
+    rhs = Q @ x_true
+    W[:] = 0.0
+    W[:lda * lda].reshape(lda, lda)[:4, :4] = Q
+    W[lda * lda:lda * lda + 4] = rhs
+    K.spd_solve(W, 0, lda, lda * lda, 4)
+    x = W[lda * lda:lda * lda + 4]
+    assert x[1] == 0.0
+    assert np.allclose(Q @ x, rhs, atol=1e-9 * np.abs(rhs).max())
