@@ -22,8 +22,10 @@ the contact and film rows (a second pass for the films' midpoint coefficient
 only where it matters), an impulse through the pinned and stiff film rows, and
 the instantaneous contact forces for located releases (the inverses of
 R^T M^-1 R over a row set are cached, as the sets change only at events);
-``kernel_us_per_step`` reports it, and ``trial_steps_per_step`` the partial
-steps of event location and the refused sub-steps on top.
+``kernel_us_per_step`` reports it, ``trial_steps_per_step`` the partial
+steps of event location and the refused sub-steps on top, and
+``cost_breakdown_us`` the parts (a full and a partial step, the contact forces,
+a whole step with its checks) on a pinned and a flying robot.
 
 The scenario is the walking robot (240 Hz, 25 um, c_ad_n = 50 nN): feet in
 the air and impacts every cycle, the expensive case. With the published
@@ -58,6 +60,66 @@ def _child_first_call(cache_dir: str) -> dict:
         env["NUMBA_CACHE_DIR"] = cache_dir
     out = subprocess.run([sys.executable, "-c", _CHILD], env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _breakdown() -> dict:
+    """CPU microseconds of the scheme's parts (compiled, called in a compiled loop) on two
+    states of the published robot at 240 Hz: all six feet pinned at rest, and all in the air
+    20 um up on their squeeze films. ``advance_*``: one midpoint step of the default length
+    (cached matrices) and of 0.37 of it (a partial step up to an event: solved through the
+    body's Schur complement); ``contact_force``: the instantaneous contact forces (M10);
+    ``step``: a whole default step with its event checks (no event happens)."""
+    import numpy as np
+    from numba import njit
+
+    from labkit.sim import RobotParams, Shaker
+    from labkit.sim import model as M
+    from labkit.sim import scheme as K
+    from labkit.sim.core import default_dt
+
+    p, sc = RobotParams(), Shaker(240, 25)
+    mdl = M.build_model(p, sc)
+    dt = default_dt(p, sc)
+    P, A = mdl.pack(dt)
+
+    @njit
+    def _loop(what, P, A, S0, mode0, h, n):
+        W = np.zeros(K.W_SIZE)
+        W[K.W_CT] = -1.0
+        W[K.W_GRND] = np.nan
+        W[K.W_GRND + 4] = np.nan
+        Iw = np.zeros(K.I_SIZE, np.int64)
+        for k in range(K.NSLOT):
+            Iw[K.I_TAG + k] = -1
+        S = S0.copy()
+        T = S0.copy()
+        mode = mode0.copy()
+        ev = np.zeros((8, K.EV_COLS))
+        cnt = np.zeros(K.CNT_SIZE, np.int64)
+        for _ in range(n):
+            for q in range(S.size):
+                S[q] = S0[q]
+            for q in range(7):
+                mode[q] = mode0[q]
+            if what == 0:
+                K.advance(P, A, S, mode, 0.0, h, W, Iw, T)
+            elif what == 1:
+                K.contact_force(P, A, S, mode, 0.0, 0.0, W, Iw, K.W_LI0)
+            else:
+                K.step(P, A, S, T, mode, 0.0, h, W, Iw, ev, cnt, True)
+
+    states = {"pinned": (M.rest_state(mdl), np.array([K.ADHESION] * 6 + [K.AIR], np.int64)),
+              "films": (M.air_state(mdl, 20e-6), np.array([K.AIR] * 7, np.int64))}
+    out: dict = {}
+    for name, (S0, mode0) in states.items():
+        for label, what, h in (("advance_full", 0, dt), ("advance_partial", 0, 0.37 * dt),
+                               ("contact_force", 1, dt), ("step", 2, dt)):
+            _loop(what, P, A, S0, mode0, h, 10)
+            n = 100_000
+            c0 = time.process_time()
+            _loop(what, P, A, S0, mode0, h, n)
+            out[f"{name}_{label}"] = round((time.process_time() - c0) / n * 1e6, 3)
+    return out
 
 
 def main() -> None:
@@ -103,6 +165,7 @@ def main() -> None:
     out["speed_mm_s_check"] = round(r.mean_speed_mm_s, 4)
     out["trial_steps_per_step"] = round(r.counters["trial_steps"] / r.n_steps, 3)
     out["steps_halved"] = r.counters["steps_halved"]
+    out["cost_breakdown_us"] = _breakdown()
 
     # --- reference on the same scenario (a short stretch: it is slow)
     ref_dur = 0.005 if args.quick else 0.02
