@@ -67,6 +67,10 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     single_opts.add_argument("--start-height-um", default=None, metavar="UM",
                              help="start at rest in the air, the body's underside UM above its resting "
                                   "gap (drop tests, free flight); default: resting on the feet")
+    single_opts.add_argument("--dt-s", default=None, metavar="S",
+                             help="integration step, s (default: 64 steps per period of the fastest leg "
+                                  "mode; finer where --dt-check says the default is not converged; PZT: "
+                                  "rounded down to a whole number of steps per half drive period)")
     single_opts.add_argument("--dt-check", action="store_true",
                              help="also run 4 seeds at the default step and at a quarter of it; report "
                                   "the difference of the mean speeds and whether the run is chaotic")
@@ -224,7 +228,12 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     height_um = None if height is None else number(height, "--start-height-um", positive=True)
     check_outputs([args.out], force=args.force, suffixes=H5_SUFFIXES)       # before simulating
     scenario = _scenario_from(kind, values)
-    r = simulate(params, scenario, duration_s=duration_s, seed=seed, start_height_um=height_um)
+    dt_s = None
+    if getattr(args, "dt_s", None) is not None:
+        from labkit.sim.core import align_dt
+
+        dt_s = align_dt(number(args.dt_s, "--dt-s", positive=True), scenario)
+    r = simulate(params, scenario, duration_s=duration_s, seed=seed, start_height_um=height_um, dt_s=dt_s)
     summary: dict[str, Any] = {"kind": kind, **values, "duration_s": duration_s, "ablate": args.ablate,
                                "seed": seed, "start_height_um": height_um}
     for key, value in _result_summary(r).items():

@@ -62,6 +62,14 @@ FILM_PASS_SKIP = 1e-6
 #: A film row whose film takes more than this fraction of its velocity in a step (x = h c /
 #: m_row) gets its end velocity from the film's slow motion, weight x / (1 + x) (:func:`advance`).
 FILM_STIFF_MIN = 0.01
+#: Sub-steps also resolve a film's transient (:func:`film_too_coarse`): a step is halved when a
+#: film row is stiffer than this (x = h c / m_row; above 2 the trapezoidal rule's factor on the
+#: row's deviation from the film's slow motion, (1 - x/2) / (1 + x/2), is negative: the row would
+#: bounce off its film) ...
+FILM_X_MAX = 2.0
+#: ... while more than this fraction of the film's force goes into stopping the row (it is not
+#: yet riding the film: |m_row (v1 - v0) / h| against |c vbar|; a hovering foot: ~1e-4).
+FILM_TRANSIENT = 0.01
 #: A point reaching the ground slower than this (m/s) touches down: it is pinned without an
 #: impact being counted (round-off approach speeds of a foot that was just released).
 V_TOUCH = 1e-9
@@ -147,7 +155,9 @@ W_CV = W_CT + 1           # ... and the drive voltage they were computed with
 #: change only at events, so nearly every step finds its matrix here.
 NSLOT = 64
 NC = 13
-W_GRND = W_CV + 1         # ground(): two remembered (t, zg, vg, ag), then the slot to replace next
+W_FX = W_CV + 1           # per film row of the last trial (7): x = h c / m_row
+W_FR = W_FX + 7           # ... and the fraction of its film force that stops the row (transient)
+W_GRND = W_FR + 7         # ground(): two remembered (t, zg, vg, ag), then the slot to replace next
 W_CACHE = W_GRND + 9
 W_SIZE = W_CACHE + NSLOT * NC * NC
 # ---- int scratch I
@@ -586,7 +596,7 @@ def advance(P, A, S, mode, t, h, W, I, out):
     else:
         partial_system(A, h, W, I, n)
     zg1, vg1, _ = ground(P, W, t + h)
-    zg0, _, _ = ground(P, W, t)
+    zg0, vg0, _ = ground(P, W, t)
     # the films see the ground's mean velocity over the step (its chord), so a foot held
     # by its film follows the ground's displacement exactly and does not sink into it
     vgm = (zg1 - zg0) / h
@@ -666,6 +676,8 @@ def advance(P, A, S, mode, t, h, W, I, out):
     # velocities of this step and the last (second order), weight x / (1 + x), x = h c / m_row.
     for j in range(7):
         out[S_FH + j] = 0.0
+        W[W_FX + j] = 0.0
+        W[W_FR + j] = 0.0
     m = 0
     for a in range(n):
         ra = I[I_ROWS + a]
@@ -680,6 +692,13 @@ def advance(P, A, S, mode, t, h, W, I, out):
             out[S_FH + j] = h
             x = h * W[W_C + a] * A[OFF_WI + ra * NI + ra]
             hp = S[S_FH + j]
+            # for film_too_coarse: x, and the part of the film's force that changes the row's
+            # velocity relative to the ground, 2 m_row (vbar - v0) / h, against c vbar
+            u0 = row_dot(A, ra, W, W_V0) - vg0
+            ub = row_dot(A, ra, W, W_VB) - 0.5 * (vg0 + vg1)
+            W[W_FX + j] = x
+            if x > 0.0:
+                W[W_FR + j] = 2.0 * abs(ub - u0) / (x * abs(ub) + 1e-300)
             if x > FILM_STIFF_MIN:
                 end = vrel
                 if hp > 0.0:
@@ -1045,11 +1064,22 @@ def film_too_coarse(P, A, mode, h, W):
     is too weak to matter: it would take less than FILM_WEAK of the row's relative
     velocity in one step (h c / m_row, with 1 / m_row = R^T M^-1 R). Uses the gaps at the
     trial's start and end in W_GAP0, W_GAP1.
+
+    Also too coarse: a film in a transient (more than FILM_TRANSIENT of its force stops the
+    row instead of balancing the other forces) that is stiffer than FILM_X_MAX over the step,
+    x = h c / m_row > 2, where the trapezoidal rule turns the row's approach into a rebound:
+    a body landing on its film at 300 Hz bounced off it at 32 steps per mode period
+    (W_FX, W_FR: x and that fraction per film row, from the trial's :func:`advance`).
     """
     hmin = P[P_HMIN]
     for j in range(7):
         if mode[j] != AIR:
             continue
+        # a film transient the step does not resolve, but the finest sub-step would (a film
+        # too stiff even for that, e.g. a foot's at h_min, is left to the stiff limit, M7)
+        x = W[W_FX + j]
+        if x > FILM_X_MAX and W[W_FR + j] > FILM_TRANSIENT and x * P[P_DT] <= FILM_X_MAX * h * (1 << (NLEV - 1)):
+            return True
         b = P[P_BGF] if j < 6 else P[P_BGB]
         if b <= 0.0:
             continue

@@ -61,6 +61,8 @@ def test_sweep_pzt_mass_text_output():
     (["sweep", "pzt", "--voltage-v", "1:20:3", "--workers", "0"], "--workers"),
     (["shaker", "--start-height-um", "-3"], "--start-height-um"),
     (["pzt", "--start-height-um", "0.001"], "start_height_um"),
+    (["shaker", "--dt-s", "-1e-6"], "--dt-s"),
+    (["shaker", "--dt-s", "1"], "dt_s"),
 ])
 def test_bad_input_exits_2_with_one_line(args, needle):
     proc = run_cli("simulate", *args, "--duration-s", "0.01", check=2)
@@ -81,6 +83,15 @@ def test_start_height_and_dt_check():
     assert c["converged"] is True and c["chaotic"] is False
     text = run_cli("simulate", "shaker", "--duration-s", "0.01", "--dt-check").stdout
     assert "dt check (4 seeds)" in text and "quarter step" in text
+
+
+def test_dt_s_sets_the_step():
+    """--dt-s: the step a run uses (PZT: rounded down so that a half drive period is a whole
+    number of steps, here 1 / (2 x 1800 Hz) / 31 for 9e-6 s)."""
+    js = last_json(run_cli("simulate", "shaker", "--duration-s", "0.01", "--dt-s", "2e-6", "--json"))
+    assert js["dt_s"] == 2e-6 and js["n_steps"] == 5000
+    js = last_json(run_cli("simulate", "pzt", "--duration-s", "0.01", "--dt-s", "9e-6", "--json"))
+    assert js["dt_s"] == pytest.approx(0.5 / 1800 / 31) and js["dt_s"] <= 9e-6
 
 
 def test_bad_params_file_names_file_and_key(tmp_path):
