@@ -265,3 +265,21 @@ def test_small_system_solver_on_semidefinite_systems():
     x = W[lda * lda:lda * lda + 4]
     assert x[1] == 0.0
     assert np.allclose(Q @ x, rhs, atol=1e-9 * np.abs(rhs).max())
+
+
+def test_pack_refuses_a_model_outside_the_kernels_structure():
+    """The kernel's row products and partial-step solve rely on the model's structure (a
+    foot's rows involve the body and its own leg only; the legs' modal coordinates are
+    uncoupled in M; M exactly symmetric); pack() checks it instead of computing wrong."""
+    base = M.build_model(RobotParams(), Shaker(240, 25))
+    base.pack(8.68e-6)
+    for what, message in (("rows", "another leg"), ("legs", "coupled"), ("symmetry", "symmetric")):
+        mdl = M.build_model(RobotParams(), Shaker(240, 25))
+        if what == "rows":
+            mdl.rows[M.NB + 3, 0] = 0.1          # foot 0's z row touching leg 1's first mode
+        elif what == "legs":
+            mdl.mass[M.NB, M.NB + 3] = mdl.mass[M.NB + 3, M.NB] = 1e-9
+        else:
+            mdl.mass[0, 1] += 1e-12
+        with pytest.raises(ValueError, match=message):
+            mdl.pack(8.68e-6)
