@@ -334,7 +334,7 @@ def row_dot(A, r, x, xo):
     if r >= NR:                       # a mode row: one unit entry
         k = NB + r - NR
         return A[o + k] * x[xo + k]
-    # two independent sums (body, leg): the additions of one do not wait on the other's
+    # the body's coordinates, then the row's own leg's (one sum, in ascending order)
     s = 0.0
     for i in range(NB):
         s += A[o + i] * x[xo + i]
