@@ -96,6 +96,9 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                             help="Dask scheduler tcp://HOST:PORT (default: local processes)")
     sweep_opts.add_argument("--workers", default=None, metavar="N",
                             help="local worker processes (default: one per core)")
+    sweep_opts.add_argument("--step-fraction", default="1", metavar="F",
+                            help="run at this fraction of the default step (0 < F <= 1; default 1), where "
+                                 "--dt-check says the default step is not converged")
     sweep_opts.add_argument("--dt-check", action="store_true",
                             help="also run the nominal robot at every point at a quarter of the step and "
                                  "report whether each point's speed is converged")
@@ -263,6 +266,13 @@ def _result_summary(r: Any) -> dict[str, Any]:
     return out
 
 
+def _fraction(text: str) -> float:
+    f = number(text, "--step-fraction", positive=True)
+    if f > 1.0:
+        raise InputError(f"must be <= 1, got {text}", key="--step-fraction", expected="a fraction 0 < F <= 1")
+    return f
+
+
 def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.sim import sweep
     from labkit.sim.core import ablate
@@ -297,7 +307,8 @@ def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
               duration_s=number(args.duration_s, "--duration-s", positive=True), scheduler=args.scheduler,
               workers=workers, seed=integer(args.seed, "--seed"), quiet=args.quiet,
               accel_limit_g=None if accel is None else number(accel, "--accel-limit-g", positive=True),
-              dt_check=bool(getattr(args, "dt_check", False)))
+              dt_check=bool(getattr(args, "dt_check", False)),
+              step_fraction=_fraction(args.step_fraction))
     summary = s.summary()
     summary["ablate"] = args.ablate
     if args.out:

@@ -63,6 +63,8 @@ def test_sweep_pzt_mass_text_output():
     (["pzt", "--start-height-um", "0.001"], "start_height_um"),
     (["shaker", "--dt-s", "-1e-6"], "--dt-s"),
     (["shaker", "--dt-s", "1"], "dt_s"),
+    (["sweep", "shaker", "--freq-hz", "100:200:3", "--step-fraction", "2"], "--step-fraction"),
+    (["sweep", "shaker", "--freq-hz", "100:200:3", "--step-fraction", "0"], "--step-fraction"),
 ])
 def test_bad_input_exits_2_with_one_line(args, needle):
     proc = run_cli("simulate", *args, "--duration-s", "0.01", check=2)

@@ -10,6 +10,7 @@ import pytest
 
 from labkit.errors import InputError
 from labkit.sim import PZT, RobotParams, Shaker, SweepResult, simulate, sweep
+from labkit.sim.core import default_dt
 from labkit.sim.uncertainty import DEFAULT_TABLE, check_table, draw_params
 
 DUR = 0.03  # s: a few shaker periods; enough to exercise contact, cheap enough for CI
@@ -173,3 +174,22 @@ def test_sweep_dt_check_reruns_the_nominal_robot_at_a_quarter_step():
     assert c["difference_mm_s"][1] == pytest.approx(s.speeds_mm_s[1, 0] - quarter.mean_speed_mm_s)
     pts = s.summary()["points"]
     assert [pt["dt_converged"] for pt in pts] == c["converged"] and all(c["converged"])
+
+
+def test_step_fraction_runs_every_point_at_that_step():
+    """step_fraction: the nominal run of a point is the run at that fraction of its default
+    step (same seed), its dt check at a quarter of that; bad fractions are refused."""
+    p, sc = RobotParams(c_ad_n=2e-6), Shaker(240, 100)
+    s = sweep(p, sc, "amp_um", [100.0], draws=0, duration_s=0.05, scheduler="serial", quiet=True,
+              step_fraction=0.5, dt_check=True)
+    dt = default_dt(p, sc)
+    seed = s.meta["task_seeds"][0]
+    half = simulate(p, sc, duration_s=0.05, seed=seed, dt_s=dt / 2).mean_speed_mm_s
+    eighth = simulate(p, sc, duration_s=0.05, seed=seed, dt_s=dt / 8).mean_speed_mm_s
+    assert s.speeds_mm_s[0, 0] == half
+    assert s.meta["dt_check"]["quarter_speed_mm_s"][0] == eighth
+    assert s.meta["step_fraction"] == 0.5 and s.summary()["step_fraction"] == 0.5
+    for bad in (0.0, 1.5):
+        with pytest.raises(InputError) as e:
+            sweep(p, sc, "amp_um", [100.0], duration_s=0.05, scheduler="serial", quiet=True, step_fraction=bad)
+        assert e.value.key == "step_fraction"
