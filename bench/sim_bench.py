@@ -84,13 +84,7 @@ def _breakdown() -> dict:
 
     @njit
     def _loop(what, P, A, S0, mode0, h, n):
-        W = np.zeros(K.W_SIZE)
-        W[K.W_CT] = -1.0
-        W[K.W_GRND] = np.nan
-        W[K.W_GRND + 4] = np.nan
-        Iw = np.zeros(K.I_SIZE, np.int64)
-        for k in range(K.NSLOT):
-            Iw[K.I_TAG + k] = -1
+        W, Iw = K.new_scratch()
         S = S0.copy()
         T = S0.copy()
         mode = mode0.copy()

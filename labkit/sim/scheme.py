@@ -687,17 +687,19 @@ def advance(P, A, S, mode, t, h, W, I, out):
             m += 1
         elif ra < 6 or ra == ROW_BZ:
             j = ra if ra < 6 else 6
-            vrel = row_dot(A, ra, W, W_VB) - vgm
+            rv = row_dot(A, ra, W, W_VB)
+            vrel = rv - vgm
             out[S_FV + j] = vrel
             out[S_FH + j] = h
             x = h * W[W_C + a] * A[OFF_WI + ra * NI + ra]
             hp = S[S_FH + j]
-            # for film_too_coarse: x, and the part of the film's force that changes the row's
-            # velocity relative to the ground, 2 m_row (vbar - v0) / h, against c vbar
-            u0 = row_dot(A, ra, W, W_V0) - vg0
-            ub = row_dot(A, ra, W, W_VB) - 0.5 * (vg0 + vg1)
+            # for film_too_coarse: x, and (where x exceeds FILM_X_MAX, the only case it reads)
+            # the part of the film's force that changes the row's velocity relative to the
+            # ground, 2 m_row (vbar - v0) / h, against c vbar
             W[W_FX + j] = x
-            if x > 0.0:
+            if x > FILM_X_MAX:
+                u0 = row_dot(A, ra, W, W_V0) - vg0
+                ub = rv - 0.5 * (vg0 + vg1)
                 W[W_FR + j] = 2.0 * abs(ub - u0) / (x * abs(ub) + 1e-300)
             if x > FILM_STIFF_MIN:
                 end = vrel
@@ -1280,16 +1282,24 @@ def record(P, A, S, mode, t, rec, rec_contact, row):
 
 
 @jit
-def integrate(P, A, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac, max_air, max_h, count,
-              events):
-    """Run n_steps steps of dt; fill the outputs (statistics after n_skip steps)."""
+def new_scratch():
+    """The scratch arrays (W, I) of a run, empty: no contact forces, ground values or
+    inverses cached yet."""
     W = np.zeros(W_SIZE)
-    W[W_CT] = -1.0                  # no cached contact forces yet
-    W[W_GRND] = math.nan            # nor ground values
+    W[W_CT] = -1.0
+    W[W_GRND] = math.nan
     W[W_GRND + 4] = math.nan
     I = np.zeros(I_SIZE, np.int64)
     for k in range(NSLOT):
         I[I_TAG + k] = -1
+    return W, I
+
+
+@jit
+def integrate(P, A, S, mode, n_steps, dt, every, n_skip, rec, rec_contact, frac, max_air, max_h, count,
+              events):
+    """Run n_steps steps of dt; fill the outputs (statistics after n_skip steps)."""
+    W, I = new_scratch()
     T = np.zeros(S_SIZE)
     air_run = np.zeros(6)
     row = 0

@@ -264,9 +264,7 @@ def run_point(task: tuple) -> dict[str, Any]:
     from labkit.sim import simulate
     from labkit.sim.uncertainty import draw_params
 
-    params, scenario, quantity, value, draw, seed, duration_s, table, accel_limit_g = task[:9]
-    quarter = len(task) > 9 and bool(task[9])
-    fraction = float(task[10]) if len(task) > 10 else 1.0
+    params, scenario, quantity, value, draw, seed, duration_s, table, accel_limit_g, quarter, fraction = task
     task_seed = _task_seed(seed, draw)
     if draw > 0:
         params = draw_params(params, np.random.default_rng(task_seed), table)
