@@ -571,14 +571,22 @@ def advance(P, A, S, mode, t, h, W, I, out):
     forces(P, A, S, mode, t + 0.5 * h, S, S_Q, S, S_V, W, W_F)
     # r = 2 M v0 + h (f - K q0). The matrix-vector products go by columns (M is symmetric,
     # Sinv stored transposed): each sum takes the same terms in the same order as by rows,
-    # but the additions of one sum no longer wait on each other.
+    # but the additions of one sum no longer wait on each other. A leg mode's column of M
+    # has entries only in the body's rows and its own (the leg block is diagonal, checked
+    # by Model.pack): the exact zeros are skipped, the sums stay the same to the bit.
     for i in range(NQ):
         W[W_R + i] = 0.0
-    for k in range(NQ):
+    for k in range(NB):
         vk = W[W_V0 + k]
         o = OFF_M + k * NQ
         for i in range(NQ):
             W[W_R + i] += A[o + i] * vk
+    for k in range(NB, NQ):
+        vk = W[W_V0 + k]
+        o = OFF_M + k * NQ
+        for i in range(NB):
+            W[W_R + i] += A[o + i] * vk
+        W[W_R + k] += A[o + k] * vk
     for i in range(NQ):
         W[W_R + i] = 2.0 * W[W_R + i] + h * (W[W_F + i] - A[OFF_K + i] * W[W_Q0 + i])
     lev = step_level(P, h)
