@@ -951,14 +951,16 @@ def impact(P, A, S, mode, t, W, I, events, count):
             vy = row_dot(A, 6 + j, S, S_V) if j < 6 else S[S_V + 0]
             if j < 6:
                 count[j] += 1
+                # a new contact begins: F_ad grows with the time since this landing (M10).
+                # (Only a stuck impact reset it before: with the films on, feet land with a
+                # rebound and then touch, so t_c summed every contact of the run.)
+                S[S_TC + j] = 0.0
             else:
                 count[CNT_BODY] += 1
             log_event(events, count, t, j if j < 6 else -1, W[W_VREL + j], vpost, vy, stuck)
         if stuck:
             mode[j] = REST
             if j < 6:
-                if not touch:
-                    S[S_TC + j] = 0.0
                 S[S_YPIN + j] = row_dot(A, 6 + j, S, S_Q)
                 S[S_SLIP + j] = 0.0
 
