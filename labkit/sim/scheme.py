@@ -897,7 +897,14 @@ def impact(P, A, S, mode, t, W, I, events, count):
             cr = P[P_CR] if j < 6 else P[P_CRB]
             vpre = W[W_VREL + j]
             rebound = -cr * vpre
-            stuck = rebound < vstick
+            # M11: a rebound slower than v_stick ends the bouncing; so does one that the squeeze
+            # film stops within the position tolerance (rebound m_row / c, c at the gap floor
+            # h_min): the foot would be back at once and bounce again, a Zeno sequence whose limit
+            # is contact (unresolved, the feet chattered once per step at a step-dependent rate)
+            r = j if j < 6 else ROW_BZ
+            b = P[P_BGF] if j < 6 else P[P_BGB]
+            hm = P[P_HMIN]
+            stuck = rebound < vstick or rebound * hm * hm * hm < P[P_POSTOL] * b * A[OFF_WI + r * NI + r]
             if j < 6:
                 I[I_ROWS + m] = j
                 W[W_T + m] = vg + (0.0 if stuck else rebound)

@@ -160,7 +160,8 @@ def test_squeeze_film_stops_a_falling_foot_before_it_touches():
     falling from far above the velocity b / (2 m h^2) by the time it reaches the gap h (the
     integral of b / (m h^3) dh): ~30 m/s at h_min for the published feet, far more than any
     foot ever has. So with the films on, feet land at the film's creep speed (force / c),
-    if at all, and c_r hardly changes the walk.
+    if at all, the film stops their rebound within picometres (M11: every such landing
+    sticks), and c_r does not change the walk.
 
     At the default step (converged at this 23 g since issue 10: 8.82 against 8.80 mm/s at a
     quarter step, docs/model.md "Numerics")."""
@@ -169,6 +170,7 @@ def test_squeeze_film_stops_a_falling_foot_before_it_touches():
     for r in runs:
         ev = r.events[r.events[:, M.EV_LEG] >= 0]
         assert np.all(np.abs(ev[:, M.EV_VPRE]) < 5e-5)                          # m/s: < 0.05 mm/s
+        assert np.all(ev[:, M.EV_STUCK] == 1)
         # released by the 2 uN adhesion, the feet ride the tray on their films within h_min
         assert r.contact_fraction["leg1"]["air"] > 0.5 and r.max_height_um.max() < r.params.h_min_um
         # the tray moves at 150 mm/s; the feet follow it on their films
