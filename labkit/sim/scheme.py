@@ -61,8 +61,8 @@ FILM_PASSES = 4
 FILM_RATIO = 1.2
 #: ... unless the film would take less than this fraction of the row's velocity in a step.
 FILM_WEAK = 0.05
-#: The second film pass is skipped when it would change no film's effect on its row's
-#: velocity by more than this fraction (weak films far from the ground).
+#: The film passes stop when the next would change no film's effect on its row's velocity
+#: by more than this fraction (weak films far from the ground: one pass).
 FILM_PASS_SKIP = 1e-6
 #: Sub-steps also resolve a film's transient (:func:`film_too_coarse`): a step is halved when a
 #: film row is stiffer than this (x = h c / m_row; above 2 the trapezoidal rule's factor on the
@@ -736,7 +736,6 @@ def advance(P, A, S, mode, t, h, W, I, out):
                 u0 = row_dot(A, ra, W, W_V0) - vg0
                 ub = rv - 0.5 * (vg0 + vg1)
                 W[W_FR + j] = 2.0 * abs(ub - u0) / (x * abs(ub) + 1e-300)
-            if x > FILM_X_MAX:
                 end = vrel
                 if hp > 0.0:
                     end += h * (vrel - S[S_FV + j]) / (h + hp)
