@@ -211,8 +211,11 @@ def mean_speed_mm_s(t: np.ndarray, y: np.ndarray, t_from: float) -> float:
     if len(tt) < 2 or tt[-1] <= tt[0]:
         return 0.0
     tc = tt - tt.mean()
-    den = float(tc @ tc)
-    return float(tc @ (yy - yy.mean()) / den * 1e3) if den > 0 else 0.0
+    # sums, not ``tc @ tc``: a dot product of this length (10^4-10^5 samples) wakes OpenBLAS's
+    # threads, which then spin for ~0.1 s of CPU on the other core; in a sweep on both cores
+    # that was 15-20 % of the time (issue 10, bench/sim_bench.py)
+    den = float(np.sum(tc * tc))
+    return float(np.sum(tc * (yy - yy.mean())) / den * 1e3) if den > 0 else 0.0
 
 
 def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engine, wall, seed, ablation):

@@ -75,6 +75,10 @@ FILM_TRANSIENT = 0.01
 #: A point reaching the ground slower than this (m/s) touches down: it is pinned without an
 #: impact being counted (round-off approach speeds of a foot that was just released).
 V_TOUCH = 1e-9
+#: Event location (:func:`step`): at most this many trial steps per event, and a release time
+#: is located to this fraction of the step (an impact to the position tolerance P_POSTOL).
+EVENT_ITERS = 12
+EVENT_TIME_TOL = 1e-6
 
 # ---- scalars P
 (P_H0, P_HMIN, P_BGF, P_BGB, P_AD, P_CAD, P_CADT, P_CR, P_CRB, P_VSTICK, P_MU, P_BNS, P_KIND, P_AMP,
@@ -1140,6 +1144,37 @@ def film_too_coarse(P, A, mode, h, W):
 
 
 @jit
+def bracket_root(lo, glo, hi, ghi, side, x, g):
+    """One iteration of the event location: the bracket [lo, hi] of a root of a function that
+    is > 0 at lo (value glo) and <= 0 at hi (ghi), its value g at x inside it; returns the new
+    bracket, ``side`` and the next point.
+
+    Regula falsi with the Anderson-Bjoerck rule: when the same end moves twice in a row, the
+    value at the other end is scaled by 1 - g_new / g_old (0.5 if that is not positive), so the
+    bracket closes from both sides. Plain regula falsi keeps one end for good wherever the
+    function is curved, e.g. the contact force of a foot next to a squeeze film's 25 ns
+    transient after an event; a release then took 6-10 trial steps to locate (issue 10).
+    ``side``: +1 when the last iteration moved lo, -1 when it moved hi, 0 at the start.
+    """
+    if g > 0.0:
+        if side == 1:
+            f = 1.0 - g / glo
+            ghi *= f if f > 0.0 else 0.5
+        lo = x
+        glo = g
+        side = 1
+    else:
+        if side == -1:
+            f = 1.0 - g / ghi if ghi != 0.0 else 0.5
+            glo *= f if f > 0.0 else 0.5
+        hi = x
+        ghi = g
+        side = -1
+    nxt = lo + (hi - lo) * glo / (glo - ghi) if glo > 0.0 else lo
+    return lo, glo, hi, ghi, side, nxt
+
+
+@jit
 def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
     """One full step with event location (M9, M10); the new state is left in S.
 
@@ -1219,22 +1254,24 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
         ghi = -release_margin(P, S, mode, W, W_LI1, who, rem) if rel else W[W_GAP1 + who]
         tau = best * rem
         fresh = False           # T holds the trial advanced to tau
-        for _ in range(12):
+        side = 0                # which end of the bracket the last iteration moved (Illinois)
+        tp = hi                 # the last point evaluated (the trial's end, at first)
+        gp = ghi
+        for _ in range(EVENT_ITERS):
             if tau <= 0.0:
                 tau = 0.0
                 break
             count[CNT_ADV] += 1
             g = event_value(P, A, S, T, mode, now, tau, tv, W, I, who, rel)
-            if (not rel and abs(g) <= tol) or hi - lo <= 1e-9 * rem:
+            # an impact: the gap within the position tolerance; a release: the secant's next
+            # correction (from the last two points) below EVENT_TIME_TOL of the step
+            if (not rel and abs(g) <= tol) or hi - lo <= 1e-9 * rem \
+                    or (rel and g != gp and abs(g * (tau - tp)) <= EVENT_TIME_TOL * rem * abs(g - gp)):
                 fresh = True
                 break
-            if g > 0.0:
-                lo = tau
-                glo = g
-            else:
-                hi = tau
-                ghi = g
-            tau = lo + (hi - lo) * glo / (glo - ghi) if glo > 0.0 else lo
+            tp = tau
+            gp = g
+            lo, glo, hi, ghi, side, tau = bracket_root(lo, glo, hi, ghi, side, tau, g)
         if tau > 0.0:
             if not fresh:
                 count[CNT_ADV] += 1
