@@ -169,10 +169,16 @@ class Model:
         # recognises a level by h == dt / 2^k)
         for lev in range(K.NLEV):
             h = dt * 0.5 ** lev
-            Sinv = np.linalg.inv(2 * M + h * np.diag(self.damp) + 0.5 * h * h * np.diag(self.stiff))
+            S = 2 * M + h * np.diag(self.damp) + 0.5 * h * h * np.diag(self.stiff)
+            Sinv = np.linalg.inv(S)
             Z = Sinv @ self.rows
+            # S^-1 by parts for the scheme (advance): the legs' diagonal, the body's Schur complement
+            dli = np.zeros(NQ)
+            dli[NB:] = 1.0 / np.diag(S)[NB:]
+            sc = S[:NB, :NB] - (S[:NB, NB:] * dli[NB:]) @ S[NB:, :NB]
             base = K.OFF_LEV + lev * K.LEV_SIZE
-            for off, arr in ((K.LEV_SINVT, Sinv.T), (K.LEV_ZT, Z.T), (K.LEV_Q, self.rows.T @ Z)):
+            for off, arr in ((K.LEV_DLI, dli), (K.LEV_SCI, np.linalg.inv(sc)), (K.LEV_ZT, Z.T),
+                             (K.LEV_Q, self.rows.T @ Z)):
                 flat = np.ascontiguousarray(arr, dtype=float).ravel()
                 A[base + off:base + off + flat.size] = flat
         return P, A
