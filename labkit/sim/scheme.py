@@ -1198,7 +1198,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
 
     Events inside the step: a free foot (or the body) reaching the ground, and a
     pinned foot (or the resting body) whose pull exceeds what holds it. The
-    earliest is located on the scheme's own trajectory (secant), the step is
+    earliest is located on the scheme's own trajectory (bracket_root), the step is
     advanced to it, the event applied, and the rest of the step integrated.
 
     With ``refine``, a step whose trial shows a squeeze film it does not resolve
@@ -1265,7 +1265,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
             count[CNT_FORCED] += 1
             break
         n_ev += 1
-        # locate the event of `who` inside [0, rem] (secant on the scheme's own trajectory)
+        # locate the event of `who` inside [0, rem] (bracket_root on the scheme's own trajectory)
         lo = 0.0
         glo = -W[W_G0 + who] if rel else W[W_GAP0 + who]
         hi = rem
