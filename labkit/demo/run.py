@@ -33,7 +33,7 @@ they appear only in the final comparison (``lab.truth``).
 
 Why not the bundled ``paper`` set (``RobotParams.preset("paper")``, calibrated
 to the paper's observations)? At the demo's drives it is not robust: at 240 Hz /
-25 um the nominal robot walks at 2.0 mm/s but three robots drawn from the Monte
+25 um the nominal robot walks at 2.2 mm/s but three robots drawn from the Monte
 Carlo table average 15 mm/s (``python bench/paper_table.py``), and at 280 Hz
 the nominal robot does not move (0.00 mm/s over 4 seeds, 2 s), so a
 tracked speed and one simulation of the fitted robot (whose identified modes

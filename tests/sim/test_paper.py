@@ -13,6 +13,7 @@ import pytest
 from clihelpers import run_cli
 from labkit.errors import ConfigError, InputError
 from labkit.sim import RobotParams
+from labkit.sim.paper import fit
 from labkit.sim.paper.observations import Observation, check, observations, parse, violation
 from labkit.sim.paper.shaker import PAPER_SHAKER, ShakerLaw
 from labkit.sim.scenarios import SCENARIOS
@@ -93,6 +94,23 @@ def test_violation_is_the_distance_outside_the_band():
     assert violation(below, float("nan")) == 3.0 and violation(below, None) == 3.0
     sign = Observation("z", "s", "m", "src", "q", "sign", "t", "both", low=0.0)
     assert violation(sign, 0.0) > 0 and violation(sign, 1e-9) == 0.0
+
+
+def test_objective_margin_scores_the_edge_of_a_band_but_never_decides_met():
+    """The calibration's objective narrows each band by a margin (fit.OBJECTIVE_MARGIN) so its
+    search ends inside the band; the observation itself is met on the band as written."""
+    two = Observation("x", "s", "m", "src", "q", "number", "t", "both", low=2.0, high=6.0)
+    m = 0.05                                                     # 0.2 of the width 4
+    assert violation(two, 2.002, m) == pytest.approx(0.198 / 4) and two.passes(2.002)
+    assert violation(two, 5.9, m) == pytest.approx(0.1 / 4) and violation(two, 4.0, m) == 0.0
+    assert violation(two, 1.0, m) == pytest.approx(1.2 / 4)     # outside: measured from the narrowed edge
+    below = Observation("y", "s", "m", "src", "q", "range", "t", "both", high=0.1)
+    assert violation(below, 0.099, m) == pytest.approx(0.004 / 0.1) and below.passes(0.099)
+    assert violation(below, 0.2, m) == pytest.approx(0.105 / 0.1)
+    metrics = {"speed_240_hz_mm_s": 2.002}
+    obs = [o for o in observations() if o.metric == "speed_240_hz_mm_s"]
+    assert fit.violations(metrics, obs) == {obs[0].id: 0.0}
+    assert fit.objective(metrics, obs) == pytest.approx(math.tanh((2.0 + 0.05 * 4 - 2.002) / 4))
 
 
 @pytest.mark.parametrize("row, key", [

@@ -60,26 +60,32 @@ class Observation:
         return max(abs(bound or 0.0), 0.1)
 
 
-def violation(obs: Observation, value: float | None) -> float:
+def violation(obs: Observation, value: float | None, margin: float = 0.0) -> float:
     """Distance of ``value`` outside the band in units of :meth:`Observation.scale`; 0 inside.
 
     One-sided sign tests (``> 0``) pass only strictly; a missing value (NaN)
-    counts as 3 units.
+    counts as 3 units. ``margin`` (in the same units) narrows the band on each
+    bounded side first: the calibration's objective uses it so that its search
+    does not stop on a band's edge (:data:`labkit.sim.paper.fit.OBJECTIVE_MARGIN`);
+    whether an observation is met is always decided with ``margin = 0``.
     """
     if value is None or not math.isfinite(float(value)):
         return 3.0
     v = float(value)
     s = obs.scale()
+    d = margin * s
     if obs.low is not None:
+        lo = obs.low + d
         if obs.high is None and v <= obs.low:      # one-sided: strictly above
-            return max((obs.low - v) / s, 1e-3)
-        if v < obs.low:
-            return (obs.low - v) / s
+            return max((lo - v) / s, 1e-3)
+        if v < lo:
+            return (lo - v) / s
     if obs.high is not None:
+        hi = obs.high - d
         if obs.low is None and v >= obs.high:      # one-sided: strictly below
-            return max((v - obs.high) / s, 1e-3)
-        if v > obs.high:
-            return (v - obs.high) / s
+            return max((v - hi) / s, 1e-3)
+        if v > hi:
+            return (v - hi) / s
     return 0.0
 
 
