@@ -16,10 +16,11 @@ number on a shared machine):
   ``--quick`` runs a smaller sweep and says so.
 
 Cost of the scheme (issue 10): one implicit-midpoint step of the 23-coordinate
-coupled system is two 23 x 23 matrix-vector products (M v0, and the cached
-(2M + hD + h^2/2 K)^-1 for the step or one of its halvings), a small solve for
-the contact and film rows (a second pass for the films' midpoint coefficient
-only where it matters), an impulse through the pinned and stiff film rows, and
+coupled system is M v0 and a solve with S = 2M + hD + h^2/2 K (through the
+body's cached 5 x 5 Schur complement for the step or one of its halvings: the
+legs' block is diagonal), a small solve for the contact and film rows (further
+passes for the films' mean coefficient only where it matters), an impulse
+through the pinned and stiff film rows, and
 the instantaneous contact forces for located releases (the inverses of
 R^T M^-1 R over a row set are cached, as the sets change only at events);
 ``kernel_us_per_step`` reports it, ``trial_steps_per_step`` the partial
