@@ -1272,7 +1272,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
         ghi = -release_margin(P, S, mode, W, W_LI1, who, rem) if rel else W[W_GAP1 + who]
         tau = best * rem
         fresh = False           # T holds the trial advanced to tau
-        side = 0                # which end of the bracket the last iteration moved (Illinois)
+        side = 0                # which end of the bracket the last iteration moved (bracket_root)
         tp = hi                 # the last point evaluated (the trial's end, at first)
         gp = ghi
         for _ in range(EVENT_ITERS):
