@@ -18,6 +18,53 @@ from typing import Any
 #: True while the reference copy of the scheme is being loaded.
 PURE = False
 
+_registered = False
+
+
+def unmanaged(a: Any) -> Any:
+    """The same array without numba's reference counting: in compiled code a view of ``a``
+    whose memory-info (and parent) pointers are null; in plain Python ``a`` itself.
+
+    Why: numba increments and decrements an atomic reference count on every array argument
+    of a compiled function it does not inline, and its pruning pass leaves most of these in
+    the scheme's functions (they take up to ten arrays). On this machine a pair costs ~10 ns;
+    a step makes dozens of such calls. numba skips the count for a null memory-info, so the
+    kernel's entry point (:func:`labkit.sim.scheme.integrate`) passes such views down.
+    The caller must keep ``a`` alive while the view is used (an argument of the compiled
+    function is: the Python caller holds it)."""
+    return a
+
+
+def _register_unmanaged() -> None:
+    """Teach numba :func:`unmanaged` (once, when the first function is compiled)."""
+    global _registered
+    if _registered:
+        return
+    from numba import types
+    from numba.core import cgutils
+    from numba.extending import intrinsic, overload
+
+    @intrinsic
+    def _null_meminfo(typingctx: Any, arr: Any) -> Any:
+        if not isinstance(arr, types.Array):
+            return None
+
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            ary = context.make_array(sig.args[0])(context, builder, value=args[0])
+            ary.meminfo = cgutils.get_null_value(ary.meminfo.type)
+            ary.parent = cgutils.get_null_value(ary.parent.type)
+            return ary._getvalue()
+
+        return arr(arr), codegen
+
+    @overload(unmanaged)
+    def _unmanaged(a):  # no annotations: numba compares this signature with the lambda's
+        if isinstance(a, types.Array):
+            return lambda a: _null_meminfo(a)
+        return None
+
+    _registered = True
+
 
 def jit(fn: Callable[..., Any]) -> Callable[..., Any]:
     """``numba.njit(cache=True, nogil=True)`` normally (nogil: the virtual lab runs
@@ -26,4 +73,6 @@ def jit(fn: Callable[..., Any]) -> Callable[..., Any]:
         return fn
     from numba import njit
 
+    _register_unmanaged()
     return njit(cache=True, nogil=True)(fn)
+

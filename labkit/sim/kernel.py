@@ -21,9 +21,11 @@ def run_scheme(mod: ModuleType, P: np.ndarray, A: np.ndarray, state: np.ndarray,
     out = {"rec": np.zeros((n_rec, mod.REC_COLS)), "rec_contact": np.zeros((n_rec, 6), np.int8),
            "frac": np.zeros((6, 3)), "max_air": np.zeros(6), "max_h": np.zeros(6),
            "count": np.zeros(mod.CNT_SIZE, np.int64), "events": np.zeros((ev_cap, mod.EV_COLS))}
+    scratch_w, scratch_i = mod.new_scratch()
     mod.integrate(np.ascontiguousarray(P, dtype=np.float64), np.ascontiguousarray(A, dtype=np.float64), S, md,
                   int(n_steps), float(dt), int(every), int(n_skip), out["rec"], out["rec_contact"], out["frac"],
-                  out["max_air"], out["max_h"], out["count"], out["events"])
+                  out["max_air"], out["max_h"], out["count"], out["events"], scratch_w, scratch_i,
+                  np.zeros(mod.S_SIZE), np.zeros(6))
     out["state"] = S
     out["mode"] = md.astype(np.int8)
     return out

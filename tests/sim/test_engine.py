@@ -293,3 +293,29 @@ def test_pack_refuses_a_model_outside_the_kernels_structure():
             mdl.mass[0, 1] += 1e-12
         with pytest.raises(ValueError, match=message):
             mdl.pack(8.68e-6)
+
+
+def test_unmanaged_views_write_through_and_leave_the_owner_alone():
+    """The kernel's views without reference counting (labkit.sim._jit.unmanaged): reads and
+    writes reach the caller's array; the array's own reference count is untouched; plain
+    Python gets the array itself (the reference engine)."""
+    import sys
+
+    from numba import njit
+
+    from labkit.sim._jit import unmanaged
+
+    @njit
+    def fill(a, b):
+        u, v = unmanaged(a), unmanaged(b)
+        for i in range(u.shape[0]):
+            u[i] = 2.0 * i
+        v[1, 2] = u[3] + 1.0
+        return u.sum()
+
+    a, b = np.zeros(5), np.zeros((2, 3))
+    before = sys.getrefcount(a)
+    assert fill(a, b) == 20.0
+    assert a.tolist() == [0.0, 2.0, 4.0, 6.0, 8.0] and b[1, 2] == 7.0
+    assert sys.getrefcount(a) == before
+    assert unmanaged(a) is a
