@@ -35,11 +35,20 @@ def unmanaged(a: Any) -> Any:
     return a
 
 
+def ix(i: int) -> int:
+    """An array index known to be >= 0: in compiled code ``i`` as an unsigned integer, so
+    that numba does not emit its negative-index wraparound (a compare, a select and an add
+    on every access, most of the instructions of the scheme's small loops); in plain Python
+    ``i`` itself. Only for indices that are never negative."""
+    return i
+
+
 def _register_unmanaged() -> None:
     """Teach numba :func:`unmanaged` (once, when the first function is compiled)."""
     global _registered
     if _registered:
         return
+    import numpy as np
     from numba import types
     from numba.core import cgutils
     from numba.extending import intrinsic, overload
@@ -61,6 +70,12 @@ def _register_unmanaged() -> None:
     def _unmanaged(a):  # no annotations: numba compares this signature with the lambda's
         if isinstance(a, types.Array):
             return lambda a: _null_meminfo(a)
+        return None
+
+    @overload(ix)
+    def _ix(i):  # no annotations: numba compares this signature with the lambda's
+        if isinstance(i, types.Integer):
+            return lambda i: np.uint64(i)
         return None
 
     _registered = True

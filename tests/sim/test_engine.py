@@ -319,3 +319,31 @@ def test_unmanaged_views_write_through_and_leave_the_owner_alone():
     assert a.tolist() == [0.0, 2.0, 4.0, 6.0, 8.0] and b[1, 2] == 7.0
     assert sys.getrefcount(a) == before
     assert unmanaged(a) is a
+
+
+def test_ix_is_an_unsigned_index_in_compiled_code_and_absent_from_the_reference():
+    """labkit.sim._jit.ix: the same element as the plain index in compiled code (unsigned: no
+    negative-index wraparound), the identity in Python; the reference engine's copy of the
+    scheme has no ix() calls left (they are dropped from its syntax tree)."""
+    import ast
+    from pathlib import Path
+
+    from numba import njit
+
+    import labkit.sim.scheme as scheme_module
+    from labkit.sim._jit import ix
+    from labkit.sim.reference import _without_ix, scheme_python
+
+    @njit
+    def pick(a, i):
+        a[ix(i + 1)] = -1.0
+        return a[ix(i)], ix(i)
+
+    a = np.arange(6.0)
+    val, idx = pick(a, 2)
+    assert val == 2.0 and a[3] == -1.0 and idx == 2 and ix(4) == 4
+    source = Path(scheme_module.__file__).read_text()
+    assert "ix(" in source
+    stripped = ast.unparse(_without_ix(ast.parse(source)))
+    assert "ix(" not in stripped.replace("_ix(", "")
+    assert scheme_python().advance.__code__.co_names.count("ix") == 0
