@@ -68,7 +68,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                              help="start at rest in the air, the body's underside UM above its resting "
                                   "gap (drop tests, free flight); default: resting on the feet")
     single_opts.add_argument("--dt-s", default=None, metavar="S",
-                             help="integration step, s (default: 64 steps per period of the fastest leg "
+                             help="integration step, s (default: 32 steps per period of the fastest leg "
                                   "mode; finer where --dt-check says the default is not converged; PZT: "
                                   "rounded down to a whole number of steps per half drive period)")
     single_opts.add_argument("--dt-check", action="store_true",

@@ -4,8 +4,8 @@ Numerics (both engines run the same scheme, :mod:`labkit.sim.scheme`; docs/model
 M5-M11 and its section "Numerics"):
 
 * one coupled system (23 coordinates, one mass matrix), implicit midpoint with a
-  fixed step, default :func:`default_dt` (64 steps per period of the fastest mode
-  or drive, >= 40 per shaker period; 8.7e-6 s for the paper's robot), halved where
+  fixed step, default :func:`default_dt` (32 steps per period of the fastest mode
+  or drive, >= 40 per shaker period; 1.7e-5 s for the paper's robot), halved where
   a squeeze film needs it; the PZT square wave's edges fall on step boundaries;
 * squeeze films implicit, at the midpoint gap, stiff ones without ringing; impacts
   and releases are events located inside the step on the scheme's own trajectory;
@@ -31,7 +31,7 @@ from labkit.sim.params import RobotParams
 from labkit.sim.result import SimResult, classify_pattern, foot_period
 
 #: Default step: this many steps per period of the fastest of (highest mode, drive) ...
-STEPS_PER_PERIOD = 64
+STEPS_PER_PERIOD = 32
 #: ... and at least this many per shaker period (measured: docs/model.md M5 and "Numerics").
 SHAKER_STEPS_PER_PERIOD = 40
 #: Default recording interval: at most 1e-4 s, and at least 20 samples per drive period.
