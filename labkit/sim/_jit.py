@@ -35,20 +35,20 @@ def unmanaged(a: Any) -> Any:
     return a
 
 
-def ix(i: int) -> int:
-    """An array index known to be >= 0: in compiled code ``i`` as an unsigned integer, so
-    that numba does not emit its negative-index wraparound (a compare, a select and an add
-    on every access, most of the instructions of the scheme's small loops); in plain Python
-    ``i`` itself. Only for indices that are never negative."""
-    return i
+def pointer(a: Any) -> Any:
+    """The address of an array's data as a typed pointer in compiled code (``ptr[i]`` reads
+    and writes element i, nothing else: no shape, no reference count, no negative-index
+    wraparound, one machine word per argument instead of an array's seven); in plain Python
+    ``a`` itself, indexed the same way. The caller keeps ``a`` alive and indexes it in range."""
+    return a
 
 
 def _register_unmanaged() -> None:
-    """Teach numba :func:`unmanaged` (once, when the first function is compiled)."""
+    """Teach numba :func:`unmanaged` and :func:`pointer` (once, when the first function is
+    compiled)."""
     global _registered
     if _registered:
         return
-    import numpy as np
     from numba import types
     from numba.core import cgutils
     from numba.extending import intrinsic, overload
@@ -72,10 +72,20 @@ def _register_unmanaged() -> None:
             return lambda a: _null_meminfo(a)
         return None
 
-    @overload(ix)
-    def _ix(i):  # no annotations: numba compares this signature with the lambda's
-        if isinstance(i, types.Integer):
-            return lambda i: np.uint64(i)
+    @intrinsic
+    def _data_pointer(typingctx: Any, arr: Any) -> Any:
+        if not isinstance(arr, types.Array):
+            return None
+
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            return context.make_array(sig.args[0])(context, builder, value=args[0]).data
+
+        return types.CPointer(arr.dtype)(arr), codegen
+
+    @overload(pointer)
+    def _pointer(a):  # no annotations: numba compares this signature with the lambda's
+        if isinstance(a, types.Array):
+            return lambda a: _data_pointer(a)
         return None
 
     _registered = True

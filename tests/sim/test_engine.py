@@ -321,29 +321,32 @@ def test_unmanaged_views_write_through_and_leave_the_owner_alone():
     assert unmanaged(a) is a
 
 
-def test_ix_is_an_unsigned_index_in_compiled_code_and_absent_from_the_reference():
-    """labkit.sim._jit.ix: the same element as the plain index in compiled code (unsigned: no
-    negative-index wraparound), the identity in Python; the reference engine's copy of the
-    scheme has no ix() calls left (they are dropped from its syntax tree)."""
-    import ast
-    from pathlib import Path
+def test_pointer_reads_and_writes_the_array_in_compiled_code_and_is_the_array_in_python():
+    """labkit.sim._jit.pointer: in compiled code a typed pointer to the array's data (the
+    kernel's step functions take these), indexed like the array, writes reaching the caller's
+    array; in plain Python (the reference engine) the array itself."""
+    import sys
 
     from numba import njit
 
-    import labkit.sim.scheme as scheme_module
-    from labkit.sim._jit import ix
-    from labkit.sim.reference import _without_ix, scheme_python
+    from labkit.sim._jit import pointer
 
     @njit
-    def pick(a, i):
-        a[ix(i + 1)] = -1.0
-        return a[ix(i)], ix(i)
+    def bump(w, n):                     # compiled once for a pointer, once for an array
+        for i in range(n):
+            w[i + 1] += 2.0 * w[i]
+        return w[n]
 
-    a = np.arange(6.0)
-    val, idx = pick(a, 2)
-    assert val == 2.0 and a[3] == -1.0 and idx == 2 and ix(4) == 4
-    source = Path(scheme_module.__file__).read_text()
-    assert "ix(" in source
-    stripped = ast.unparse(_without_ix(ast.parse(source)))
-    assert "ix(" not in stripped.replace("_ix(", "")
-    assert scheme_python().advance.__code__.co_names.count("ix") == 0
+    @njit
+    def through_pointer(a, ints):
+        p, q = pointer(a), pointer(ints)
+        return bump(p, 3) + q[2]
+
+    a, ints = np.ones(5), np.arange(4, dtype=np.int64)
+    before = sys.getrefcount(a)
+    assert through_pointer(a, ints) == 15.0 + 2
+    assert a.tolist() == [1.0, 3.0, 7.0, 15.0, 1.0]
+    assert sys.getrefcount(a) == before
+    assert pointer(a) is a
+    b = np.ones(5)
+    assert bump(b, 3) == 15.0 and b.tolist() == a.tolist()
