@@ -27,7 +27,10 @@ R^T M^-1 R over a row set are cached, as the sets change only at events);
 ``kernel_us_per_step`` reports it, ``trial_steps_per_step`` the partial
 steps of event location and the refused sub-steps on top, and
 ``cost_breakdown_us`` the parts (a full and a partial step, the contact forces,
-a whole step with its checks) on a pinned and a flying robot.
+a whole step with its checks) on a pinned and a flying robot, called as the kernel
+calls them: the step's arrays as plain pointers (``labkit.sim._jit.pointer``; numba's
+array arguments cost a reference count and seven words per call, and a negative-index
+check per access).
 
 The scenario is the walking robot (240 Hz, 25 um, c_ad_n = 50 nN): feet in
 the air and impacts every cycle, the expensive case. With the published
@@ -77,6 +80,7 @@ def _breakdown() -> dict:
     from labkit.sim import RobotParams, Shaker
     from labkit.sim import model as M
     from labkit.sim import scheme as K
+    from labkit.sim._jit import pointer
     from labkit.sim.core import default_dt
 
     p, sc = RobotParams(), Shaker(240, 25)
@@ -85,15 +89,18 @@ def _breakdown() -> dict:
     P, A = mdl.pack(dt)
 
     @njit
-    def _loop(what, P, A, S0, mode0, h, n):
-        W, Iw = K.new_scratch()
-        S = S0.copy()
-        T = S0.copy()
-        mode = mode0.copy()
+    def _loop(what, P_, A_, S0, mode0, h, n):
+        W_, I_ = K.new_scratch()
+        S_ = S0.copy()
+        T_ = S0.copy()
+        mode_ = mode0.copy()
         ev = np.zeros((8, K.EV_COLS))
         cnt = np.zeros(K.CNT_SIZE, np.int64)
+        # as the kernel calls them (scheme.integrate): plain pointers
+        P, A, S, T, mode, W, Iw = (pointer(P_), pointer(A_), pointer(S_), pointer(T_), pointer(mode_),
+                                   pointer(W_), pointer(I_))
         for _ in range(n):
-            for q in range(S.size):
+            for q in range(S0.size):
                 S[q] = S0[q]
             for q in range(7):
                 mode[q] = mode0[q]

@@ -1,7 +1,7 @@
 """The event location's root bracketing (:func:`labkit.sim.scheme.bracket_root`) on functions
 with known roots, shaped like the event functions the scheme meets: nearly linear (a gap),
 steep at one end (a square root), and a fast transient next to the step's start (the contact
-force of a foot beside a squeeze film right after an event, 25 ns against a 8.7 us step).
+force of a foot beside a squeeze film right after an event, 25 ns against a 17 us step).
 
 Plain regula falsi keeps one end of the bracket for good on curved functions and ran into the
 12-iteration cap on the last kind (issue 10); with the Anderson-Bjoerck rule the bracket closes
