@@ -163,7 +163,7 @@ def test_squeeze_film_stops_a_falling_foot_before_it_touches():
     if at all, the film stops their rebound within picometres (M11: every such landing
     sticks), and c_r does not change the walk.
 
-    At the default step (converged at this 23 g since issue 10: 8.82 against 8.80 mm/s at a
+    At the default step (converged at this 23 g since issue 10: 8.83 against 8.79 mm/s at a
     quarter step, docs/model.md "Numerics")."""
     sc = Shaker(240, 100)
     runs = [simulate(RobotParams(c_r=c_r, c_ad_n=2e-6), sc, duration_s=0.3, seed=0) for c_r in (0.2, 0.8)]
