@@ -39,7 +39,8 @@ def pointer(a: Any) -> Any:
     """The address of an array's data as a typed pointer in compiled code (``ptr[i]`` reads
     and writes element i, nothing else: no shape, no reference count, no negative-index
     wraparound, one machine word per argument instead of an array's seven); in plain Python
-    ``a`` itself, indexed the same way. The caller keeps ``a`` alive and indexes it in range."""
+    ``a`` itself, indexed the same way. The caller keeps ``a`` alive and indexes it in range;
+    ``a`` must be C-contiguous (anything else does not compile)."""
     return a
 
 
@@ -74,7 +75,8 @@ def _register_unmanaged() -> None:
 
     @intrinsic
     def _data_pointer(typingctx: Any, arr: Any) -> Any:
-        if not isinstance(arr, types.Array):
+        # C-contiguous only: element i of a strided array is not at data + i
+        if not isinstance(arr, types.Array) or arr.layout != "C":
             return None
 
         def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
@@ -84,7 +86,7 @@ def _register_unmanaged() -> None:
 
     @overload(pointer)
     def _pointer(a):  # no annotations: numba compares this signature with the lambda's
-        if isinstance(a, types.Array):
+        if isinstance(a, types.Array) and a.layout == "C":
             return lambda a: _data_pointer(a)
         return None
 

@@ -350,3 +350,12 @@ def test_pointer_reads_and_writes_the_array_in_compiled_code_and_is_the_array_in
     assert pointer(a) is a
     b = np.ones(5)
     assert bump(b, 3) == 15.0 and b.tolist() == a.tolist()
+
+    @njit
+    def strided(a):
+        return pointer(a)[1]
+
+    from numba.core.errors import TypingError
+
+    with pytest.raises(TypingError):        # element i of a strided array is not at data + i
+        strided(np.arange(6.0)[::2])
