@@ -136,6 +136,7 @@ class Runner:
                     bar.set_postfix_str(f"point {n_done}/{plan.points_total}", refresh=False)
                     bar.update(step.est_s)
                     self.timing[-1]["total_s"] = time.monotonic() - t0
+                self._wait_burst_end()      # a normal end lets the last burst end by itself
             status = "complete"
         except InterlockEnd as exc:
             status = f"aborted: interlock: {exc.message}"
@@ -221,6 +222,7 @@ class Runner:
             return
         n = math.ceil((settle_s + hold_s) * freq_hz) + BURST_MARGIN_CYCLES
         if n != self.burst_n:
+            self._wait_burst_end()          # never re-arm a running burst
             self.guard.funcgen.burst(n, trigger_source="BUS")
             self.burst_n = n
 
@@ -236,7 +238,11 @@ class Runner:
         self._wait_burst_end()
         t = time.monotonic()
         self.guard.funcgen.trigger()
-        self.burst_end = t + self.burst_n / freq_hz + 0.002
+        # the burst starts when the generator reads *TRG, somewhere between t and the trigger's
+        # return (after it, when the driver reads the error queue on the same link): count its
+        # end from the return. From t, a trigger that took over 2 ms to arrive (a loaded machine)
+        # let the next point's commands cut the burst short (seen once on the virtual lab: 86 us)
+        self.burst_end = time.monotonic() + self.burst_n / freq_hz + 0.002
         return t
 
     def _no_drive_in(self, rec: measure.Records) -> bool:
@@ -341,7 +347,12 @@ class Runner:
 
     # -- stepped sine ------------------------------------------------------------------------
     def _set_sine(self, freq_hz: float, amp_vpp: float, offset_v: float) -> None:
-        """Program the generator, sending only what changed (fewer round trips per point)."""
+        """Program the generator, sending only what changed (fewer round trips per point).
+
+        A bounded run's last burst is left to end by itself first: the scope's record ends
+        inside it (BURST_MARGIN_CYCLES), so the next point would otherwise reprogram a
+        running burst."""
+        self._wait_burst_end()
         fg = self.guard.funcgen
         if self.sine_set is not None and self.sine_set[1] == offset_v and amp_vpp < self.sine_set[0]:
             # Lower the amplitude BEFORE moving the frequency: the old, larger drive must never
