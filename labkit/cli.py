@@ -20,7 +20,7 @@ from typing import Any
 
 from labkit import __version__
 from labkit.errors import EXIT_INPUT, EXIT_INTERRUPTED, DriveNotOff, InputError, Interrupted, LabkitError
-from labkit.experiments.safety import install_stop_handlers, restore_handlers
+from labkit.experiments.safety import check_stop, install_stop_handlers, restore_handlers, stop_handled
 
 
 class _Parser(argparse.ArgumentParser):
@@ -84,12 +84,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     turned off and the run file finished exactly as for Ctrl-C (exit 130). A
     shell's background job starts with SIGINT and SIGQUIT ignored; this undoes it.
     """
-    previous = install_stop_handlers()
+    previous: dict[int, Any] = {}
     args: argparse.Namespace | None = None
     try:
+        install_stop_handlers(previous)     # inside the try: a signal during it is handled too
         parser = build_parser()
         args = parser.parse_args(argv)
         summary = args._run(args)
+        check_stop()            # a stop signal whose exception was dropped still stops (exit 130)
         if args.json:
             emit_json(summary if isinstance(summary, dict) else {"result": summary})
     except DriveNotOff as exc:
@@ -106,6 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _fail(args, f"{where}{exc.strerror or exc}", EXIT_INPUT)
         return _exit(EXIT_INPUT, argv)
     except (KeyboardInterrupt, Interrupted) as exc:
+        stop_handled()
         name = exc.signame if isinstance(exc, Interrupted) else "SIGINT"
         _fail(args, f"interrupted by {name}; outputs were turned off", EXIT_INTERRUPTED)
         return _exit(EXIT_INTERRUPTED, argv)

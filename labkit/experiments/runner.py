@@ -45,7 +45,7 @@ from labkit.experiments.kinds import POINT_OVERHEAD_BYTES, Config
 from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, SinePoint
 from labkit.experiments.rig import Rig
 from labkit.experiments.runfile import RunFile, WriteFailed
-from labkit.experiments.safety import DriveGuard, Interlock, deferred, shielded, signals_raise
+from labkit.experiments.safety import DriveGuard, Interlock, check_stop, deferred, shielded, signals_raise, stop_handled
 from labkit.progress import progress
 
 #: how long past twice the record an acquisition may take before the scope counts as lost
@@ -127,6 +127,7 @@ class Runner:
                 if m.kind == "stepped":
                     self.rig.set_record_points(math.ceil(m.dwell_cycles * self.cfg.scope.samples_per_cycle))
                 for step in plan.steps:
+                    check_stop()        # a stop signal whose exception was dropped (safety._PENDING)
                     if isinstance(step, MoveSpot):
                         self._move_spot(step.spot, drive_off=True)
                         continue
@@ -137,14 +138,17 @@ class Runner:
                     bar.update(step.est_s)
                     self.timing[-1]["total_s"] = time.monotonic() - t0
                 self._wait_burst_end()      # a normal end lets the last burst end by itself
+                check_stop()
             status = "complete"
         except InterlockEnd as exc:
             status = f"aborted: interlock: {exc.message}"
             raise
         except KeyboardInterrupt:
+            stop_handled()
             status = "interrupted: SIGINT"
             raise
         except Interrupted as exc:
+            stop_handled()
             status = f"interrupted: {exc.signame}"
             raise
         except BaseException as exc:

@@ -118,25 +118,63 @@ class DriveGuard:
 STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
 
 
-def raise_stop_signal(signum: int, frame: Any) -> None:
-    """Signal handler: SIGINT raises KeyboardInterrupt, the other stop signals :class:`Interrupted`."""
+#: stop signals whose exception may not have arrived: Python runs a signal's handler in
+#: whatever code runs at that moment, and an exception raised inside a weakref callback or a
+#: ``__del__`` (the import system's lock clean-up, say) is printed and dropped.
+_PENDING: list[int] = []
+
+
+def _stop_exception(signum: int) -> BaseException:
     if signum == signal.SIGINT:
-        raise KeyboardInterrupt
-    raise Interrupted(signal.Signals(signum).name)
+        return KeyboardInterrupt()
+    return Interrupted(signal.Signals(signum).name)
 
 
-def install_stop_handlers() -> dict[int, Any]:
+def raise_stop_signal(signum: int, frame: Any) -> None:
+    """Signal handler: SIGINT raises KeyboardInterrupt, the other stop signals
+    :class:`Interrupted`. The signal is also remembered until it is
+    handled (:func:`check_stop`, :func:`stop_handled`), in case the exception was dropped."""
+    _PENDING.append(signum)
+    raise _stop_exception(signum)
+
+
+def check_stop() -> None:
+    """Raise the stop of a signal whose exception was dropped (see ``_PENDING``); else nothing.
+
+    Called where a run can stop cleanly: before each point of a run, and when a command
+    returns. A stop that did arrive is marked handled by whoever caught it (:func:`stop_handled`)."""
+    if _PENDING:
+        signum = _PENDING[0]
+        _PENDING.clear()
+        raise _stop_exception(signum)
+
+
+def stop_handled() -> None:
+    """The stop exception was caught and acted on: forget the signals behind it."""
+    _PENDING.clear()
+
+
+def install_stop_handlers(previous: dict[int, Any] | None = None) -> dict[int, Any]:
     """Make every stop signal raise (:func:`raise_stop_signal`) in the main thread; return the old handlers.
 
     Also ignores SIGXFSZ, so a file-size limit makes a write fail with an error
     (handled: the drive goes off, the run file is finished) instead of killing the
     process with the drive on. A shell starts background jobs with SIGINT and
     SIGQUIT ignored and Python keeps that; installing handlers undoes it.
+
+    The old handlers go into ``previous`` (a new dict by default) one by one, each before
+    its signal's new handler is set: a signal that arrives while the others are still being
+    installed raises at once, and the caller, which called this inside its ``try``, can still
+    restore exactly what was changed. (Called before the ``try``, such a signal escaped
+    ``labkit``'s handling: a background job stopped at its very start died by SIGINT, exit -2,
+    instead of exiting 130; seen on a loaded machine.)
     """
+    previous = {} if previous is None else previous
     if threading.current_thread() is not threading.main_thread():
-        return {}
-    previous: dict[int, Any] = {s: signal.signal(s, raise_stop_signal) for s in STOP_SIGNALS}
-    previous[signal.SIGXFSZ] = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        return previous
+    for s in (*STOP_SIGNALS, signal.SIGXFSZ):
+        previous[s] = signal.getsignal(s)
+        signal.signal(s, signal.SIG_IGN if s == signal.SIGXFSZ else raise_stop_signal)
     return previous
 
 
@@ -184,8 +222,9 @@ def deferred() -> Iterator[None]:
 @contextlib.contextmanager
 def signals_raise() -> Iterator[None]:
     """Every stop signal raises inside the block (:func:`install_stop_handlers`), then the old handlers."""
-    previous = install_stop_handlers()
+    previous: dict[int, Any] = {}
     try:
+        install_stop_handlers(previous)
         yield
     finally:
         restore_handlers(previous)

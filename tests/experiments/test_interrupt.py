@@ -110,3 +110,31 @@ def test_sigkill_leaves_every_completed_point(tmp_path):
     summary = run_session("inchip", cfg, None, resume=out, lab=True, quiet=True)
     assert summary["status"] == "complete"
     _check_complete_once(out)
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_a_stop_whose_exception_python_dropped_still_stops():
+    """Python runs a signal's handler in whatever code runs then; raised inside a ``__del__``
+    or a weakref callback (the import system's lock clean-up, at a command's start) the
+    exception is printed and dropped. The signal is remembered: the next check_stop (before
+    every point, and when a command returns) raises it; once handled it is forgotten."""
+    import gc
+
+    from labkit.errors import Interrupted
+    from labkit.experiments.safety import check_stop, raise_stop_signal, stop_handled
+
+    class Dropper:
+        def __del__(self):
+            raise_stop_signal(signal.SIGQUIT, None)     # "Exception ignored in ..." and gone
+
+    d = Dropper()
+    del d
+    gc.collect()
+    with pytest.raises(Interrupted) as exc:
+        check_stop()
+    assert exc.value.signame == "SIGQUIT"
+    check_stop()                                # raised once, then forgotten
+    with pytest.raises(KeyboardInterrupt):
+        raise_stop_signal(signal.SIGINT, None)
+    stop_handled()                              # caught and acted on: nothing left behind
+    check_stop()
