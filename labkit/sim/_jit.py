@@ -27,9 +27,9 @@ def unmanaged(a: Any) -> Any:
 
     Why: numba increments and decrements an atomic reference count on every array argument
     of a compiled function it does not inline, and its pruning pass leaves most of these in
-    the scheme's functions (they take up to ten arrays). On this machine a pair costs ~10 ns;
-    a step makes dozens of such calls. numba skips the count for a null memory-info, so the
-    kernel's entry point (:func:`labkit.sim.scheme.integrate`) passes such views down.
+    the scheme's functions. On this machine a pair costs ~10 ns. numba skips the count for a
+    null memory-info, so the kernel's entry point (:func:`labkit.sim.scheme.integrate`) passes
+    its output arrays down as such views (the step's own arrays go as :func:`pointer`).
     The caller must keep ``a`` alive while the view is used (an argument of the compiled
     function is: the Python caller holds it)."""
     return a
@@ -44,7 +44,7 @@ def pointer(a: Any) -> Any:
     return a
 
 
-def _register_unmanaged() -> None:
+def _register_intrinsics() -> None:
     """Teach numba :func:`unmanaged` and :func:`pointer` (once, when the first function is
     compiled)."""
     global _registered
@@ -100,6 +100,5 @@ def jit(fn: Callable[..., Any]) -> Callable[..., Any]:
         return fn
     from numba import njit
 
-    _register_unmanaged()
+    _register_intrinsics()
     return njit(cache=True, nogil=True)(fn)
-
