@@ -242,6 +242,15 @@ class Tolerances:
         if bad:
             raise ValueError(f"unknown tolerance {', '.join(bad)} (known: {', '.join(sorted(names))})")
         t = cls(**{k: float(v) for k, v in (values or {}).items()})
+        for name, value in t.as_dict().items():
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name} = {value:g}: expected a finite number >= 0")
+        for name in ("speed_coverage_min", "knee_correlation_min", "pattern_agreement_min", "fit_quality_min"):
+            if getattr(t, name) > 1:
+                raise ValueError(f"{name} = {getattr(t, name):g}: expected a fraction in [0, 1]")
+        if t.knee_amplitude_ratio_max < 1:
+            raise ValueError(f"knee_amplitude_ratio_max = {t.knee_amplitude_ratio_max:g}: expected >= 1 "
+                             "(its inverse is the minimum)")
         if not 0 <= t.band_lo_pct < t.band_hi_pct <= 100:
             raise ValueError("band_lo_pct and band_hi_pct must satisfy 0 <= lo < hi <= 100")
         return t

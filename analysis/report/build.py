@@ -25,6 +25,7 @@ from labkit.analysis.compare import Tolerances, verdict
 from labkit.analysis.report import figures as figs
 from labkit.analysis.report import html as rh
 from labkit.analysis.report import inputs as ri
+from labkit.analysis.report import provenance as prov
 from labkit.analysis.report.numbers import format_uncertain, format_value
 from labkit.errors import InputError
 
@@ -120,9 +121,8 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     software = f"labkit {__version__}"
-    if command is None:
-        command = (f"labkit.analysis.report.build_report({str(out)!r}, runs={list(map(str, runs))}, "
-                   f"tracks={list(map(str, tracks))}, fit={fit!r}, sims={list(map(str, sims))}, params={params!r})")
+    typed = command
+    command = prov.report_command(out, runs, tracks, fit, sims, params)
     # ---- read everything first: a bad file fails before any figure is drawn
     inchip, shaker = [], []
     for path in runs:
@@ -154,14 +154,18 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
                     _tracks_section(stage, track_data)]
         rows = [dict(r, section=s.id) for s in sections for r in s.rows]
         sections.append(_agreement_section(rows, tol, sections))
+        inputs = prov.file_records(f for s in sections if s.status == "ok" for f in s.files)
+        for f in inputs:
+            f["shown_as"] = prov.display_path(f["path"], out)
         for s in sections:
             s.verdict = _section_verdict(s)
             if s.status == "ok":
-                s.provenance = _provenance(s.files, software, command, s.notes)
+                s.provenance = prov.section_provenance(s.files, inputs=inputs, notes=s.notes)
 
         created = utc_now()
         headline = _headline(fit_data, details, sections)
         meta = {"created_utc": created, "software": software, "command": command,
+                "command_as_given": typed, "input_files": inputs,
                 "inputs": {"runs": list(map(str, runs)), "tracks": list(map(str, tracks)), "fit": fit,
                            "sims": list(map(str, sims)), "params": params},
                 "tolerances": tol.as_dict()}
@@ -216,12 +220,6 @@ def _jsonable(x: Any) -> Any:
     if isinstance(x, Path):
         return str(x)
     return x
-
-
-def _provenance(files: list[str], software: str, command: str, notes: dict[str, Any]) -> dict[str, Any]:
-    from labkit.analysis.report.provenance import section_provenance
-
-    return section_provenance(files, software=software, command=command, notes=notes)
 
 
 def _section_verdict(s: Section) -> dict[str, Any]:
@@ -481,13 +479,15 @@ def _sweep_pattern_pairs(measured: dict[str, Any], c: dict[str, Any]) -> list[di
     against the sweep's dominant pattern at the nearest frequency (within 2 %)."""
     pairs = []
     values = np.asarray(c["freq_hz"], float)
-    for fz, lab, src in zip(measured["freq_hz"], measured["patterns"], measured["sources"]):
+    for fz, lab, by, src in zip(measured["freq_hz"], measured["patterns"], measured["pattern_by"],
+                                measured["sources"]):
         if lab not in compare.PATTERNS:
             continue
         i = int(np.argmin(np.abs(values - fz)))
         if abs(values[i] - fz) > 0.02 * fz:
             continue
         pairs.append({"source": "sweep", "drive": f"{fz:.4g} Hz", "measured": lab, "simulated": c["patterns"][i],
+                      "measured_by": by, "simulated_by": ri.FOOT_CONTACT,
                       "measured_file": src, "simulated_file": c["file"]})
     return pairs
 
@@ -626,7 +626,8 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
                                meas.get("pattern", "?"), s["knee_pattern"], s["foot_pattern"]])
             if meas.get("pattern") in compare.PATTERNS:
                 pattern_pairs.append({"source": "knee record", "drive": drive, "measured": meas["pattern"],
-                                      "simulated": s["knee_pattern"], "measured_file": meas["file"],
+                                      "simulated": s["knee_pattern"], "measured_by": ri.KNEE,
+                                      "simulated_by": ri.KNEE, "measured_file": meas["file"],
                                       "simulated_file": s["source"]})
         elif meas is None:
             msgs.append(f"No measured knee record at {freq:.4g} Hz, {amp:.3g} um.")
@@ -660,11 +661,13 @@ def _pattern_section(pairs: list[dict[str, Any]], tol: Tolerances, details: dict
     here = [f for f in sources if not Path(f).is_file()]
     if here:
         sec.notes["simulated here"] = f"{len(here)} knee simulation(s) run by this report (see the knee section)"
-    sec.notes["observed"] = "run file label, or classify_knee_pattern on the knee record"
-    sec.notes["simulated (sweep)"] = "dominant foot-contact pattern over draws and feet"
-    sec.notes["simulated (knee record)"] = "classify_knee_pattern on the simulated knee record"
+    sec.notes["compared"] = ("a pattern is compared only with one classified the same way: knee record "
+                             "against simulated knee record (classify_knee_pattern on both), run-file labels of "
+                             "the feet against the simulated feet's dominant contact pattern")
+    for p in pairs:
+        p["comparable"] = ri.PATTERN_BY.get(p["measured_by"]) == ri.PATTERN_BY.get(p["simulated_by"])
     for source in ("knee record", "sweep"):
-        ps = [p for p in pairs if p["source"] == source]
+        ps = [p for p in pairs if p["source"] == source and p["comparable"]]
         if not ps:
             continue
         a = compare.pattern_agreement([p["measured"] for p in ps], [p["simulated"] for p in ps],
@@ -675,11 +678,25 @@ def _pattern_section(pairs: list[dict[str, Any]], tol: Tolerances, details: dict
         sec.rows.append(_row(f"leg pattern ({source}s)", "fraction of drives with the same pattern", fr, "1",
                              f"≥ {tol.pattern_agreement_min:g}", verdict(fr, at_least=tol.pattern_agreement_min),
                              n=a["n"], text=f"{format_value(fr, 3)} ({agree} of {a['n']})"))
-    sec.html.append(rh.table(["compared with", "drive", "observed", "simulated", "same"],
-                             [[p["source"], p["drive"], p["measured"].replace("_", " "),
-                               p["simulated"].replace("_", " "), "yes" if p["measured"] == p["simulated"] else "no"]
+    apart = [p for p in pairs if not p["comparable"]]
+    if apart:
+        sec.message = (f"{len(apart)} pair(s) not compared: the observed pattern was classified from a knee "
+                       "record, the simulated one from the feet's contact (different observables; see the "
+                       "knee record rows for the like-with-like comparison).")
+    if not sec.rows:
+        sec.notes["verdict_note"] = "no drive has an observed and a simulated pattern from the same classifier"
+    sec.html.append(rh.table(["compared with", "drive", "observed", "observed by", "simulated", "simulated by",
+                              "same"],
+                             [[p["source"], p["drive"], p["measured"].replace("_", " "), p["measured_by"],
+                               p["simulated"].replace("_", " "), p["simulated_by"], _same_text(p)]
                               for p in pairs]))
     return sec
+
+
+def _same_text(pair: dict[str, Any]) -> str:
+    if not pair["comparable"]:
+        return "not compared (different classifiers)"
+    return "yes" if pair["measured"] == pair["simulated"] else "no"
 
 
 # --------------------------------------------------------------------------- tracks
@@ -728,8 +745,8 @@ def _agreement_section(rows: list[dict[str, Any]], tol: Tolerances, sections: li
         return _missing("agreement", title, "Nothing to compare: needs measured and simulated data of the same "
                         "kind (speeds and a frequency sweep, knee records and simulations) or a fit.")
     sec = Section("agreement", title)
-    # its inputs are the other sections' (listed once each in their provenance): not repeated here
-    sec.notes["inputs"] = "those of the sections above, listed in each section's provenance"
+    # its inputs are the other sections' (numbered in the report's provenance): not repeated here
+    sec.notes["inputs"] = "those of the sections above"
     sec.summarises = rows          # the rows belong to their sections; this one summarises them
     judged = [r for r in rows if r["verdict"] in ("pass", "fail")]
     failed = [r for r in judged if r["verdict"] == "fail"]

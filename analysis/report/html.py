@@ -112,15 +112,12 @@ def verdict_badge(result: str) -> str:
 
 
 def provenance_block(p: dict[str, Any]) -> str:
-    """One section's provenance: its files with SHA-256 and size, the software, the command, notes."""
-    rows = [[("html", f'<span class="mono">{e(f["path"])}</span>'),
-             ("html", f'<span class="mono">{e(f.get("sha256", "(not a file)"))}</span>'),
-             f.get("bytes", "")] for f in p.get("files", [])]
-    parts = ['<div class="provenance"><b>Provenance</b>']
-    if rows:
-        parts.append(table(["input", "SHA-256", "bytes"], rows, num_cols={2}))
-    parts.append(f'<div>software: <code>{e(p.get("software", ""))}</code></div>')
-    parts.append(f'<div>command: <code>{e(p.get("command", ""))}</code></div>')
+    """One section's provenance: which of the report's inputs it used (by number) and its notes."""
+    parts = ['<div class="provenance"><b>Inputs</b>: ']
+    files = p.get("files", [])
+    parts.append(", ".join(f'<a href="#input-{f["number"]}">[{f["number"]}]</a> '
+                           f'<span class="mono">{e(Path(f["shown_as"]).name)}</span>' for f in files)
+                 or "none")
     for k, v in (p.get("notes") or {}).items():
         if k == "verdict_note":
             continue
@@ -128,6 +125,19 @@ def provenance_block(p: dict[str, Any]) -> str:
         parts.append(f"<div>{e(k)}: {e(text)}</div>")
     parts.append("</div>")
     return "".join(parts)
+
+
+def report_provenance(meta: dict[str, Any]) -> str:
+    """The report's provenance, once: every input with SHA-256 and size, the software, the command."""
+    rows = [[("html", f'<span id="input-{i}">{i}</span>'),
+             ("html", f'<span class="mono">{e(f["shown_as"])}</span>'),
+             ("html", f'<span class="mono">{e(f.get("sha256", "(not a file)"))}</span>'), f.get("bytes", "")]
+            for i, f in enumerate(meta.get("input_files", []), 1)]
+    return ('<section id="provenance"><h2>Provenance</h2>'
+            + table(["#", "input (relative to this report's folder)", "SHA-256", "bytes"], rows, num_cols={3})
+            + f'<div>software: <code>{e(meta.get("software", ""))}</code></div>'
+            + "<div>command (from the folder holding the report's folder): "
+            + f'<code>{e(meta.get("command", ""))}</code></div></section>')
 
 
 def headline_block(headline: dict[str, Any]) -> str:
@@ -179,6 +189,7 @@ def render(title: str, sections: list[Section], meta: dict[str, Any],
         if s.status == "ok" and s.provenance:
             parts.append(provenance_block(s.provenance))
         parts.append("</section>")
+    parts.append(report_provenance(meta))
     parts.append("<footer><p>Tolerances: " + e(json.dumps(meta.get("tolerances", {}), sort_keys=True))
                  + "</p></footer>")
     parts.append("</body></html>")

@@ -22,6 +22,15 @@ from labkit.errors import InputError
 
 LOCATIONS = ("body", "hip", "knee")
 
+# What classified a leg pattern. Two patterns are compared only when the same kind of
+# classifier made both: a label written in a run file names what the feet did (as the
+# simulator's per-foot contact pattern does); a knee record is classified from the knee's
+# vertical velocity (classify_knee_pattern), a different observable.
+LABEL = "run-file label (feet)"
+KNEE = "knee record (classify_knee_pattern)"
+FOOT_CONTACT = "simulated foot contact (dominant over draws and feet)"
+PATTERN_BY = {LABEL: "feet", FOOT_CONTACT: "feet", KNEE: "knee"}
+
 
 def _s(v: Any) -> str:
     return v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
@@ -211,19 +220,21 @@ def measured_speeds(shaker_runs: list[dict[str, Any]], tracks: list[dict[str, An
             if video:
                 by_video[str(Path(video).resolve())] = (run, k)
 
-    def pattern_of(run: dict[str, Any], k: int) -> str:
+    def pattern_of(run: dict[str, Any], k: int) -> tuple[str, str]:
+        """The point's leg pattern and what classified it (see :data:`PATTERN_BY`)."""
         if run.get("patterns"):
-            return run["patterns"][k]
+            return run["patterns"][k], LABEL
         rec = next((r for r in run.get("knee", []) if r["point"] == int(run["index"][k])), None)
         if rec is None:
-            return ""
-        return classify_knee_pattern(rec["t_s"], rec["knee_vz_mm_s"], rec["tray_vz_mm_s"], rec["freq_hz"])["pattern"]
+            return "", ""
+        pattern = classify_knee_pattern(rec["t_s"], rec["knee_vz_mm_s"], rec["tray_vz_mm_s"], rec["freq_hz"])
+        return pattern["pattern"], KNEE
 
     rows: list[tuple] = []
     covered: set[tuple[str, int]] = set()
     unmatched = []
     for tr in tracks:
-        freq, amp, pattern, src = tr.get("freq_hz"), tr.get("tray_amp_um", np.nan), "", tr["file"]
+        freq, amp, pattern, src = tr.get("freq_hz"), tr.get("tray_amp_um", np.nan), ("", ""), tr["file"]
         if not np.isfinite(tr["mean_speed_mm_s"]):
             unmatched.append(f"{tr['file']} (no speed)")
             continue
@@ -239,7 +250,7 @@ def measured_speeds(shaker_runs: list[dict[str, Any]], tracks: list[dict[str, An
             continue
         lo, hi = tr["speed_ci_mm_s"]
         z = norm.ppf(0.5 + tr.get("ci_level", 0.95) / 2)
-        rows.append((float(freq), float(amp), tr["mean_speed_mm_s"], lo, hi, (hi - lo) / (2 * z), pattern, src))
+        rows.append((float(freq), float(amp), tr["mean_speed_mm_s"], lo, hi, (hi - lo) / (2 * z), *pattern, src))
     for run in shaker_runs:
         if "speed_mm_s" not in run:
             continue
@@ -254,20 +265,22 @@ def measured_speeds(shaker_runs: list[dict[str, Any]], tracks: list[dict[str, An
                 lo = float(run["speed_lo_mm_s"][k]) if "speed_lo_mm_s" in run else s
                 hi = float(run["speed_hi_mm_s"][k]) if "speed_hi_mm_s" in run else s
                 std = (hi - lo) / (2 * 1.96)
-            rows.append((float(fz), float(run["tray_amp_um"][k]), s, lo, hi, std, pattern_of(run, k),
+            rows.append((float(fz), float(run["tray_amp_um"][k]), s, lo, hi, std, *pattern_of(run, k),
                          f"{run['file']} (point {int(run['index'][k])})"))
     rows.sort(key=lambda r: (r[0], r[1]))
-    cols: list[Sequence[Any]] = list(zip(*rows)) if rows else [[]] * 8
+    cols: list[Sequence[Any]] = list(zip(*rows)) if rows else [[]] * 9
     return {"freq_hz": np.asarray(cols[0], float), "amp_um": np.asarray(cols[1], float),
             "speed_mm_s": np.asarray(cols[2], float), "lo_mm_s": np.asarray(cols[3], float),
             "hi_mm_s": np.asarray(cols[4], float), "std_mm_s": np.asarray(cols[5], float),
-            "patterns": list(cols[6]), "sources": list(cols[7]), "unmatched": unmatched}
+            "patterns": list(cols[6]), "pattern_by": list(cols[7]), "sources": list(cols[8]),
+            "unmatched": unmatched}
 
 
 def select(measured: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
     """The rows of :func:`measured_speeds` where ``mask`` holds."""
     idx = np.flatnonzero(mask)
-    return {k: (v[idx] if isinstance(v, np.ndarray) else [v[i] for i in idx] if k in ("patterns", "sources") else v)
+    lists = ("patterns", "pattern_by", "sources")
+    return {k: (v[idx] if isinstance(v, np.ndarray) else [v[i] for i in idx] if k in lists else v)
             for k, v in measured.items()}
 
 

@@ -1,5 +1,6 @@
-"""Where a report section's numbers came from: its input files with checksums, the software
-version and the command that made it — written once per section, never once per row."""
+"""Where a report's numbers came from: its input files with checksums, the software version
+and the command that made it — written once per report; each section refers to the inputs
+it used by their number in that list."""
 from __future__ import annotations
 
 import hashlib
@@ -15,6 +16,39 @@ def sha256(path: str | Path, chunk: int = 1 << 20) -> str:
         while block := fh.read(chunk):
             h.update(block)
     return h.hexdigest()
+
+
+def display_path(path: str | Path, base: str | Path) -> str:
+    """``path`` as shown in a report in folder ``base``: relative to it (no absolute paths on the page)."""
+    import os
+
+    p = Path(path)
+    if not p.is_absolute() and not p.exists():
+        return str(path)                    # a description, e.g. of a simulation run by the report
+    return os.path.relpath(p.resolve(), Path(base).resolve())
+
+
+def report_command(out: str | Path, runs: Iterable[str], tracks: Iterable[str], fit: str | None,
+                   sims: Iterable[str], params: str | None) -> str:
+    """The ``labkit report`` command that reads the same inputs, with paths relative to the folder
+    holding the report folder (run it from there)."""
+    import os
+    import shlex
+
+    base = Path(out).resolve().parent
+
+    def rel(path: str) -> str:
+        return os.path.relpath(Path(path).resolve(), base)
+
+    words = ["labkit", "report"]
+    for flag, paths in (("--runs", runs), ("--tracks", tracks), ("--sim", sims)):
+        paths = [rel(p) for p in paths]
+        if paths:
+            words += [flag, *paths]
+    for flag, path in (("--fit", fit), ("--params", params)):
+        if path:
+            words += [flag, rel(path)]
+    return shlex.join([*words, "--out", Path(out).resolve().name])
 
 
 def file_records(paths: Iterable[str | Path]) -> list[dict[str, Any]]:
@@ -36,7 +70,10 @@ def file_records(paths: Iterable[str | Path]) -> list[dict[str, Any]]:
     return out
 
 
-def section_provenance(files: Iterable[str | Path], *, software: str, command: str,
+def section_provenance(files: Iterable[str | Path], *, inputs: list[dict[str, Any]],
                        notes: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The provenance block of one section."""
-    return {"files": file_records(files), "software": software, "command": command, "notes": dict(notes or {})}
+    """One section's provenance: its files (as in ``inputs``, with their number there) and notes."""
+    index = {f["path"]: i for i, f in enumerate(inputs, 1)}
+    mine = [dict(inputs[index[str(p)] - 1], number=index[str(p)]) for p in dict.fromkeys(map(str, files))
+            if str(p) in index]
+    return {"files": mine, "notes": dict(notes or {})}

@@ -56,23 +56,30 @@ def test_full_report_is_self_contained_and_numbers_agree(inputs, tmp_path):
     ratio = rows[("knee @ 200 Hz, 25 um", "amplitude ratio (sim/meas)")]
     assert ratio["value"] == pytest.approx(1.1 / 1.05, rel=1e-3) and ratio["verdict"] == "pass"
     assert abs(rows[("knee @ 200 Hz, 25 um", "phase difference (sim - meas)")]["value"]) < 1.0
-    # patterns: knee records firm/firm and jumping/jumping; the sweep says partial at 200 and 300 Hz
+    # patterns: knee records firm/firm and jumping/jumping; the sweep's feet say partial at 200 and
+    # 300 Hz, but the observed patterns there are classified from knee records: a different
+    # observable, shown and not judged (no sweep row)
     assert rows[("leg pattern (knee records)", "fraction of drives with the same pattern")]["value"] == 1.0
-    sweep_pat = rows[("leg pattern (sweeps)", "fraction of drives with the same pattern")]
-    assert sweep_pat["value"] == 0.0 and sweep_pat["verdict"] == "fail"
+    assert ("leg pattern (sweeps)", "fraction of drives with the same pattern") not in rows
+    assert summary["verdicts"]["patterns"] == "pass"
+    assert html.count("not compared (different classifiers)") == 2
     assert summary["verdicts"]["frf"] == "pass" and summary["verdicts"]["speed"] == "fail"
     assert summary["verdicts"]["agreement"] == "fail"
     # the sweep is described by its range, not by its base scenario's frequency
     assert "freq_hz 100\u2013800 Hz (7 points), amp_um 25, 5 draws of 1 s" in html
     assert "freq_hz: 240" not in html and "freq_hz 240" not in html
-    # provenance once per section: each input file's checksum appears once in each section that used it
+    # provenance once: each input's checksum and the command appear once on the page; the
+    # sections refer to the inputs by number; no absolute path anywhere on the page
     data = json.loads((out / "agreement.json").read_text())
-    sweep_sha = next(f["sha256"] for f in data["sections"]["speed"]["provenance"]["files"]
-                     if f["path"] == str(inputs["sweep"]))
-    assert html.count(sweep_sha) == sum(str(inputs["sweep"]) in [f["path"] for f in sec["provenance"]["files"]]
-                                        for sec in data["sections"].values() if sec["provenance"])
-    assert html.count('<div class="provenance">') == 7
-    assert data["meta"]["command"].startswith("labkit report --runs")
+    sweep = next(f for f in data["sections"]["speed"]["provenance"]["files"] if f["path"] == str(inputs["sweep"]))
+    assert html.count(sweep["sha256"]) == 1
+    assert html.count(f'href="#input-{sweep["number"]}"') == sum(
+        str(inputs["sweep"]) in [f["path"] for f in sec["provenance"]["files"]]
+        for sec in data["sections"].values() if sec["provenance"])
+    assert html.count('<div class="provenance">') == 7 and html.count("command (from the folder") == 1
+    assert str(tmp_path) not in html and str(inputs["sweep"]) not in html
+    assert data["meta"]["command"].startswith("labkit report --runs in/inchip.h5")
+    assert data["meta"]["command"].endswith("--out rep")
     assert data["meta"]["tolerances"]["speed_relative_rms_max"] == 0.30
     # headline numbers for --compare
     assert data["headline"]["inchip_mode1_freq_hz"]["value"] == pytest.approx(438.0)
@@ -225,3 +232,14 @@ def test_failed_report_leaves_the_old_one_whole(inputs, tmp_path, monkeypatch):
     assert names == ["agreement.json", "fig_speed.png", "fig_speed.svg", "fig_tracks.png", "fig_tracks.svg",
                      "figure_data.json", "report.html"]
     assert s["figures"] == [str(out / "fig_speed.png"), str(out / "fig_tracks.png")]
+
+
+@pytest.mark.parametrize("tolerance", ["speed_relative_rms_max=nan", "knee_phase_deg_max=-1",
+                                       "pattern_agreement_min=1.5", "knee_amplitude_ratio_max=0.5",
+                                       "speed_coverage_min=inf"])
+def test_a_tolerance_outside_its_meaning_is_bad_input(inputs, tmp_path, tolerance):
+    proc = run_cli("report", "--runs", str(inputs["shaker"]), "--tolerance", tolerance,
+                   "--out", str(tmp_path / "r"), check=2)
+    assert "Traceback" not in proc.stderr
+    assert tolerance.split("=")[0] in proc.stderr and "expected" in proc.stderr
+    assert not (tmp_path / "r").exists()
