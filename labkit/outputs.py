@@ -38,7 +38,8 @@ __all__ = ["check_outputs", "check_output_dir", "atomic_output", "atomic_outputs
 
 
 def _hint(resume: bool) -> str:
-    return "use --force to replace it" + (", or --resume to continue it" if resume else "")
+    return ("use --force (force=True from Python) to replace it"
+            + (", or --resume to continue it" if resume else ""))
 
 
 def check_outputs(paths: Iterable[str | os.PathLike[str] | None], *, force: bool = False,
