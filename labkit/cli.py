@@ -1,6 +1,6 @@
 """The ``labkit`` command line: one entry point, subcommands discovered in :mod:`labkit.commands`.
 
-Contract (``shared/docs/architecture.md``): every subcommand accepts ``--json``
+Contract (``docs/architecture.md``): every subcommand accepts ``--json``
 (then the last line of standard output is one JSON object), ``--quiet`` (no
 progress bar), and exits 0 on success, 2 on bad input, 3 on an instrument or
 transport fault, 4 when a drive output could not be confirmed off (with a

@@ -10,8 +10,8 @@ use instead, built from the instruments' specifications, not fitted to the
 robot's behaviour.
 
 Sources (numbers restated here because :mod:`labkit.sim` may not import the
-instrument drivers; the same values are in ``labkit/drivers/shaker.py`` and
-``/work/shared/docs/instruments.md``):
+instrument drivers; the same values are in ``drivers/shaker.py`` and
+``docs/instruments.md``):
 
 ====================================  ==========  ===============================================
 quantity                              value       source
