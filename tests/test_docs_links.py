@@ -20,7 +20,8 @@ if (REPO / "CHANGELOG.md").exists():
 TOP = sorted(p.name for p in REPO.iterdir() if p.is_dir() and not p.name.startswith(".") and p.name != "build"
              and not p.name.endswith(".egg-info")) + [".ci"]
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
-CITED = re.compile(r"`((?:%s)/[^`\s]*)`" % "|".join(re.escape(t) for t in TOP))
+TOPS = "|".join(re.escape(t) for t in TOP)
+CITED = re.compile(rf"`((?:{TOPS})/[^`\s]*)`")
 PLACEHOLDER = re.compile(r"[*<>{}]|\.\.\.|\b[A-Z]{2,}\b")
 
 

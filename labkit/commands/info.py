@@ -83,14 +83,16 @@ def _png_summary(path: Path) -> dict[str, Any]:
 
 
 def _html_summary(path: Path) -> dict[str, Any]:
-    """A report page: title, sections and images (self-contained: images are inline)."""
+    """A report page: title, sections and figures (self-contained: figures are inline)."""
     import re
 
     page = path.read_text(encoding="utf-8", errors="replace")
     title = re.search(r"<title>(.*?)</title>", page, re.S | re.I)
+    # a figure is an <img> or an inline <svg> (labkit's reports inline every figure as SVG)
     return {"kind": "report", "title": title.group(1).strip() if title else "",
             "sections": len(re.findall(r"<section\b", page, re.I)),
-            "images": len(re.findall(r"<img\b", page, re.I)), "bytes": len(page.encode())}
+            "figures": len(re.findall(r"<img\b", page, re.I)) + len(re.findall(r"<svg\b", page, re.I)),
+            "bytes": len(page.encode())}
 
 
 def _uff_summary(path: Path) -> dict[str, Any]:

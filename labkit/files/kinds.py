@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -47,8 +48,12 @@ class Track(LabFile):
         return self.columns["t_s"]
 
     def summary(self) -> dict[str, Any]:
-        return super().summary() | {"frames": int(self.t_s.size), "mean_speed_mm_s": self.mean_speed_mm_s,
-                                    "speed_ci_mm_s": list(self.speed_ci_mm_s), "source_video": self.source_video,
+        speed: Any = self.mean_speed_mm_s
+        ci: Any = list(self.speed_ci_mm_s)
+        if not np.isfinite(speed) and self.kind == "track_csv":
+            speed = ci = "not in this CSV (older labkit; the track's .h5 file holds it)"
+        return super().summary() | {"frames": int(self.t_s.size), "mean_speed_mm_s": speed,
+                                    "speed_ci_mm_s": ci, "source_video": self.source_video,
                                     "mm_per_px": self.attrs.get("mm_per_px")}
 
     def to_xarray(self) -> xarray.Dataset:
@@ -98,8 +103,23 @@ def read_track_csv(path: Path) -> Track:
     except (ValueError, IndexError) as exc:
         raise InputError(f"bad row ({exc})", file=path) from None
     units = {h: _csv_units(h) for h in header}
-    t = Track(path, "track_csv", 0, {"comment": "\n".join(comments)}, units, cols)
-    return t
+    attrs: dict[str, Any] = {"comment": "\n".join(comments)} | _csv_header_values(comments)
+    ci = attrs.get("speed_ci_mm_s", (np.nan, np.nan))
+    source = re.search(r"labkit track of (.*?);", attrs["comment"])
+    return Track(path, "track_csv", 0, attrs, units, cols, {}, float(attrs.get("mean_speed_mm_s", np.nan)),
+                 (float(ci[0]), float(ci[-1])), source.group(1) if source else "")
+
+
+def _csv_header_values(comments: list[str]) -> dict[str, Any]:
+    """``key=value`` pairs of a track CSV's comment lines (``mm_per_px=0.05; speed_ci_mm_s=1.2,1.4``)."""
+    out: dict[str, Any] = {}
+    for key, value in re.findall(r"(\w+)=([^;\s]+)", "\n".join(comments)):
+        try:
+            numbers = [float(v) for v in value.split(",")]
+        except ValueError:
+            continue
+        out[key] = numbers[0] if len(numbers) == 1 else tuple(numbers)
+    return out
 
 
 def _csv_units(name: str) -> str:
@@ -519,10 +539,23 @@ class Video(LabFile):
     codec: str = ""
     t_s: np.ndarray = field(default_factory=lambda: np.array([]), repr=False)
 
+    @property
+    def fps_measured(self) -> float:
+        """The frame rate the frames' timestamps give (median interval); NaN for fewer than 2 frames."""
+        dt = np.diff(self.t_s)
+        dt = dt[dt > 0]
+        return float(1.0 / np.median(dt)) if dt.size else float("nan")
+
     def summary(self) -> dict[str, Any]:
         d = float(self.t_s[-1] - self.t_s[0]) if self.t_s.size > 1 else None
+        fps = self.fps_measured
+        container: Any = self.fps_nominal
+        if np.isfinite(fps) and abs(self.fps_nominal - fps) > 0.01 * fps:
+            # e.g. Matroska's 1 ms time base read back as "1000 fps": not the frame rate
+            container = f"{self.fps_nominal:g} (the container's rate field; the timestamps give {fps:.4g})"
         return super().summary() | {"width_px": self.width, "height_px": self.height, "frames": self.frames,
-                                    "fps_nominal": self.fps_nominal, "codec": self.codec, "duration_s": d}
+                                    "fps": fps, "fps_container": container, "codec": self.codec,
+                                    "duration_s": d}
 
     def to_xarray(self) -> xarray.Dataset:
         """The frame times (``t_s`` coordinate over ``frame``); pixels are read with ``labkit.analysis.tracking``."""

@@ -30,12 +30,29 @@ def test_json_sidecar_keys(tmp_path):
     assert c["keys"] == ["out", "parameters"] and "calibrate" in c["kind"]
 
 
-def test_html_report_title_sections_images(tmp_path):
+def test_html_report_title_sections_figures(tmp_path):
     p = tmp_path / "report.html"
     p.write_text("<html><head><title>Robot 7</title></head><body><section><img src='data:,'></section>"
-                 "<section></section></body></html>")
+                 "<section><figure><svg viewBox='0 0 1 1'></svg></figure><svg></svg></section></body></html>")
     c = summarise(p)["content"]
-    assert (c["title"], c["sections"], c["images"]) == ("Robot 7", 2, 1)
+    assert (c["title"], c["sections"], c["figures"]) == ("Robot 7", 2, 3)
+
+
+def test_track_csv_and_video_summaries_read_what_the_files_say(tmp_path):
+    """The CSV's header carries the scale (and, from this version, the speed); an MKV's container
+    rate field is its 1 ms time base, not the frame rate: the timestamps give the rate."""
+    from clihelpers import REPO
+
+    c = summarise(REPO / "sample_data" / "shaker_240hz_track.csv")["content"]
+    assert 0.04 < c["mm_per_px"] < 0.06 and c["source_video"].endswith("shaker_240hz.mkv")
+    p = tmp_path / "t.csv"
+    p.write_text("# labkit track of v.mkv; mm_per_px=0.05; quality: 0 ok\n"
+                 "# mean_speed_mm_s=18.7; speed_ci_mm_s=18.5,18.9\nt_s,x_mm,y_mm\n0,1,2\n0.1,1,3.87\n")
+    c = summarise(p)["content"]
+    assert (c["mean_speed_mm_s"], c["speed_ci_mm_s"], c["mm_per_px"]) == (18.7, [18.5, 18.9], 0.05)
+    v = summarise(REPO / "sample_data" / "shaker_240hz.mkv")["content"]
+    assert v["frames"] == 24 and abs(v["fps"] - 23 / v["duration_s"]) < 0.05 * v["fps"]
+    assert "1000 (the container's rate field" in str(v["fps_container"])
 
 
 def test_uff_datasets_by_type(tmp_path):
