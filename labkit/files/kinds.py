@@ -432,13 +432,12 @@ class RobotParameters(LabFile):
     def to_xarray(self) -> xarray.Dataset:
         """Scalars as 0-d variables, per-mode triples over ``mode`` (1, 2, 3); units on each."""
         xr = require_xarray()
-        from labkit.sim.params import _SPECS  # the parameter table: units of every key
+        from labkit.sim.params import UNITS  # the parameter table: units of every key
 
         data = {}
         for k, v in self.params.to_dict().items():
             arr = np.asarray(v)
-            spec = _SPECS.get(k)
-            data[k] = (("mode",) if arr.ndim == 1 else (), arr, {"units": spec.unit if spec else ""})
+            data[k] = (("mode",) if arr.ndim == 1 else (), arr, {"units": UNITS.get(k, "")})
         ds = xr.Dataset(data, coords={"mode": ("mode", np.arange(1, 4))})
         ds.attrs.update(kind=self.kind, file=str(self.path))
         return ds

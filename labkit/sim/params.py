@@ -87,6 +87,8 @@ _SPECS: dict[str, _Spec] = {
 
 #: Field name -> one-line description with unit (for docs and ``labkit info``).
 FIELD_DOCS = {k: f"{s.doc} [{s.unit}]" for k, s in _SPECS.items()}
+#: The unit of every parameter key (what readers of parameter files label their values with).
+UNITS = {k: s.unit for k, s in _SPECS.items()}
 
 
 @dataclass(frozen=True)
