@@ -168,3 +168,71 @@ def test_calibration_recovers_a_changed_parameter_on_the_virtual_lab(quick_demo,
     # 0.12 mm/s after, from 0.16-0.24 before), so the recovered value above is the test's point.
     assert c["after"]["rms_error_mm_s"] < c["before"]["rms_error_mm_s"]
     assert RobotParams.from_toml(out).modal_participation == pytest.approx(fitted["fitted"])
+
+
+def _section_tables(html: str, section_id: str) -> list[list[list[str]]]:
+    """Every table of one report section, as rows of cell texts (header row first)."""
+    from html.parser import HTMLParser
+
+    start = html.index(f'<section id="{section_id}"')
+    body = html[start:html.index("</section>", start)]
+
+    class Tables(HTMLParser):
+        def __init__(self) -> None:
+            super().__init__()
+            self.tables: list[list[list[str]]] = []
+            self.cell: list[str] | None = None
+
+        def handle_starttag(self, tag, attrs):
+            if tag == "table":
+                self.tables.append([])
+            elif tag == "tr" and self.tables:
+                self.tables[-1].append([])
+            elif tag in ("td", "th"):
+                self.cell = []
+
+        def handle_endtag(self, tag):
+            if tag in ("td", "th") and self.cell is not None and self.tables:
+                self.tables[-1][-1].append("".join(self.cell).strip())
+                self.cell = None
+
+        def handle_data(self, data):
+            if self.cell is not None:
+                self.cell.append(data)
+
+    p = Tables()
+    p.feed(body)
+    return p.tables
+
+
+@pytest.mark.slow
+def test_quick_demo_report_verdicts_agree_with_its_own_tables(quick_demo):
+    """No section's verdict contradicts the table it summarises: the leg-pattern fractions are
+    those of the pattern and knee tables, counted here from the page itself."""
+    cwd, _, s = quick_demo
+    html = (cwd / s["files"]["report_html"]).read_text()
+    rows = json.loads((cwd / s["files"]["agreement_json"]).read_text())["agreement"]
+    # each section's verdict: FAIL exactly when one of its judged rows fails
+    verdicts = json.loads((cwd / s["files"]["agreement_json"]).read_text())["sections"]
+    for sid, sec in verdicts.items():
+        mine = [r for r in rows if r["section"] == sid and r["verdict"] in ("pass", "fail")]
+        if sid != "agreement" and mine:
+            assert (sec["verdict"]["result"] == "fail") == any(r["verdict"] == "fail" for r in mine), sid
+    # the pattern table: per source, the fraction of compared rows that agree is the judged value
+    (table,) = _section_tables(html, "patterns")
+    head, body = table[0], table[1:]
+    col = {name: i for i, name in enumerate(head)}
+    for source in {r[col["compared with"]] for r in body}:
+        compared = [r for r in body if r[col["compared with"]] == source and r[col["same"]] in ("yes", "no")]
+        judged = [r for r in rows if r["comparison"] == f"leg pattern ({source}s)"]
+        if not compared:
+            assert not judged, source
+            continue
+        (row,) = judged
+        assert row["value"] == pytest.approx(sum(r[col["same"]] == "yes" for r in compared) / len(compared))
+    # ... and the knee table's own pattern columns give the same fraction as the knee-record row
+    knee_table = next(t for t in _section_tables(html, "knee") if "measured pattern (knee)" in t[0])
+    k = {name: i for i, name in enumerate(knee_table[0])}
+    same = [r[k["measured pattern (knee)"]] == r[k["simulated pattern (knee)"]] for r in knee_table[1:]]
+    knee_row = next(r for r in rows if r["comparison"] == "leg pattern (knee records)")
+    assert knee_row["value"] == pytest.approx(sum(same) / len(same))

@@ -567,7 +567,8 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
 
         p, param_src = _knee_params(fit, params, sweeps)
         sec.files.append(param_src)
-        sec.notes["simulated here"] = (f"simulate({param_src}, Shaker(freq_hz, amp_um), duration_s={duration_s:g}, "
+        sec.notes["simulated here"] = (f"simulate({Path(param_src).name}, Shaker(freq_hz, amp_um), "
+                                       f"duration_s={duration_s:g}, "
                                        f"seed=0) at {len(todo)} drive(s); the settled second half is compared")
         outs = map_tasks(_sim_knee_task, [(p, drives[i][0], drives[i][1], duration_s, 0) for i in todo],
                          scheduler=scheduler, workers=workers, desc="knee sims", quiet=quiet)
@@ -709,16 +710,18 @@ def _tracks_section(out: Path, tracks: list[dict[str, Any]]) -> Section:
         return _missing("tracks", title, "No track files (--tracks TRACK.h5) given.")
     sec = Section("tracks", title, files=[t["file"] for t in tracks])
     sec.notes["verdict_note"] = "the tracked speeds are judged in the speed section"
-    paths = []
-    for t in tracks:
+    paths, names = [], []
+    for k, t in enumerate(tracks, 1):
         p = load_track_path(t["file"])
         lo, hi = t["speed_ci_mm_s"]
-        label = f"{Path(t['file']).name}: {format_value(t['mean_speed_mm_s'], 3)} mm/s " \
-                f"[{format_value(float(lo), 3)}, {format_value(float(hi), 3)}]"
+        drive = f"{t['freq_hz']:.4g} Hz: " if "freq_hz" in t else ""
+        label = f"{drive}{format_value(t['mean_speed_mm_s'], 3)} mm/s"
+        names.append(f"{k}: {Path(t['file']).name} ({format_value(t['mean_speed_mm_s'], 3)} mm/s, interval "
+                     f"{format_value(float(lo), 3)}\u2013{format_value(float(hi), 3)})")
         paths.append(dict(p, label=label, videos=t.get("videos", [])))
     ff = figs.tracks_figure(paths, out / "fig_tracks")
-    sec.figure(ff, f"Paths of all {len(paths)} tracks in the camera's world frame (mm); legend: mean speed and "
-                   f"its confidence interval.")
+    sec.figure(ff, f"Paths of all {len(paths)} tracks (mm), each from its own start, side by side, labelled with "
+                   f"its mean speed. Tracks: {'; '.join(names)}.")
     # the frame shows the track that moved furthest in the image (the most visible one)
     cands = [(float(np.nansum(np.hypot(np.diff(p["u_px"]), np.diff(p["v_px"])))), k, p, v)
              for k, p in enumerate(paths) if "u_px" in p and p["u_px"].size
@@ -732,7 +735,7 @@ def _tracks_section(out: Path, tracks: list[dict[str, Any]]) -> Section:
     sec.files.append(video)
     ff = figs.frame_figure(frame, p["u_px"], p["v_px"], out / "fig_frame",
                            title=f"{Path(video).name} at t = {float(p['t_s'][-1]):.2f} s, with the track")
-    sec.figure(ff, f"The last tracked frame of {video} with the track of {p['file']} drawn on it "
+    sec.figure(ff, f"The last tracked frame of {Path(video).name} with the track of {Path(p['file']).name} drawn on it "
                    f"(of the tracks whose video was found, the one that moved furthest in the image).")
     return sec
 

@@ -321,11 +321,12 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
     from matplotlib.colors import ListedColormap
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
+    from matplotlib.ticker import MaxNLocator
 
     n = len(cases)
     ncols = max(1, min(ncols, n))
     nrows = math.ceil(n / ncols)
-    fig = _figure(max(3.5 * ncols + 0.4, 5.6), 3.1 * nrows + 0.9)
+    fig = _figure(max(3.8 * ncols + 0.4, 5.6), 3.1 * nrows + 0.9)
     grid = fig.subfigures(nrows, ncols, wspace=0.02, hspace=0.03, squeeze=False)
     subs = list(np.asarray(grid, dtype=object).ravel())
     cmap = ListedColormap(CONTACT_COLOURS)
@@ -373,15 +374,18 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
             ax.text(0.02, 0.96, "no measured record", fontsize=7, va="top", transform=ax.transAxes)
         ax.set_xlim(0, 1e3 * periods / f)
         ax.grid(True, alpha=0.3)
-        ax.tick_params(labelsize=7)
-        tl.tick_params(labelsize=7)
-        tl.set_ylabel("foot", fontsize=7)
-        tl.set_xlabel("time from tray phase 0 (ms)", fontsize=7)
-        ax.set_ylabel("v_z (mm/s)", fontsize=7)
+        # few, large tick labels: the panels are read on a projector too
+        ax.yaxis.set_major_locator(MaxNLocator(4))
+        tl.xaxis.set_major_locator(MaxNLocator(4))
+        ax.tick_params(labelsize=9)
+        tl.tick_params(labelsize=9)
+        tl.set_ylabel("foot", fontsize=9)
+        tl.set_xlabel("time from tray phase 0 (ms)", fontsize=9)
+        ax.set_ylabel("v_z (mm/s)", fontsize=9)
         pm = meas.get("pattern", "?") if meas is not None else "-"
         ps = sim.get("knee_pattern", "?") if sim is not None else "-"
         ax.set_title(f"{f:.4g} Hz, tray {case.get('tray_amp_um', float('nan')):.3g} um\n"
-                     f"measured: {pm.replace('_', ' ')} | simulated: {ps.replace('_', ' ')}", fontsize=7.5)
+                     f"meas. {pm.replace('_', ' ')} | sim. {ps.replace('_', ' ')}", fontsize=8.5)
         data["drives"].append(drawn)
     handles: list[Artist] = [Line2D([], [], color=MEAS_COLOUR, lw=1.3, label="knee, measured"),
                              Line2D([], [], color=SIM_COLOUR, lw=1.3, ls="--", label="knee, simulated"),
@@ -395,21 +399,27 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
 # --------------------------------------------------------------------------- tracks and video
 
 def tracks_figure(paths: list[dict[str, Any]], stem: Path) -> FigureFiles:
-    """Tracked paths in the camera's world frame (mm), start marked, each with its speed."""
+    """Tracked paths side by side: each drawn from its own start (displacement in mm), the paths
+    spread along x so that none hides another, each labelled at its start with its speed."""
     fig = _figure(7.0, 5.0)
     ax = fig.subplots()
+    spans = [float(np.nanmax(np.abs(p["x_mm"] - p["x_mm"][0]))) if np.size(p["x_mm"]) else 0.0 for p in paths]
+    step = max(2.0 * max(spans, default=0.0) + 1.0, 2.0)
     for k, p in enumerate(paths):
         c = f"C{k % 10}"
-        ax.plot(p["x_mm"], p["y_mm"], "-", color=c, lw=1.3, label=p["label"])
-        ax.plot(p["x_mm"][0], p["y_mm"][0], "o", color=c, ms=5)
-        ax.plot(p["x_mm"][-1], p["y_mm"][-1], ">", color=c, ms=5)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x (mm)")
-    ax.set_ylabel("y (mm)")
-    ax.grid(True, alpha=0.3)
+        x, y = p["x_mm"] - p["x_mm"][0] + k * step, p["y_mm"] - p["y_mm"][0]
+        ax.plot(x, y, "-", color=c, lw=1.3)
+        ax.plot(x[0], y[0], "o", color=c, ms=5)
+        ax.plot(x[-1], y[-1], ">", color=c, ms=5)
+        ax.annotate(p["label"], (x[-1], y[-1]), textcoords="offset points", xytext=(0, 6), rotation=90,
+                    ha="center", va="bottom", fontsize=8, color=c)
+    ax.margins(y=0.35)
+    ax.set_xticks([k * step for k in range(len(paths))], [str(k + 1) for k in range(len(paths))])
+    ax.set_xlabel("track (each drawn from its own start, side by side)")
+    ax.set_ylabel("displacement along y (mm)")
+    ax.grid(True, axis="y", alpha=0.3)
     ax.set_title("tracked paths (o start, > end)", fontsize=10)
-    _legend_outside(ax)
-    return _save(fig, stem, {"tracks": [p["label"] for p in paths]})
+    return _save(fig, stem, {"tracks": [p["label"] for p in paths], "spacing_mm": step})
 
 
 def frame_figure(frame: np.ndarray, u_px: np.ndarray, v_px: np.ndarray, stem: Path, title: str) -> FigureFiles:
