@@ -13,9 +13,10 @@ whose inputs were not given says so; an input that cannot be read raises
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -46,9 +47,41 @@ class Section:
     verdict: dict[str, Any] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
     summarises: list[dict[str, Any]] | None = None    # the agreement section judges other sections' rows
+    details: dict[str, Any] = field(default_factory=dict)       # this section's numbers, for agreement.json
+    pairs: list[dict[str, Any]] = field(default_factory=list)   # leg patterns it observed and simulated
 
     def figure(self, files: figs.FigureFiles, caption: str) -> None:
         self.figures.append((files, caption, files.png.stem))
+
+
+@dataclass(frozen=True)
+class KneeOptions:
+    """How the knee section finds and simulates its drives (see :func:`build_report`)."""
+
+    drives: Sequence[tuple[float, float]] | None = None
+    simulate: bool = True
+    duration_s: float = 0.3
+    leg: int = 0
+    scheduler: str | None = None
+    workers: int | None = None
+    quiet: bool = True
+
+
+@dataclass(frozen=True)
+class ReportInputs:
+    """Everything the sections read, read once before any is drawn (figures go to ``out``)."""
+
+    out: Path
+    inchip: list[dict[str, Any]]
+    shaker: list[dict[str, Any]]
+    tracks: list[dict[str, Any]]
+    fit: dict[str, Any] | None
+    fit_file: str | None
+    params: str | None
+    sweeps: list[dict[str, Any]]
+    results: list[dict[str, Any]]
+    tol: Tolerances
+    knee: KneeOptions
 
 
 def _missing(sid: str, title: str, message: str) -> Section:
@@ -123,37 +156,17 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     software = f"labkit {__version__}"
     typed = command
     command = prov.report_command(out, runs, tracks, fit, sims, params)
-    # ---- read everything first: a bad file fails before any figure is drawn
-    inchip, shaker = [], []
-    for path in runs:
-        kind = ri.file_kind(path)
-        if kind == "run_inchip":
-            inchip.append(ri.load_inchip_run(path))
-        elif kind == "run_shaker":
-            shaker.append(ri.load_shaker_run(path))
-        else:
-            raise InputError(f"this file holds {kind!r}", file=path, key="kind",
-                             expected="a 'run_inchip' or 'run_shaker' run file")
-    track_data = [ri.load_track(p) for p in tracks]
-    fit_data = ri.load_fit(fit) if fit else None
-    sim_data = [ri.load_sim(p) for p in sims]
-    sweeps = [s for s in sim_data if s["kind"] == "sim_sweep"]
-    results = [s for s in sim_data if s["kind"] == "sim_result"]
-
-    details: dict[str, Any] = {}
-    pattern_pairs: list[dict[str, Any]] = []
+    knee = KneeOptions(knee_drives, simulate_knee, knee_duration_s, leg, scheduler, workers, quiet)
+    # read everything first: a bad file fails before any figure is drawn
+    inchip, shaker, track_data, fit_data, sweeps, results = _read_inputs(runs, tracks, fit, sims)
+    read = ReportInputs(out, inchip, shaker, track_data, fit_data, fit, params, sweeps, results, tol, knee)
     names: list[str] = []           # filled below; staged_dir moves them into ``out`` once all are written
     # every file goes to a staging folder first: a failure anywhere leaves an old report whole
     with staged_dir(out, names) as stage:
-        sections = [_frf_section(stage, inchip, fit_data, tol),
-                    _stab_section(stage, fit_data),
-                    _speed_section(stage, shaker, track_data, sweeps, tol, details, pattern_pairs),
-                    _knee_section(stage, shaker, results, sweeps, fit, params, knee_drives, simulate_knee,
-                                  knee_duration_s, leg, scheduler, workers, quiet, tol, details, pattern_pairs),
-                    _pattern_section(pattern_pairs, tol, details),
-                    _tracks_section(stage, track_data)]
+        sections = run_sections(replace(read, out=stage))
         rows = [dict(r, section=s.id) for s in sections for r in s.rows]
         sections.append(_agreement_section(rows, tol, sections))
+        details = {k: v for s in sections for k, v in s.details.items()}
         inputs = prov.file_records(f for s in sections if s.status == "ok" for f in s.files)
         for f in inputs:
             f["shown_as"] = prov.display_path(f["path"], out)
@@ -201,6 +214,26 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
             "speed_rms_error_nominal_mm_s": headline.get("speed_rms_error_nominal_mm_s", {}).get("value"),
             "agreement": [{k: r[k] for k in ("section", "comparison", "metric", "value", "value_text", "units",
                                              "tolerance", "verdict", "band_statistic", "n")} for r in rows]}
+
+
+def _read_inputs(runs: Sequence[str], tracks: Sequence[str], fit: str | None, sims: Sequence[str]) -> tuple[
+        list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]], dict[str, Any] | None,
+        list[dict[str, Any]], list[dict[str, Any]]]:
+    """In-chip runs, shaker runs, tracks, the fit, sweeps and single simulations, read (InputError
+    naming the first file that cannot be)."""
+    inchip, shaker = [], []
+    for path in runs:
+        kind = ri.file_kind(path)
+        if kind == "run_inchip":
+            inchip.append(ri.load_inchip_run(path))
+        elif kind == "run_shaker":
+            shaker.append(ri.load_shaker_run(path))
+        else:
+            raise InputError(f"this file holds {kind!r}", file=path, key="kind",
+                             expected="a 'run_inchip' or 'run_shaker' run file")
+    sim_data = [ri.load_sim(p) for p in sims]
+    return (inchip, shaker, [ri.load_track(p) for p in tracks], ri.load_fit(fit) if fit else None,
+            [s for s in sim_data if s["kind"] == "sim_sweep"], [s for s in sim_data if s["kind"] == "sim_result"])
 
 
 def _jsonable(x: Any) -> Any:
@@ -254,9 +287,10 @@ def _minima(f: np.ndarray, mag: np.ndarray) -> list[list[float]]:
     return [[float(f[k]), float(mag[k])] for k in i]
 
 
-def _frf_section(out: Path, inchip: list[dict], fit: dict | None, tol: Tolerances) -> Section:
+def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     from labkit.analysis.report.model import rebuild_model
 
+    out, inchip, fit, tol = inp.out, inp.inchip, inp.fit, inp.tol
     title = "Frequency responses with the fitted model (paper Fig. 5/6)"
     groups = {k: g for k, g in (fit["groups"].items() if fit else []) if g["locations"]}
     if not groups and not inchip:
@@ -319,7 +353,8 @@ def _frf_section(out: Path, inchip: list[dict], fit: dict | None, tol: Tolerance
     return sec
 
 
-def _stab_section(out: Path, fit: dict | None) -> Section:
+def _stab_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
+    out, fit = inp.out, inp.fit
     title = "Stabilisation diagram"
     if fit is None:
         return _missing("stabilisation", title, "No fit given (--fit robot.fit.h5).")
@@ -374,8 +409,8 @@ def _sim_curves(sweeps: list[dict], tol: Tolerances) -> list[dict[str, Any]]:
     return curves
 
 
-def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: list[dict], tol: Tolerances,
-                   details: dict[str, Any], pattern_pairs: list[dict[str, Any]]) -> Section:
+def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
+    out, shaker, tracks, sweeps, tol = inp.out, inp.shaker, inp.tracks, inp.sweeps, inp.tol
     title = "Speed against shaker frequency (paper Fig. 8)"
     measured = ri.measured_speeds(shaker, tracks) if (shaker or tracks) else None
     curves = _sim_curves(sweeps, tol)
@@ -412,10 +447,10 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
             if not m["freq_hz"].size:
                 msgs.append(f"No measured point at the tray amplitude of {c['file']} ({amp:.3g} um).")
                 continue
-            _judge_speed(sec, m, c, tol, details, band)
-            pattern_pairs += _sweep_pattern_pairs(m, c)
+            _judge_speed(sec, m, c, tol, band)
+            sec.pairs += _sweep_pattern_pairs(m, c)
     note = ""
-    judged = details.get("speed", {})
+    judged = sec.details.get("speed", {})
     if judged:
         first = next(iter(judged.values()))
         nom, cov = first["nominal"], first["coverage"]
@@ -432,8 +467,7 @@ def _speed_section(out: Path, shaker: list[dict], tracks: list[dict], sweeps: li
     return sec
 
 
-def _judge_speed(sec: Section, m: dict[str, Any], c: dict[str, Any], tol: Tolerances, details: dict[str, Any],
-                 band: str) -> None:
+def _judge_speed(sec: Section, m: dict[str, Any], c: dict[str, Any], tol: Tolerances, band: str) -> None:
     p = {"measured": sorted(set(m["sources"])), "simulated": c["file"], "sweep": c["describe"]}
     a_nom = compare.speed_agreement(m["freq_hz"], m["speed_mm_s"], m["lo_mm_s"], m["hi_mm_s"], c["freq_hz"],
                                     c["nominal_mm_s"], c["p10_mm_s"], c["p90_mm_s"], provenance=p)
@@ -442,6 +476,7 @@ def _judge_speed(sec: Section, m: dict[str, Any], c: dict[str, Any], tol: Tolera
     pct = compare.draw_percentiles(m["freq_hz"], m["speed_mm_s"], c["freq_hz"], c["draws_mm_s"])
     cov = compare.coverage(pct.tolist(), [q["inside_band"] for q in a_nom["points"]],
                            (tol.band_lo_pct, tol.band_hi_pct))
+    details = sec.details
     details.setdefault("speed", {})[c["file"]] = {"nominal": a_nom, "monte_carlo_mean": a_mc, "coverage": cov,
                                                   "percentiles": pct.tolist()}
     details.setdefault("speed_mc_mean_rms_error_mm_s", a_mc["rms_error_mm_s"])
@@ -544,12 +579,12 @@ def knee_drives_of(records: list[dict[str, Any]], results: list[dict[str, Any]],
     return sorted(drives)
 
 
-def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simulate_knee, duration_s, leg,
-                  scheduler, workers, quiet, tol: Tolerances, details: dict[str, Any],
-                  pattern_pairs: list[dict[str, Any]]) -> Section:
+def _knee_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
+    out, shaker, results, tol, opt = inp.out, inp.shaker, inp.results, inp.tol, inp.knee
+    duration_s, leg = opt.duration_s, opt.leg
     title = "Knee vertical motion, measured against simulated (paper Fig. 10/11)"
     records = [dict(r, file=run["file"]) for run in shaker for r in run["knee"]]
-    drives = knee_drives_of(records, results, knee_drives)
+    drives = knee_drives_of(records, results, opt.drives)
     if not drives:
         return _missing("knee", title, "No measured knee records (shaker run files with waveforms), no "
                         "sim_result files (--sim) and no --knee-drive given.")
@@ -562,16 +597,16 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
     todo = [i for i, d in enumerate(drives) if i not in sims and np.isfinite(d[1])]
     sec = Section("knee", title)
     sec.files += sorted({r["file"] for r in records}) + [s["file"] for s in results]
-    if simulate_knee and todo:
+    if opt.simulate and todo:
         from labkit.executor import map_tasks
 
-        p, param_src = _knee_params(fit, params, sweeps)
+        p, param_src = _knee_params(inp.fit_file, inp.params, inp.sweeps)
         sec.files.append(param_src)
         sec.notes["simulated here"] = (f"simulate({Path(param_src).name}, Shaker(freq_hz, amp_um), "
                                        f"duration_s={duration_s:g}, "
                                        f"seed=0) at {len(todo)} drive(s); the settled second half is compared")
         outs = map_tasks(_sim_knee_task, [(p, drives[i][0], drives[i][1], duration_s, 0) for i in todo],
-                         scheduler=scheduler, workers=workers, desc="knee sims", quiet=quiet)
+                         scheduler=opt.scheduler, workers=opt.workers, desc="knee sims", quiet=opt.quiet)
         for i, o in zip(todo, outs):
             sims[i] = dict(o, source=f"simulated here ({drives[i][0]:.4g} Hz, {drives[i][1]:.3g} um)")
     sec.notes["leg"] = f"simulated knee of leg {leg + 1}"
@@ -607,7 +642,7 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
             a = compare.knee_motion_agreement(meas["t_s"], meas["knee_vz_mm_s"], s["t_s"], s["knee_vz_mm_s"], freq,
                                               ref_meas=meas.get("tray_vz_mm_s"), ref_sim=s["tray_vz_mm_s"],
                                               provenance=pv)
-            details.setdefault("knee", {})[key] = a
+            sec.details.setdefault("knee", {})[key] = a
             drive = f"{freq:.4g} Hz, {amp:.3g} um"
             r_lo, r_hi = 1.0 / tol.knee_amplitude_ratio_max, tol.knee_amplitude_ratio_max
             ratio, phase, corr = a["amplitude_ratio"], a["phase_diff_deg"], a["correlation"]
@@ -626,7 +661,7 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
                                _fixed(phase, 1), _fixed(corr, 3),
                                meas.get("pattern", "?"), s["knee_pattern"], s["foot_pattern"]])
             if meas.get("pattern") in compare.PATTERNS:
-                pattern_pairs.append({"source": "knee record", "drive": drive, "measured": meas["pattern"],
+                sec.pairs.append({"source": "knee record", "drive": drive, "measured": meas["pattern"],
                                       "simulated": s["knee_pattern"], "measured_by": ri.KNEE,
                                       "simulated_by": ri.KNEE, "measured_file": meas["file"],
                                       "simulated_file": s["source"]})
@@ -651,7 +686,10 @@ def _knee_section(out, shaker, results, sweeps, fit, params, knee_drives, simula
 
 # --------------------------------------------------------------------------- leg patterns
 
-def _pattern_section(pairs: list[dict[str, Any]], tol: Tolerances, details: dict[str, Any]) -> Section:
+def _pattern_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
+    tol = inp.tol
+    # the observed and simulated patterns the speed and knee sections met, copied: theirs stay as they are
+    pairs = [dict(p) for sid in ("speed", "knee") if sid in done for p in done[sid].pairs]
     title = "Leg-motion patterns, observed against simulated (paper Fig. 9-11)"
     if not pairs:
         return _missing("patterns", title, "No drive with both an observed leg pattern (a knee record or a "
@@ -673,7 +711,7 @@ def _pattern_section(pairs: list[dict[str, Any]], tol: Tolerances, details: dict
             continue
         a = compare.pattern_agreement([p["measured"] for p in ps], [p["simulated"] for p in ps],
                                       keys=[p["drive"] for p in ps])
-        details.setdefault("patterns", {})[source] = a
+        sec.details.setdefault("patterns", {})[source] = a
         fr = a["fraction_agree"]
         agree = sum(q["agree"] for q in a["pairs"])
         sec.rows.append(_row(f"leg pattern ({source}s)", "fraction of drives with the same pattern", fr, "1",
@@ -702,9 +740,10 @@ def _same_text(pair: dict[str, Any]) -> str:
 
 # --------------------------------------------------------------------------- tracks
 
-def _tracks_section(out: Path, tracks: list[dict[str, Any]]) -> Section:
+def _tracks_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     from labkit.analysis.report.tracks import load_track_path, read_frame_at
 
+    out, tracks = inp.out, inp.tracks
     title = "Tracked paths and a video frame"
     if not tracks:
         return _missing("tracks", title, "No track files (--tracks TRACK.h5) given.")
@@ -738,6 +777,33 @@ def _tracks_section(out: Path, tracks: list[dict[str, Any]]) -> Section:
     sec.figure(ff, f"The last tracked frame of {Path(video).name} with the track of {Path(p['file']).name} drawn on it "
                    f"(of the tracks whose video was found, the one that moved furthest in the image).")
     return sec
+
+
+# --------------------------------------------------------------------------- the registry
+
+SectionFunction = Callable[[ReportInputs, Mapping[str, Section]], Section]
+
+#: The report's sections in page order: each is a function of the inputs and of the sections
+#: before it (read-only; the leg-pattern section reads the pairs the speed and knee sections
+#: met). A new section is one function and one line here.
+SECTIONS: tuple[tuple[str, SectionFunction], ...] = (
+    ("frf", _frf_section),
+    ("stabilisation", _stab_section),
+    ("speed", _speed_section),
+    ("knee", _knee_section),
+    ("patterns", _pattern_section),
+    ("tracks", _tracks_section),
+)
+
+
+def run_sections(inp: ReportInputs) -> list[Section]:
+    """Every section of :data:`SECTIONS`, in order (the agreement table is added by the caller)."""
+    done: dict[str, Section] = {}
+    for sid, make in SECTIONS:
+        sec = make(inp, MappingProxyType(done))
+        assert sec.id == sid, (sid, sec.id)
+        done[sid] = sec
+    return list(done.values())
 
 
 # --------------------------------------------------------------------------- agreement table
