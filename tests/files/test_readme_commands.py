@@ -37,3 +37,14 @@ def test_the_browser_tests_fail_rather_than_skip_without_chromium():
     text = (REPO / "tests" / "report" / "test_browser.py").read_text(encoding="utf-8")
     assert "assert CHROMIUM" in text
     assert "skip" not in text.replace("skipped", "")
+
+
+def test_the_readme_is_a_users_page_under_900_words():
+    """A user's page, not a changelog: short, and no dated history (that is CHANGELOG.md's)."""
+    import re as _re
+
+    text = README.read_text(encoding="utf-8")
+    assert len(text.split()) < 900, len(text.split())
+    assert not _re.search(r"\b(January|February|March|April|May|June|July|August|September|October|"
+                          r"November|December) 20\d\d\b|\bissue \d+\b", text)
+    assert (REPO / "CHANGELOG.md").is_file()
