@@ -97,45 +97,69 @@ def lock_run(resources: Iterable[tuple[str, str]], run_file: str | Path, config:
 
 # ----------------------------------------------------------------------------- a served virtual lab
 
-def lab_file() -> Path:
-    """Where ``labkit lab serve`` says which lab it serves (``labkit off --lab`` reads it)."""
-    return runtime_dir() / "lab-serve.json"
+def lab_file(pid: int | None = None) -> Path:
+    """Where the ``labkit lab serve`` of process ``pid`` (default: this one) records its lab.
+
+    One file per serving process, so two served labs never overwrite each other's record.
+    """
+    return runtime_dir() / f"lab-serve-{os.getpid() if pid is None else int(pid)}.json"
 
 
-def announce_lab(resources: dict[str, str], models: dict[str, str]) -> Path:
-    """Record a served lab (this process): its resources and driver models."""
+def announce_lab(resources: dict[str, str], models: dict[str, str], config: str | None = None,
+                 **extra: Any) -> Path:
+    """Record a served lab (this process): its resources, driver models and the config it wrote."""
     p = lab_file()
     tmp = p.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text(json.dumps({"pid": os.getpid(), "resources": resources, "models": models,
-                               "since": time.strftime("%H:%M:%S")}))
+                               "config": config, "since": time.strftime("%H:%M:%S"),
+                               "started": time.time()} | extra))
     os.replace(tmp, p)
     return p
 
 
 def withdraw_lab() -> None:
     """Remove the record of this process's served lab (another process's is left alone)."""
-    data = read_record(lab_file())
-    if data is not None and data.get("pid") == os.getpid():
-        try:
-            lab_file().unlink()
-        except OSError:
-            pass
+    try:
+        lab_file().unlink()
+    except OSError:
+        pass
+
+
+def _alive(pid: Any) -> bool:
+    if not isinstance(pid, int) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def served_labs() -> list[dict[str, Any]]:
+    """Every running ``labkit lab serve`` (their records), the newest first.
+
+    A record whose process has ended (killed before it could remove it) is skipped
+    and removed.
+    """
+    labs = []
+    for p in runtime_dir().glob("lab-serve-*.json"):
+        data = read_record(p)
+        if not isinstance(data, dict) or not isinstance(data.get("resources"), dict):
+            continue
+        if not _alive(data.get("pid")):
+            with contextlib.suppress(OSError):
+                p.unlink()
+            continue
+        labs.append(data)
+    return sorted(labs, key=lambda d: -float(d.get("started") or 0.0))
 
 
 def served_lab() -> dict[str, Any]:
-    """The running ``labkit lab serve`` (its record), or InputError when none runs."""
-    data = read_record(lab_file())
-    pid = data.get("pid") if data else None
-    alive = False
-    if isinstance(pid, int):
-        try:
-            os.kill(pid, 0)
-            alive = True
-        except ProcessLookupError:
-            alive = False
-        except PermissionError:
-            alive = True
-    if not alive or not isinstance(data, dict) or not isinstance(data.get("resources"), dict):
+    """The newest running ``labkit lab serve`` (its record), or InputError when none runs."""
+    labs = served_labs()
+    if not labs:
         raise InputError("no virtual lab is being served", key="--lab",
                          expected="a running 'labkit lab serve' (or give a CONFIG)")
-    return data
+    return labs[0]

@@ -127,6 +127,8 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
     from labkit.experiments.locks import lock_run
 
     experiment = kinds.get(kind)
+    if lab is True:
+        lab = served_or_new()
     cfg = experiment.load(config)
     experiment.preflight(cfg)
     path = _output_path(out, resume)
@@ -186,6 +188,26 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
     if runner is not None:
         out_summary["interlocks"] = runner.interlocks
     return out_summary
+
+
+class ServedLab:
+    """A virtual lab another process serves (``labkit lab serve``): used, never started or closed here."""
+
+    def __init__(self, record: dict[str, Any]) -> None:
+        self.resources: dict[str, str] = dict(record["resources"])
+        self.models: dict[str, str] = dict(record.get("models") or {})
+        self.pid = record.get("pid")
+
+    def start(self) -> ServedLab:
+        return self
+
+
+def served_or_new() -> ServedLab | bool:
+    """``--lab``: the newest running ``labkit lab serve`` if there is one, else True (start one in-process)."""
+    from labkit.experiments.locks import served_labs
+
+    labs = served_labs()
+    return ServedLab(labs[0]) if labs else True
 
 
 def _store_lab_record(path: Path, lab: Any) -> None:
