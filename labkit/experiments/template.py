@@ -117,6 +117,10 @@ def _header(kind: str, command: str) -> list[str]:
             f"#   {command}", ""]
 
 
+def _footer(check: str, run: str) -> list[str]:
+    return ["# next, once no \"TODO\" is left:", f"#   {check}", f"# then the run:  {run}", ""]
+
+
 def inchip_text(instruments: dict[str, Instrument], wiring: Wiring, *, control: str | None = None,
                 band: Band = Band(), path: str = "CONFIG.toml") -> str:
     """An in-chip sweep config (``labkit sweep inchip``): see the module docstring."""
@@ -141,8 +145,8 @@ def inchip_text(instruments: dict[str, Instrument], wiring: Wiring, *, control: 
               _line("dwell_cycles", 20.0, "drive periods recorded per point, 1..1e7 (required)"),
               _line("keep_raw", False, "keep every point's scope records (default false)"), ""]
     lines += _scope(wiring) + _vibrometer(wiring)
-    text = "\n".join(lines)
-    return text.replace('"__LOC__"', '["body", "hip", "knee"]')
+    lines += _footer(f"labkit check {path}", f"labkit sweep inchip {path} --out run.h5")
+    return "\n".join(lines).replace('"__LOC__"', '["body", "hip", "knee"]')
 
 
 def shaker_text(instruments: dict[str, Instrument], wiring: Wiring, *, control: str | None = None,
@@ -183,6 +187,7 @@ def shaker_text(instruments: dict[str, Instrument], wiring: Wiring, *, control: 
               _line("dwell_cycles", 20.0, "drive periods recorded per point, 1..1e7 (required)"), ""]
     lines += _scope(wiring) + _vibrometer(wiring)
     lines += ["[interlock]", _line("tray_max_um", 60.0, "um, > 0 and <= 4000 (the 4809's stroke) (required)"), ""]
+    lines += _footer(f"labkit check {path}", f"labkit shaker {path} --out run.h5")
     return "\n".join(lines).replace('"__AMP__"', "[10.0, 25.0]")
 
 

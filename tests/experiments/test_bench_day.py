@@ -88,6 +88,14 @@ class Raw:
         self.file.close()
 
 
+def _docs_block(marker: str) -> dict[str, str]:
+    """Check names and verdicts of the text block in docs/bench-day.md that holds ``marker``."""
+    blocks = re.findall(r"```text\n(.*?)```", (REPO / "docs" / "bench-day.md").read_text(), re.DOTALL)
+    found = [b for b in blocks if marker in b]
+    assert len(found) == 1, marker
+    return _lines(found[0])
+
+
 def _lines(text: str) -> dict[str, str]:
     """``check``'s output: check name -> status."""
     out = {}
@@ -248,7 +256,8 @@ def test_init_check_sweep_on_a_served_lab_editing_only_the_todos(tmp_path):
                       "--out", str(cfg))
         assert f"next: labkit check {cfg}" in out.stdout
         text = cfg.read_text()
-        assert text.rstrip().splitlines()[2].strip() == f"#   labkit check {cfg}"
+        assert text.rstrip().splitlines()[-2:] == [f"#   labkit check {cfg}",
+                                                    f"# then the run:  labkit sweep inchip {cfg} --out run.h5"]
         assert res["funcgen"] in text and res["control"] in text and "identifies as" in text
         early = _labkit(env, "check", str(cfg), check=2)
         assert "still TODO: scope.drive_channel, scope.velocity_channel, vibrometer.scale_mm_s_per_v" in early.stderr
@@ -263,6 +272,7 @@ def test_init_check_sweep_on_a_served_lab_editing_only_the_todos(tmp_path):
         lines = _lines(chk.stdout)
         assert "FAIL" not in lines.values() and lines["triggered acquisition"] == "PASS"
         assert lines["output off"] == "PASS" and "all checks passed" in chk.stdout
+        assert lines == _docs_block("all checks passed")       # docs/bench-day.md shows this very check
         run = _labkit(env, "sweep", "inchip", str(cfg), "--out", str(tmp_path / "run.h5"), "--quiet", "--json")
         summary = json.loads(run.stdout.strip().splitlines()[-1])
         assert summary["points_ok"] == summary["points_planned"] == 9
@@ -312,6 +322,9 @@ def test_check_passes_a_good_lab_and_fails_each_miswiring_by_name(tmp_path, faul
         assert set(lines.values()) == {"PASS"} and lines["amplifier gain"] == "PASS"
         return
     assert proc.returncode == 1, proc.stdout
+    # the docs page shows each fault's check failing as it does here
+    shown = _docs_block("--amplifier-gain-db 40" if fault == "amplifier-gain" else f"--miswire {args[1]}")
+    assert {k for k, v in shown.items() if v == "FAIL"} == {k for k, v in lines.items() if v == "FAIL"}
     assert lines[name] == "FAIL" and why in proc.stdout and "check(s) FAILED" in proc.stderr
     others = {k for k, v in lines.items() if v == "FAIL"} - {name}
     related = {"swapped-channels": {"drive frequency", "drive phase at the trigger",
@@ -332,3 +345,20 @@ def test_check_bad_input_exits_2_and_sends_nothing(tmp_path):
         proc = _labkit(env, "check", str(tmp_path / "none.toml"), check=2)
         assert "none.toml" in proc.stderr
         assert [e for e in lab.log if e[2] == "rx"] == []
+
+
+@pytest.mark.parametrize("models", [("DG1062Z", "DS1104Z", "OFV-3001"), ("33220A", "DS1054Z", "OFV-5000")])
+def test_check_passes_the_other_lab_models(tmp_path, monkeypatch, models):
+    """The Rigol pair (8-bit records: the velocity channel is narrowed), the 33220A, the OFV-3001."""
+    from labkit.experiments.bench import run_check
+    from labkit.experiments.template import lab_config_text
+
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
+    with VirtualLab(seed=2, funcgen_model=models[0], scope_model=models[1], vibrometer_model=models[2]) as lab:
+        cfg = tmp_path / "c.toml"
+        cfg.write_text(lab_config_text("inchip", lab.resources, lab.models))
+        report = run_check(cfg, lab=lab)
+        on_after = lab.output_state("funcgen", 1)
+    status = {line.name: line.status for line in report.lines}
+    assert report.ok and set(status.values()) == {"PASS"}, [line.text() for line in report.lines]
+    assert on_after is False
