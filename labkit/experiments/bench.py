@@ -22,7 +22,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -170,25 +170,6 @@ def load_checked(path: str | Path, kind: str | None = None) -> Config:
     cfg = kinds.get(kind).load(path)
     kinds.get(kind).preflight(cfg)
     return cfg
-
-
-@contextlib.contextmanager
-def _locked(cfg: Config) -> Iterator[None]:
-    """The instruments locked as a run locks them (a run in progress is never disturbed)."""
-    import os
-    import socket
-    import sys
-
-    from labkit.experiments.locks import RunLocks
-
-    record = {"pid": os.getpid(), "host": socket.gethostname(), "command": " ".join(["labkit", *sys.argv[1:]]),
-              "run_file": "", "config": str(cfg.path), "since": time.strftime("%H:%M:%S")}
-    with RunLocks() as locks:
-        for role, spec in cfg.instruments.items():
-            if spec.resource:
-                locks.take("resource:" + spec.resource, f"the {role} ({spec.resource})", record,
-                           file=str(cfg.path), conf_key=f"instruments.{role}.resource")
-        yield
 
 
 def _open(spec: InstrumentSpec, **limits: float) -> Any:
@@ -505,7 +486,10 @@ def run_check(config: str | Path, *, lab: Any = False) -> CheckReport:
 
             obj = served_or_new() if lab is True else lab
             _, cfg = stack.enter_context(virtual_lab(cfg, lab=None if obj is True else obj))
-        stack.enter_context(_locked(cfg))
+        from labkit.experiments.locks import lock_instruments
+
+        # the instruments locked as a run locks them: a run in progress is never disturbed
+        stack.enter_context(lock_instruments(((r, sp.resource) for r, sp in cfg.instruments.items()), str(cfg.path)))
         opened = _identities(cfg, report, stack)
         if opened is None:
             report.add("wiring", FAIL, "not checked: an instrument did not identify", "",

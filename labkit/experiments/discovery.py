@@ -198,23 +198,10 @@ def _hint(resource: str, exc: BaseException | str) -> str:
 
 
 def _open(resource: str, timeout_s: float, **transport: Any) -> Any:
-    """A bare driver on ``resource`` (no handshake): only the generic write/query are used."""
-    from labkit.drivers.base import Instrument
+    """A generic SCPI driver on ``resource`` (no handshake): only write/query and the error queue are used."""
+    from labkit.drivers.base import ScpiInstrument
 
-    return Instrument.open(resource, timeout_s=timeout_s, name=resource, **transport)
-
-
-def _drain(inst: Any, command: str = "SYST:ERR?") -> list[str]:
-    import re
-
-    errors = []
-    for _ in range(32):
-        reply = inst.query(command)
-        m = re.match(r'^\s*([+-]?\d+)\s*,\s*"?(.*?)"?\s*$', reply)
-        if not m or int(m.group(1)) == 0:
-            break
-        errors.append(f"{int(m.group(1))},\"{m.group(2)}\"")
-    return errors
+    return ScpiInstrument.open(resource, timeout_s=timeout_s, name=resource, **transport)
 
 
 def _scpi(resource: str, timeout_s: float, self_test: bool) -> Identity:
@@ -222,8 +209,11 @@ def _scpi(resource: str, timeout_s: float, self_test: bool) -> Identity:
         reply = inst.query("*IDN?")
         driver, word = _match_driver(reply)
         ident = Identity(resource, True, reply, "*IDN?", driver, word)
-        err_cmd = ":SYST:ERR?" if driver in ("DG1000Z", "InfiniiVision", "DS1000Z") else "SYST:ERR?"
-        ident.errors = _drain(inst, err_cmd)
+        inst.err_command = ":SYST:ERR?" if driver in ("DG1000Z", "InfiniiVision", "DS1000Z") else "SYST:ERR?"
+        try:
+            ident.errors = inst.read_error_queue()
+        except InstrumentError as exc:          # it answered *IDN?: identified, its queue unreadable
+            ident.errors = [f"(error queue unreadable: {exc})"]
         if self_test:
             ident.self_test = "passed" if inst.query("*TST?").strip().lstrip("+") == "0" else "FAILED"
         return ident

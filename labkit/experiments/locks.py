@@ -73,23 +73,45 @@ class RunLocks:
         self.release()
 
 
+def _holder(run_file: str | Path | None, config: str) -> dict[str, Any]:
+    """What a lock file says about its holder (this process)."""
+    return {"pid": os.getpid(), "host": socket.gethostname(),
+            "command": " ".join(["labkit", *sys.argv[1:]]) if sys.argv else "",
+            "run_file": "" if run_file is None else os.fspath(run_file), "config": config,
+            "since": time.strftime("%H:%M:%S")}
+
+
+def _take_instruments(locks: RunLocks, resources: Iterable[tuple[str, str]], record: dict[str, Any],
+                      config: str) -> None:
+    seen: set[str] = set()
+    for role, resource in resources:
+        # roles may share one resource (the virtual lab's camera rides its control channel):
+        # one lock each, or the run would find itself "busy"
+        if resource and resource not in seen:
+            seen.add(resource)
+            locks.take("resource:" + resource, f"the {role} ({resource})", record, file=config,
+                       conf_key=f"instruments.{role}.resource")
+
+
 @contextlib.contextmanager
 def lock_run(resources: Iterable[tuple[str, str]], run_file: str | Path, config: str) -> Iterator[RunLocks]:
     """Lock every ``(role, resource)`` and the run file, for the block; RigBusy if any is held."""
-    record = {"pid": os.getpid(), "host": socket.gethostname(),
-              "command": " ".join(["labkit", *sys.argv[1:]]) if sys.argv else "",
-              "run_file": os.fspath(run_file), "config": config, "since": time.strftime("%H:%M:%S")}
+    record = _holder(run_file, config)
     locks = RunLocks()
     try:
         locks.take(file_key(run_file), f"the run file {run_file}", record, file=os.fspath(run_file), conf_key="--out")
-        seen: set[str] = set()
-        for role, resource in resources:
-            # roles may share one resource (the virtual lab's camera rides its control channel):
-            # one lock each, or the run would find itself "busy"
-            if resource and resource not in seen:
-                seen.add(resource)
-                locks.take("resource:" + resource, f"the {role} ({resource})", record, file=config,
-                           conf_key=f"instruments.{role}.resource")
+        _take_instruments(locks, resources, record, config)
+        yield locks
+    finally:
+        locks.release()
+
+
+@contextlib.contextmanager
+def lock_instruments(resources: Iterable[tuple[str, str]], config: str) -> Iterator[RunLocks]:
+    """Lock every ``(role, resource)`` without a run file (``labkit check``); RigBusy if any is held."""
+    locks = RunLocks()
+    try:
+        _take_instruments(locks, resources, _holder(None, config), config)
         yield locks
     finally:
         locks.release()

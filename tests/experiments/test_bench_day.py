@@ -333,7 +333,7 @@ def test_check_passes_a_good_lab_and_fails_each_miswiring_by_name(tmp_path, faul
     assert others <= related, others       # the fault is named, not buried among unrelated ones
 
 
-def test_check_bad_input_exits_2_and_sends_nothing(tmp_path):
+def test_check_bad_input_exits_2_and_sends_nothing(tmp_path, monkeypatch):
     env = _env(tmp_path / "rt")
     from labkit.experiments.template import lab_config_text
 
@@ -344,6 +344,14 @@ def test_check_bad_input_exits_2_and_sends_nothing(tmp_path):
         assert "amp_vpp" in proc.stderr and "Traceback" not in proc.stderr
         proc = _labkit(env, "check", str(tmp_path / "none.toml"), check=2)
         assert "none.toml" in proc.stderr
+        cfg.write_text(lab_config_text("inchip", lab.resources, lab.models))
+        from labkit.experiments.locks import lock_run
+
+        # a run holds the rig: check touches nothing of it
+        monkeypatch.setenv("XDG_RUNTIME_DIR", env["XDG_RUNTIME_DIR"])
+        with lock_run([("scope", lab.resources["scope"])], tmp_path / "busy.h5", str(cfg)):
+            proc = _labkit(env, "check", str(cfg), check=2)
+        assert "in use by another run" in proc.stderr and "busy.h5" in proc.stderr
         assert [e for e in lab.log if e[2] == "rx"] == []
 
 
