@@ -321,6 +321,9 @@ def _set_sync_trigger(b: Bench) -> bool:
 
 
 def _drive_on(b: Bench, guard: Any) -> None:
+    """A continuous sine: a run may have left the generator in triggered-burst or sweep mode."""
+    b.fg.burst_off()
+    b.fg.sweep_off()
     b.fg.set_sine(b.freq_hz, b.amp_vpp, b.offset_v)
     guard.on()
 

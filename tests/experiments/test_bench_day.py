@@ -290,6 +290,9 @@ def test_lab_flag_uses_the_served_lab(tmp_path):
     cfg.write_text(stepped_inchip_toml(lab_instruments_toml(), [500.0, 900.0]))
     with served(env) as (res, _, _):
         _labkit(env, "sweep", "inchip", str(cfg), "--lab", "--out", str(tmp_path / "r.h5"), "--quiet")
+        chk = _labkit(env, "check", str(cfg), "--lab", "--json")
+        report = json.loads(chk.stdout.strip().splitlines()[-1])
+        assert report["ok"] and any(res["funcgen"] in c["expected"] for c in report["checks"])
     with h5py.File(tmp_path / "r.h5", "r") as f:
         assert {r: f[f"instruments/{r}"].attrs["resource"] for r in ("funcgen", "scope", "vibrometer")} == {
             r: res[r] for r in ("funcgen", "scope", "vibrometer")}
@@ -370,3 +373,58 @@ def test_check_passes_the_other_lab_models(tmp_path, monkeypatch, models):
     status = {line.name: line.status for line in report.lines}
     assert report.ok and set(status.values()) == {"PASS"}, [line.text() for line in report.lines]
     assert on_after is False
+
+
+def test_init_from_resources_writes_a_shaker_config_with_its_todos(tmp_path):
+    env = _env(tmp_path / "rt")
+    out = tmp_path / "shaker.toml"
+    with VirtualLab(seed=1, funcgen_model="DG1062Z", scope_model="DS1104Z", vibrometer_model="OFV-3001") as lab:
+        res = [lab.resources[r] for r in ("vibrometer", "scope", "funcgen")]
+        proc = _labkit(env, "init", *res, "--kind", "shaker", "--out", str(out), "--json")
+        again = _labkit(env, "init", *res, "--out", str(out), check=2)       # never over a file
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert summary["instruments"] == {"funcgen": f"DG1000Z at {lab.resources['funcgen']}",
+                                      "scope": f"DS1000Z at {lab.resources['scope']}",
+                                      "vibrometer": f"OFV-3001 at {lab.resources['vibrometer']}"}
+    assert set(summary["todo"]) == {"amplifier.gain_db", "shaker.accel_m_s2_per_v", "scope.drive_channel",
+                                    "scope.velocity_channel", "vibrometer.scale_mm_s_per_v"}
+    assert "already exists" in again.stderr and "--force" in again.stderr
+    # no instrument found for a role: its model and resource are TODOs too
+    with VirtualLab(seed=1) as lab:
+        proc = _labkit(env, "init", lab.resources["scope"], "--out", str(tmp_path / "one.toml"), "--json")
+    todo = json.loads(proc.stdout.strip().splitlines()[-1])["todo"]
+    assert {"instruments.funcgen.model", "instruments.funcgen.resource", "instruments.vibrometer.resource"} <= set(todo)
+
+
+def test_check_fails_over_range_on_a_too_sensitive_range(tmp_path, monkeypatch):
+    from labkit.experiments.bench import run_check
+    from labkit.experiments.template import lab_config_text
+
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
+    with VirtualLab(seed=2) as lab:
+        cfg = tmp_path / "s.toml"
+        text = lab_config_text("shaker", lab.resources, lab.models)
+        # 1 mm/s/V is +-10 mm/s full scale; 0.2 Vpp moves the tray about 15 mm/s at 212 Hz
+        cfg.write_text(text.replace("scale_mm_s_per_v = 25.0", "scale_mm_s_per_v = 1.0")
+                       .replace("start_vpp = 0.05", "start_vpp = 0.2"))
+        report = run_check(cfg, lab=lab)
+    status = {line.name: line for line in report.lines}
+    assert not report.ok and status["vibrometer over-range"].status == "FAIL"
+    assert "a larger range" in status["vibrometer over-range"].todo
+    assert status["output off"].status == "PASS"
+
+
+@pytest.mark.parametrize("exc, words", [
+    (PermissionError(13, "Permission denied"), "dialout"),
+    (OSError("could not open port /dev/ttyUSB0: [Errno 13] Permission denied: '/dev/ttyUSB0'"), "udev"),
+    (ValueError("Please install PyUSB to use this resource type. No module named 'usb'"), "libusb"),
+    (OSError("[Errno 111] Connection refused"), "nothing listens"),
+    (OSError("could not open port /dev/ttyUSB9: [Errno 2] No such file or directory"), "labkit devices"),
+    (TimeoutError("timeout after 0.5 s (partial reply b'')"), "baud rate"),
+])
+def test_identify_hints_for_the_usual_failures(exc, words):
+    """pyserial's and pyvisa-py's own messages for the usual failures, turned into what to do."""
+    from labkit.experiments.discovery import _hint
+
+    assert words in _hint("ASRL/dev/ttyUSB0::INSTR" if "usb" not in str(exc).lower() or "ttyUSB" in str(exc)
+                          else "USB0::0x0957::0x2807::MY5740::INSTR", exc)
