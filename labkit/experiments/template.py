@@ -81,12 +81,67 @@ def _instruments(instruments: dict[str, Instrument], control: str | None) -> lis
         if role == "funcgen" and "channel" not in inst.settings:
             out.append(_line("channel", 1, "output that drives the chain (default 1; 1..the model's channels)"))
         out.append("# timeout_s = 2.0                 # per command, s (default 2)")
+        out += driver_settings(inst.model, skip=set(inst.settings) | {"channel"})
         out.append("")
     if control is not None:
         out += ["[instruments.control]             # the virtual lab's control channel: the run moves "
                 "the laser itself",
                 _line("model", "LabControl", "the virtual lab's control channel (optional table)"),
                 _line("resource", control, "its socket"), ""]
+    return out
+
+
+#: the drivers' settings: an example value (for those without a default) and what each is
+_SETTINGS: dict[str, tuple[object, str]] = {
+    "max_amp_vpp": (20.0, "Vpp, the amplitude limit, 0..20 (default: none beyond the model's 20 Vpp)"),
+    "max_v": (10.0, "V, limit of |offset| + amplitude/2, 0..10 (in-chip the run also applies drive.pzt_max_v)"),
+    "max_freq_hz": (100000.0, "Hz, highest frequency allowed (default: the family's maximum)"),
+    "check_errors": (True, "read the error queue after each group of settings (default true)"),
+    "points": ("MAX", "record points read back: \"MAX\" or 100..8000000 (default \"MAX\")"),
+    "channels": (4, "analog inputs; must agree with the model (default: from its identity)"),
+    "max_volts_per_div": (10.0, "V/div, refuse larger vertical scales (default 10)"),
+    "max_block_bytes": (250000, "bytes per :WAV:DATA? block, 2..250000 (default 250000)"),
+    "decoder_index": (1, "the velocity decoder's index (default 1)"),
+    "ranges_mm_s_per_v": ([1.0, 5.0, 25.0, 125.0, 1000.0], "mm/s/V, the decoder's ranges (default: verified by "
+                          "reading back)"),
+    "over_range_command": ("Get,VeloDec,{i},OverRange", "over-range query (unverified; {i} the decoder index)"),
+    "identity_command": ("GetDevInfo,Controller,0,Name", "identity query (unverified)"),
+    "decoder": ("OVD-01", "\"OVD-01\" or \"OVD-02\": the range-number table (default \"OVD-01\")"),
+    "serial_number": ("", "recorded in the identity (default empty)"),
+    "baud_rate": (9600, "serial baud rate"),
+}
+
+
+def driver_settings(model: str | None, skip: set[str] = frozenset()) -> list[str]:  # type: ignore[assignment]
+    """Commented lines for the settings of ``model``'s driver, with their defaults (none for an unknown model)."""
+    import inspect
+
+    from labkit.drivers.registry import driver_class
+
+    if model is None:
+        return []
+    try:
+        cls = driver_class(model)
+    except ConfigError:
+        return []
+    defaults: dict[str, object] = {}
+    for klass in cls.__mro__:
+        init = klass.__dict__.get("__init__")
+        for prm in (inspect.signature(init).parameters.values() if init is not None else ()):
+            if prm.kind == prm.KEYWORD_ONLY and prm.name not in defaults:
+                defaults[prm.name] = prm.default
+    defaults.update(cls.transport_defaults)
+    out = []
+    for key, default in defaults.items():
+        if key in skip or key not in _SETTINGS:
+            continue
+        example, what = _SETTINGS[key]
+        shown = example if default is None else default
+        val = "[" + ", ".join(repr(x) for x in shown) + "]" if isinstance(shown, list) else _value(shown)
+        note = what if default is not None or "default" in what else what + " (default: none)"
+        if key == "baud_rate":
+            note = f"{what} (default {default})"
+        out.append(f"{'# ' + key + ' = ' + val:<33} # {note}")
     return out
 
 
@@ -149,6 +204,18 @@ def inchip_text(instruments: dict[str, Instrument], wiring: Wiring, *, control: 
     return "\n".join(lines).replace('"__LOC__"', '["body", "hip", "knee"]')
 
 
+def _envelope_lines() -> list[str]:
+    """The 4809's published envelope, commented (a value may be lowered, never raised)."""
+    from labkit.drivers.shaker import Shaker4809Envelope
+    from labkit.experiments.config import ENVELOPE_KEYS
+
+    env = Shaker4809Envelope()
+    units = {"freq_min_hz": "Hz (may only be raised)", "freq_max_hz": "Hz", "force_peak_n": "N",
+             "stroke_peak_mm": "mm", "velocity_peak_m_s": "m/s", "moving_mass_kg": "kg (may only be raised)"}
+    return [f"{'# ' + k + ' = ' + repr(float(getattr(env, k))):<33} # {units[k]}, the 4809's (default)"
+            for k in ENVELOPE_KEYS]
+
+
 def shaker_text(instruments: dict[str, Instrument], wiring: Wiring, *, control: str | None = None,
                 band: Band = Band(150.0, 300.0, 3), path: str = "CONFIG.toml") -> str:
     """A shaker-run config (``labkit shaker``): see the module docstring."""
@@ -170,6 +237,7 @@ def shaker_text(instruments: dict[str, Instrument], wiring: Wiring, *, control: 
               "(default those)", "",
               "[shaker]                          # B&K 4809 envelope (each value may only be made stricter)",
               _line("payload_kg", 0.002, "kg on the table, 0..10 (default 0)"),
+              *_envelope_lines(),
               _line("accel_m_s2_per_v", wiring.accel_m_s2_per_v, "m/s^2 per V at the amplifier output, > 0 "
                     "(optional): lets 'labkit check' verify the amplifier gain", "the shaker's sensitivity from its "
                     "calibration (or delete this line: the gain is then not checked)"), "",

@@ -146,6 +146,16 @@ def test_templates_hold_every_key_and_load_once_the_todos_are_filled(tmp_path):
     cfg.write_text(filled)
     assert todo_keys(cfg) == [] and load_inchip(cfg).freqs_hz[-1] == pytest.approx(5000.0)
 
+    # every driver setting the template lists is one its driver accepts (uncommented, the config loads)
+    for models in (("33220A", "InfiniiVision", "OFV-3001"), ("DG1000Z", "DS1000Z", "OFV-5000")):
+        inst2 = {r: Instrument(m, i.resource) for (r, i), m in zip(inst.items(), models)}
+        text2 = inchip_text(inst2, Wiring(1, 2, 25.0))
+        head, tail = text2.split("[drive]")
+        settings = re.findall(r"^# (\w+) = ", head, re.MULTILINE)
+        assert len(settings) >= 8 and "max_amp_vpp" in settings and "baud_rate" in settings
+        cfg.write_text(re.sub(r"^# (\w+ = )", r"\1", head, flags=re.MULTILINE) + "[drive]" + tail)
+        loaded = load_inchip(cfg)
+        assert sum(len(s.settings) for s in loaded.instruments.values()) >= len(settings) - 1
     sh = tmp_path / "sh.toml"
     sh.write_text(shaker_text(inst, Wiring()))
     assert set(todo_keys(sh)) == {"amplifier.gain_db", "shaker.accel_m_s2_per_v", "scope.drive_channel",
