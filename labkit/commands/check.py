@@ -18,7 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.experiments.bench import CheckFailed, run_check
 
-    report = run_check(args.config, lab=args.lab)
+    report = run_check(args.config, lab="served" if args.lab else False)
     if not args.json:
         for line in report.lines:
             print(line.text(), flush=True)

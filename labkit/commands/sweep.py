@@ -39,8 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.experiments.session import run_session
 
-    summary = run_session("inchip", args.config, args.out, lab=args.lab, resume=args.resume,
-                          quiet=args.quiet, seed=args.seed)
+    summary = run_session("inchip", args.config, args.out, lab="served" if args.lab else False,
+                          resume=args.resume, quiet=args.quiet, seed=args.seed)
     if not args.json:
         print_summary(summary)
     return summary

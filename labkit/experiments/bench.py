@@ -476,8 +476,8 @@ def _mover(cfg: Config, stack: contextlib.ExitStack) -> Callable[[str], None]:
 def run_check(config: str | Path, *, lab: Any = False) -> CheckReport:
     """Check the wiring of ``config``'s rig (see the module docstring); the report's ``ok`` is False on a FAIL.
 
-    ``lab``: False (the config's instruments), True (the running ``labkit lab serve``,
-    else a virtual lab in-process), or a :class:`labkit.lab.VirtualLab`.
+    ``lab``: False (the config's instruments), True (a virtual lab in-process), ``"served"``
+    (the running ``labkit lab serve``, else as True), or a :class:`labkit.lab.VirtualLab`.
     """
     from labkit.experiments.safety import DriveGuard, signals_raise
 
@@ -487,7 +487,7 @@ def run_check(config: str | Path, *, lab: Any = False) -> CheckReport:
         if lab is not False:
             from labkit.experiments.session import served_or_new, virtual_lab
 
-            obj = served_or_new() if lab is True else lab
+            obj = served_or_new() if lab == "served" else lab
             _, cfg = stack.enter_context(virtual_lab(cfg, lab=None if obj is True else obj))
         from labkit.experiments.locks import lock_instruments
 

@@ -173,6 +173,7 @@ def served_labs() -> list[dict[str, Any]]:
         if not _alive(data.get("pid")):
             with contextlib.suppress(OSError):
                 p.unlink()
+                p.with_suffix(".toml").unlink(missing_ok=True)    # the config it wrote beside its record
             continue
         labs.append(data)
     return sorted(labs, key=lambda d: -float(d.get("started") or 0.0))

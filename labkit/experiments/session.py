@@ -79,7 +79,8 @@ def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: A
     """Run an in-chip sweep (``kind="inchip"``) or a shaker run; return the JSON summary.
 
     ``lab``: False (the config's instruments), True (start a virtual lab in-process for
-    this run), or a running :class:`labkit.lab.VirtualLab` to use.
+    this run), ``"served"`` (the running ``labkit lab serve``, else as True: the CLI's
+    ``--lab``), or a running :class:`labkit.lab.VirtualLab` to use.
 
     Order (each step only when the ones before passed): config and every limit
     (nothing opened), output paths and free space, the locks on every instrument
@@ -127,7 +128,7 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
     from labkit.experiments.locks import lock_run
 
     experiment = kinds.get(kind)
-    if lab is True:
+    if lab == "served":
         lab = served_or_new()
     cfg = experiment.load(config)
     experiment.preflight(cfg)
