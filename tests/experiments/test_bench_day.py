@@ -438,3 +438,16 @@ def test_identify_hints_for_the_usual_failures(exc, words):
 
     assert words in _hint("ASRL/dev/ttyUSB0::INSTR" if "usb" not in str(exc).lower() or "ttyUSB" in str(exc)
                           else "USB0::0x0957::0x2807::MY5740::INSTR", exc)
+
+
+def test_lab_serve_config_option_keeps_the_file_and_never_overwrites(tmp_path):
+    env = _env(tmp_path / "rt")
+    cfg = tmp_path / "lab.toml"
+    with served(env, "--config", str(cfg), "--setup", "shaker") as (res, rec, _):
+        assert rec["config"] == str(cfg.resolve()) and res["control"] in cfg.read_text()
+        from labkit.experiments.config import load_shaker
+
+        assert load_shaker(cfg).instruments["funcgen"].resource == res["funcgen"]   # usable as is
+    assert cfg.is_file()                       # the person's file stays after the lab stops
+    proc = _labkit(env, "lab", "serve", "--config", str(cfg), check=2, timeout=120)
+    assert "already exists" in proc.stderr and "--force" in proc.stderr and "Traceback" not in proc.stderr
