@@ -1,8 +1,12 @@
 """``labkit lab serve``: run the virtual lab until interrupted.
 
 Prints the instruments' resource strings as one JSON object on standard
-output (flushed at once, so a parent process can read it and connect), then
-serves until SIGINT or SIGTERM; the lab is shut down (generator outputs off,
+output (flushed at once, so a parent process can read it and connect), writes
+a config a run can use as is (its instruments and control channel, the lab's
+wiring; ``--config FILE``, else beside the lab's record in the user's runtime
+folder, path on standard error), records the lab there (one record per serving
+process: ``--lab`` runs and ``labkit off --lab`` find it), then serves until
+SIGINT or SIGTERM; the lab is shut down (generator outputs off,
 sockets and the pseudo-terminal closed) in every case.
 """
 from __future__ import annotations
@@ -37,30 +41,57 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                        help=f"simulated oscilloscope: {', '.join(SCOPE_MODELS)} (default DSOX3024T)")
     serve.add_argument("--vibrometer", choices=list(VIBROMETER_MODELS), default="OFV-5000", metavar="MODEL",
                        help="simulated vibrometer controller: OFV-5000 (default) or OFV-3001")
+    from labkit.lab.miswire import MISWIRES
+    serve.add_argument("--config", metavar="FILE", help="write the lab's config here (default: in the runtime "
+                       "folder, beside the lab's record); an existing FILE needs --force")
+    serve.add_argument("--force", action="store_true", help="overwrite an existing --config FILE")
+    serve.add_argument("--miswire", action="append", choices=MISWIRES, default=[], metavar="FAULT",
+                       help=f"cable the lab wrong on purpose (repeatable): {', '.join(MISWIRES)}")
+    serve.add_argument("--amplifier-gain-db", type=float, default=20.0, metavar="DB",
+                       help="the lab amplifier's real gain (default 20 dB, as its config declares)")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
+    from pathlib import Path
+
     from labkit.cli import emit_json, require_file
+    from labkit.errors import InputError
     from labkit.lab import VirtualLab
+    from labkit.lab.miswire import Miswiring
 
     robot = require_file(args.robot, "robot parameter file") if args.robot else None
+    if args.config and Path(args.config).exists() and not args.force:
+        raise InputError("already exists; give --force to overwrite it", file=args.config, key="--config")
+    if args.config and not Path(args.config).resolve().parent.is_dir():
+        raise InputError("the folder does not exist", file=args.config, key="--config")
     lab = VirtualLab(robot=robot, seed=args.seed, funcgen_model=args.funcgen, scope_model=args.scope,
-                     vibrometer_model=args.vibrometer)
+                     vibrometer_model=args.vibrometer, miswire=Miswiring.from_names(args.miswire),
+                     amplifier_gain_db=args.amplifier_gain_db)
     lab.set_setup(args.setup)
     lab.set_spot(args.spot)
     stop = threading.Event()
-    from labkit.experiments.locks import announce_lab, withdraw_lab
+    from labkit.experiments.locks import announce_lab, lab_file, withdraw_lab
+    from labkit.experiments.template import lab_config_text
 
+    config = Path(args.config) if args.config else lab_file().with_suffix(".toml")
     try:
         lab.start()
         emit_json(lab.resources)   # always: this line is how clients find the lab
-        announce_lab(lab.resources, lab.models)   # and this file is how `labkit off --lab` does
+        config.write_text(lab_config_text(args.setup, lab.resources, lab.models, path=str(config)))
+        # and this record is how `--lab` runs and `labkit off --lab` do
+        announce_lab(lab.resources, lab.models, config=str(config.resolve()), setup=args.setup,
+                     miswire=lab.miswire.names())
         if not args.json:
             models = ", ".join(f"{role}: {model}" for role, model in lab.models.items())
-            print(f"virtual lab serving ({models}); Ctrl-C to stop", file=sys.stderr, flush=True)
+            print(f"virtual lab serving ({models}); Ctrl-C to stop\n"
+                  f"its config: {config}  (labkit check {config}; "
+                  f"labkit {'sweep inchip' if args.setup == 'inchip' else 'shaker'} {config} --out run.h5)",
+                  file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
     finally:
         withdraw_lab()
+        if not args.config:
+            config.unlink(missing_ok=True)
         lab.close()
     return {}  # pragma: no cover - only reached if the wait ends without a signal

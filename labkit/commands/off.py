@@ -6,8 +6,8 @@ config's ``[instruments.funcgen]`` table is read (model, resource, driver
 settings), so a config that fails validation elsewhere still works; nothing
 but the OFF commands and their confirmation is sent. ``--model`` and
 ``--resource`` name a generator without a config; ``--lab`` the generator of
-the running ``labkit lab serve`` (which records its resources in the user's
-runtime folder).
+every running ``labkit lab serve`` (each records its resources in the user's
+runtime folder, one file per serving process).
 
 Every channel of the generator is switched off (``OUTPn OFF``), the generator
 confirms it has processed them (``*OPC?``), then each channel's state is read
@@ -31,7 +31,7 @@ HELP = "turn every generator output of a rig off and confirm it (after a crash, 
 def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
     parser.add_argument("config", nargs="?", help="experiment config (TOML): its [instruments.funcgen] is used")
     parser.add_argument("--lab", action="store_true",
-                        help="the generator of the running 'labkit lab serve' (instead of a config)")
+                        help="the generators of every running 'labkit lab serve' (instead of a config)")
     parser.add_argument("--model", help="generator model (33220A, 33500B, DG1000Z), instead of a config")
     parser.add_argument("--resource", help="generator VISA resource, instead of a config")
     parser.add_argument("--timeout-s", type=float, default=3.0, help="per-command timeout (default 3 s)")
@@ -40,16 +40,29 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.experiments.safety import turn_off
 
-    model, resource = args.model, args.resource
     if args.lab:
-        from labkit.experiments.locks import served_lab
+        from labkit.errors import LabkitError
+        from labkit.experiments.locks import served_lab, served_labs
 
-        lab = served_lab()
-        model, resource = lab["models"]["funcgen"], lab["resources"]["funcgen"]
-    summary = turn_off(None if args.lab else args.config, model=model, resource=resource,
-                       timeout_s=args.timeout_s)
+        labs = served_labs() or [served_lab()]      # none: served_lab() says so (exit 2)
+        summaries, failed = [], None
+        for lab in labs:                            # every lab is tried, even after one failed
+            try:
+                summaries.append(turn_off(None, model=lab["models"]["funcgen"],
+                                          resource=lab["resources"]["funcgen"], timeout_s=args.timeout_s))
+                _print(args, summaries[-1])
+            except LabkitError as exc:
+                failed = failed or exc
+        if failed is not None:
+            raise failed
+        return summaries[0] | {"labs": summaries}
+    summary = turn_off(args.config, model=args.model, resource=args.resource, timeout_s=args.timeout_s)
+    _print(args, summary)
+    return summary
+
+
+def _print(args: argparse.Namespace, summary: dict[str, Any]) -> None:
     if not args.json:
         chans = ", ".join(str(c) for c in summary["channels_off"])
         print(f"{summary['instrument']} at {summary['resource']}: output(s) {chans} off (confirmed)"
               + (f"; the rig was in use by {summary['in_use_by']}" if summary.get("in_use_by") else ""))
-    return summary

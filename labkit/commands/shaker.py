@@ -25,8 +25,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.commands.sweep import print_summary
     from labkit.experiments.session import run_session
 
-    summary = run_session("shaker", args.config, args.out, lab=args.lab, resume=args.resume,
-                          quiet=args.quiet, seed=args.seed)
+    summary = run_session("shaker", args.config, args.out, lab="served" if args.lab else False,
+                          resume=args.resume, quiet=args.quiet, seed=args.seed)
     if not args.json:
         print_summary(summary)
     return summary

@@ -20,10 +20,12 @@ def add_experiment_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="experiment config (TOML)")
     p.add_argument("--out", help="run file to write (HDF5; must not exist)")
     p.add_argument("--lab", action="store_true",
-                   help="start the virtual lab in-process and point the config's instruments at it")
+                   help="point the config's instruments at the running 'labkit lab serve' (the newest), "
+                        "else at a virtual lab started in-process")
     p.add_argument("--resume", metavar="FILE",
                    help="continue this interrupted run file after its last complete point")
-    p.add_argument("--seed", type=int, default=0, help="virtual lab noise seed (with --lab)")
+    p.add_argument("--seed", type=int, default=0, help="virtual lab noise seed (with --lab, "
+                   "when no lab is served)")
 
 
 def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
@@ -37,8 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.experiments.session import run_session
 
-    summary = run_session("inchip", args.config, args.out, lab=args.lab, resume=args.resume,
-                          quiet=args.quiet, seed=args.seed)
+    summary = run_session("inchip", args.config, args.out, lab="served" if args.lab else False,
+                          resume=args.resume, quiet=args.quiet, seed=args.seed)
     if not args.json:
         print_summary(summary)
     return summary

@@ -73,23 +73,45 @@ class RunLocks:
         self.release()
 
 
+def _holder(run_file: str | Path | None, config: str) -> dict[str, Any]:
+    """What a lock file says about its holder (this process)."""
+    return {"pid": os.getpid(), "host": socket.gethostname(),
+            "command": " ".join(["labkit", *sys.argv[1:]]) if sys.argv else "",
+            "run_file": "" if run_file is None else os.fspath(run_file), "config": config,
+            "since": time.strftime("%H:%M:%S")}
+
+
+def _take_instruments(locks: RunLocks, resources: Iterable[tuple[str, str]], record: dict[str, Any],
+                      config: str) -> None:
+    seen: set[str] = set()
+    for role, resource in resources:
+        # roles may share one resource (the virtual lab's camera rides its control channel):
+        # one lock each, or the run would find itself "busy"
+        if resource and resource not in seen:
+            seen.add(resource)
+            locks.take("resource:" + resource, f"the {role} ({resource})", record, file=config,
+                       conf_key=f"instruments.{role}.resource")
+
+
 @contextlib.contextmanager
 def lock_run(resources: Iterable[tuple[str, str]], run_file: str | Path, config: str) -> Iterator[RunLocks]:
     """Lock every ``(role, resource)`` and the run file, for the block; RigBusy if any is held."""
-    record = {"pid": os.getpid(), "host": socket.gethostname(),
-              "command": " ".join(["labkit", *sys.argv[1:]]) if sys.argv else "",
-              "run_file": os.fspath(run_file), "config": config, "since": time.strftime("%H:%M:%S")}
+    record = _holder(run_file, config)
     locks = RunLocks()
     try:
         locks.take(file_key(run_file), f"the run file {run_file}", record, file=os.fspath(run_file), conf_key="--out")
-        seen: set[str] = set()
-        for role, resource in resources:
-            # roles may share one resource (the virtual lab's camera rides its control channel):
-            # one lock each, or the run would find itself "busy"
-            if resource and resource not in seen:
-                seen.add(resource)
-                locks.take("resource:" + resource, f"the {role} ({resource})", record, file=config,
-                           conf_key=f"instruments.{role}.resource")
+        _take_instruments(locks, resources, record, config)
+        yield locks
+    finally:
+        locks.release()
+
+
+@contextlib.contextmanager
+def lock_instruments(resources: Iterable[tuple[str, str]], config: str) -> Iterator[RunLocks]:
+    """Lock every ``(role, resource)`` without a run file (``labkit check``); RigBusy if any is held."""
+    locks = RunLocks()
+    try:
+        _take_instruments(locks, resources, _holder(None, config), config)
         yield locks
     finally:
         locks.release()
@@ -97,45 +119,70 @@ def lock_run(resources: Iterable[tuple[str, str]], run_file: str | Path, config:
 
 # ----------------------------------------------------------------------------- a served virtual lab
 
-def lab_file() -> Path:
-    """Where ``labkit lab serve`` says which lab it serves (``labkit off --lab`` reads it)."""
-    return runtime_dir() / "lab-serve.json"
+def lab_file(pid: int | None = None) -> Path:
+    """Where the ``labkit lab serve`` of process ``pid`` (default: this one) records its lab.
+
+    One file per serving process, so two served labs never overwrite each other's record.
+    """
+    return runtime_dir() / f"lab-serve-{os.getpid() if pid is None else int(pid)}.json"
 
 
-def announce_lab(resources: dict[str, str], models: dict[str, str]) -> Path:
-    """Record a served lab (this process): its resources and driver models."""
+def announce_lab(resources: dict[str, str], models: dict[str, str], config: str | None = None,
+                 **extra: Any) -> Path:
+    """Record a served lab (this process): its resources, driver models and the config it wrote."""
     p = lab_file()
     tmp = p.with_suffix(f".{os.getpid()}.tmp")
     tmp.write_text(json.dumps({"pid": os.getpid(), "resources": resources, "models": models,
-                               "since": time.strftime("%H:%M:%S")}))
+                               "config": config, "since": time.strftime("%H:%M:%S"),
+                               "started": time.time()} | extra))
     os.replace(tmp, p)
     return p
 
 
 def withdraw_lab() -> None:
     """Remove the record of this process's served lab (another process's is left alone)."""
-    data = read_record(lab_file())
-    if data is not None and data.get("pid") == os.getpid():
-        try:
-            lab_file().unlink()
-        except OSError:
-            pass
+    try:
+        lab_file().unlink()
+    except OSError:
+        pass
+
+
+def _alive(pid: Any) -> bool:
+    if not isinstance(pid, int) or pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def served_labs() -> list[dict[str, Any]]:
+    """Every running ``labkit lab serve`` (their records), the newest first.
+
+    A record whose process has ended (killed before it could remove it) is skipped
+    and removed.
+    """
+    labs = []
+    for p in runtime_dir().glob("lab-serve-*.json"):
+        data = read_record(p)
+        if not isinstance(data, dict) or not isinstance(data.get("resources"), dict):
+            continue
+        if not _alive(data.get("pid")):
+            with contextlib.suppress(OSError):
+                p.unlink()
+                p.with_suffix(".toml").unlink(missing_ok=True)    # the config it wrote beside its record
+            continue
+        labs.append(data)
+    return sorted(labs, key=lambda d: -float(d.get("started") or 0.0))
 
 
 def served_lab() -> dict[str, Any]:
-    """The running ``labkit lab serve`` (its record), or InputError when none runs."""
-    data = read_record(lab_file())
-    pid = data.get("pid") if data else None
-    alive = False
-    if isinstance(pid, int):
-        try:
-            os.kill(pid, 0)
-            alive = True
-        except ProcessLookupError:
-            alive = False
-        except PermissionError:
-            alive = True
-    if not alive or not isinstance(data, dict) or not isinstance(data.get("resources"), dict):
+    """The newest running ``labkit lab serve`` (its record), or InputError when none runs."""
+    labs = served_labs()
+    if not labs:
         raise InputError("no virtual lab is being served", key="--lab",
                          expected="a running 'labkit lab serve' (or give a CONFIG)")
-    return data
+    return labs[0]

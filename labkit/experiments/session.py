@@ -79,7 +79,8 @@ def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: A
     """Run an in-chip sweep (``kind="inchip"``) or a shaker run; return the JSON summary.
 
     ``lab``: False (the config's instruments), True (start a virtual lab in-process for
-    this run), or a running :class:`labkit.lab.VirtualLab` to use.
+    this run), ``"served"`` (the running ``labkit lab serve``, else as True: the CLI's
+    ``--lab``), or a running :class:`labkit.lab.VirtualLab` to use.
 
     Order (each step only when the ones before passed): config and every limit
     (nothing opened), output paths and free space, the locks on every instrument
@@ -127,6 +128,8 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
     from labkit.experiments.locks import lock_run
 
     experiment = kinds.get(kind)
+    if lab == "served":
+        lab = served_or_new()
     cfg = experiment.load(config)
     experiment.preflight(cfg)
     path = _output_path(out, resume)
@@ -186,6 +189,26 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
     if runner is not None:
         out_summary["interlocks"] = runner.interlocks
     return out_summary
+
+
+class ServedLab:
+    """A virtual lab another process serves (``labkit lab serve``): used, never started or closed here."""
+
+    def __init__(self, record: dict[str, Any]) -> None:
+        self.resources: dict[str, str] = dict(record["resources"])
+        self.models: dict[str, str] = dict(record.get("models") or {})
+        self.pid = record.get("pid")
+
+    def start(self) -> ServedLab:
+        return self
+
+
+def served_or_new() -> ServedLab | bool:
+    """``--lab``: the newest running ``labkit lab serve`` if there is one, else True (start one in-process)."""
+    from labkit.experiments.locks import served_labs
+
+    labs = served_labs()
+    return ServedLab(labs[0]) if labs else True
 
 
 def _store_lab_record(path: Path, lab: Any) -> None:

@@ -30,6 +30,7 @@ from labkit.errors import ConfigError
 from labkit.lab import camera
 from labkit.lab.control import SimLabControl
 from labkit.lab.funcgen import Drive, SimAgilent33220A, SimKeysight33500B, SimRigolDG1000Z
+from labkit.lab.miswire import Miswiring
 from labkit.lab.models import FUNCGEN_MODELS, SCOPE_MODELS, VIBROMETER_MODELS
 from labkit.lab.physics import SPOTS, ShakerChain, TetheredModel, simulate_linear
 from labkit.lab.scope import SimInfiniiVision, SimRigolDS1000Z
@@ -123,8 +124,9 @@ class VirtualLab:
                  noise_v_rms: float = 5e-4, noise_mm_s_rms: float = 0.01,
                  sim_duration_s: float = 1.0, scope_memory_points: int = 1_000_000,
                  funcgen_model: str = "33522B", scope_model: str = "DSOX3024T",
-                 vibrometer_model: str = "OFV-5000") -> None:
+                 vibrometer_model: str = "OFV-5000", miswire: Miswiring | None = None) -> None:
         self.seed = int(seed)
+        self.miswire = miswire or Miswiring()
         self.params = load_robot(robot)
         hip_hz, hip_zeta = 438.0, 0.25
         if self.params is not None:
@@ -166,6 +168,8 @@ class VirtualLab:
         self.scope.idn = self.scope.idn.replace("DSOX3024T", sc_model).replace("DS1104Z", sc_model)
         vib_class = SimOFV3001 if vib_model == "OFV-3001" else SimOFV5000
         self.vibrometer: SimOFV5000 | SimOFV3001 = vib_class(self.spot_peak_velocity_mm_s)
+        if self.miswire.vibrometer_range_mm_s_per_v is not None:
+            self.vibrometer.lock_range(self.miswire.vibrometer_range_mm_s_per_v)
         self.control = SimLabControl(self)
         for ch in self.funcgen.ch:
             self.output_timeline.append((0.0, "funcgen", ch, False))
@@ -395,13 +399,14 @@ class VirtualLab:
             n = len(t_abs)
             out: dict[int, np.ndarray] = {}
             for ch in channels:
-                if ch == 1:
-                    out[1] = drive.voltage(t_abs)
-                elif ch == 2 or (ch == 3 and setup == "shaker"):
-                    v = (self._spot_velocity(spot, setup, drive, t_abs) if ch == 2
+                src = self.miswire.source(ch)     # the signal the cable on this input carries
+                if src == 1:
+                    out[ch] = drive.voltage(t_abs)
+                elif src == 2 or (src == 3 and setup == "shaker"):
+                    v = (self._spot_velocity(spot, setup, drive, t_abs) if src == 2
                          else self._tray_velocity(drive, t_abs))
                     v = v + rng.normal(0.0, self.noise_mm_s_rms, n)
-                    if ch == 2:
+                    if src == 2:
                         self.vibrometer.clipped = bool(np.max(np.abs(v)) > scale * FULL_SCALE_V)
                     out[ch] = np.clip(v / scale, -FULL_SCALE_V, FULL_SCALE_V)
                 else:
@@ -415,7 +420,7 @@ class VirtualLab:
         """The scope's trigger: generator sync (EXT) or a rising edge of the drive (CHAN1)."""
         drive = self.funcgen.drive(1)
         if source == "EXT":
-            return drive.next_sync(t_min)
+            return None if self.miswire.sync_disconnected else drive.next_sync(t_min)
         if source == "CHAN1":
             if drive.is_sine() and drive.amp_v > 0:
                 level = self.scope.trigger_level("CHAN1")

@@ -36,6 +36,15 @@ class _Controller:
         self.peak_velocity_mm_s = peak_velocity_mm_s
         self.lock = threading.RLock()
         self.clipped = False   # the last acquisition saw the analog output at its +-10 V limit
+        self.range_locked = False   # a miswiring: the decoder ignores range settings
+
+    def lock_range(self, scale_mm_s_per_v: float) -> None:
+        """Put the decoder on this range and keep it there (the lab's miswiring option)."""
+        self._force_range(float(scale_mm_s_per_v))
+        self.range_locked = True
+
+    def _force_range(self, scale: float) -> None:
+        raise NotImplementedError
 
     @property
     def full_scale_mm_s(self) -> float:
@@ -75,6 +84,9 @@ class SimOFV5000(_Controller):
             ("VeloDec", 1, "Tracking"): ("Off", "On"),
         }
 
+    def _force_range(self, scale: float) -> None:
+        self.scale_mm_s_per_v = scale
+
     def handle(self, line: str) -> bytes | None:
         parts = [p.strip() for p in line.strip().split(",")]
         with self.lock:
@@ -104,6 +116,8 @@ class SimOFV5000(_Controller):
             return "Not Available"
         if verb == "Set" and len(parts) == 5:
             value = parts[4]
+            if key == ("VeloDec", 1, "Range") and self.range_locked:
+                return None
             if key == ("VeloDec", 1, "Range"):
                 for r in RANGES_MM_S_PER_V:
                     if value.lower() == range_text(r).lower():
@@ -136,6 +150,9 @@ class SimOFV3001(_Controller):
         self.range_number = 3
         self.remote = False
 
+    def _force_range(self, scale: float) -> None:
+        self.range_number = {v: k for k, v in OFV3001_OVD01.items()}[scale]
+
     @property   # read-only here: the range number decides it
     def scale_mm_s_per_v(self) -> float:  # type: ignore[override]
         return OFV3001_OVD01[self.range_number]
@@ -152,7 +169,7 @@ class SimOFV3001(_Controller):
                 return b"1\n" if self.over_range() else b"0\n"
             if word.startswith("VELO") and word[4:].isdigit():
                 n = int(word[4:])
-                if self.remote and n in OFV3001_OVD01:
+                if self.remote and n in OFV3001_OVD01 and not self.range_locked:
                     self.range_number = n
                     self.clipped = False
             return None
