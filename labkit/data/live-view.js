@@ -94,6 +94,7 @@
     }
     else if (r.t === 'event') { S.events.push(r); if (typeof r.drive === 'boolean') S.drive = r.drive; }
     else if (r.t === 'end') { S.end = r; }
+    else if (r.t === 'hb') { S.busy = r.busy_s; }        // the run's time in its current step
     schedule();
   }
   let pending = false;
@@ -125,7 +126,8 @@
     $('remaining').textContent = ended ? '0:00' : (last ? dur(last.remaining_s - (now - last.time)) : (fin(st.est_s) ? '~' + dur(st.est_s) : '-'));
     const drive = $('drive'); drive.textContent = S.drive ? 'DRIVE ON' : 'DRIVE OFF'; drive.className = 'cell lamp ' + (S.drive ? 'on' : 'off');
     const age = S.status && fin(S.status.stream_age_s) ? S.status.stream_age_s + (Date.now() - S.statusAt) / 1000 : NaN;
-    $('hb').textContent = ended ? 'run ended' : (fin(age) ? age.toFixed(1) + ' s ago' : '-');
+    $('hb').textContent = ended ? 'run ended' : (fin(age) ? age.toFixed(1) + ' s ago' : '-') +
+      (!ended && S.busy > 10 ? ' (one step for ' + S.busy.toFixed(0) + ' s)' : '');
     const state = $('state');
     if (ended) { state.textContent = 'ended: ' + S.end.status + ' (exit ' + S.end.exit + ')';
       state.className = 'cell ' + (S.end.exit === 0 ? 'ended' : 'failed'); }

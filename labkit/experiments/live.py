@@ -50,7 +50,7 @@ from typing import IO, Any
 HEARTBEAT_S = 1.0
 #: a reader calls the run "not responding" when the last line is older than this
 STALE_S = 5.0
-#: the sine-fit R^2 under which a point is shown as poor (noise power a tenth of the signal's)
+#: the sine-fit R^2 under which a point is shown as poor (the residual is a tenth of the record's power)
 QUALITY_MIN = 0.9
 #: a channel whose peak is under this percentage of the scope's full scale is flagged under range
 UNDER_PCT = 10.0
