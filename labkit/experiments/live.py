@@ -231,6 +231,10 @@ class LiveStream:
         """The ``end`` record (status and exit code); stops the heartbeat and closes the stream."""
         self._write({"t": "end", "time": time.time(), "status": status, "exit": exit_code_of(exc)})
         self.close()
+        try:
+            self.stop_file.unlink()       # a "now" request (or one too late) has been answered
+        except OSError:
+            pass
 
     def close(self) -> None:
         self._stop.set()

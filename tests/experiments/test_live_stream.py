@@ -21,6 +21,7 @@ import pytest
 from labcfg import inchip_toml, shaker_toml
 
 from clihelpers import REPO, last_json, run_cli
+from labkit.errors import LimitError
 from labkit.experiments import live
 from labkit.experiments.session import run_session
 from labkit.lab import VirtualLab
@@ -63,6 +64,25 @@ def test_stepped_stream_matches_the_run_file(tmp_path):
     drive = [r["drive"] for r in recs if "drive" in r]
     assert drive[0] is True and drive[-1] is False and drive.count(False) >= 2     # off before the move
     assert all(live.format_record(r) for r in recs if r["t"] != "hb")
+
+
+def test_over_range_points_are_flagged_and_an_interlock_end_exits_2(tmp_path):
+    # 1 mm/s/V: the knee's 3.4 kHz resonance (~12 mm/s) exceeds the vibrometer's 10 V analog range
+    freqs = [1000.0, 3400.0, 4500.0]
+    cfg = inchip_toml(tmp_path / "il.toml", freqs, locations=("knee",), scale_mm_s_per_v=1.0,
+                      settle_s=0.02, dwell_cycles=10)
+    run_session("inchip", cfg, tmp_path / "il.h5", lab=True, quiet=True)
+    pts = [r for r in _records(tmp_path / "il.h5") if r["t"] == "point"]
+    assert [p["status"] for p in pts] == ["ok", "interlock", "ok"]
+    assert pts[1]["over"]["velocity"] and "over-range" in pts[1]["reason"] and "frf" not in pts[1]
+    assert not pts[0]["over"]["velocity"] and not pts[2]["over"]["velocity"]
+    assert "interlock: vibrometer over-range" in live.format_record(pts[1])
+    end_cfg = inchip_toml(tmp_path / "end.toml", freqs, locations=("knee",), scale_mm_s_per_v=1.0,
+                          settle_s=0.02, dwell_cycles=10, on_interlock="end")
+    with pytest.raises(LimitError):
+        run_session("inchip", end_cfg, tmp_path / "end.h5", lab=True, quiet=True)
+    end = _records(tmp_path / "end.h5")[-1]
+    assert end["t"] == "end" and end["exit"] == 2 and end["status"].startswith("aborted: interlock")
 
 
 def test_shaker_stream_and_the_page_replaying_it(tmp_path):
