@@ -100,8 +100,12 @@ class LiveView:
         self.httpd.serve_forever(poll_interval=0.2)
 
     def close(self) -> None:
+        """Stop serving. ``shutdown()`` only for the thread of :meth:`start`: it waits for a loop
+        that is running, and hangs when the loop never started (Ctrl-C before serving)."""
         self.closing.set()
-        self.httpd.shutdown()
+        if self._thread is not None:
+            self.httpd.shutdown()
+            self._thread.join(timeout=5)
         self.httpd.server_close()
 
     def __enter__(self) -> LiveView:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -154,6 +155,17 @@ def test_watch_replays_a_finished_run_and_fails_cleanly_without_a_stream(tmp_pat
     bad = run_cli("watch", str(tmp_path / "none.h5"), check=2)
     assert bad.stderr.count("\n") == 1 and "no live stream beside it" in bad.stderr and "Traceback" not in bad.stderr
     assert run_cli("view", str(tmp_path / "none.h5"), check=2).stderr.count("\n") == 1
+    # labkit view serves until Ctrl-C, which ends it normally (exit 0, its summary)
+    view = subprocess.Popen([sys.executable, "-m", "labkit", "view", str(out), "--json"], cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        url = json.loads(view.stdout.readline())["url"]
+        assert url.startswith("http://127.0.0.1:") and "token=" in url
+        view.send_signal(signal.SIGINT)
+        v_out, v_err = view.communicate(timeout=30)
+    finally:
+        view.kill()
+    assert view.returncode == 0 and json.loads(v_out.splitlines()[-1])["url"] == url, v_err
 
 
 def test_watch_says_when_the_run_has_gone(tmp_path):
