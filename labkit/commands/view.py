@@ -9,6 +9,8 @@ the stream from its start), and replays a finished run. The page's Stop
 buttons: "after this point" (the run stops before its next point) and "now"
 (SIGINT to the run: its drive goes off and its file is finished, as on
 Ctrl-C); both end the run with exit 130 and leave it resumable (``--resume``).
+Shaker runs with video: each point's video is tracked as it appears (the robot's
+speed, as ``labkit track`` measures it, at low priority; ``--no-track`` not).
 Serves until Ctrl-C; nothing is sent to any instrument.
 """
 from __future__ import annotations
@@ -25,6 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("run", metavar="RUN.h5", help="the run file (or its RUN.live.jsonl)")
     parser.add_argument("--port", type=int, default=0, help="TCP port on 127.0.0.1 (default: any free one)")
     parser.add_argument("--open", action="store_true", help="also open the page in the default browser")
+    parser.add_argument("--no-track", action="store_true",
+                        help="do not track shaker points' videos (the robot's speed) as they appear")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
@@ -36,7 +40,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if not 0 <= args.port <= 65535:
         raise InputError(f"{args.port}", key="--port", expected="a TCP port, 0..65535 (0: any free one)")
     try:
-        view = LiveView(args.run, port=args.port)
+        view = LiveView(args.run, port=args.port, track_videos=not args.no_track)
     except OSError as exc:
         raise InputError(f"cannot listen on 127.0.0.1:{args.port} ({exc.strerror or exc})", key="--port",
                          expected="a free port, or 0") from None

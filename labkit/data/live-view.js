@@ -4,7 +4,7 @@
   const token = new URLSearchParams(location.search).get('token') || '';
   const COLORS = {body: '#1e88e5', hip: '#8e24aa', knee: '#f4511e', tray: '#00897b'};
   const S = {start: null, points: [], events: [], drive: false, end: null, status: null, statusAt: 0,
-             conn: 'connecting', stopSent: '', latency: [], openedAt: 0};
+             conn: 'connecting', stopSent: '', latency: [], openedAt: 0, speeds: []};
   window.__labkit = S;                 // for tests and the curious
   const $ = (id) => document.getElementById(id);
   const NS = 'http://www.w3.org/2000/svg';
@@ -48,6 +48,7 @@
     const xs = [], ys = [];
     series.forEach((s) => s.pts.forEach((p) => { if (fin(p[0]) && fin(p[1]) && (!o.logx || p[0] > 0)) {
       xs.push(p[0]); ys.push(p[1]); } }));
+    series.forEach((s) => (s.bars || []).forEach((b) => { if (fin(b[1]) && fin(b[2])) ys.push(b[1], b[2]); }));
     (o.hlines || []).forEach((h) => ys.push(h.y));
     if (!xs.length) { svg.appendChild(el('text', {x: W / 2, y: H / 2, 'text-anchor': 'middle'}, 'waiting for points')); return; }
     let x0 = Math.min(...xs), x1 = Math.max(...xs), y0 = o.ymin !== undefined ? o.ymin : Math.min(...ys),
@@ -78,6 +79,8 @@
       const pts = s.pts.filter((p) => fin(p[0]) && fin(p[1]) && (!o.logx || p[0] > 0)).sort((a, b) => a[0] - b[0]);
       if (pts.length > 1) svg.appendChild(el('polyline', {points: pts.map((p) => fx(p[0]) + ',' + fy(p[1])).join(' '),
         fill: 'none', stroke: s.color, 'stroke-width': 1.5, 'stroke-dasharray': s.dash ? '4 3' : 'none'}));
+      (s.bars || []).forEach((b) => { if (fin(b[0]) && fin(b[1]) && fin(b[2])) svg.appendChild(el('line',
+        {x1: fx(b[0]), x2: fx(b[0]), y1: fy(b[1]), y2: fy(b[2]), stroke: s.color, 'stroke-width': 1.5, class: 'ci'})); });
       if (pts.length < 400) pts.forEach((p) => svg.appendChild(el('circle', {cx: fx(p[0]), cy: fy(p[1]), r: 2.6,
         fill: s.hollow ? '#fff' : s.color, stroke: s.color, class: 'pt'})));
       svg.appendChild(el('text', {x: lx, y: 12}, s.name)).style.fill = s.color;   // CSSOM: allowed by the CSP
@@ -153,8 +156,15 @@
     if (shaker) {
       const ok = S.points.filter((p) => p.status === 'ok');
       plot($('tray'), [{name: 'measured', color: '#00897b', pts: ok.map((p) => [p.freq_hz, p.tray_amp_um])},
-        {name: 'target', color: '#546e7a', hollow: true, dash: true, pts: ok.map((p) => [p.freq_hz, p.tray_amp_request_um])}], {logx: true});
-      plot($('drivev'), [{name: 'drive', color: '#e53935', pts: ok.map((p) => [p.freq_hz, p.drive_vpp])}], {logx: true});
+        {name: 'target', color: '#546e7a', hollow: true, dash: true, pts: ok.map((p) => [p.freq_hz, p.tray_amp_request_um])}], {logx: true, ymin: 0});
+      plot($('drivev'), [{name: 'drive', color: '#e53935', pts: ok.map((p) => [p.freq_hz, p.drive_vpp])}], {logx: true, ymin: 0});
+      const sp = S.speeds.filter((r) => fin(r.speed_mm_s));
+      plot($('speed'), [{name: 'speed', color: '#6d4c41', pts: sp.map((r) => [r.freq_hz, r.speed_mm_s]),
+        bars: sp.map((r) => [r.freq_hz, r.ci_mm_s[0], r.ci_mm_s[1]])}], {logx: true, ymin: 0});
+      const videos = ok.filter((p) => p.video).length, failed = S.speeds.filter((r) => r.error);
+      $('speed-note').textContent = (videos ? 'Each point\'s video is tracked by labkit view as it arrives (as labkit track does): ' +
+        sp.length + ' of ' + videos + ' tracked.' : 'No video in this run (run.video_s = 0): no speed.') +
+        failed.map((r) => ' Point ' + r.k + ' (' + r.video + '): ' + r.error).join('');
     }
     drawRecord(last);
     drawEvents();
@@ -207,6 +217,7 @@
     const es = new EventSource('/events?token=' + encodeURIComponent(token));
     es.onopen = () => { S.conn = 'open'; S.openedAt = S.openedAt || Date.now() / 1000; schedule(); };
     es.onmessage = (e) => { try { onRecord(JSON.parse(e.data)); } catch (err) { /* a torn line: skipped */ } };
+    es.addEventListener('speed', (e) => { S.speeds.push(JSON.parse(e.data)); schedule(); });
     es.addEventListener('status', (e) => { S.status = JSON.parse(e.data); S.statusAt = Date.now(); S.conn = 'open'; schedule(); });
     es.onerror = () => { S.conn = es.readyState === EventSource.CLOSED ? 'lost' : 'reconnecting'; schedule(); };
   }

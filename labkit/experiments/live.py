@@ -70,14 +70,15 @@ def stop_path(run_path: str | Path) -> Path:
     return p.with_name(p.stem + ".live.stop")
 
 
-def _num(x: Any) -> float | None:
+def num(x: Any) -> float | None:
+    """A float for JSON: None when not finite."""
     x = float(x)
     return x if math.isfinite(x) else None
 
 
 def _cplx(z: Any) -> list[float | None]:
     z = complex(z)
-    return [_num(z.real), _num(z.imag)]
+    return [num(z.real), num(z.imag)]
 
 
 def exit_code_of(exc: BaseException | None) -> int:
@@ -179,7 +180,7 @@ class LiveStream:
         self._k, self._n = points_done, points_planned
         self._write({"t": "start", "time": self._t0, "pid": os.getpid(), "file": self.run_name,
                      "kind": kind, "points_planned": points_planned, "points_done": points_done,
-                     "est_s": _num(est_s), "locations": locations, "quality_min": QUALITY_MIN,
+                     "est_s": num(est_s), "locations": locations, "quality_min": QUALITY_MIN,
                      "heartbeat_s": HEARTBEAT_S, "config": config})
         self._thread = threading.Thread(target=self._beat, name="labkit-live-heartbeat", daemon=True)
         self._thread.start()
@@ -210,13 +211,13 @@ class LiveStream:
                                "location": str(rows.get("location", "")), "status": str(rows.get("status", "")),
                                "reason": str(rows.get("reason", "")), "elapsed_s": round(elapsed, 3),
                                "remaining_s": round(elapsed / self._session * max(self._n - self._k, 0), 3)}
-        rec["freq_hz"] = _num(rows.get("freq_hz", math.nan))
+        rec["freq_hz"] = num(rows.get("freq_hz", math.nan))
         if loc is not None:
             rec.update(_location_fields(loc, drive_set_vpp))
         if "tray_amp_um" in rows:
             rec.update(_shaker_fields(rows))
         if scope is not None:
-            pct = {"drive": _num(scope.drive_pct), "velocity": _num(scope.velocity_pct)}
+            pct = {"drive": num(scope.drive_pct), "velocity": num(scope.velocity_pct)}
             rec["pct_fs"] = pct
             rec["over"] = {"drive": (pct["drive"] or 0) >= OVER_PCT,
                            "velocity": over_range or (pct["velocity"] or 0) >= OVER_PCT}
@@ -268,19 +269,19 @@ def _location_fields(loc: dict[str, Any], drive_set_vpp: float | None) -> dict[s
     f = np.asarray(loc["freq_hz"])
     if f.ndim:          # a chirp: every frequency line at once
         h = np.asarray(loc["frf"])
-        return {"freq_hz": [_num(x) for x in f], "frf": [[_num(x) for x in h.real], [_num(x) for x in h.imag]],
-                "quality": [_num(x) for x in np.asarray(loc["quality"])]}
-    out: dict[str, Any] = {"frf": _cplx(loc["frf"]), "quality": _num(loc["quality"])}
+        return {"freq_hz": [num(x) for x in f], "frf": [[num(x) for x in h.real], [num(x) for x in h.imag]],
+                "quality": [num(x) for x in np.asarray(loc["quality"])]}
+    out: dict[str, Any] = {"frf": _cplx(loc["frf"]), "quality": num(loc["quality"])}
     if "drive_v" in loc:
-        out["drive_vpp"] = _num(2 * abs(complex(loc["drive_v"])))
-        out["drive_set_vpp"] = _num(drive_set_vpp) if drive_set_vpp is not None else None
+        out["drive_vpp"] = num(2 * abs(complex(loc["drive_v"])))
+        out["drive_set_vpp"] = num(drive_set_vpp) if drive_set_vpp is not None else None
     return out
 
 
 def _shaker_fields(rows: dict[str, Any]) -> dict[str, Any]:
-    return {"tray_amp_um": _num(rows["tray_amp_um"]), "tray_amp_request_um": _num(rows["tray_amp_request_um"]),
-            "drive_vpp": _num(rows["drive_vpp"]), "drive_request_vpp": _num(rows["drive_request_vpp"]),
-            "transmissibility": _cplx(rows["transmissibility"]), "quality": _num(rows["quality"]),
+    return {"tray_amp_um": num(rows["tray_amp_um"]), "tray_amp_request_um": num(rows["tray_amp_request_um"]),
+            "drive_vpp": num(rows["drive_vpp"]), "drive_request_vpp": num(rows["drive_request_vpp"]),
+            "transmissibility": _cplx(rows["transmissibility"]), "quality": num(rows["quality"]),
             "robot_velocity_mm_s": _cplx(rows["robot_velocity_mm_s"]), "video": str(rows.get("video", ""))}
 
 

@@ -8,6 +8,11 @@ the stream's last line as the server's clock sees it (the run's heartbeat).
 The page (``labkit/data/live-view.*``: plain JavaScript drawing SVG, no
 library, nothing fetched from elsewhere) builds its plots from the events.
 
+Shaker runs with video: the server (not the run) tracks each point's video as the point
+appears in the stream (:class:`SpeedTracker`, the method of ``labkit track``, in a thread
+at low priority) and sends the robot's speed with its confidence interval as ``speed``
+events.
+
 Stop: ``POST /stop`` with ``{"when": "point"}`` writes the stop request the
 run looks for before each point (:func:`labkit.experiments.live.stop_path`);
 ``{"when": "now"}`` also sends SIGINT to the process that holds the run
@@ -30,6 +35,7 @@ from __future__ import annotations
 
 import hmac
 import json
+import math
 import os
 import secrets
 import signal
@@ -63,6 +69,64 @@ def _asset(name: str) -> bytes:
     return (resources.files("labkit") / "data" / name).read_bytes()
 
 
+class SpeedTracker:
+    """Tracks each shaker point's video as it appears in the stream; :attr:`results` grows.
+
+    A video in which the robot did not walk far enough to find its own scale is tracked
+    again with the scale of the run's other videos (one camera, one zoom), as ``labkit
+    demo`` does; until one has been measured, such a point gets an ``error``.
+    """
+
+    def __init__(self, run_path: Path, stream: Path, closing: threading.Event) -> None:
+        self.run_path, self.stream, self.closing = run_path, stream, closing
+        self.results: list[dict[str, Any]] = []
+        self.scales: list[tuple[float, float]] = []        # (mm/px, its standard uncertainty)
+
+    def run(self) -> None:
+        try:        # Linux: this thread only; the run on the same machine keeps its share of the CPU
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
+        except (AttributeError, OSError):
+            pass
+        pos = 0
+        while not self.closing.is_set():
+            for end, rec in live.follow(self.stream, pos, wait=False):
+                pos = end
+                if rec.get("t") == "point" and rec.get("video") and rec.get("status") == "ok":
+                    self.results.append(self.track(rec))
+                if self.closing.is_set():
+                    return
+            self.closing.wait(0.5)
+
+    def track(self, rec: dict[str, Any]) -> dict[str, Any]:
+        """The ``speed`` record of one point's video (``error`` when it could not be tracked)."""
+        from labkit.analysis.tracking import Scale, track_file
+        from labkit.errors import InputError
+
+        out: dict[str, Any] = {"t": "speed", "index": rec["index"], "k": rec.get("k"), "video": rec["video"],
+                               "freq_hz": rec.get("freq_hz"), "tray_amp_um": rec.get("tray_amp_um")}
+        video = self.run_path.parent / str(rec["video"])
+        scale = None
+        try:
+            try:
+                summ = track_file(video, quiet=True).summary
+                self.scales.append((float(summ["mm_per_px"]), float(summ["mm_per_px_std"] or 0.0)))
+            except InputError:
+                if not self.scales:
+                    raise
+                mm = [m for m, _ in self.scales]
+                scale = Scale(sum(mm) / len(mm), max(d for _, d in self.scales), "other videos of the run",
+                              {"videos": len(mm)})
+                summ = track_file(video, quiet=True, scale=scale).summary
+        except Exception as exc:        # one bad video must not stop the page
+            out["error"] = f"{type(exc).__name__}: {str(exc)[:300]}"
+            return out
+        lo, hi = summ["speed_ci_mm_s"]
+        out.update(speed_mm_s=live.num(summ["mean_speed_mm_s"]), ci_mm_s=[live.num(lo), live.num(hi)],
+                   ci_level=live.num(summ.get("ci_level", math.nan)), frames=int(summ["frames"]),
+                   scaled_by=("other videos of the run" if scale is not None else "the robot's length"))
+        return out
+
+
 class LiveView:
     """The server of one run's page; :meth:`start` serves in a thread, :meth:`close` stops.
 
@@ -74,9 +138,12 @@ class LiveView:
         TCP port on 127.0.0.1 (0: any free one).
     token:
         The secret of the page's URL (default: a new random one).
+    track_videos:
+        Track shaker points' videos as they appear (:class:`SpeedTracker`).
     """
 
-    def __init__(self, run_path: str | Path, port: int = 0, token: str | None = None) -> None:
+    def __init__(self, run_path: str | Path, port: int = 0, token: str | None = None,
+                 track_videos: bool = True) -> None:
         self.run_path, self.stream = live.stream_of(run_path)
         self.token = token or secrets.token_urlsafe(24)
         self.closing = threading.Event()
@@ -86,6 +153,9 @@ class LiveView:
         self.port = int(self.httpd.server_address[1])
         self.hosts = {f"127.0.0.1:{self.port}", f"localhost:{self.port}"}
         self._thread: threading.Thread | None = None
+        self.tracker = SpeedTracker(self.run_path, self.stream, self.closing) if track_videos else None
+        if self.tracker is not None:
+            threading.Thread(target=self.tracker.run, name="labkit-view-track", daemon=True).start()
 
     @property
     def url(self) -> str:
@@ -195,13 +265,17 @@ class _Handler(BaseHTTPRequestHandler):
         self.send_header("X-Content-Type-Options", "nosniff")
         self.end_headers()
         self.close_connection = True
-        next_status = 0.0
+        next_status, speeds = 0.0, 0
+        tracker = self.view.tracker
         try:
             while not self.view.closing.is_set():
                 out = []
                 for end, rec in live.follow(self.view.stream, offset, wait=False):
                     out.append(f"id: {end}\ndata: {json.dumps(rec, allow_nan=False)}\n\n")
                     offset = end
+                for rec in (tracker.results[speeds:] if tracker is not None else []):
+                    out.append(f"event: speed\ndata: {json.dumps(rec, allow_nan=False)}\n\n")
+                    speeds += 1
                 if time.monotonic() >= next_status:
                     out.append(f"event: status\ndata: {json.dumps(self.view.status())}\n\n")
                     next_status = time.monotonic() + STATUS_S

@@ -117,11 +117,51 @@ def test_shaker_stream_and_the_page_replaying_it(tmp_path):
             assert page.inner_text("#k") == "4" and page.inner_text("#drive") == "DRIVE OFF"
             assert page.is_disabled("#stop-point")            # nothing to stop: the run has ended
             assert "tray" in page.inner_text("#last-point")
+            assert "No video in this run" in page.inner_text("#speed-note")
             page.goto(view.url.replace("token=", "token=x"))   # a wrong token gets no page
             assert "wrong token" in page.inner_text("body")
             assert [c for c in console if "403" not in c] == [], console
         finally:
             browser.close()
+
+
+def test_the_page_shows_each_video_s_tracked_speed(tmp_path):
+    """A shaker run with video (the demo's robot, which walks at 240-280 Hz): the view tracks each
+    point's video as it appears and the page plots the speed with its confidence interval; the
+    numbers are those ``labkit track`` gives for the same videos."""
+    from playwright.sync_api import sync_playwright
+
+    from labkit.analysis.tracking import track_file
+    from labkit.demo.configs import write_shaker_config
+    from labkit.demo.run import demo_robots
+    from labkit.experiments.liveview import LiveView
+
+    cfg = write_shaker_config(tmp_path / "v.toml", [240.0, 280.0], 25.0, video_s=0.5, settle_s=0.05,
+                              dwell_cycles=10)
+    out = tmp_path / "v.h5"
+    with VirtualLab(robot=demo_robots()[0], seed=1) as lab:
+        run_session("shaker", cfg, out, lab=lab, quiet=True)
+    videos = [r["video"] for r in _records(out) if r["t"] == "point"]
+    assert len(videos) == 2 and all(videos)
+    want = [track_file(tmp_path / v, quiet=True).summary for v in videos]
+    with LiveView(out) as view, sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=["--no-sandbox"])
+        try:
+            console: list[str] = []
+            page = browser.new_page(viewport={"width": 1280, "height": 1300})
+            page.on("console", lambda m: console.append(f"{m.type}: {m.text}"))
+            page.goto(view.url)
+            page.wait_for_function("() => document.querySelectorAll('#speed circle.pt').length === 2",
+                                   timeout=60000)
+            assert page.locator("#speed line.ci").count() == 2
+            assert "2 of 2 tracked" in page.inner_text("#speed-note")
+            got = page.evaluate("window.__labkit.speeds")
+            assert console == [], console
+        finally:
+            browser.close()
+    for g, w, v in zip(got, want, videos):
+        assert g["video"] == v and g["speed_mm_s"] == w["mean_speed_mm_s"] > 0
+        assert g["ci_mm_s"] == list(w["speed_ci_mm_s"]) and g["ci_mm_s"][0] < g["speed_mm_s"] < g["ci_mm_s"][1]
 
 
 def test_chirp_points_carry_every_line(tmp_path):
