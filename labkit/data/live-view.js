@@ -186,6 +186,7 @@
     if (p.status === 'ok' && p.frf && !Array.isArray(p.frf[0])) text += ', |H| ' + db(p.frf).toFixed(1) + ' dB, ' + deg(p.frf).toFixed(1) + ' deg';
     if (fin(p.tray_amp_um)) text += ', tray ' + p.tray_amp_um.toPrecision(3) + ' um';
     if (fin(p.drive_vpp)) text += ', drive ' + p.drive_vpp.toPrecision(3) + ' Vpp' + (fin(p.drive_set_vpp) ? ' (set ' + p.drive_set_vpp.toPrecision(3) + ')' : '');
+    if (fin(p.drive_measured_vpp)) text += ' (measured ' + p.drive_measured_vpp.toPrecision(3) + ')';
     if (fin(p.quality)) text += ', quality ' + p.quality.toFixed(3);
     $('last-point').textContent = text;
   }

@@ -15,7 +15,8 @@ Records (``"t"`` names the type; times are Unix seconds; NaN is written ``null``
     ``status`` (``ok`` | ``interlock``), ``reason``, ``elapsed_s``,
     ``remaining_s``; an in-chip point adds ``frf`` (``[re, im]``, (mm/s)/V),
     ``quality``, ``drive_vpp`` (measured) and ``drive_set_vpp``; a shaker point
-    adds ``tray_amp_um`` and its request, ``drive_vpp``, ``transmissibility``,
+    adds ``tray_amp_um`` and its request, ``drive_vpp`` (applied) and
+    ``drive_measured_vpp`` (in its last record), ``transmissibility``,
     ``robot_velocity_mm_s`` (``[re, im]``) and ``video``; a chirp point has
     arrays (``freq_hz``, ``frf`` as ``[[re...], [im...]]``, ``quality``). Every
     point with a scope record adds ``pct_fs`` (peak of each channel, % of the
@@ -98,6 +99,7 @@ class Scope:
 
     drive_pct: float
     velocity_pct: float
+    drive_vpp: float = math.nan      # the drive's peak-to-peak from its rms (a sine's: 2 sqrt(2) rms)
 
 
 def record_levels(drive_v: Any, velocity_v: Any, drive_fs_v: float | None, velocity_fs_v: float | None) -> Scope:
@@ -111,7 +113,9 @@ def record_levels(drive_v: Any, velocity_v: Any, drive_fs_v: float | None, veloc
         # about the record's mean: the drive channel is centred on the generator's DC offset
         return float(np.max(np.abs(v - v.mean()))) / fs * 100 if fs and v.size else math.nan
 
-    return Scope(pct(drive_v, drive_fs_v), pct(velocity_v, velocity_fs_v))
+    d = np.asarray(drive_v, float)
+    vpp = 2 * math.sqrt(2) * float(np.std(d)) if d.size else math.nan
+    return Scope(pct(drive_v, drive_fs_v), pct(velocity_v, velocity_fs_v), vpp)
 
 
 class LiveStream:
@@ -222,6 +226,8 @@ class LiveStream:
             rec["over"] = {"drive": (pct["drive"] or 0) >= OVER_PCT,
                            "velocity": over_range or (pct["velocity"] or 0) >= OVER_PCT}
             rec["under"] = {k: v is not None and v < UNDER_PCT for k, v in pct.items()}
+            if "tray_amp_um" in rec:        # a shaker point: the drive the scope saw in its last record
+                rec["drive_measured_vpp"] = num(scope.drive_vpp)
         elif over_range:
             rec["over"] = {"drive": False, "velocity": True}
         self._write(rec)

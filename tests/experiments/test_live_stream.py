@@ -102,6 +102,8 @@ def test_shaker_stream_and_the_page_replaying_it(tmp_path):
         assert [x["tray_amp_request_um"] for x in pts] == list(p["tray_amp_request_um"][...]) == [8, 12, 8, 12]
         assert [x["drive_vpp"] for x in pts] == list(p["drive_vpp"][...])
         assert [complex(*x["transmissibility"]) for x in pts] == list(p["transmissibility"][...])
+    for x in pts:       # the drive the scope saw is the one applied (the scope's rms, a sine's 2 sqrt 2)
+        assert x["drive_measured_vpp"] == pytest.approx(x["drive_vpp"], rel=0.05)
     with LiveView(out) as view, sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=["--no-sandbox"])
         try:
@@ -116,7 +118,7 @@ def test_shaker_stream_and_the_page_replaying_it(tmp_path):
             assert page.locator("#drivev circle.pt").count() == 4 and page.locator("#mag circle.pt").count() == 4
             assert page.inner_text("#k") == "4" and page.inner_text("#drive") == "DRIVE OFF"
             assert page.is_disabled("#stop-point")            # nothing to stop: the run has ended
-            assert "tray" in page.inner_text("#last-point")
+            assert "tray" in page.inner_text("#last-point") and "(measured " in page.inner_text("#last-point")
             assert "No video in this run" in page.inner_text("#speed-note")
             page.goto(view.url.replace("token=", "token=x"))   # a wrong token gets no page
             assert "wrong token" in page.inner_text("body")
