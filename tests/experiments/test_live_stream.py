@@ -20,6 +20,7 @@ import h5py
 import numpy as np
 import pytest
 from labcfg import inchip_toml, shaker_toml
+from livehelpers import Browser
 
 from clihelpers import REPO, last_json, run_cli
 from labkit.errors import LimitError
@@ -105,13 +106,9 @@ def test_shaker_stream_and_the_page_replaying_it(tmp_path):
     for x in pts:       # the drive the scope saw is the one applied (the scope's rms, a sine's 2 sqrt 2)
         assert x["drive_measured_vpp"] == pytest.approx(x["drive_vpp"], rel=0.05)
     with LiveView(out) as view, sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=["--no-sandbox"])
+        browser = Browser(pw)
         try:
-            console: list[str] = []
-            page = browser.new_page(viewport={"width": 1280, "height": 1100})
-            page.on("console", lambda m: console.append(f"{m.type}: {m.text}"))
-            page.on("pageerror", lambda e: console.append(f"pageerror: {e}"))
-            page.goto(view.url)
+            page = browser.page(view.url, height=1100)
             page.wait_for_function("() => document.getElementById('state').textContent.includes('exit 0')")
             assert page.is_visible("#shaker") and "transmissibility" in page.inner_text("#h-mag")
             page.wait_for_function("() => document.querySelectorAll('#tray circle.pt').length === 8")
@@ -122,7 +119,7 @@ def test_shaker_stream_and_the_page_replaying_it(tmp_path):
             assert "No video in this run" in page.inner_text("#speed-note")
             page.goto(view.url.replace("token=", "token=x"))   # a wrong token gets no page
             assert "wrong token" in page.inner_text("body")
-            assert [c for c in console if "403" not in c] == [], console
+            assert [c for c in browser.console if "403" not in c] == [], browser.console
         finally:
             browser.close()
 
@@ -147,18 +144,15 @@ def test_the_page_shows_each_video_s_tracked_speed(tmp_path):
     assert len(videos) == 2 and all(videos)
     want = [track_file(tmp_path / v, quiet=True).summary for v in videos]
     with LiveView(out) as view, sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path="/usr/bin/chromium", args=["--no-sandbox"])
+        browser = Browser(pw)
         try:
-            console: list[str] = []
-            page = browser.new_page(viewport={"width": 1280, "height": 1300})
-            page.on("console", lambda m: console.append(f"{m.type}: {m.text}"))
-            page.goto(view.url)
+            page = browser.page(view.url, height=1300)
             page.wait_for_function("() => document.querySelectorAll('#speed circle.pt').length === 2",
                                    timeout=60000)
             assert page.locator("#speed line.ci").count() == 2
             assert "2 of 2 tracked" in page.inner_text("#speed-note")
             got = page.evaluate("window.__labkit.speeds")
-            assert console == [], console
+            assert browser.console == [], browser.console
         finally:
             browser.close()
     for g, w, v in zip(got, want, videos):

@@ -31,12 +31,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from livehelpers import Browser
 
 from clihelpers import REPO, last_json
 from labkit.experiments import live
 from labkit.experiments.session import LAB_MODELS
 
-CHROMIUM = "/usr/bin/chromium"
 FREQS = [float(f) for f in np.round(np.geomspace(300, 3000, 18), 2)]
 LOCS = ("body", "knee")
 
@@ -119,24 +119,6 @@ def _start_view(run: Path) -> tuple[subprocess.Popen, str]:
     line = proc.stdout.readline()
     assert line, proc.stderr.read()
     return proc, json.loads(line)["url"]
-
-
-class Browser:
-    """A headless Chromium page that records every console message and page error."""
-
-    def __init__(self, pw):
-        self.browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-        self.console: list[str] = []
-
-    def page(self, url: str):
-        page = self.browser.new_page(viewport={"width": 1280, "height": 900})
-        page.on("console", lambda m: self.console.append(f"{m.type}: {m.text}"))
-        page.on("pageerror", lambda e: self.console.append(f"pageerror: {e}"))
-        page.goto(url)
-        return page
-
-    def close(self):
-        self.browser.close()
 
 
 def _page_points(page) -> int:
