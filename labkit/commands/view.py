@@ -50,8 +50,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             emit_json(out)              # the first line: how a script (or a test) finds the page
         else:
             print(f"live view of {view.run_path.name}: {view.url}", flush=True)
+            import socket
+
             print("(this computer only; from elsewhere: ssh -L "
-                  f"{view.port}:127.0.0.1:{view.port} THIS-HOST; Ctrl-C to stop serving)", file=sys.stderr, flush=True)
+                  f"{view.port}:127.0.0.1:{view.port} {socket.gethostname()}, then the same URL; "
+                  "Ctrl-C to stop serving)", file=sys.stderr, flush=True)
         if args.open:
             import webbrowser
 
