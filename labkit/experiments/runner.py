@@ -31,6 +31,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -39,7 +40,7 @@ from typing import Any, cast
 import numpy as np
 
 from labkit.errors import DriveNotOff, InputError, InstrumentError, Interrupted, LimitError
-from labkit.experiments import kinds, measure
+from labkit.experiments import kinds, live, measure
 from labkit.experiments.config import ShakerConfig
 from labkit.experiments.kinds import POINT_OVERHEAD_BYTES, Config
 from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, SinePoint
@@ -98,6 +99,8 @@ class Runner:
         self.burst_end = 0.0                     # time.monotonic() when the last burst ends by itself
         self.record_delay: tuple[float, float] | None = None   # (record_s, delay_s) set on the scope
         self.drive_set_vpp: float | None = None  # amplitude commanded (for the measured-drive check)
+        self.live = live.LiveStream(runfile.path, live.console_for_run(quiet))   # RUN.live.jsonl
+        self.last_rec: tuple[measure.Records, float | None, float | None] | None = None  # + V/div then
 
     # -- events ------------------------------------------------------------------------------
     def _event(self, text: str) -> None:
@@ -105,6 +108,30 @@ class Runner:
             self.file.event(text)
         except Exception:  # the log must never stop a shutdown
             pass
+        self.live.event(text)
+
+    def _live_point(self, p: Any, rows: dict[str, Any], loc: dict[str, Any] | None) -> None:
+        """The finished point into the live stream, with its last record's levels on the scope."""
+        from labkit.experiments.rig import VERTICAL_DIVS
+
+        scope = None
+        if self.last_rec is not None and rows.get("status") == "ok":
+            rec, dvpd, vvpd = self.last_rec
+            scope = live.record_levels(rec.drive_v, rec.velocity_v, dvpd and dvpd * VERTICAL_DIVS / 2,
+                                       vvpd and vvpd * VERTICAL_DIVS / 2)
+        self.last_rec = None
+        try:            # the live view must never stop a run
+            self.live.point(p.index, rows, loc, scope, drive_set_vpp=self.drive_set_vpp,
+                            over_range="over-range" in str(rows.get("reason", "")))
+        except Exception as exc:
+            self._event(f"live stream: point {p.index} not written ({type(exc).__name__}: {exc})")
+
+    def _check_stop_request(self) -> None:
+        """A Stop "after this point" from ``labkit view``: the same way out as a signal."""
+        why = self.live.stop_requested()
+        if why is not None:
+            self._event(f"stop requested: {why}")
+            raise Interrupted("STOP (labkit view)")
 
     # -- the run -----------------------------------------------------------------------------
     def run(self, plan: Plan) -> str:
@@ -121,6 +148,9 @@ class Runner:
                 bar.total = plan.est_s
                 bar.bar_format = "{desc} {percentage:3.0f}%|{bar}| {postfix} [{elapsed}<{remaining}]"
                 bar.set_postfix_str(f"point {n_done}/{plan.points_total}", refresh=False)
+                self.live.start(kind=self.file.kind, points_planned=plan.points_total, points_done=n_done,
+                                est_s=plan.est_s, locations=list(getattr(self.cfg, "locations", ()) or ()),
+                                config=str(getattr(self.cfg, "path", "") or ""))
                 self._event(f"run started: {len(plan.points)} of {plan.points_total} points to measure")
                 self._declare_bounded(plan)
                 m = self.cfg.method
@@ -128,6 +158,7 @@ class Runner:
                     self.rig.set_record_points(math.ceil(m.dwell_cycles * self.cfg.scope.samples_per_cycle))
                 for step in plan.steps:
                     check_stop()        # a stop signal whose exception was dropped (safety._PENDING)
+                    self._check_stop_request()
                     if isinstance(step, MoveSpot):
                         self._move_spot(step.spot, drive_off=True)
                         continue
@@ -167,6 +198,7 @@ class Runner:
         """Drive off, then the final status into the file; returns the file's error, if any."""
         finish_error: Exception | None = None
         drive_error: DriveNotOff | None = None
+        ending = sys.exc_info()[1]          # what ended the run (None: it completed)
         with shielded() as arrived:
             try:
                 self.guard.final_off(status)
@@ -180,6 +212,7 @@ class Runner:
                 self.file.finish(status)
             except Exception as exc:   # another error may be in flight: never mask it
                 finish_error = exc
+            self.live.end(status, drive_error or ending or finish_error)
         if drive_error is not None:
             raise drive_error
         return finish_error
@@ -313,6 +346,7 @@ class Runner:
             with deferred(), self._writing(p.index):
                 self.file.end_point(p.index, rows | {"time_unix_s": time.time(),
                                                     "duration_s": time.time() - t_start})
+            self._live_point(p, rows, None)
             if self.cfg.on_interlock == "end":
                 raise InterlockEnd(f"{il.reason} at point {p.index}; run ended (run.on_interlock = 'end')",
                                    limit="interlock") from None
@@ -326,6 +360,7 @@ class Runner:
                 group, dt, arrays = records
                 self.file.add_records(group, p.index, dt, arrays)
             self.file.end_point(p.index, rows | {"time_unix_s": time.time(), "duration_s": time.time() - t_start})
+        self._live_point(p, rows, loc_rows)
 
     @contextlib.contextmanager
     def _writing(self, index: int) -> Iterator[None]:
@@ -416,6 +451,7 @@ class Runner:
                 rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
                                       timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
                 waited += min(dwell_s, time.monotonic() - t_acq)
+            self.last_rec = (rec, getattr(rig, "drive_vpd", None), getattr(rig, "velocity_vpd", None))
             if rig.vibrometer.over_range():
                 raise Interlock("vibrometer over-range")
             if not rig.velocity_clipped(rec.velocity_v) or not rig.widen_velocity_range():
