@@ -340,6 +340,25 @@ class Instrument:
 
 
 _ERR = re.compile(r'^\s*([+-]?\d+)\s*,\s*"?(.*?)"?\s*$')
+#: an error summary longer than this is cut (the entries left out are counted)
+SUMMARY_CHARS = 240
+
+
+def summarise_errors(errors: list[str]) -> str:
+    """The error-queue entries as one short line: repeats counted (``-113,"Undefined header"
+    x32``), at most :data:`SUMMARY_CHARS` characters, the rest counted, never a newline."""
+    counted: dict[str, int] = {}
+    for e in errors:
+        text = " ".join(e.split())[:80]
+        counted[text] = counted.get(text, 0) + 1
+    parts = [t if n == 1 else f"{t} x{n}" for t, n in counted.items()]
+    out: list[str] = []
+    for i, part in enumerate(parts):
+        if sum(len(p) + 2 for p in out) + len(part) > SUMMARY_CHARS:
+            out.append(f"... {len(parts) - i} more kinds")
+            break
+        out.append(part)
+    return "; ".join(out)
 
 
 class ScpiInstrument(Instrument):
@@ -398,7 +417,7 @@ class ScpiInstrument(Instrument):
         self.errors_at_connect = stale
         if stale:
             log.warning("%s: errors queued before this connection (cleared): %s", self.name,
-                        "; ".join(stale))
+                        summarise_errors(stale))
 
     def snapshot(self) -> dict[str, Any]:
         snap = super().snapshot()
@@ -435,7 +454,7 @@ class ScpiInstrument(Instrument):
         """
         errors = self.read_error_queue()
         if errors:
-            raise InstrumentError("instrument reported " + "; ".join(errors), instrument=self.name,
+            raise InstrumentError("instrument reported " + summarise_errors(errors), instrument=self.name,
                                   command=after or self.err_command)
 
     def read_error_queue(self) -> list[str]:

@@ -67,17 +67,22 @@ def acquire_burst(scope: Any, fire: Any, drive_channel: int, velocity_channel: i
     The scope's record was placed ``settle_s`` after its trigger (the burst's start,
     :meth:`set_record_delay`), so it holds ``dwell_s`` of the steady response.
     """
-    scope.single()
-    # a query answered after :SING means the scope has armed: only then may the burst start
-    # (the two instruments are separate links; nothing else orders their commands). *STB? never
-    # waits (an *OPC? may be held until an armed single acquisition completes, i.e. forever here)
-    confirm = getattr(scope, "query", None)
-    if confirm is not None:
-        confirm("*STB?")
+    arm(scope)
     fire()
     time.sleep(settle_s + dwell_s)
     scope.wait_done(timeout_s)
     return _read(scope, drive_channel, velocity_channel)
+
+
+def arm(scope: Any) -> None:
+    """``:SING``, confirmed: a query answered after it means the scope has armed, so a trigger sent
+    to the generator next cannot come before it (the two instruments are separate links; nothing
+    else orders their commands). *STB? never waits (an *OPC? may be held until an armed single
+    acquisition completes, i.e. forever here)."""
+    scope.single()
+    confirm = getattr(scope, "query", None)
+    if confirm is not None:
+        confirm("*STB?")
 
 
 def _read(scope: Any, drive_channel: int, velocity_channel: int) -> Records:

@@ -142,7 +142,7 @@ class Rig:
                                     config=cfg.path)
             # A generator may come up with its output on from an earlier session: off first.
             fg.safe_off()
-            fg.set_load_high_z()
+            fg.set_load()         # the declared load_ohm (INF: the PZT, an amplifier input), read back
             scope = self.scope = _open(inst["scope"])
             scope.poll_s = 0.002       # completion polls: fine-grained (the record time is slept)
             vib = self.vibrometer = _open(inst["vibrometer"])
@@ -153,7 +153,10 @@ class Rig:
             # EXT: the generator's TTL sync (phase zero of the sine, start of a sweep)
             offset_v = setup.drive[1] if setup.drive is not None else 0.0
             level = 1.0 if trig == "EXT" else (offset_v if trig == f"CHAN{self.drive_channel}" else 0.0)
-            scope.set_trigger(trig, level, "POS")
+            if trig == "EXT":
+                fg.enable_sync()      # sync on, from the drive channel, read back (docs/instruments.md)
+            scope.set_trigger(trig, level, "POS")     # NORMal sweep: no trigger, no record
+            scope.set_averaging(1)    # one record per trigger (a scope left averaging would blend points)
             if setup.drive is not None:
                 self.on_drive_amplitude(*setup.drive)
             if setup.wants_camera:

@@ -280,6 +280,13 @@ class Runner:
                             f"{DRIVE_TOLERANCE:.0%} off): the generator was switched off or changed "
                             "outside this run, or its cable is loose")
 
+    def _no_trigger(self) -> None:
+        """After an acquisition that never triggered (the scope waits in NORMal sweep): an output found
+        off explains it (no drive, no sync) and is an interlock on this point, not a fault of the rig."""
+        if self.guard.is_on and not self.guard.funcgen.output_on:
+            raise Interlock(f"no trigger: drive measured off by the generator (its output query), commanded "
+                            f"{self.drive_set_vpp or 0:.4g} Vpp: the generator was switched off outside this run")
+
     # -- steps -------------------------------------------------------------------------------
     def _move_spot(self, spot: str, *, drive_off: bool) -> None:
         if spot == self.spot:
@@ -402,9 +409,19 @@ class Runner:
             t_acq = time.monotonic()
             if self.bounded:
                 self._wait_burst_end()       # before arming: the trigger must follow the arm at once
-                rec = measure.acquire_burst(rig.scope, lambda: self._fire_burst(freq_hz),
-                                            rig.drive_channel, rig.velocity_channel,
-                                            settle_s, dwell_s, timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                try:
+                    rec = measure.acquire_burst(rig.scope, lambda: self._fire_burst(freq_hz),
+                                                rig.drive_channel, rig.velocity_channel,
+                                                settle_s, dwell_s, timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                except InstrumentError as exc:
+                    if not getattr(exc, "no_trigger", False):
+                        raise
+                    self._no_trigger()
+                    if not retries:
+                        raise
+                    retries -= 1    # NORMal sweep: a missed burst start is a timeout, not a silent record
+                    self._event(f"no trigger at {freq_hz:g} Hz (the burst's start missed?): acquiring once more")
+                    continue
                 waited += min(settle_s + dwell_s, time.monotonic() - t_acq)
                 if retries and self._no_drive_in(rec):
                     # the scope may have missed the burst's start (it then records silence): once more;
@@ -413,8 +430,13 @@ class Runner:
                     self._event(f"too little drive in the record at {freq_hz:g} Hz: acquiring once more")
                     continue
             else:
-                rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
-                                      timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                try:
+                    rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
+                                          timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                except InstrumentError as exc:
+                    if getattr(exc, "no_trigger", False):
+                        self._no_trigger()
+                    raise
                 waited += min(dwell_s, time.monotonic() - t_acq)
             if rig.vibrometer.over_range():
                 raise Interlock("vibrometer over-range")
@@ -455,8 +477,8 @@ class Runner:
         records = []
         try:
             for _ in range(p.averages):
-                rig.scope.single()
-                fg.trigger()
+                measure.arm(rig.scope)     # armed before the sweep starts: in NORMal sweep a start
+                fg.trigger()               # the scope missed would be a timeout
                 rig.scope.wait_done(p.length_s * 2 + ACQUIRE_MARGIN_S)
                 wd = rig.scope.read_waveform(rig.drive_channel)
                 wv = rig.scope.read_waveform(rig.velocity_channel)

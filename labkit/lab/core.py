@@ -238,16 +238,17 @@ class VirtualLab:
         return self._setup
 
     def inject_fault(self, instrument: str, kind: str = "drop", after: int = 0, match: str | None = None,
-                     count: int = 1) -> Fault:
+                     count: int = 1, interval_s: float = 0.5) -> Fault:
         """Arm a fault on ``instrument``'s replies (see :class:`labkit.lab.transport.Fault`).
 
         ``after`` replies (to commands containing ``match``, if given) go out
         normally first; the next ``count`` are dropped mid-transfer, withheld
-        (``stall``) or replaced by ``garbage``.
+        (``stall``), replaced by ``garbage`` or sent a byte every ``interval_s``
+        (``trickle``).
         """
         if instrument not in self.servers:
             raise ValueError(f"instrument must be one of {', '.join(self.servers)}, not {instrument!r}")
-        fault = Fault(kind, int(after), match, int(count))
+        fault = Fault(kind, int(after), match, int(count), float(interval_s))
         self.servers[instrument].inject(fault)
         self._log("lab", "state", f"fault armed on {instrument}: {kind} after {after} (match {match!r})")
         return fault
@@ -415,7 +416,8 @@ class VirtualLab:
         """The scope's trigger: generator sync (EXT) or a rising edge of the drive (CHAN1)."""
         drive = self.funcgen.drive(1)
         if source == "EXT":
-            return drive.next_sync(t_min)
+            # EXT is cabled to the Sync connector: off (or following a silent channel), no trigger
+            return self.funcgen.sync_edge(t_min)
         if source == "CHAN1":
             if drive.is_sine() and drive.amp_v > 0:
                 level = self.scope.trigger_level("CHAN1")

@@ -16,6 +16,7 @@ output voltage and rescales the displayed amplitude.
 """
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -30,6 +31,8 @@ MAX_FREQ_HZ = 30e6
 MIN_FREQ_HZ = 1e-6
 SOURCE_OHM = 50.0
 MAX_VPP_OPEN = 20.0   # open-circuit (10 Vpp into 50 ohm)
+#: a number and its suffix (the amplitude's unit may be in the suffix)
+_NUMBER = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z]*)\s*$")
 
 
 @dataclass(frozen=True)
@@ -362,6 +365,37 @@ class SimKeysight33500B(SimScpiInstrument):
         with self.lock:
             return self.ch[channel]
 
+    # -- the Sync connector (cabled to the scope's EXT input) -----------------------------------
+    def sync_channel(self) -> int | None:
+        """The channel whose sync reaches the Sync connector, or None when the connector is off
+        (``OUTPut:SYNC:SOURce`` picks the channel, ``OUTPut:SYNC`` switches it)."""
+        src = self.settings.get("sync_source", "CH1")
+        n = int(str(src)[-1]) if str(src)[-1].isdigit() else 1
+        return n if n in self.ch and self.sync[n] else None
+
+    def sync_inverted(self, n: int) -> bool:
+        """Whether channel ``n``'s sync pulse is inverted (its rising edge at half a cycle)."""
+        return self.get("sync_pol", n) == "INV"
+
+    def sync_edge(self, t_min: float) -> float | None:
+        """The next rising edge at the Sync connector at or after ``t_min``, or None.
+
+        The connector is off, or follows another channel: whatever that channel does
+        (nothing, if it is off). A plain waveform's sync rises at phase zero of each
+        cycle, inverted at half a cycle; sweeps and bursts mark their starts.
+        """
+        with self.lock:
+            n = self.sync_channel()
+            if n is None or self.get("sync_mode", n) != "NORM":
+                return None
+            d = self.ch[n]
+            inverted = self.sync_inverted(n)
+        if inverted and not (d.sweep or d.burst):
+            half = 0.5 / d.freq_hz
+            t = d.next_sync(t_min - half)
+            return None if t is None else t + half
+        return d.next_sync(t_min)
+
     # -- helpers ------------------------------------------------------------------------------
     def _chan(self, c: Call, i: int = 0) -> int:
         n = c.suffix(i)
@@ -383,13 +417,27 @@ class SimKeysight33500B(SimScpiInstrument):
     def _display_vpp(self, n: int) -> float:
         return 2 * self.ch[n].amp_v / self._factor(n)
 
+    def _amp_unit(self, n: int, text: str) -> tuple[str, str]:
+        """(unit, number) of an amplitude: a ``VPP``/``MVPP``, ``VRMS``/``MVRMS`` or ``DBM`` suffix
+        names its own unit; a bare number (or ``V``/``MV``) is in ``VOLTage:UNIT``'s."""
+        m = _NUMBER.match(text)
+        suffix = m.group(2).upper() if m else ""
+        for unit, forms in (("VPP", ("VPP", "MVPP")), ("VRMS", ("VRMS", "MVRMS")), ("DBM", ("DBM",))):
+            if suffix in forms and m is not None:
+                scale = 1e-3 if suffix.startswith("MV") else 1.0
+                return unit, repr(float(m.group(1)) * scale)
+        return self.vunit[n], text
+
     def _set_amp(self, n: int, text: str) -> None:
         f = self._factor(n)
         limit = MAX_VPP_OPEN / f
-        if self.vunit[n] == "VRMS":
+        unit, text = self._amp_unit(n, text)
+        if unit == "DBM" and np.isinf(self.load[n]):
+            raise ScpiError(-221, "Settings conflict;dBm units not allowed with high impedance load")
+        if unit == "VRMS":
             value = self.num(text, "V", 1e-3 / (2 * 2 ** 0.5), limit / (2 * 2 ** 0.5), 0.1 / (2 * 2 ** 0.5))
             vpp = value * 2 * 2 ** 0.5
-        elif self.vunit[n] == "DBM":
+        elif unit == "DBM":
             dbm = self.num(text, "", _vpp_to_dbm(1e-3, self.load[n]), _vpp_to_dbm(limit, self.load[n]),
                            _vpp_to_dbm(0.1, self.load[n]))
             vpp = _dbm_to_vpp(dbm, self.load[n])
@@ -608,8 +656,10 @@ class SimKeysight33500B(SimScpiInstrument):
         self.setting("OUTPut#:POLarity", "polarity", "NORM", lambda t: parse_enum(t, ["NORMal", "INVerted"]),
                      str, True)
         self.setting("OUTPut:SYNC:SOURce", "sync_source", "CH1", lambda t: parse_enum(t, ["CH1", "CH2"]), str)
-        self.setting("OUTPut:SYNC:MODE", "sync_mode", "NORM",
-                     lambda t: parse_enum(t, ["NORMal", "CARRier", "MARKer"]), str)
+        self.setting("OUTPut#:SYNC:MODE", "sync_mode", "NORM",
+                     lambda t: parse_enum(t, ["NORMal", "CARRier", "MARKer"]), str, True)
+        self.setting("OUTPut#:SYNC:POLarity", "sync_pol", "NORM",
+                     lambda t: parse_enum(t, ["NORMal", "INVerted"]), str, True)
         self.setting("OUTPut:TRIGger[:STATe]", "trig_out", False, parse_bool, yes_no)
         self.setting("OUTPut:TRIGger:SLOPe", "trig_out_slope", "POS",
                      lambda t: parse_enum(t, ["POSitive", "NEGative"]), str)
@@ -767,10 +817,13 @@ class SimRigolDG1000Z(SimKeysight33500B):
         add(S + "BURSt:MODE", set=self._set_rigol_burst_mode, query=self._rigol_burst_mode_query)
         add(S + "APPLy", query=lambda c: self._rigol_apply_query(self._chan(c)))
         self.commands = [cmd for cmd in self.commands if cmd.pattern not in ("[SOURce#:]APPLy:SINusoid",
-                                                                             "OUTPut#:SYNC[:STATe]")]
+                                                                             "OUTPut#:SYNC[:STATe]",
+                                                                             "OUTPut#:SYNC:POLarity")]
         add(S + "APPLy:SINusoid", set=self._rigol_apply_sin)
         add("OUTPut#:SYNC[:STATe]", set=lambda c: self.sync.__setitem__(self._chan(c), parse_bool(c.one())),
             query=lambda c: "ON" if self.sync[self._chan(c)] else "OFF")
+        self.setting("OUTPut#:SYNC:POLarity", "sync_pol", "POS", lambda t: parse_enum(t, ["POSitive", "NEGative"]),
+                     str, True)
         add(S + "SWEep:TRIGger:SOURce", set=self._set_rigol_trig, query=self._rigol_trig_query)
         add(S + "BURSt:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
         add(S + "SWEep:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
@@ -785,6 +838,13 @@ class SimRigolDG1000Z(SimKeysight33500B):
         self.setting("OUTPut#:GATe:POLarity", "gate_out_pol", "POSITIVE",
                      lambda t: {"POS": "POSITIVE", "NEG": "NEGATIVE"}[parse_enum(t, ["POSitive", "NEGative"])],
                      str, True)
+
+    def sync_channel(self) -> int | None:
+        """The lab cables channel 1's rear-panel sync to the scope: on with ``:OUTPut1:SYNC ON``."""
+        return 1 if self.sync[1] else None
+
+    def sync_inverted(self, n: int) -> bool:
+        return self.get("sync_pol", n) == "NEG"
 
     def trigger_delay(self, n: int) -> float:
         """``:SOURce<n>:BURSt:TDELay``: the burst starts this long after its trigger."""

@@ -206,7 +206,7 @@ _NUM = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z/]
 #: SI suffixes per unit; SCPI reads ``MHZ`` as megahertz and ``MV`` as millivolt
 _SUFFIX = {
     "HZ": {"HZ": 1.0, "KHZ": 1e3, "MHZ": 1e6, "MAHZ": 1e6, "GHZ": 1e9},
-    "V": {"V": 1.0, "MV": 1e-3, "UV": 1e-6, "KV": 1e3, "VPP": 1.0, "MVPP": 1e-3, "VRMS": 1.0},
+    "V": {"V": 1.0, "MV": 1e-3, "UV": 1e-6, "KV": 1e3},
     "S": {"S": 1.0, "MS": 1e-3, "US": 1e-6, "NS": 1e-9, "PS": 1e-12, "KS": 1e3},
     "OHM": {"OHM": 1.0, "KOHM": 1e3, "MOHM": 1e6},
     "": {},

@@ -9,7 +9,7 @@ goes to ``on_log(instrument, "rx"|"tx", text)``.
 Faults (:class:`Fault`) are applied to replies: ``drop`` sends half of the
 reply and closes the connection (a pulled cable, mid-block for a waveform),
 ``stall`` swallows the reply (a hung instrument), ``garbage`` replaces it with
-random bytes and a ``\\n``.
+random bytes and a ``\\n``, ``trickle`` sends it a byte at a time (raw sockets).
 """
 from __future__ import annotations
 
@@ -34,6 +34,10 @@ class Handler(Protocol):
 LogFn = Callable[[str, str, str], None]
 
 
+#: ``trickle``: the reply leaves one byte every ``interval_s`` (a scope whose link crawls)
+FAULT_KINDS = ("drop", "stall", "garbage", "trickle")
+
+
 @dataclass
 class Fault:
     """A fault armed on one instrument.
@@ -55,10 +59,11 @@ class Fault:
     after: int = 0
     match: str | None = None
     count: int = 1
+    interval_s: float = 0.5
 
     def __post_init__(self) -> None:
-        if self.kind not in ("drop", "stall", "garbage"):
-            raise ValueError(f"fault kind must be drop, stall or garbage, not {self.kind!r}")
+        if self.kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, not {self.kind!r}")
 
     def hits(self, command: str) -> bool:
         """Count a reply to ``command``; True when this one is to be spoiled."""
@@ -94,6 +99,7 @@ class _Endpoint:
         self._rng = np.random.default_rng(seed)
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        self._trickle_s = 0.5
 
     @property
     def name(self) -> str:
@@ -134,6 +140,11 @@ class _Endpoint:
         if fault.kind == "stall":
             self.on_log(self.name, "fault", f"stall: reply to {line!r} withheld")
             return None, "stall"
+        if fault.kind == "trickle":
+            self.on_log(self.name, "fault", f"trickle: the reply to {line!r} leaves a byte every "
+                        f"{fault.interval_s:g} s")
+            self._trickle_s = fault.interval_s
+            return reply, "trickle"
         if fault.kind == "garbage":
             junk = bytes(self._rng.integers(128, 256, size=max(8, min(len(reply), 64)), dtype=np.uint8)) + b"\n"
             self.on_log(self.name, "fault", f"garbage: {junk[:-1]!r} instead of the reply to {line!r}")
@@ -197,7 +208,9 @@ class TcpServer(_Endpoint):
                     if not line.strip():
                         continue
                     data, fault = self.process(line)
-                    if data:
+                    if data and fault == "trickle":
+                        self._send_trickle(conn, data)
+                    elif data:
                         conn.settimeout(None)
                         conn.sendall(data)
                         conn.settimeout(0.05)
@@ -210,6 +223,13 @@ class TcpServer(_Endpoint):
             with self._lock:
                 self._conns.discard(conn)
             conn.close()
+
+    def _send_trickle(self, conn: socket.socket, data: bytes) -> None:
+        """One byte every ``_trickle_s`` until the reply is out, the client leaves or the lab stops."""
+        for i in range(len(data)):
+            if self._stop.wait(self._trickle_s):
+                return
+            conn.sendall(data[i:i + 1])
 
     def close(self) -> None:
         self._stop.set()
