@@ -117,6 +117,7 @@ class Vibrometer(Protocol):
     """A laser Doppler vibrometer controller: its decoder's scale factor and over-range flag."""
 
     scale_mm_s_per_v: float
+    signal_delay_s: float
 
     def over_range(self) -> bool: ...
 

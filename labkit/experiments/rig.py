@@ -104,6 +104,7 @@ class Rig:
         self.drive_channel = cfg.scope.drive_channel
         self.velocity_channel = cfg.scope.velocity_channel
         self.scale_mm_s_per_v = cfg.scale_mm_s_per_v
+        self.velocity_delay_s = 0.0
         self._spot = spot
         self._funcgen_limits: dict[str, float] = {}
         self.velocity_vpd = cfg.scope.velocity_volts_per_div or 2 * VIB_OUTPUT_MAX_V / VERTICAL_DIVS
@@ -148,6 +149,8 @@ class Rig:
             vib = self.vibrometer = _open(inst["vibrometer"])
             vib.scale_mm_s_per_v = cfg.scale_mm_s_per_v
             self.scale_mm_s_per_v = float(vib.scale_mm_s_per_v)
+            # the decoder's output lags the velocity: every point's phase is corrected for it
+            self.velocity_delay_s = float(vib.signal_delay_s)
             scope.setup_channel(self.velocity_channel, self.velocity_vpd, 0.0, "DC")
             trig = cfg.scope.trigger_source
             # EXT: the generator's TTL sync (phase zero of the sine, start of a sweep)

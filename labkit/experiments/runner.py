@@ -450,7 +450,7 @@ class Runner:
         t_changed = time.monotonic()
         self.guard.on()
         rec, waited = self._settle_and_acquire(p.freq_hz, p.settle_s, p.dwell_s, t_changed)
-        ph = measure.sine_phasors(rec, p.freq_hz, self.rig.scale_mm_s_per_v)
+        ph = measure.sine_phasors(rec, p.freq_hz, self.rig.scale_mm_s_per_v, self.rig.velocity_delay_s)
         self._check_measured_drive(ph)
         self.timing.append({"waited_s": waited, "settle_s": p.settle_s, "dwell_s": p.dwell_s})
         rows = {"location": p.location, "freq_hz": p.freq_hz, "reason": ""}
@@ -491,7 +491,8 @@ class Runner:
                 fg.sweep_off()
             except InstrumentError:
                 pass
-        f, h, coh = measure.chirp_h1(records, rig.scale_mm_s_per_v, p.start_hz, p.stop_hz)
+        f, h, coh = measure.chirp_h1(records, rig.scale_mm_s_per_v, p.start_hz, p.stop_hz,
+                                     rig.velocity_delay_s)
         self.timing.append({"waited_s": p.averages * p.length_s})
         rows = {"location": p.location, "freq_hz": float("nan"), "reason": ""}
         loc = {"location": p.location, "freq_hz": f, "frf": h, "quality": coh, "coherence": coh,
@@ -530,7 +531,7 @@ class Runner:
             self.guard.on()
             rec, w = self._settle_and_acquire(f, p.settle_s, p.dwell_s, t_changed)
             waited += w
-            tray = measure.sine_phasors(rec, f, rig.scale_mm_s_per_v)
+            tray = measure.sine_phasors(rec, f, rig.scale_mm_s_per_v, rig.velocity_delay_s)
             self._check_measured_drive(tray)
             x_um = measure.displacement_um(tray.velocity_mm_s, f)
             iterations += 1
@@ -561,7 +562,7 @@ class Runner:
         self._move_spot(p.robot_spot, drive_off=False)
         robot_rec, w = self._settle_and_acquire(f, p.settle_s, p.dwell_s, time.monotonic())
         waited += w
-        robot = measure.sine_phasors(robot_rec, f, rig.scale_mm_s_per_v)
+        robot = measure.sine_phasors(robot_rec, f, rig.scale_mm_s_per_v, rig.velocity_delay_s)
         self._check_measured_drive(robot)
         from labkit.analysis.frf import transmissibility
 

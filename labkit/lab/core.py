@@ -390,6 +390,7 @@ class VirtualLab:
             spot, setup = self._spot, self._setup
         drive = self.funcgen.drive(1)
         scale = self.vibrometer.scale_mm_s_per_v
+        delay = self.vibrometer.signal_delay_s    # the decoder's output lags the velocity
 
         def render(t_abs: np.ndarray, rng: np.random.Generator,
                    channels: tuple[int, ...] = (1, 2, 3, 4)) -> dict[int, np.ndarray]:
@@ -399,8 +400,8 @@ class VirtualLab:
                 if ch == 1:
                     out[1] = drive.voltage(t_abs)
                 elif ch == 2 or (ch == 3 and setup == "shaker"):
-                    v = (self._spot_velocity(spot, setup, drive, t_abs) if ch == 2
-                         else self._tray_velocity(drive, t_abs))
+                    v = (self._spot_velocity(spot, setup, drive, t_abs - delay) if ch == 2
+                         else self._tray_velocity(drive, t_abs - delay))
                     v = v + rng.normal(0.0, self.noise_mm_s_rms, n)
                     if ch == 2:
                         self.vibrometer.clipped = bool(np.max(np.abs(v)) > scale * FULL_SCALE_V)

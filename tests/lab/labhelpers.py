@@ -107,6 +107,12 @@ def read_word(sc: Raw, ch: int) -> tuple[np.ndarray, np.ndarray]:
     return (np.arange(len(data)) - xref) * xinc + xorig, (data - yref) * yinc + yorig
 
 
+def decoder_lag(lab: VirtualLab, freq_hz: float) -> complex:
+    """What the vibrometer decoder's signal delay does to a velocity phasor at ``freq_hz``: the
+    analog output is the velocity ``signal_delay_s`` ago (7.6 us on the lab's OFV-5000)."""
+    return complex(np.exp(-2j * np.pi * freq_hz * lab.vibrometer.signal_delay_s))
+
+
 def settle(lab: VirtualLab) -> None:
     """Wait until the structure's transient after a drive change has died out."""
     time.sleep(lab.model.settle_s() + 0.02)

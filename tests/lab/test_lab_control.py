@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 import pyvisa
-from labhelpers import drive_sine, fit_sine, lab, raw, read_word  # noqa: F401  (fixtures)
+from labhelpers import decoder_lag, drive_sine, fit_sine, lab, raw, read_word  # noqa: F401  (fixtures)
 
 from labkit.errors import InstrumentError
 from labkit.lab import VirtualLab
@@ -77,7 +77,7 @@ def test_shaker_setup_drives_the_tray_and_the_simulated_robot(lab, raw):
     # the tray: generator -> 20 dB -> shaker, 25 um at 240 Hz
     tray_v = fit_sine(t, tray * scale, freq_hz)
     assert abs(tray_v) / (2 * np.pi * freq_hz) * 1e3 == pytest.approx(amp_um, rel=0.01)
-    h = lab.chain.tray_velocity_frf(freq_hz)
+    h = lab.chain.tray_velocity_frf(freq_hz) * decoder_lag(lab, freq_hz)    # the decoder's output lags
     assert np.angle(tray_v / fit_sine(t, drive, freq_hz) / h) == pytest.approx(0, abs=0.01)
     # the knee: the hybrid simulator's answer for that tray motion (cached per freq, amp)
     from labkit.sim import Shaker, simulate
