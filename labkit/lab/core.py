@@ -18,9 +18,11 @@ decayed (12 time constants of the slowest mode), then analytically (sine).
 """
 from __future__ import annotations
 
+import tempfile
 import threading
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +39,49 @@ from labkit.lab.transport import Fault, PtyServer, TcpServer
 from labkit.lab.vibrometer import FULL_SCALE_V, SimOFV3001, SimOFV5000
 
 SETUPS = ("inchip", "shaker")
+#: the lab's log keeps this many entries (the newest), each text at most LOG_TEXT_CHARS long
+LOG_ENTRIES = 20_000
+LOG_TEXT_CHARS = 240
+
+LogEntry = tuple[float, str, str, str]
+
+
+class LogRing:
+    """The lab's log: the newest :data:`LOG_ENTRIES` entries ``(t_s, instrument, direction, text)``.
+
+    ``len()`` and indices count every entry ever appended, so ``log[n:]`` is what came
+    after the first ``n`` (less whatever has been dropped since); iteration sees a copy.
+    """
+
+    def __init__(self, maxlen: int = LOG_ENTRIES) -> None:
+        self._entries: deque[LogEntry] = deque(maxlen=maxlen)
+        self._count = 0
+        self._lock = threading.Lock()
+
+    def append(self, entry: LogEntry) -> None:
+        with self._lock:
+            self._entries.append(entry)
+            self._count += 1
+
+    def __len__(self) -> int:
+        return self._count
+
+    def _kept(self) -> tuple[int, list[LogEntry]]:
+        with self._lock:
+            return self._count - len(self._entries), list(self._entries)
+
+    def __iter__(self) -> Iterator[LogEntry]:
+        return iter(self._kept()[1])
+
+    def __getitem__(self, key: int | slice) -> Any:
+        first, kept = self._kept()
+        if isinstance(key, slice):
+            start, stop, step = key.indices(self._count)
+            return [kept[i - first] for i in range(start, stop, step) if i >= first]
+        i = key + self._count if key < 0 else key
+        if not first <= i < self._count:
+            raise IndexError("log entry dropped or not yet written")
+        return kept[i - first]
 
 
 def _pick(role: str, model: str, table: dict[str, str]) -> str:
@@ -143,12 +188,14 @@ class VirtualLab:
         self._state_lock = threading.Lock()
         self._sim_cache: OrderedDict[tuple[float, float], Any] = OrderedDict()
         self._sim_lock = threading.Lock()
-        self.log: list[tuple[float, str, str, str]] = []
+        self.log = LogRing()
         self.output_timeline: list[tuple[float, str, int, bool]] = []
         self.t0 = time.monotonic()
         self.servers: dict[str, TcpServer | PtyServer] = {}
         self.camera_fps = 30.0
         self.last_recording: dict[str, Any] | None = None
+        #: the only folder the camera writes to (``CAM:REC "<file name>"``); a fresh one per lab
+        self.recordings_dir = Path(tempfile.mkdtemp(prefix="labkit-lab-camera-"))
 
         self.burst_timeline: list[tuple[float, str, int, float]] = []
         fg_model = _pick("funcgen", funcgen_model, FUNCGEN_MODELS)
@@ -198,6 +245,8 @@ class VirtualLab:
         for server in self.servers.values():
             server.close()
         self._started = False
+        import shutil
+        shutil.rmtree(self.recordings_dir, ignore_errors=True)    # clips not moved out are the lab's
 
     def __enter__(self) -> VirtualLab:
         return self.start()
@@ -286,6 +335,8 @@ class VirtualLab:
         return time.monotonic() - self.t0
 
     def _log(self, instrument: str, direction: str, text: str) -> None:
+        if len(text) > LOG_TEXT_CHARS:      # a 1 MiB line is logged by its start and its length
+            text = text[:LOG_TEXT_CHARS] + f"...<{len(text)} chars>"
         self.log.append((self.now_s(), instrument, direction, text))
 
     def _output(self, instrument: str, channel: int, on: bool) -> None:

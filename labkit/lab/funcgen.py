@@ -273,6 +273,17 @@ def _shape(func: str, phase: np.ndarray) -> np.ndarray:
 BurstFn = Callable[[int, float, float], None]
 
 
+@dataclass
+class SavedState:
+    """What ``*SAV`` keeps: stored settings, loads, units, sync states and each channel's drive."""
+
+    settings: dict
+    load: dict[int, float]
+    vunit: dict[int, str]
+    sync: dict[int, bool]
+    ch: dict[int, Drive]
+
+
 class SimKeysight33500B(SimScpiInstrument):
     """The simulated 33500B generator (33522B by default); ``drive(ch)`` is its output for the physics.
 
@@ -496,10 +507,12 @@ class SimKeysight33500B(SimScpiInstrument):
             query=lambda c: self._amp_query(self._chan(c), c))
         add(S + "VOLTage:UNIT", set=self._set_unit, query=lambda c: self.vunit[self._chan(c)])
         add(S + "VOLTage[:LEVel][:IMMediate]:OFFSet", set=self._set_offset,
-            query=lambda c: self.flevel(self.ch[self._chan(c)].offset_v / self._factor(self._chan(c))))
+            query=self._limited(lambda c: self.ch[self._chan(c)].offset_v / self._factor(self._chan(c)),
+                                lambda c: self._offset_limits(self._chan(c)), 0.0))
         add(S + "PHASe[:ADJust]",
-            set=lambda c: self._update(self._chan(c), phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
-            query=lambda c: self.flevel(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
+            set=lambda c: self._update(self._chan(c), phase_rad=self._angle(c.one())),
+            query=self._limited(lambda c: self._angle_out(self.ch[self._chan(c)].phase_rad),
+                                lambda c: self._angle_limits(), 0.0))
         add(S + "APPLy:SINusoid", set=self._apply_sin, query=None)
         add(S + "APPLy", query=lambda c: self._apply_query(self._chan(c)))
         add(S + "SWEep:STATe", set=lambda c: self._update(self._chan(c), sweep=parse_bool(c.one())),
@@ -523,8 +536,9 @@ class SimKeysight33500B(SimScpiInstrument):
         add(S + "BURSt:INTernal:PERiod", set=fset("burst_period_s", "S", 1e-6, 8000.0, 0.01),
             query=fget("burst_period_s", 1e-6, 8000.0))
         add(S + "BURSt:PHASe",
-            set=lambda c: self._update(self._chan(c), burst_phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
-            query=lambda c: self.flevel(np.rad2deg(self.ch[self._chan(c)].burst_phase_rad)))
+            set=lambda c: self._update(self._chan(c), burst_phase_rad=self._angle(c.one())),
+            query=self._limited(lambda c: self._angle_out(self.ch[self._chan(c)].burst_phase_rad),
+                                lambda c: self._angle_limits(), 0.0))
         add("OUTPut#[:STATe]", set=lambda c: self._set_output(self._chan(c), parse_bool(c.one())),
             query=lambda c: "1" if self.ch[self._chan(c)].on else "0")
         add("OUTPut#:LOAD", set=self._set_load, query=self._load_query)
@@ -623,9 +637,12 @@ class SimKeysight33500B(SimScpiInstrument):
         S = "[SOURce#:]"
         add = self.add
         add(S + "VOLTage[:LEVel][:IMMediate]:HIGH", set=lambda c: self._set_level(c, "HIGH"),
-            query=lambda c: self.fnum(self._levels(self._chan(c))[0]))
+            query=self._limited(lambda c: self._levels(self._chan(c))[0],
+                                lambda c: self._offset_limits(self._chan(c)), 0.05, self.fnum))
         add(S + "VOLTage[:LEVel][:IMMediate]:LOW", set=lambda c: self._set_level(c, "LOW"),
-            query=lambda c: self.fnum(self._levels(self._chan(c))[1]))
+            query=self._limited(lambda c: self._levels(self._chan(c))[1],
+                                lambda c: self._offset_limits(self._chan(c)), -0.05, self.fnum))
+        self._build_common()
         self.setting(S + "FUNCtion:SQUare:DCYCle", "square_dcyc", 50.0,
                      lambda t: self.num(t, "", 0.01, 99.99), self.fnum, True, (0.01, 99.99))
         self.setting(S + "FUNCtion:RAMP:SYMMetry", "ramp_symm", 100.0,
@@ -690,6 +707,108 @@ class SimKeysight33500B(SimScpiInstrument):
         for n in self.ch:
             self.ch[n] = replace(self.ch[n], t_epoch=now)
 
+    # -- ? MIN|MAX|DEF on every numeric query, angles, and the rest of the common commands ----------
+    def _limited(self, value: Callable[[Call], float], limits: Callable[[Call], tuple[float, float]],
+                 default: float, fmt: Callable[[float], str] | None = None) -> Callable[[Call], str]:
+        """A numeric query answering ``? MIN|MAX|DEF`` (the limits now, the ``*RST`` value) too."""
+        out = fmt or self.flevel
+
+        def query(c: Call) -> str:
+            if c.params:
+                return out(self.query_limit(c, limits(c), default))
+            return out(value(c))
+        return query
+
+    def _offset_limits(self, n: int) -> tuple[float, float]:
+        """Offset (and high/low level) range for the declared load: +-10 V open circuit."""
+        lim = (MAX_VPP_OPEN / 2) / self._factor(n)
+        return -lim, lim
+
+    #: UNIT:ANGLe: radians per unit (SECond is a time: the phase as a delay at the frequency)
+    _ANGLE = {"DEG": np.pi / 180, "RAD": 1.0}
+
+    def _angle_unit(self) -> str:
+        return str(self.settings.get("angle_unit", "DEG"))
+
+    def _angle(self, text: str) -> float:
+        """A phase in ``UNIT:ANGLe``'s unit (-360..360 degrees) as radians."""
+        k = self._ANGLE[self._angle_unit()]
+        return self.num(text, "", -2 * np.pi / k, 2 * np.pi / k, 0.0) * k
+
+    def _angle_out(self, rad: float) -> float:
+        return rad / self._ANGLE[self._angle_unit()]
+
+    def _angle_limits(self) -> tuple[float, float]:
+        k = self._ANGLE[self._angle_unit()]
+        return -2 * np.pi / k, 2 * np.pi / k
+
+    def _build_common(self) -> None:
+        """UNIT:ANGLe, MARKer, DATA:ARBitrary, *SAV/*RCL (KS "UNIT Subsystem", "MARKer Subsystem",
+        "DATA Subsystem", IEEE 488.2 10.27/10.29)."""
+        S = "[SOURce#:]"
+        self.setting("UNIT:ANGLe", "angle_unit", "DEG", lambda t: parse_enum(t, ["DEGree", "RADian"]), str)
+        self.setting(S + "MARKer:FREQuency", "marker_hz", 500.0, lambda t: self.num(t, "HZ", MIN_FREQ_HZ, MAX_FREQ_HZ),
+                     self.fnum, True, (MIN_FREQ_HZ, MAX_FREQ_HZ))
+        self.setting(S + "MARKer:CYCLe", "marker_cycle", 2.0, lambda t: self.num(t, "", 2, 1e8), self.fnum, True,
+                     (2.0, 1e8))
+        self.setting(S + "MARKer:POINt", "marker_point", 32.0, lambda t: self.num(t, "", 4, 65536), self.fnum, True,
+                     (4.0, 65536.0))
+        self.arbs: dict[str, int] = {}
+        self.add(S + "DATA:ARBitrary", set=self._data_arb)
+        self.add(S + "DATA:ATTRibute:POINts", query=lambda c: self.fnum(self._arb(c.one())))
+        self.saved: dict[int, SavedState] = {}
+        self.add("*SAV", set=lambda c: self.saved.__setitem__(self._slot(c), self._state_copy()))
+        self.add("*RCL", set=lambda c: self._recall(self._slot(c)))
+
+    def _arb(self, name: str) -> int:
+        key = name.strip().strip('"').upper()
+        if key not in self.arbs:
+            raise ScpiError(-224, "Illegal parameter value;no such arbitrary waveform")
+        return self.arbs[key]
+
+    def _data_arb(self, c: Call) -> None:
+        """``DATA:ARB <name>,<block of float32>`` or ``<name>,<v>,<v>...`` (values -1..1, 8 to 65536
+        points): kept in volatile memory under ``name``."""
+        if len(c.params) < 2:
+            raise ScpiError(-109)
+        name, data = c.params[0].strip().strip('"'), c.params[1:]
+        if len(data) == 1 and data[0].startswith("#"):
+            raw = data[0].encode("latin-1")
+            n = int(raw[1:2])
+            size = int(raw[2:2 + n]) if n else -1
+            if n == 0 or len(raw) != 2 + n + size or size % 4:
+                raise ScpiError(-161, "Invalid block data")
+            points = size // 4
+        else:
+            values = [self.num(v, "", -1.0, 1.0) for v in data]
+            points = len(values)
+        if not 8 <= points <= 65536:
+            raise ScpiError(-222, "Data out of range;8 to 65536 points")
+        self.arbs[name.upper()] = points
+
+    def _slot(self, c: Call) -> int:
+        return int(self.num(c.one(), "", 0, 4))
+
+    def _state_copy(self) -> SavedState:
+        import copy
+        return SavedState(copy.deepcopy(self.settings), dict(self.load), dict(self.vunit), dict(self.sync),
+                          dict(self.ch))
+
+    def _recall(self, slot: int) -> None:
+        """``*RCL``: the saved settings back; outputs stay as they are (488.2 10.29: the state, not
+        the outputs, which the 33500B turns off on recall only from power-on)."""
+        import copy
+        if slot not in self.saved:
+            raise ScpiError(-221, "Settings conflict;nothing stored in that state")
+        saved = self.saved[slot]
+        self.settings.update(copy.deepcopy(saved.settings))
+        self.load.update(saved.load)
+        self.vunit.update(saved.vunit)
+        self.sync.update(saved.sync)
+        keep = ("on", "t_epoch", "trig_times")
+        for n, d in saved.ch.items():
+            self._update(n, **{k: v for k, v in d.__dict__.items() if k not in keep})
+
     def _set_offset(self, c: Call) -> None:
         n = self._chan(c)
         f = self._factor(n)
@@ -710,6 +829,8 @@ class SimKeysight33500B(SimScpiInstrument):
         self.load[n] = load  # the output voltage is kept; the displayed amplitude rescales
 
     def _load_query(self, c: Call) -> str:
+        if c.params:     # OUTPut:LOAD? {MINimum|MAXimum|DEFault}: 1 ohm, 10 kohm, 50 ohm
+            return self.fnum(self.query_limit(c, (1.0, 10e3), 50.0))
         load = self.load[self._chan(c)]
         return self.inf_reply if np.isinf(load) else self.fnum(load)
 

@@ -32,6 +32,43 @@ AUTO_TRIGGER_S = 0.05
 MAX_SRATE_SA_S = 5e9
 
 
+#: :MEASure queries answered (IV ":MEASure Commands"; a signal without edges answers 9.9E37)
+MEASUREMENTS = ("VPP", "VAMPlitude", "VRMS", "VAVerage", "VMAX", "VMIN", "FREQuency", "PERiod")
+
+
+def measure(item: str, volts: np.ndarray, dt_s: float) -> float:
+    """One of :data:`MEASUREMENTS` on a record (``dt_s`` between samples)."""
+    key = item.upper()[:4]
+    if key in ("VPP", "VAMP"):
+        return float(np.ptp(volts))
+    if key == "VRMS":
+        return float(np.sqrt(np.mean(volts ** 2)))
+    if key == "VAVE":
+        return float(np.mean(volts))
+    if key in ("VMAX", "VMIN"):
+        return float(np.max(volts) if key == "VMAX" else np.min(volts))
+    mid = (np.max(volts) + np.min(volts)) / 2
+    rising = np.flatnonzero((volts[:-1] < mid) & (volts[1:] >= mid))
+    if len(rising) < 2 or np.ptp(volts) <= 0:
+        return 9.9e37
+    period = (rising[-1] - rising[0]) * dt_s / (len(rising) - 1)
+    return float(1 / period if key == "FREQ" else period)
+
+
+def screen_png(width: int = 800, height: int = 480) -> bytes:
+    """The screen as a PNG (a blank grey graticule: the lab draws no traces)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    row = b"\x00" + b"\x20" * width
+    body = zlib.compress(row * height, 9)
+    head = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", head) + chunk(b"IDAT", body) + chunk(b"IEND", b"")
+
+
 # render(t_abs, rng, channels) -> {channel: volts}: the lab's physics, frozen at one moment
 def yes_no(value: object) -> str:
     """A boolean reply: ``1`` or ``0``."""
@@ -237,6 +274,67 @@ class SimInfiniiVision(SimScpiInstrument):
                      lambda t: parse_enum(t, ["AC", "DC", "LFReject"]), str)
         self.setting(":TRIGger:HOLDoff", "holdoff", 40e-9, lambda t: self.num(t, "S", 40e-9, 10.0), self.fnum)
         self.setting(":DISPlay:LABel", "display_label", False, parse_bool, yes_no)
+        self._build_common()
+
+    # -- measurements, set-ups, the screen, saved states -----------------------------------------
+    def _build_common(self) -> None:
+        """IV ":MEASure Commands" (VPP, VAMPlitude, VRMS, VAVerage, FREQuency, PERiod: on the
+        latest record), ":SYSTem:SETup" (a definite-length block holding the set-up; sent back, it
+        restores it), ":DISPlay:DATA?" (the screen as a PNG block), 488.2 ``*SAV``/``*RCL``."""
+        for item in MEASUREMENTS:
+            self.add(f":MEASure:{item}", query=self._measure_query(item), query_params=True)
+        self.add(":SYSTem:SETup", set=self._set_setup, query=lambda c: self.block(self._setup_bytes()))
+        self.add(":DISPlay:DATA", query=lambda c: self.block(screen_png()), query_params=True)
+        self.saved: dict[int, bytes] = {}
+        self.add("*SAV", set=lambda c: self.saved.__setitem__(self._slot(c), self._setup_bytes()))
+        self.add("*RCL", set=lambda c: self._load_setup(self.saved.get(self._slot(c))))
+
+    def _measure_query(self, item: str) -> Callable[[Call], str]:
+        return lambda c: self.fnum(self._measure(item, c))
+
+    def _slot(self, c: Call) -> int:
+        return int(self.num(c.one(), "", 0, 9))
+
+    def _setup_bytes(self) -> bytes:
+        import json
+
+        return json.dumps({"settings": self.settings, "levels": self.trig_levels},
+                          default=lambda o: sorted(o) if isinstance(o, set) else str(o)).encode()
+
+    def _set_setup(self, c: Call) -> None:
+        text = c.one()
+        raw = text.encode("latin-1")
+        if not raw.startswith(b"#") or not raw[1:2].isdigit() or raw[1:2] == b"0":
+            raise ScpiError(-161, "Invalid block data")
+        n = int(raw[1:2])
+        self._load_setup(raw[2 + n:])
+
+    def _load_setup(self, data: bytes | None) -> None:
+        import json
+
+        if data is None:
+            raise ScpiError(-221, "Settings conflict;nothing stored there")
+        try:
+            saved = json.loads(data)
+            for key, value in saved["settings"].items():
+                if key not in self.setting_defaults:
+                    continue
+                per_suffix = self.setting_defaults[key][1]
+                self.settings[key] = {int(k): v for k, v in value.items()} if per_suffix else value
+            self.trig_levels = {str(k): float(v) for k, v in saved["levels"].items()}
+        except (ValueError, KeyError, AttributeError, TypeError):
+            raise ScpiError(-161, "Invalid block data;not a set-up of this scope") from None
+
+    def _measure(self, item: str, c: Call) -> float:
+        """One measurement on the latest record of ``c``'s source (default: channel 1)."""
+        ch = 1
+        if c.params:
+            ch = int(parse_enum(c.one(), ["CHANnel1", "CHANnel2", "CHANnel3", "CHANnel4"])[-1])
+        acq = self._last_acq()
+        volts = acq.get(max(1, acq.points // 10_000)).get(ch)
+        if volts is None or volts.size < 4:
+            raise ScpiError(-221, "Settings conflict;source channel is off")
+        return measure(item, volts, acq.xinc_s * max(1, acq.points // 10_000))
 
     def _channel_summary(self, c: Call) -> str:
         """``:CHANnel<n>?``: every channel setting, with headers (the form PyMeasure parses)."""
@@ -613,6 +711,8 @@ class SimRigolDS1000Z(SimInfiniiVision):
                      lambda t: int(self.num(t, "", 1, 24_000_000)), self.fmt_int)
         self.add(":TRIGger:STATus", query=lambda c: self._trigger_status())
         self.add(":ACQuire:MDEPth", set=self._set_mdepth, query=lambda c: self._mdepth_query())
+        # :MEASure:ITEM? <item>[,<source>] (DS ":MEASure:ITEM"): VPP, VAMP, VRMS, VAVG, VMAX, VMIN, FREQ, PER
+        self.add(":MEASure:ITEM", query=self._measure_item, query_params=True)
         # :ACQuire:TYPE {NORMal|AVERages|PEAK|HRESolution}, :ACQuire:AVERages 2^n (n = 1..10)
         self.setting(":ACQuire:TYPE", "acq_type", "NORM",
                      lambda t: parse_enum(t, ["NORMal", "AVERages", "PEAK", "HRESolution"]), str)
@@ -628,6 +728,13 @@ class SimRigolDS1000Z(SimInfiniiVision):
         self.add(":TRIGger[:EDGe]:LEVel", set=self._set_trig_level, query=self._trig_level_query)
         # :CHANnel<n>:BWLimit {20M|OFF}
         self.setting(":CHANnel#:BWLimit", "bwlimit", "OFF", lambda t: parse_enum(t, ["20M", "OFF"]), str, True)
+
+    def _measure_item(self, c: Call) -> str:
+        if not c.params or len(c.params) > 2:
+            raise ScpiError(-109 if not c.params else -108)
+        item = parse_enum(c.params[0], ["VPP", "VAMP", "VRMS", "VAVG", "VMAX", "VMIN", "FREQuency", "PERiod"])
+        src = Call(c.params[1:], c.suffixes, c.header, True)
+        return self.fnum(self._measure({"VAVG": "VAVE"}.get(item, item), src))
 
     def _parse_averages(self, text: str) -> int:
         n = int(self.num(text, "", 2, 1024))

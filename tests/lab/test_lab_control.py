@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -188,3 +189,25 @@ def test_camera_sees_the_robot_walk_during_a_sine_burst_only(lab, raw, tmp_path)
     assert fg.query("*TRG;*OPC?") == "1"
     lab.record_video(tmp_path / "burst.avi", 0.5)
     assert lab.last_recording["speed_mm_s"] == walking                 # inside the burst: as the sine
+
+
+def test_cam_rec_writes_only_inside_the_labs_folder_and_leaves_the_channel_free(lab, raw, tmp_path):
+    """A path with a directory part is refused (it overwrote an unrelated file); a clip's length does not
+    hold the control channel (LAB:SPOT? answers meanwhile); too many frames is refused up front."""
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    ctl, other = raw("control"), raw("control")
+    for bad in (str(victim), "../victim.txt", ".hidden.avi"):
+        assert ctl.query(f'CAM:REC "{bad}",0.1') == "0"
+        assert "file name only" in ctl.query("SYST:ERR?")
+    assert victim.read_text() == "keep me"
+    assert ctl.query("CAM:FPS 1000;:CAM:REC? \"big.avi\",600") == "0"
+    assert "more than 20000 frames" in ctl.query("SYST:ERR?")
+    ctl.write("CAM:FPS 20")
+    ctl.write('CAM:REC "clip.avi",1.5')
+    t0 = time.monotonic()
+    assert other.query("LAB:SPOT?") in ("KNEE", "HIP", "BODY", "TRAY")
+    assert time.monotonic() - t0 < 0.5                  # not held for the clip's 1.5 s
+    assert ctl.readline() == "30"
+    folder = ctl.query("CAM:DIR?").strip('"')
+    assert (Path(folder) / "clip.avi").is_file() and Path(folder) == lab.recordings_dir

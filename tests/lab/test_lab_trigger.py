@@ -181,3 +181,23 @@ def test_the_decoder_delay_is_read_recorded_and_taken_out_of_every_phase(lab, tm
     lag = 2 * np.pi * freqs * 7.6e-6
     assert np.angle(frf * np.exp(-1j * lag) / truth) == pytest.approx(-lag, abs=0.02)
     assert lag.max() > 0.16                      # 9.3 degrees at 3.4 kHz: far above the tolerance
+
+
+def test_averaging_takes_one_triggered_record_per_average_and_lowers_the_noise(lab, raw):
+    """IV :ACQuire:TYPE AVERage, :ACQuire:COUNt: the record is the mean of COUNt triggered records;
+    the drive (synced) stays, uncorrelated noise (channel 4: nothing but the input's noise) falls by
+    sqrt(COUNt)."""
+    fg, sc = raw("funcgen"), raw("scope")
+    drive_sine(fg, 1000.0, 2.0)
+    settle(lab)
+    sc.write(":CHAN1:DISP 1;:CHAN4:DISP 1;:CHAN4:SCAL 0.001;:TIM:RANG 2e-3;:TRIG:EDGE:SOUR EXT;:TRIG:SWE NORM")
+    stds = {}
+    for count in (1, 16):
+        sc.write(":ACQ:TYPE NORM" if count == 1 else f":ACQ:TYPE AVER;:ACQ:COUN {count}")
+        assert _arm_and_wait(sc, 5.0)
+        _, noise = read_word(sc, 4)
+        t, v = read_word(sc, 1)
+        stds[count] = float(np.std(noise))
+        assert abs(fit_sine(t, v, 1000.0)) == pytest.approx(1.0, rel=0.01)
+    assert stds[1] / stds[16] == pytest.approx(4.0, rel=0.25)
+    assert sc.query(":WAV:PRE?").split(",")[3] == "+16"
