@@ -168,7 +168,7 @@ class VirtualLab:
                  noise_v_rms: float = 5e-4, noise_mm_s_rms: float = 0.01,
                  sim_duration_s: float = 1.0, scope_memory_points: int = 1_000_000,
                  funcgen_model: str = "33522B", scope_model: str = "DSOX3024T",
-                 vibrometer_model: str = "OFV-5000") -> None:
+                 vibrometer_model: str = "OFV-5000", vxi11: bool = False) -> None:
         self.seed = int(seed)
         self.params = load_robot(robot)
         hip_hz, hip_zeta = 438.0, 0.25
@@ -192,6 +192,9 @@ class VirtualLab:
         self.output_timeline: list[tuple[float, str, int, bool]] = []
         self.t0 = time.monotonic()
         self.servers: dict[str, TcpServer | PtyServer] = {}
+        #: VXI-11 servers of the generator and the scope (``vxi11=True``; needs root for port 111)
+        self.vxi11 = bool(vxi11)
+        self.vxi11_servers: dict[str, Any] = {}
         self.camera_fps = 30.0
         self.last_recording: dict[str, Any] | None = None
         #: the only folder the camera writes to (``CAM:REC "<file name>"``); a fresh one per lab
@@ -231,6 +234,13 @@ class VirtualLab:
         }
         for server in self.servers.values():
             server.start()
+        if self.vxi11:
+            from labkit.lab.vxi11 import Vxi11Server
+
+            for name in ("funcgen", "scope"):
+                vx = Vxi11Server(self.servers[name])
+                vx.start()
+                self.vxi11_servers[name] = vx
         self._started = True
         return self
 
@@ -240,6 +250,9 @@ class VirtualLab:
             with self.funcgen.lock:
                 self.funcgen._set_output(ch, False)
         self.scope.close()
+        for vx in self.vxi11_servers.values():
+            vx.close()
+        self.vxi11_servers = {}
         for server in self.servers.values():
             server._stop.set()   # every server winds down at once, then each is joined
         for server in self.servers.values():
@@ -258,6 +271,11 @@ class VirtualLab:
     def resources(self) -> dict[str, str]:
         """VISA resource strings of the instruments and of the control channel."""
         return {name: server.resource for name, server in self.servers.items()}
+
+    @property
+    def vxi11_resources(self) -> dict[str, str]:
+        """``TCPIP0::127.x.y.z::inst0::INSTR`` of the generator and the scope (with ``vxi11=True``)."""
+        return {name: server.resource for name, server in self.vxi11_servers.items()}
 
     # -- the person at the bench ----------------------------------------------------------------
     def set_spot(self, spot: str) -> None:
