@@ -304,9 +304,12 @@ class InfiniiVision(Oscilloscope):
         return {**super().settings(), "points": self.points}
 
     def set_record_points(self, points: int) -> None:
-        """Samples per record read back (``:WAV:POIN:MODE RAW``, ``:WAV:POIN n``), sent now."""
+        """Samples per record read back (``:WAV:POIN:MODE RAW``, ``:WAV:POIN n``), sent now; the
+        mode is read back (the count may be fewer than asked until a record exists: IV
+        :WAVeform:POINts)."""
         n = int(check_range("points", points, 100, 8e6))
         self._send_all([":WAV:POIN:MODE RAW", f":WAV:POIN {n}"])
+        self._read_back({":WAV:POIN:MODE?": "RAW"})
         self.points = n
         self.state["record_points"] = n
 

@@ -159,12 +159,16 @@ _RANGE_TEXT = re.compile(r"^\s*([0-9.]+(?:[eE][-+]?\d+)?)\s*(mm|m|um|µm)/s/V\s*
 _UNIT = {"mm": 1.0, "m": 1000.0, "um": 1e-3, "µm": 1e-3}
 
 
+def _number_with_unit(pattern: re.Pattern[str], units: dict[str, float], text: str, what: str) -> float:
+    m = pattern.match(text)
+    if not m:
+        raise ValueError(f"not a {what}: {text!r}")
+    return float(m.group(1)) * units[m.group(2)]
+
+
 def parse_range_text(text: str) -> float:
     """``"125mm/s/V"`` -> 125.0 (mm/s per V); ``"1m/s/V"`` -> 1000.0. ValueError otherwise."""
-    m = _RANGE_TEXT.match(text)
-    if not m:
-        raise ValueError(f"not a velocity range: {text!r}")
-    return float(m.group(1)) * _UNIT[m.group(2)]
+    return _number_with_unit(_RANGE_TEXT, _UNIT, text, "velocity range")
 
 
 _DELAY_TEXT = re.compile(r"^\s*([0-9.]+(?:[eE][-+]?\d+)?)\s*(s|ms|us|µs|ns)\s*$")
@@ -173,10 +177,7 @@ _DELAY_UNIT = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
 
 def parse_delay_text(text: str) -> float:
     """``"7.6us"`` -> 7.6e-06 s. ValueError otherwise."""
-    m = _DELAY_TEXT.match(text)
-    if not m:
-        raise ValueError(f"not a delay: {text!r}")
-    return float(m.group(1)) * _DELAY_UNIT[m.group(2)]
+    return _number_with_unit(_DELAY_TEXT, _DELAY_UNIT, text, "delay")
 
 
 def _parse_bool(inst: Instrument, reply: str, command: str) -> bool:
@@ -250,14 +251,18 @@ class OFV5000(Vibrometer):
         """The decoder's signal delay, s: its analog output is the velocity this long ago (asked once
         with ``signal_delay_command``, answered like ``7.6us``; or the declared ``signal_delay_s``)."""
         if self._delay is None:
-            cmd = self.signal_delay_command.format(i=self.decoder_index)
-            reply = self.query(cmd)
-            try:
-                self._delay = parse_delay_text(reply)
-            except ValueError:
-                raise InstrumentError(f"garbled reply {reply[:40]!r} (expected e.g. '7.6us')",
-                                      instrument=self.name, command=cmd) from None
+            self._delay = self._query_parsed(self.signal_delay_command.format(i=self.decoder_index),
+                                             parse_delay_text, "7.6us")
         return self._delay
+
+    def _query_parsed(self, cmd: str, parse: Any, example: str) -> float:
+        """``parse(reply)`` of ``cmd``; a reply it cannot read is a garbled reply (InstrumentError)."""
+        reply = self.query(cmd)
+        try:
+            return float(parse(reply))
+        except ValueError:
+            raise InstrumentError(f"garbled reply {reply[:40]!r} (expected e.g. '{example}')",
+                                  instrument=self.name, command=cmd) from None
 
     def set_decoder(self, prop: str, value: str) -> None:
         """``Set,VeloDec,<i>,<prop>,<value>`` (``Filter``, ``Tracking``), read back: the controller
@@ -289,13 +294,8 @@ class OFV5000(Vibrometer):
     @property
     def scale_mm_s_per_v(self) -> float:
         """Scale factor in mm/s per V (``Get,VeloDec,<i>,Range``); set with a value in mm/s/V."""
-        cmd = f"Get,VeloDec,{self.decoder_index},Range"
-        reply = self.query(cmd)
-        try:
-            self._scale = parse_range_text(reply)
-        except ValueError:
-            raise InstrumentError(f"garbled reply {reply[:40]!r} (expected e.g. '125mm/s/V')",
-                                  instrument=self.name, command=cmd) from None
+        self._scale = self._query_parsed(f"Get,VeloDec,{self.decoder_index},Range", parse_range_text,
+                                         "125mm/s/V")
         return self._scale
 
     @scale_mm_s_per_v.setter

@@ -278,21 +278,8 @@ class TcpServer(_Endpoint):
         self._threads.append(t)
 
     def _accept(self) -> None:
-        self.sock.settimeout(0.05)
-        while not self._stop.is_set():
-            try:
-                conn, _ = self.sock.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            with self._lock:
-                self._conns.add(conn)
-            t = threading.Thread(target=self._serve, args=(conn,), name=f"lab-{self.name}-conn",
-                                 daemon=True)
-            t.start()
-            self._threads.append(t)
+        accept_loop(self.sock, self._stop, self._lock, self._conns, self._threads, self._serve,
+                    f"lab-{self.name}-conn")
 
     def _serve(self, conn: socket.socket) -> None:
         framer = Framer()
@@ -331,20 +318,47 @@ class TcpServer(_Endpoint):
             conn.sendall(data[i:i + 1])
 
     def close(self) -> None:
-        self._stop.set()
+        shut_down(self._stop, [self.sock], self._lock, self._conns, self._threads)
+
+
+def accept_loop(sock: socket.socket, stop: threading.Event, lock: Any, conns: set[socket.socket],
+                threads: list[threading.Thread], serve: Callable[[socket.socket], None], name: str) -> None:
+    """Accept connections on ``sock`` until ``stop``; each is served by ``serve(conn)`` in its own thread."""
+    sock.settimeout(0.05)
+    while not stop.is_set():
         try:
-            self.sock.close()
+            conn, _ = sock.accept()
+        except TimeoutError:
+            continue
+        except OSError:
+            return
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        with lock:
+            conns.add(conn)
+        t = threading.Thread(target=serve, args=(conn,), name=name, daemon=True)
+        t.start()
+        threads.append(t)
+
+
+def shut_down(stop: threading.Event, listeners: list[socket.socket], lock: Any,
+              conns: set[socket.socket], threads: list[threading.Thread]) -> None:
+    """Stop a socket server: the stop flag, its listening sockets closed, its connections shut
+    down (their threads see it at once), then every thread joined."""
+    stop.set()
+    for sock in listeners:
+        try:
+            sock.close()
         except OSError:
             pass
-        with self._lock:
-            conns = list(self._conns)
-        for c in conns:
-            try:
-                c.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-        for t in self._threads:
-            t.join(timeout=2)
+    with lock:
+        open_conns = list(conns)
+    for c in open_conns:
+        try:
+            c.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+    for t in threads:
+        t.join(timeout=2)
 
 
 class PtyServer(_Endpoint):

@@ -29,7 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from labkit.lab.transport import Framer
+from labkit.lab.transport import Framer, accept_loop, shut_down
 
 PMAP_PROG, PMAP_VERS, PMAP_GETPORT = 100000, 2, 3
 CORE_PROG, CORE_VERS = 0x0607AF, 1
@@ -197,20 +197,8 @@ class Vxi11Server:
             self._threads.append(t)
 
     def _accept(self, sock: socket.socket, prog: int, vers: int, handler: Handler) -> None:
-        sock.settimeout(0.05)
-        while not self._stop.is_set():
-            try:
-                conn, _ = sock.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            with self._lock:
-                self._conns.add(conn)
-            t = threading.Thread(target=self._serve, args=(conn, prog, vers, handler), daemon=True)
-            t.start()
-            self._threads.append(t)
+        accept_loop(sock, self._stop, self._lock, self._conns, self._threads,
+                    lambda conn: self._serve(conn, prog, vers, handler), f"lab-vxi11-{self.endpoint.name}-conn")
 
     def _serve(self, conn: socket.socket, prog: int, vers: int, handler: Handler) -> None:
         try:
@@ -326,18 +314,4 @@ class Vxi11Server:
         return u32(NO_ERROR, reason) + opaque(chunk)
 
     def close(self) -> None:
-        self._stop.set()
-        for sock in (self.pmap, self.core):
-            try:
-                sock.close()
-            except OSError:
-                pass
-        with self._lock:
-            conns = list(self._conns)
-        for c in conns:
-            try:
-                c.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-        for t in self._threads:
-            t.join(timeout=2)
+        shut_down(self._stop, [self.pmap, self.core], self._lock, self._conns, self._threads)

@@ -278,3 +278,11 @@ def test_wait_done_stall_is_instrument_error():
     with expected_protocol(RigolDS1000Z, [(b":TRIG:STAT?\n", STALL)], timeout_s=0.2) as sc:
         with pytest.raises(InstrumentError, match="no reply"):
             sc.wait_done(5.0)
+
+
+def test_infiniivision_record_points_mode_read_back():
+    script = _w(":WAV:POIN:MODE RAW", ":WAV:POIN 20000") + [(b":SYST:ERR?\n", OK),
+                                                           (b":WAV:POIN:MODE?\n", b"NORM\n")]
+    with expected_protocol(InfiniiVision, script) as sc:
+        with pytest.raises(InstrumentError, match="WAV:POIN:MODE.*RAW was set"):
+            sc.set_record_points(20000)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 
 import pytest
-from labhelpers import lab  # noqa: F401  (fixture)
+from labhelpers import instruments_toml, lab  # noqa: F401  (fixture)
 
 from clihelpers import run_cli, stepped_inchip_toml
 from labkit.drivers.funcgen import Keysight33500B
@@ -50,23 +50,7 @@ def test_an_endless_error_queue_is_one_short_line(lab):
 def test_a_run_whose_scope_trickles_gives_up_within_its_timeout_exit_3_drive_off(tmp_path):
     with VirtualLab(seed=6) as lab:
         res = lab.resources
-        instruments = f"""[instruments.funcgen]
-model = "33500B"
-resource = "{res['funcgen']}"
-
-[instruments.scope]
-model = "InfiniiVision"
-resource = "{res['scope']}"
-timeout_s = 1.5
-
-[instruments.vibrometer]
-model = "OFV-5000"
-resource = "{res['vibrometer']}"
-
-[instruments.control]
-model = "LabControl"
-resource = "{res['control']}"
-"""
+        instruments = instruments_toml(res, scope_timeout_s=1.5)
         cfg = tmp_path / "inchip.toml"
         cfg.write_text(stepped_inchip_toml(instruments, [800.0, 3400.0]))
         lab.inject_fault("scope", "trickle", match="DATA?", interval_s=0.5)

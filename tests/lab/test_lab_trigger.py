@@ -14,7 +14,7 @@ import time
 import h5py
 import numpy as np
 import pytest
-from labhelpers import drive_sine, fit_sine, lab, raw, read_word, settle  # noqa: F401  (fixtures)
+from labhelpers import drive_sine, fit_sine, instruments_toml, lab, raw, read_word, settle  # noqa: F401  (fixtures)
 
 from clihelpers import stepped_inchip_toml
 from labkit.lab import VirtualLab
@@ -81,26 +81,9 @@ def test_sync_settings_decide_the_trigger(lab, raw, setting, phase_deg):
 
 
 def _inchip_config(tmp_path, res, *, timeout_s=5) -> str:
-    instruments = f"""[instruments.funcgen]
-model = "33500B"
-resource = "{res['funcgen']}"
-timeout_s = {timeout_s}
-
-[instruments.scope]
-model = "InfiniiVision"
-resource = "{res['scope']}"
-timeout_s = {timeout_s}
-
-[instruments.vibrometer]
-model = "OFV-5000"
-resource = "{res['vibrometer']}"
-
-[instruments.control]
-model = "LabControl"
-resource = "{res['control']}"
-"""
     cfg = tmp_path / "inchip.toml"
-    cfg.write_text(stepped_inchip_toml(instruments, [800.0, 3400.0]))
+    cfg.write_text(stepped_inchip_toml(instruments_toml(res, scope_timeout_s=timeout_s, funcgen_timeout_s=timeout_s),
+                                       [800.0, 3400.0]))
     return str(cfg)
 
 

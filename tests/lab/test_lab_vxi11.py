@@ -166,3 +166,27 @@ def test_a_makers_programming_example_runs_over_vxi11(which, lab, rigol_lab):
     finally:
         gen.close()
         osc.close()
+
+
+def test_python_vxi11_client_drives_the_generator(lab):
+    """python-vxi11's own ONC-RPC client (not pyvisa's) on the 33522B: ask/write, device trigger
+    (VXI-11 device_trigger: the instrument's *TRG), the status byte, lock/unlock, device clear."""
+    import vxi11
+
+    host = lab.vxi11_resources["funcgen"].split("::")[1]
+    inst = vxi11.Instrument(host)
+    try:
+        assert inst.ask("*IDN?").startswith("Keysight Technologies,33522B")
+        inst.write("*RST;*CLS;:OUTP1:LOAD INF;:SOUR1:FREQ 1000;VOLT 2;BURS:NCYC 3;:SOUR1:BURS:STAT ON;:TRIG1:SOUR BUS")
+        inst.write("OUTP1 ON")
+        inst.lock()
+        inst.trigger()
+        inst.unlock()
+        assert any(inst_ == "funcgen" and ch == 1 for _, inst_, ch, _ in lab.burst_timeline)
+        assert inst.read_stb() == 0
+        inst.write("FREQ?")
+        inst.clear()                          # device clear empties the output buffer: no -410
+        assert inst.ask("SYST:ERR?") == '+0,"No error"'
+        inst.write("OUTP1 OFF")
+    finally:
+        inst.close()
