@@ -594,7 +594,7 @@ class SimScpiInstrument:
                 prefix = bare.rsplit(":", 1)[0] if ":" in bare and known else ""
             reply = self.execute(bare, rest, query)
             if reply is not None:
-                replies.append(reply if isinstance(reply, bytes) else str(reply).encode("ascii"))
+                replies.append(reply if isinstance(reply, bytes) else str(reply).encode("ascii", "replace"))
         if not replies:
             return None
         return b";".join(replies) + b"\n"

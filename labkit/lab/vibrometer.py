@@ -89,8 +89,8 @@ class SimOFV5000(_Controller):
         if reply is None:
             return None
         if self.props[("Interface", 0, "Echo")] == "On":
-            return (line + "\n" + reply + "\n").encode("ascii")
-        return (reply + "\n").encode("ascii")
+            return (line + "\n" + reply + "\n").encode("ascii", "replace")
+        return (reply + "\n").encode("ascii", "replace")
 
     def _handle(self, parts: list[str]) -> str | None:
         if len(parts) < 4 or not parts[2].isdigit():

@@ -78,3 +78,9 @@ def test_the_log_keeps_the_newest_entries_and_short_texts(lab, raw):
     with pytest.raises(IndexError):
         ring[2]
     assert LOG_ENTRIES <= 20_000
+
+
+def test_a_non_ascii_byte_is_answered_not_a_hang(lab, raw):
+    fg = raw("funcgen", timeout_s=5)
+    fg.sock.sendall(b'DISP:TEXT "caf\xe9"\n')
+    assert fg.query("DISP:TEXT?") == '"caf?"'
