@@ -122,6 +122,27 @@ def _check_resource(resource: str) -> None:
                           expected=RESOURCE_FORMS) from None
 
 
+def open_failure(resource: str, exc: BaseException) -> str:
+    """One line saying why ``resource`` did not open, and what to write instead where the
+    back-end's own words mislead (pyvisa-py calls a missing HiSLIP server 'resource not present')."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    parts = resource.split("::")
+    host = parts[1] if len(parts) > 2 else "?"
+    kind = resource.upper()
+    if "HISLIP" in kind and "RSRC_NFOUND" in text:
+        return (f"no HiSLIP server answered at {host}, port 4880 (pyvisa-py: {text[:60]}...); "
+                f"the instrument may not offer HiSLIP: try TCPIP0::{host}::inst0::INSTR (VXI-11) "
+                f"or TCPIP0::{host}::5025::SOCKET")
+    if kind.startswith("TCPIP") and kind.endswith("::INSTR") and "refused" in text.lower():
+        return (f"no VXI-11 portmapper at {host}, port 111 ({text}): is the instrument on, its "
+                f"VXI-11 (LAN) interface enabled? or try TCPIP0::{host}::5025::SOCKET")
+    if kind.startswith("USB") and "usb" in text.lower():
+        return "USB resources need the pyusb package and libusb, not installed here (" + text[:80] + ")"
+    if kind.startswith("GPIB"):
+        return "GPIB resources need linux-gpib or gpib-ctypes, not installed here (" + text[:80] + ")"
+    return text
+
+
 RESOURCE_FORMS = ("a VISA resource (TCPIP0::host::5025::SOCKET), ASRL/dev/ttyX::INSTR, "
                   "a /dev/... path or a pyserial URL (socket://host:port)")
 
@@ -197,8 +218,8 @@ class Instrument:
         try:
             transport = open_transport(resource, timeout_s, **tkw)
         except Exception as exc:  # pyvisa-py raises bare Exception for unreachable hosts
-            raise InstrumentError(f"cannot open {resource}: {exc}", instrument=label,
-                                  command="open") from exc
+            raise InstrumentError(f"cannot open {resource}: {open_failure(resource, exc)}",
+                                  instrument=label, command="open") from exc
         try:
             inst = cls(transport, name=name, **settings)
             inst.connect()
@@ -340,6 +361,25 @@ class Instrument:
 
 
 _ERR = re.compile(r'^\s*([+-]?\d+)\s*,\s*"?(.*?)"?\s*$')
+#: an error summary longer than this is cut (the entries left out are counted)
+SUMMARY_CHARS = 240
+
+
+def summarise_errors(errors: list[str]) -> str:
+    """The error-queue entries as one short line: repeats counted (``-113,"Undefined header"
+    x32``), at most :data:`SUMMARY_CHARS` characters, the rest counted, never a newline."""
+    counted: dict[str, int] = {}
+    for e in errors:
+        text = " ".join(e.split())[:80]
+        counted[text] = counted.get(text, 0) + 1
+    parts = [t if n == 1 else f"{t} x{n}" for t, n in counted.items()]
+    out: list[str] = []
+    for i, part in enumerate(parts):
+        if sum(len(p) + 2 for p in out) + len(part) > SUMMARY_CHARS:
+            out.append(f"... {len(parts) - i} more kinds")
+            break
+        out.append(part)
+    return "; ".join(out)
 
 
 class ScpiInstrument(Instrument):
@@ -398,7 +438,7 @@ class ScpiInstrument(Instrument):
         self.errors_at_connect = stale
         if stale:
             log.warning("%s: errors queued before this connection (cleared): %s", self.name,
-                        "; ".join(stale))
+                        summarise_errors(stale))
 
     def snapshot(self) -> dict[str, Any]:
         snap = super().snapshot()
@@ -435,7 +475,7 @@ class ScpiInstrument(Instrument):
         """
         errors = self.read_error_queue()
         if errors:
-            raise InstrumentError("instrument reported " + "; ".join(errors), instrument=self.name,
+            raise InstrumentError("instrument reported " + summarise_errors(errors), instrument=self.name,
                                   command=after or self.err_command)
 
     def read_error_queue(self) -> list[str]:

@@ -2,9 +2,11 @@
 
 They drive the PZT in-chip (through no amplifier: the volts at the output are
 the volts at the film) or the shaker amplifier's input. Both loads are high
-impedance, so every amplitude is preceded by ``OUTP:LOAD INF``: with the
-factory 50 ohm setting a Keysight would put twice the programmed voltage on
-the PZT.
+impedance, so every amplitude is preceded by the declared load (``load_ohm``,
+default ``OUTP:LOAD INF``): with the factory 50 ohm setting a Keysight would
+put twice the programmed voltage on the PZT. Amplitudes are given in volts
+peak-to-peak at the load and sent in ``amplitude_unit`` (VPP, VRMS, or DBM into
+a finite load), after ``VOLT:UNIT`` (docs/instruments.md).
 
 Limits are declared settings checked BEFORE anything is sent:
 
@@ -21,6 +23,7 @@ Every setting method checks the error queue afterwards (``SYST:ERR?`` until
 """
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 from labkit.drivers.base import ScpiInstrument, check_choice, check_range
@@ -30,6 +33,45 @@ from labkit.errors import InstrumentError, LimitError
 def _num(x: float) -> str:
     """SCPI number: shortest exact-enough text (``1000``, ``0.5``, ``1e-05``)."""
     return format(float(x), ".10g")
+
+
+#: source impedance of every supported generator (ohm)
+SOURCE_OHM = 50.0
+
+
+def _unit_and_load(unit: str, load: float | str) -> tuple[str, float]:
+    """Validate the ``amplitude_unit`` and ``load_ohm`` settings (ConfigError naming the key)."""
+    from labkit.errors import ConfigError
+
+    u = str(unit).upper()
+    if u not in ("VPP", "VRMS", "DBM"):
+        raise ConfigError(f"amplitude_unit {unit!r} is not VPP, VRMS or DBM", key="amplitude_unit",
+                          expected='"VPP", "VRMS" or "DBM"')
+    if isinstance(load, str) and load.strip().upper() in ("INF", "INFINITY"):
+        r = math.inf
+    else:
+        try:
+            r = float(load)
+        except (TypeError, ValueError):
+            r = math.nan
+        if not 1.0 <= r <= 10e3:
+            raise ConfigError(f"load_ohm {load!r} is not a load the generators accept", key="load_ohm",
+                              expected='"INF" (high impedance: the PZT, an amplifier input) or 1 to 10000 ohm')
+    if u == "DBM" and math.isinf(r):
+        raise ConfigError("amplitude_unit DBM needs a finite load_ohm (power into a high-impedance load "
+                          "is undefined; the generators refuse it)", key="amplitude_unit",
+                          expected='"VPP" or "VRMS" with load_ohm = "INF", or a load_ohm in ohm')
+    return u, r
+
+
+def amplitude_in(unit: str, amp_vpp: float, load_ohm: float) -> float:
+    """A sine's peak-to-peak volts at the load, in ``unit`` (VPP, VRMS, or DBM into ``load_ohm``)."""
+    if unit == "VPP":
+        return amp_vpp
+    vrms = amp_vpp / (2 * math.sqrt(2))
+    if unit == "VRMS":
+        return vrms
+    return 10 * math.log10(vrms ** 2 / load_ohm / 1e-3)
 
 
 class FunctionGenerator(ScpiInstrument):
@@ -58,8 +100,10 @@ class FunctionGenerator(ScpiInstrument):
 
     def __init__(self, transport, *, name: str | None = None, channel: int = 1,
                  max_amp_vpp: float | None = None, max_v: float | None = None,
-                 max_freq_hz: float | None = None, **settings: Any) -> None:
+                 max_freq_hz: float | None = None, amplitude_unit: str = "VPP",
+                 load_ohm: float | str = "INF", **settings: Any) -> None:
         super().__init__(transport, name=name, **settings)
+        self.amplitude_unit, self.load_ohm = _unit_and_load(amplitude_unit, load_ohm)
         if channel not in self.channels:
             from labkit.errors import ConfigError
             raise ConfigError(f"{self.model} has no channel {channel!r}", key="channel",
@@ -114,7 +158,23 @@ class FunctionGenerator(ScpiInstrument):
     # -- helpers ------------------------------------------------------------------------------
     def settings(self) -> dict[str, Any]:
         return {**super().settings(), "channel": self.channel, "max_amp_vpp": self.max_amp_vpp,
-                "max_v": self.max_v, "max_freq_hz": self.max_freq_hz}
+                "max_v": self.max_v, "max_freq_hz": self.max_freq_hz,
+                "amplitude_unit": self.amplitude_unit, "load_ohm": self._load_word()}
+
+    def _load_word(self) -> str:
+        return "INF" if math.isinf(self.load_ohm) else _num(self.load_ohm)
+
+    def _max_v_at_load(self) -> float:
+        """The output's peak into the declared load: +-10 V open circuit through the 50 ohm source."""
+        r = self.load_ohm
+        return self.model_max_v if math.isinf(r) else self.model_max_v * r / (r + SOURCE_OHM)
+
+    def _level_commands(self, amp_vpp: float) -> list[str]:
+        """Load, unit and amplitude, in that order: the amplitude is read in the unit and for the
+        load in force when it arrives."""
+        value = amplitude_in(self.amplitude_unit, amp_vpp, self.load_ohm)
+        return [self._outp(f":LOAD {self._load_word()}"), self._src(f"VOLT:UNIT {self.amplitude_unit}"),
+                self._src(f"VOLT {_num(value)}")]
 
     def _check_freq(self, limit: str, freq_hz: float) -> float:
         f = check_range(limit, freq_hz, 1e-6, None, "Hz")
@@ -129,9 +189,11 @@ class FunctionGenerator(ScpiInstrument):
         if self.max_v is not None and peak > self.max_v:
             raise LimitError(f"|offset| + amplitude/2 = {peak:g} V exceeds the limit max_v = "
                              f"{self.max_v:g} V; nothing was sent", limit="max_v")
-        if peak > self.model_max_v:
+        top = self._max_v_at_load()
+        if peak > top:
+            into = "high-Z" if math.isinf(self.load_ohm) else f"{self.load_ohm:g} ohm"
             raise LimitError(f"|offset| + amplitude/2 = {peak:g} V exceeds the model output range "
-                             f"of the {self.model} (+-{self.model_max_v:g} V into high-Z); "
+                             f"of the {self.model} (+-{top:g} V into {into}); "
                              "nothing was sent",
                              limit="model output range")
         return amp, off
@@ -142,6 +204,50 @@ class FunctionGenerator(ScpiInstrument):
         self._send_all([self._outp(":LOAD INF")])
         self.state["load"] = "INF"
 
+    def set_load(self) -> None:
+        """Declare the configured load (``load_ohm``: INF for the PZT or an amplifier input) and
+        read it back: the generator scales every amplitude for it (into high-Z a 50 ohm setting
+        gives twice the programmed voltage)."""
+        cmd = self._outp(":LOAD?")
+        self._send_all([self._outp(f":LOAD {self._load_word()}")])
+        got = self.query(cmd)
+        try:
+            value = math.inf if got.upper() in ("INF", "INFINITY") else float(got)
+        except ValueError:
+            value = math.nan
+        if not (value == self.load_ohm or value >= 9.9e37 and math.isinf(self.load_ohm)):
+            raise InstrumentError(f"load not set: {cmd} answers {got[:40]!r}, {self._load_word()} was set",
+                                  instrument=self.name, command=cmd)
+        self.state["load"] = self._load_word()
+
+    # -- sync: what the scope's EXT input triggers on --------------------------------------------
+    def _sync_commands(self) -> list[str]:
+        """The family's commands that put the drive channel's sync on the Sync connector."""
+        return ["OUTP:SYNC ON"]
+
+    def _sync_readback(self) -> list[tuple[str, tuple[str, ...]]]:
+        """(query, accepted replies) confirming :meth:`_sync_commands` took effect."""
+        return [("OUTP:SYNC?", ("1", "+1", "ON"))]
+
+    def enable_sync(self) -> None:
+        """Route the drive channel's sync to the Sync connector, switch it on and read it back.
+
+        The sync marks phase zero of every cycle of a sine and the start of a
+        sweep or burst; the scope's EXT trigger input is cabled to it. A
+        generator left with its sync off (or on the other channel, or
+        inverted) gives a scope in NORMal sweep no trigger at all and one in
+        AUTO untriggered records, so the reply of every setting is checked:
+        a mismatch raises InstrumentError naming the query and the reply.
+        """
+        self._send_all(self._sync_commands())
+        for cmd, ok in self._sync_readback():
+            reply = self.query(cmd)
+            if reply.strip('"').upper() not in ok:
+                raise InstrumentError(f"sync not set: {cmd} answers {reply[:40]!r}, expected {ok[0]} "
+                                      "(the scope's EXT trigger would never fire)", instrument=self.name,
+                                      command=cmd)
+        self.state["sync"] = {"on": True, "channel": self.channel}
+
     def set_sine(self, freq_hz: float, amp_vpp: float, offset_v: float = 0.0) -> None:
         """Sine of ``amp_vpp`` volts peak-to-peak at ``freq_hz`` around ``offset_v``.
 
@@ -150,16 +256,17 @@ class FunctionGenerator(ScpiInstrument):
         """
         f = self._check_freq("freq_hz > 0", freq_hz)
         amp, off = self._check_amplitude(amp_vpp, offset_v)
-        level = [self._src(f"VOLT {_num(amp)}"), self._src(f"VOLT:OFFS {_num(off)}")]
         old_off = self.state.get("offset_v")
+        # The output may be on: between the amplitude and the offset the film sees one old and
+        # one new value. Shrinking the offset first keeps that state below the old (checked)
+        # peak; otherwise amplitude first keeps it below the new (checked) peak.
+        load, unit, volt = self._level_commands(amp)
+        level = [volt, self._src(f"VOLT:OFFS {_num(off)}")]
         if old_off is not None and abs(off) < abs(old_off):
-            # The output may be on: between the two commands the film sees one old and one
-            # new value. Shrinking the offset first keeps that state below the old (checked)
-            # peak; otherwise amplitude first keeps it below the new (checked) peak.
             level.reverse()
-        self._send_all([self._outp(":LOAD INF"), self._src("FUNC SIN"), self._src("VOLT:UNIT VPP"),
-                        self._src(f"FREQ {_num(f)}"), *level])
-        self.state.update(load="INF", function="SIN", freq_hz=f, amp_vpp=amp, offset_v=off)
+        self._send_all([load, self._src("FUNC SIN"), unit, self._src(f"FREQ {_num(f)}"), *level])
+        self.state.update(load=self._load_word(), function="SIN", freq_hz=f, amp_vpp=amp, offset_v=off,
+                          amplitude_unit=self.amplitude_unit)
         self._amp_checked = True
 
     def set_frequency(self, freq_hz: float) -> None:
@@ -175,9 +282,8 @@ class FunctionGenerator(ScpiInstrument):
             # the generator may hold any offset from an earlier session: the peak is unknown
             raise LimitError("the offset is unknown, so |offset| + amplitude/2 cannot be checked; "
                              "call set_sine() first; nothing was sent", limit="offset unknown")
-        self._send_all([self._outp(":LOAD INF"), self._src("VOLT:UNIT VPP"),
-                        self._src(f"VOLT {_num(amp)}")])
-        self.state.update(load="INF", amp_vpp=amp)
+        self._send_all(self._level_commands(amp))
+        self.state.update(load=self._load_word(), amp_vpp=amp)
         self._amp_checked = True
 
     def output(self, on: bool) -> None:
@@ -312,6 +418,17 @@ class Keysight33500B(FunctionGenerator):
     def _trig_source(self, source: str, mode: str) -> str:
         return f"TRIG{self.channel}:SOUR {source}"
 
+    def _sync_commands(self) -> list[str]:
+        # the front-panel Sync connector follows one channel (OUTPut:SYNC:SOURce); its mode and
+        # polarity are per channel (OUTPut[1|2]:SYNC:MODE, :POLarity)
+        ch = self.channel
+        return [f"OUTP:SYNC:SOUR CH{ch}", f"OUTP{ch}:SYNC:MODE NORM", f"OUTP{ch}:SYNC:POL NORM", "OUTP:SYNC ON"]
+
+    def _sync_readback(self) -> list[tuple[str, tuple[str, ...]]]:
+        ch = self.channel
+        return [("OUTP:SYNC:SOUR?", (f"CH{ch}",)), (f"OUTP{ch}:SYNC:MODE?", ("NORM",)),
+                (f"OUTP{ch}:SYNC:POL?", ("NORM",)), ("OUTP:SYNC?", ("1", "+1", "ON"))]
+
 
 class RigolDG1000Z(FunctionGenerator):
     """Rigol DG1000Z (DG1022Z, DG1062Z): ``:SOURn:``, ``:OUTPn``; ``0,"No error"``."""
@@ -333,3 +450,10 @@ class RigolDG1000Z(FunctionGenerator):
 
     def _burst_state(self, on: bool) -> str:
         return self._src(f"BURS {'ON' if on else 'OFF'}")
+
+    def _sync_commands(self) -> list[str]:
+        # each channel has its own rear-panel sync (:OUTPut<n>:SYNC[:STATe], :POLarity)
+        return [self._outp(":SYNC:POL POS"), self._outp(":SYNC ON")]
+
+    def _sync_readback(self) -> list[tuple[str, tuple[str, ...]]]:
+        return [(self._outp(":SYNC:POL?"), ("POS", "POSITIVE")), (self._outp(":SYNC?"), ("ON", "1"))]

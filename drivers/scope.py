@@ -28,7 +28,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from labkit.drivers.base import ScpiInstrument, check_choice, check_range
-from labkit.errors import InstrumentError
+from labkit.errors import InstrumentError, LimitError
 
 
 @dataclass
@@ -45,6 +45,13 @@ class Waveform:
     def fs_hz(self) -> float:
         """Sample rate."""
         return 1.0 / self.xinc_s
+
+
+class AcquisitionTimeout(InstrumentError):
+    """The acquisition did not complete in time: in NORMal sweep, no trigger came."""
+
+    #: what callers test (duck-typed: they need not import the driver)
+    no_trigger = True
 
 
 _PRE_FIELDS = ("format", "type", "points", "count", "xinc", "xorig", "xref", "yinc", "yorig",
@@ -153,8 +160,46 @@ class Oscilloscope(ScpiInstrument):
         lev = check_range("trigger level_v", level_v, -1e3, 1e3, "V")
         sl = check_choice("trigger slope", slope, ("POS", "NEG"))
         self._send_all([":TRIG:MODE EDGE", f":TRIG:EDGE:SOUR {src}", f":TRIG:EDGE:LEV {lev:.6g}",
-                        f":TRIG:EDGE:SLOP {sl}"])
-        self.state["trigger"] = {"source": src, "level_v": lev, "slope": sl}
+                        f":TRIG:EDGE:SLOP {sl}", ":TRIG:SWE NORM"])
+        # In AUTO sweep a scope that sees no edge records anyway (untriggered data, a random phase);
+        # in NORMal it waits for the trigger, so a missing sync ends in a timeout, never in a record.
+        self._read_back({":TRIG:EDGE:SOUR?": src, ":TRIG:EDGE:SLOP?": sl, ":TRIG:SWE?": "NORM"})
+        got = self.query_float(":TRIG:EDGE:LEV?")
+        if abs(got - lev) > 1e-6 + 1e-3 * abs(lev) + 0.02 * abs(self._level_resolution(src)):
+            raise InstrumentError(f"trigger level reads back {got:g} V, {lev:g} V was set", instrument=self.name,
+                                  command=":TRIG:EDGE:LEV?")
+        self.state["trigger"] = {"source": src, "level_v": lev, "slope": sl, "sweep": "NORM"}
+
+    def _level_resolution(self, source: str) -> float:
+        """The trigger level's step on ``source``: a fraction of its V/div (0 for EXT)."""
+        ch = self.state["channels"].get(source[4:]) if source.startswith("CHAN") else None
+        return float(ch["volts_per_div"]) if ch else 0.0
+
+    def _read_back(self, expected: dict[str, str]) -> None:
+        """Query each setting; InstrumentError naming the first whose reply differs (short forms:
+        ``CHANnel1`` answers ``CHAN1``, ``POSitive`` ``POS``)."""
+        for cmd, want in expected.items():
+            reply = self.query(cmd).strip('"').upper()
+            if not (reply == want or want.startswith(reply) and len(reply) >= 3
+                    or reply.startswith(want)):
+                raise InstrumentError(f"{cmd} answers {reply[:40]!r}, {want} was set", instrument=self.name,
+                                      command=cmd)
+
+    def set_averaging(self, count: int) -> None:
+        """Average ``count`` triggered records (``count`` 1: normal acquisition); read back.
+
+        Averaging needs a stable trigger (the generator's sync): each record is
+        aligned on it, so the response adds up and uncorrelated noise falls by
+        about ``sqrt(count)``.
+        """
+        n = int(check_range("averages", count, 1, 65536))
+        cmds = [":ACQ:TYPE NORM"] if n == 1 else [":ACQ:TYPE AVER", self._average_command(n)]
+        self._send_all(cmds)
+        self._read_back({":ACQ:TYPE?": "NORM" if n == 1 else "AVER"})
+        self.state["averages"] = n
+
+    def _average_command(self, count: int) -> str:
+        return f":ACQ:COUN {count}"
 
     def set_record_points(self, points: int) -> None:
         """Samples per record (the base model records what its screen holds: nothing to send)."""
@@ -193,9 +238,9 @@ class Oscilloscope(ScpiInstrument):
             if self._done():
                 return
             if time.monotonic() > deadline:
-                raise InstrumentError(f"acquisition not complete within {timeout_s:g} s "
-                                      "(no trigger?)",
-                                      instrument=self.name, command=self._done_command)
+                raise AcquisitionTimeout(f"acquisition not complete within {timeout_s:g} s "
+                                         "(no trigger?)",
+                                         instrument=self.name, command=self._done_command)
             time.sleep(self.poll_s)
 
     def preamble(self) -> dict[str, float]:
@@ -259,9 +304,12 @@ class InfiniiVision(Oscilloscope):
         return {**super().settings(), "points": self.points}
 
     def set_record_points(self, points: int) -> None:
-        """Samples per record read back (``:WAV:POIN:MODE RAW``, ``:WAV:POIN n``), sent now."""
+        """Samples per record read back (``:WAV:POIN:MODE RAW``, ``:WAV:POIN n``), sent now; the
+        mode is read back (the count may be fewer than asked until a record exists: IV
+        :WAVeform:POINts)."""
         n = int(check_range("points", points, 100, 8e6))
         self._send_all([":WAV:POIN:MODE RAW", f":WAV:POIN {n}"])
+        self._read_back({":WAV:POIN:MODE?": "RAW"})
         self.points = n
         self.state["record_points"] = n
 
@@ -304,6 +352,14 @@ class InfiniiVision(Oscilloscope):
         return Waveform(self._times(pre, 0, data.size), volts, pre["xinc"], c, pre)
 
 
+#: DS1000Z Programming Guide, :ACQuire:MDEPth: depths per number of channels switched on
+MDEP_DEPTHS = {1: (12_000, 120_000, 1_200_000, 12_000_000, 24_000_000),
+               2: (6_000, 60_000, 600_000, 6_000_000, 12_000_000),
+               4: (3_000, 30_000, 300_000, 3_000_000, 6_000_000)}
+#: :ACQuire:AVERages: 2^n, n = 1..10
+MDEP_AVERAGES = tuple(2 ** k for k in range(1, 11))
+
+
 class RigolDS1000Z(Oscilloscope):
     """Rigol DS1000Z (DS1054Z, DS1104Z...): 12 divisions, RAW chunked reads.
 
@@ -332,6 +388,28 @@ class RigolDS1000Z(Oscilloscope):
 
     def _timebase_command(self, scale_s: float) -> str:
         return f":TIM:MAIN:SCAL {scale_s:.6g}"
+
+    def _average_command(self, count: int) -> str:
+        """``:ACQuire:AVERages``: a power of two from 2 to 1024 (DS1000Z Programming Guide)."""
+        if count not in MDEP_AVERAGES:
+            raise LimitError(f"averages = {count}: the DS1000Z averages 2, 4, ... 1024 records; "
+                             "nothing was sent", limit="averages")
+        return f":ACQ:AVER {count}"
+
+    def set_record_points(self, points: int) -> None:
+        """Memory depth (``:ACQuire:MDEPth``): the smallest the guide lists for the channels on
+        (1: 12k..24M, 2: 6k..12M, 3-4: 3k..6M) holding ``points``; set while running; read back."""
+        n = int(check_range("record points", points, 100, 24e6))
+        on = max(1, len(self.state["channels"]))
+        depths = MDEP_DEPTHS[1 if on == 1 else 2 if on == 2 else 4]
+        depth = next((d for d in depths if d >= n), depths[-1])
+        self.write(":RUN")          # the depth can only be changed while the scope runs
+        self._send_all([f":ACQ:MDEP {depth}"])
+        got = self.query_int(":ACQ:MDEP?")
+        if got != depth:
+            raise InstrumentError(f":ACQ:MDEP? answers {got}, {depth} was set", instrument=self.name,
+                                  command=":ACQ:MDEP?")
+        self.state["record_points"] = depth
 
     def _offset_command(self, ch: int, centre_v: float) -> str:
         """The DS1000Z's ``:CHANnel<n>:OFFSet`` is added to the signal on screen: the screen's

@@ -41,6 +41,32 @@ class TransportError(Exception):
     """A transport-level failure; :class:`Instrument` turns it into InstrumentError."""
 
 
+#: the longest reply line accepted (a line without its termination beyond this is an error)
+MAX_LINE_BYTES = 16 << 20
+#: a block's deadline grows by its length at this rate (a 100 Mbit/s LAN moves ~12 MB/s)
+BLOCK_BYTES_PER_S = 10e6
+
+
+def _block_size(head: bytes, read: Any) -> int:
+    """The payload length of a block whose first two bytes are ``head`` (``read(n)`` reads on)."""
+    if head[:1] != b"#" or not head[1:2].isdigit() or head[1:2] == b"0":
+        raise TransportError(f"malformed block header {head!r} (expected '#<n><length>')")
+    digits = read(int(head[1:2]))
+    if not digits.isdigit():
+        raise TransportError(f"malformed block length {digits!r}")
+    return int(digits)
+
+
+def _block_array(data: bytes, size: int, term: bytes, datatype: str, big_endian: bool) -> np.ndarray:
+    """The block's payload (``data`` holds it and the termination) as a numpy array."""
+    if len(data) != size + len(term) or data[size:] != term:
+        raise TransportError(f"block of {size} bytes not followed by the termination")
+    dtype = np.dtype(datatype).newbyteorder(">" if big_endian else "<")
+    if size % dtype.itemsize:
+        raise TransportError(f"block of {size} bytes is not a whole number of {datatype!r}")
+    return np.frombuffer(data, dtype=dtype, count=size // dtype.itemsize)
+
+
 # ---------------------------------------------------------------------------------------------
 # transports
 
@@ -117,6 +143,12 @@ class VisaTransport(Transport):
             # Without TCP_NODELAY a query written after unanswered commands waits
             # for the peer's delayed ACK (~40 ms on Linux) under Nagle's algorithm.
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        # Raw sockets are read here, not by pyvisa-py: its timeout restarts with every chunk that
+        # arrives, so an instrument trickling a byte at a time never times out. Ours is one
+        # deadline per reply (see _deadline_read).
+        self._sock = sock
+        self._rbuf = bytearray()
+        self._rterm = read_termination.encode()
 
     def _socket(self):
         import socket
@@ -138,9 +170,61 @@ class VisaTransport(Transport):
         self._res.write(text)
 
     def read(self) -> str:
-        return self._res.read()
+        if self._sock is None or not self._rterm:
+            return self._res.read()
+        deadline = time.monotonic() + self.timeout_s
+        while True:
+            at = self._rbuf.find(self._rterm)
+            if at >= 0:
+                line = bytes(self._rbuf[:at])
+                del self._rbuf[:at + len(self._rterm)]
+                return line.decode("ascii")
+            if len(self._rbuf) > MAX_LINE_BYTES:
+                self._rbuf.clear()
+                raise TransportError(f"reply longer than {MAX_LINE_BYTES} bytes without a termination")
+            self._recv_some(deadline, f"partial reply {bytes(self._rbuf[:40])!r}")
+
+    def _recv_some(self, deadline: float, got: str) -> None:
+        """Append what the socket has to the buffer, waiting at most until ``deadline`` (monotonic)."""
+
+        assert self._sock is not None
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise TransportError(f"timeout after {self.timeout_s:g} s ({got}; the deadline covers the "
+                                 "whole reply)")
+        was = self._sock.gettimeout()
+        self._sock.settimeout(left)
+        try:
+            chunk = self._sock.recv(1 << 20)
+        except TimeoutError:
+            raise TransportError(f"timeout after {self.timeout_s:g} s ({got})") from None
+        finally:
+            self._sock.settimeout(was)
+        if not chunk:
+            raise TransportError("connection closed by the instrument")
+        self._rbuf += chunk
+
+    def _read_exact(self, n: int, deadline: float) -> bytes:
+        while len(self._rbuf) < n:
+            self._recv_some(deadline, f"got {len(self._rbuf)} of {n} bytes")
+        out = bytes(self._rbuf[:n])
+        del self._rbuf[:n]
+        return out
+
+    def _socket_block(self, command: str, datatype: str, big_endian: bool) -> np.ndarray:
+        """A definite-length block read from the socket under one deadline: the timeout, plus the
+        block's length at :data:`BLOCK_BYTES_PER_S` (a 16 MB record over a LAN)."""
+        self._res.write(command)
+        deadline = time.monotonic() + self.timeout_s
+        head = self._read_exact(2, deadline)
+        size = _block_size(head, lambda n: self._read_exact(n, deadline))
+        deadline += size / BLOCK_BYTES_PER_S
+        data = self._read_exact(size + len(self._rterm), deadline)
+        return _block_array(data, size, self._rterm, datatype, big_endian)
 
     def query_block(self, command: str, datatype: str, big_endian: bool) -> np.ndarray:
+        if self._sock is not None and self.fast_blocks:
+            return self._socket_block(command, datatype, big_endian)
         if not self.fast_blocks:
             return self._res.query_binary_values(
                 command, datatype=datatype, is_big_endian=big_endian, container=np.array,
@@ -152,24 +236,14 @@ class VisaTransport(Transport):
 
         self._res.write(command)
         head = bytes(self._res.read_bytes(2))
-        if head[:1] != b"#" or not head[1:2].isdigit() or head[1:2] == b"0":
-            raise TransportError(f"malformed block header {head!r} (expected '#<n><length>')")
-        digits = bytes(self._res.read_bytes(int(head[1:2])))
-        if not digits.isdigit():
-            raise TransportError(f"malformed block length {digits!r}")
-        size = int(digits)
+        size = _block_size(head, lambda n: bytes(self._res.read_bytes(n)))
         term = (self._res.read_termination or "").encode()
-        dtype = np.dtype(datatype).newbyteorder(">" if big_endian else "<")
         self._res.set_visa_attribute(constants.ResourceAttribute.termchar_enabled, False)
         try:
             data = self._res.read_bytes(size + len(term), chunk_size=self.chunk_size)
         finally:
             self._res.set_visa_attribute(constants.ResourceAttribute.termchar_enabled, True)
-        if len(data) != size + len(term) or data[size:] != term:
-            raise TransportError(f"block of {size} bytes not followed by the termination")
-        if size % dtype.itemsize:
-            raise TransportError(f"block of {size} bytes is not a whole number of {datatype!r}")
-        return np.frombuffer(data, dtype=dtype, count=size // dtype.itemsize)
+        return _block_array(bytes(data), size, term, datatype, big_endian)
 
     def dropped(self) -> bool:
         """True when the peer has closed the connection (raw sockets only)."""
@@ -185,6 +259,7 @@ class VisaTransport(Transport):
             return True
 
     def close(self) -> None:
+        self._rbuf.clear()
         self._res.close()
 
 
@@ -247,19 +322,9 @@ class SerialTransport(Transport):
         self.write(command)
         deadline = time.monotonic() + self._timeout
         head = self._read_exact(2, deadline)
-        if head[:1] != b"#" or not head[1:2].isdigit() or head[1:2] == b"0":
-            raise TransportError(f"malformed block header {head!r}")
-        digits = self._read_exact(int(head[1:2]), deadline)
-        if not digits.isdigit():
-            raise TransportError(f"malformed block length {digits!r}")
-        size = int(digits)
-        data = self._read_exact(size + len(self._rterm), deadline)
-        if data[size:] != self._rterm:
-            raise TransportError(f"block of {size} bytes not followed by the termination")
-        dtype = np.dtype(datatype).newbyteorder(">" if big_endian else "<")
-        if size % dtype.itemsize:
-            raise TransportError(f"block of {size} bytes is not a whole number of {datatype!r}")
-        return np.frombuffer(data[:size], dtype=dtype).copy()
+        size = _block_size(head, lambda n: self._read_exact(n, deadline))
+        data = self._read_exact(size + len(self._rterm), deadline + size / BLOCK_BYTES_PER_S)
+        return _block_array(data, size, self._rterm, datatype, big_endian).copy()
 
     def close(self) -> None:
         self._ser.close()

@@ -14,7 +14,7 @@ from __future__ import annotations
 import re
 from typing import Any, ClassVar
 
-from labkit.drivers.base import Instrument
+from labkit.drivers.base import Instrument, check_range
 from labkit.errors import ConfigError, InstrumentError, LimitError
 
 #: OFV-3001 range number by scale factor (mm/s per V), per velocity decoder.
@@ -74,8 +74,10 @@ class OFV3001(Vibrometer):
 
     def __init__(self, transport, *, name: str | None = None, decoder: str = "OVD-01",
                  ranges: dict[float, int] | None = None, serial_number: str = "",
-                 **settings: Any) -> None:
+                 signal_delay_s: float = 0.0, **settings: Any) -> None:
         super().__init__(transport, name=name, **settings)
+        #: the decoder's signal delay (declared: the OFV-3001 has no query for it; (unverified))
+        self.signal_delay_s = check_range("signal_delay_s", signal_delay_s, 0.0, 1e-3, "s")
         if ranges is None:
             if decoder not in OFV3001_RANGES:
                 raise ConfigError(f"unknown OFV-3001 decoder {decoder!r}", key="decoder",
@@ -91,7 +93,7 @@ class OFV3001(Vibrometer):
     def settings(self) -> dict[str, Any]:
         return {**super().settings(), "decoder": self.decoder,
                 "ranges": {_fmt_scale(k): v for k, v in sorted(self.ranges.items())},
-                "serial_number": self.serial_number}
+                "serial_number": self.serial_number, "signal_delay_s": self.signal_delay_s}
 
     @property
     def identity(self) -> str:
@@ -157,12 +159,25 @@ _RANGE_TEXT = re.compile(r"^\s*([0-9.]+(?:[eE][-+]?\d+)?)\s*(mm|m|um|µm)/s/V\s*
 _UNIT = {"mm": 1.0, "m": 1000.0, "um": 1e-3, "µm": 1e-3}
 
 
+def _number_with_unit(pattern: re.Pattern[str], units: dict[str, float], text: str, what: str) -> float:
+    m = pattern.match(text)
+    if not m:
+        raise ValueError(f"not a {what}: {text!r}")
+    return float(m.group(1)) * units[m.group(2)]
+
+
 def parse_range_text(text: str) -> float:
     """``"125mm/s/V"`` -> 125.0 (mm/s per V); ``"1m/s/V"`` -> 1000.0. ValueError otherwise."""
-    m = _RANGE_TEXT.match(text)
-    if not m:
-        raise ValueError(f"not a velocity range: {text!r}")
-    return float(m.group(1)) * _UNIT[m.group(2)]
+    return _number_with_unit(_RANGE_TEXT, _UNIT, text, "velocity range")
+
+
+_DELAY_TEXT = re.compile(r"^\s*([0-9.]+(?:[eE][-+]?\d+)?)\s*(s|ms|us|µs|ns)\s*$")
+_DELAY_UNIT = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
+
+
+def parse_delay_text(text: str) -> float:
+    """``"7.6us"`` -> 7.6e-06 s. ValueError otherwise."""
+    return _number_with_unit(_DELAY_TEXT, _DELAY_UNIT, text, "delay")
 
 
 def _parse_bool(inst: Instrument, reply: str, command: str) -> bool:
@@ -205,8 +220,14 @@ class OFV5000(Vibrometer):
                  ranges_mm_s_per_v: tuple[float, ...] | None = None,
                  over_range_command: str = "Get,VeloDec,{i},OverRange",
                  identity_command: str = "GetDevInfo,Controller,0,Name",
+                 signal_delay_command: str = "Get,VeloDec,{i},SignalDelay",
+                 signal_delay_s: float | None = None,
                  **settings: Any) -> None:
         super().__init__(transport, name=name, **settings)
+        self.signal_delay_command = signal_delay_command
+        self._delay: float | None = None if signal_delay_s is None else check_range(
+            "signal_delay_s", signal_delay_s, 0.0, 1e-3, "s")
+        self._delay_declared = signal_delay_s is not None
         self.decoder_index = int(decoder_index)
         self.ranges_mm_s_per_v = (None if ranges_mm_s_per_v is None
                                   else tuple(sorted(float(r) for r in ranges_mm_s_per_v)))
@@ -218,7 +239,51 @@ class OFV5000(Vibrometer):
         return {**super().settings(), "decoder_index": self.decoder_index,
                 "ranges_mm_s_per_v": self.ranges_mm_s_per_v,
                 "over_range_command": self.over_range_command,
-                "identity_command": self.identity_command}
+                "identity_command": self.identity_command,
+                "signal_delay_command": self.signal_delay_command,
+                "signal_delay_s": self._delay if self._delay_declared else None}
+
+    def _get(self, prop: str, dev: str = "VeloDec") -> str:
+        return self.query(f"Get,{dev},{self.decoder_index if dev == 'VeloDec' else 0},{prop}")
+
+    @property
+    def signal_delay_s(self) -> float:
+        """The decoder's signal delay, s: its analog output is the velocity this long ago (asked once
+        with ``signal_delay_command``, answered like ``7.6us``; or the declared ``signal_delay_s``)."""
+        if self._delay is None:
+            self._delay = self._query_parsed(self.signal_delay_command.format(i=self.decoder_index),
+                                             parse_delay_text, "7.6us")
+        return self._delay
+
+    def _query_parsed(self, cmd: str, parse: Any, example: str) -> float:
+        """``parse(reply)`` of ``cmd``; a reply it cannot read is a garbled reply (InstrumentError)."""
+        reply = self.query(cmd)
+        try:
+            return float(parse(reply))
+        except ValueError:
+            raise InstrumentError(f"garbled reply {reply[:40]!r} (expected e.g. '{example}')",
+                                  instrument=self.name, command=cmd) from None
+
+    def set_decoder(self, prop: str, value: str) -> None:
+        """``Set,VeloDec,<i>,<prop>,<value>`` (``Filter``, ``Tracking``), read back: the controller
+        ignores an invalid value without a word."""
+        self.write(f"Set,VeloDec,{self.decoder_index},{prop},{value}")
+        back = self._get(prop)
+        if back.lower() != str(value).lower():
+            raise InstrumentError(f"{prop} not accepted: asked {value!r}, reads back {back[:40]!r}",
+                                  instrument=self.name, command=f"Set,VeloDec,{self.decoder_index},{prop}")
+        self.state[prop.lower()] = back
+
+    def snapshot(self) -> dict[str, Any]:
+        """The base snapshot plus what decides the record's meaning: range, signal delay, filter,
+        tracking and the sensor's signal level at the time."""
+        snap = super().snapshot()
+        st = snap["state"]
+        st["signal_delay_s"] = self.signal_delay_s
+        for key, prop, dev in (("filter", "Filter", "VeloDec"), ("tracking", "Tracking", "VeloDec"),
+                               ("signal_level", "SignalLevel", "SensorHead")):
+            st[key] = self._get(prop, dev)
+        return snap
 
     @property
     def identity(self) -> str:
@@ -229,13 +294,8 @@ class OFV5000(Vibrometer):
     @property
     def scale_mm_s_per_v(self) -> float:
         """Scale factor in mm/s per V (``Get,VeloDec,<i>,Range``); set with a value in mm/s/V."""
-        cmd = f"Get,VeloDec,{self.decoder_index},Range"
-        reply = self.query(cmd)
-        try:
-            self._scale = parse_range_text(reply)
-        except ValueError:
-            raise InstrumentError(f"garbled reply {reply[:40]!r} (expected e.g. '125mm/s/V')",
-                                  instrument=self.name, command=cmd) from None
+        self._scale = self._query_parsed(f"Get,VeloDec,{self.decoder_index},Range", parse_range_text,
+                                         "125mm/s/V")
         return self._scale
 
     @scale_mm_s_per_v.setter

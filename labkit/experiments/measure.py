@@ -67,17 +67,22 @@ def acquire_burst(scope: Any, fire: Any, drive_channel: int, velocity_channel: i
     The scope's record was placed ``settle_s`` after its trigger (the burst's start,
     :meth:`set_record_delay`), so it holds ``dwell_s`` of the steady response.
     """
-    scope.single()
-    # a query answered after :SING means the scope has armed: only then may the burst start
-    # (the two instruments are separate links; nothing else orders their commands). *STB? never
-    # waits (an *OPC? may be held until an armed single acquisition completes, i.e. forever here)
-    confirm = getattr(scope, "query", None)
-    if confirm is not None:
-        confirm("*STB?")
+    arm(scope)
     fire()
     time.sleep(settle_s + dwell_s)
     scope.wait_done(timeout_s)
     return _read(scope, drive_channel, velocity_channel)
+
+
+def arm(scope: Any) -> None:
+    """``:SING``, confirmed: a query answered after it means the scope has armed, so a trigger sent
+    to the generator next cannot come before it (the two instruments are separate links; nothing
+    else orders their commands). *STB? never waits (an *OPC? may be held until an armed single
+    acquisition completes, i.e. forever here)."""
+    scope.single()
+    confirm = getattr(scope, "query", None)
+    if confirm is not None:
+        confirm("*STB?")
 
 
 def _read(scope: Any, drive_channel: int, velocity_channel: int) -> Records:
@@ -91,17 +96,24 @@ def _read(scope: Any, drive_channel: int, velocity_channel: int) -> Records:
     return Records(d, v, float(wd.xinc_s))
 
 
-def sine_phasors(rec: Records, freq_hz: float, scale_mm_s_per_v: float) -> SinePhasors:
-    """Least-squares sine fit of both channels at ``freq_hz`` (:func:`labkit.analysis.frf.demodulate`)."""
+def delay_correction(freq_hz: Any, delay_s: float) -> Any:
+    """The factor undoing a signal delay: the decoder's output at ``t`` is the velocity at
+    ``t - delay_s``, i.e. its phasor ``exp(-j w delay_s)`` times the velocity's."""
+    return np.exp(2j * np.pi * np.asarray(freq_hz, dtype=float) * delay_s)
+
+
+def sine_phasors(rec: Records, freq_hz: float, scale_mm_s_per_v: float, delay_s: float = 0.0) -> SinePhasors:
+    """Least-squares sine fit of both channels at ``freq_hz`` (:func:`labkit.analysis.frf.demodulate`);
+    the velocity's phase corrected for the decoder's ``delay_s``."""
     from labkit.analysis.frf import demodulate
 
     dem = demodulate(np.vstack([rec.drive_v, rec.velocity_v]), rec.fs_hz, freq_hz)
-    return SinePhasors(complex(dem.amplitude[0]), complex(dem.amplitude[1]) * scale_mm_s_per_v,
-                       float(np.min(dem.quality)))
+    velocity = complex(dem.amplitude[1]) * scale_mm_s_per_v * complex(delay_correction(freq_hz, delay_s))
+    return SinePhasors(complex(dem.amplitude[0]), velocity, float(np.min(dem.quality)))
 
 
-def chirp_h1(records: list[Records], scale_mm_s_per_v: float, f_lo_hz: float, f_hi_hz: float
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def chirp_h1(records: list[Records], scale_mm_s_per_v: float, f_lo_hz: float, f_hi_hz: float,
+             delay_s: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """H1 and coherence from chirp records (one Welch segment per record, rectangular window).
 
     A chirp fills its record, so each record is one segment (no taper that
@@ -116,7 +128,8 @@ def chirp_h1(records: list[Records], scale_mm_s_per_v: float, f_lo_hz: float, f_
     est = estimate_frf(x, y, records[0].fs_hz, nperseg=n, noverlap=0, window="boxcar")
     keep = (est.freq_hz >= f_lo_hz) & (est.freq_hz <= f_hi_hz)
     coh = np.nan_to_num(est.coherence[keep], nan=0.0)
-    return est.freq_hz[keep], est.h1[keep], coh
+    f = est.freq_hz[keep]
+    return f, est.h1[keep] * delay_correction(f, delay_s), coh
 
 
 def displacement_um(velocity_mm_s: complex, freq_hz: float) -> float:

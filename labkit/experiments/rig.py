@@ -104,6 +104,7 @@ class Rig:
         self.drive_channel = cfg.scope.drive_channel
         self.velocity_channel = cfg.scope.velocity_channel
         self.scale_mm_s_per_v = cfg.scale_mm_s_per_v
+        self.velocity_delay_s = 0.0
         self._spot = spot
         self._funcgen_limits: dict[str, float] = {}
         self.velocity_vpd = cfg.scope.velocity_volts_per_div or 2 * VIB_OUTPUT_MAX_V / VERTICAL_DIVS
@@ -142,18 +143,23 @@ class Rig:
                                     config=cfg.path)
             # A generator may come up with its output on from an earlier session: off first.
             fg.safe_off()
-            fg.set_load_high_z()
+            fg.set_load()         # the declared load_ohm (INF: the PZT, an amplifier input), read back
             scope = self.scope = _open(inst["scope"])
             scope.poll_s = 0.002       # completion polls: fine-grained (the record time is slept)
             vib = self.vibrometer = _open(inst["vibrometer"])
             vib.scale_mm_s_per_v = cfg.scale_mm_s_per_v
             self.scale_mm_s_per_v = float(vib.scale_mm_s_per_v)
+            # the decoder's output lags the velocity: every point's phase is corrected for it
+            self.velocity_delay_s = float(vib.signal_delay_s)
             scope.setup_channel(self.velocity_channel, self.velocity_vpd, 0.0, "DC")
             trig = cfg.scope.trigger_source
             # EXT: the generator's TTL sync (phase zero of the sine, start of a sweep)
             offset_v = setup.drive[1] if setup.drive is not None else 0.0
             level = 1.0 if trig == "EXT" else (offset_v if trig == f"CHAN{self.drive_channel}" else 0.0)
-            scope.set_trigger(trig, level, "POS")
+            if trig == "EXT":
+                fg.enable_sync()      # sync on, from the drive channel, read back (docs/instruments.md)
+            scope.set_trigger(trig, level, "POS")     # NORMal sweep: no trigger, no record
+            scope.set_averaging(1)    # one record per trigger (a scope left averaging would blend points)
             if setup.drive is not None:
                 self.on_drive_amplitude(*setup.drive)
             if setup.wants_camera:

@@ -313,6 +313,13 @@ class Runner:
                             f"{DRIVE_TOLERANCE:.0%} off): the generator was switched off or changed "
                             "outside this run, or its cable is loose")
 
+    def _no_trigger(self) -> None:
+        """After an acquisition that never triggered (the scope waits in NORMal sweep): an output found
+        off explains it (no drive, no sync) and is an interlock on this point, not a fault of the rig."""
+        if self.guard.is_on and not self.guard.funcgen.output_on:
+            raise Interlock(f"no trigger: drive measured off by the generator (its output query), commanded "
+                            f"{self.drive_set_vpp or 0:.4g} Vpp: the generator was switched off outside this run")
+
     # -- steps -------------------------------------------------------------------------------
     def _move_spot(self, spot: str, *, drive_off: bool) -> None:
         if spot == self.spot:
@@ -437,9 +444,19 @@ class Runner:
             t_acq = time.monotonic()
             if self.bounded:
                 self._wait_burst_end()       # before arming: the trigger must follow the arm at once
-                rec = measure.acquire_burst(rig.scope, lambda: self._fire_burst(freq_hz),
-                                            rig.drive_channel, rig.velocity_channel,
-                                            settle_s, dwell_s, timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                try:
+                    rec = measure.acquire_burst(rig.scope, lambda: self._fire_burst(freq_hz),
+                                                rig.drive_channel, rig.velocity_channel,
+                                                settle_s, dwell_s, timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                except InstrumentError as exc:
+                    if not getattr(exc, "no_trigger", False):
+                        raise
+                    self._no_trigger()
+                    if not retries:
+                        raise
+                    retries -= 1    # NORMal sweep: a missed burst start is a timeout, not a silent record
+                    self._event(f"no trigger at {freq_hz:g} Hz (the burst's start missed?): acquiring once more")
+                    continue
                 waited += min(settle_s + dwell_s, time.monotonic() - t_acq)
                 if retries and self._no_drive_in(rec):
                     # the scope may have missed the burst's start (it then records silence): once more;
@@ -448,8 +465,13 @@ class Runner:
                     self._event(f"too little drive in the record at {freq_hz:g} Hz: acquiring once more")
                     continue
             else:
-                rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
-                                      timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                try:
+                    rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
+                                          timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                except InstrumentError as exc:
+                    if getattr(exc, "no_trigger", False):
+                        self._no_trigger()
+                    raise
                 waited += min(dwell_s, time.monotonic() - t_acq)
             self.last_rec = (rec, getattr(rig, "drive_vpd", None), getattr(rig, "velocity_vpd", None))
             if rig.vibrometer.over_range():
@@ -464,7 +486,7 @@ class Runner:
         t_changed = time.monotonic()
         self.guard.on()
         rec, waited = self._settle_and_acquire(p.freq_hz, p.settle_s, p.dwell_s, t_changed)
-        ph = measure.sine_phasors(rec, p.freq_hz, self.rig.scale_mm_s_per_v)
+        ph = measure.sine_phasors(rec, p.freq_hz, self.rig.scale_mm_s_per_v, self.rig.velocity_delay_s)
         self._check_measured_drive(ph)
         self.timing.append({"waited_s": waited, "settle_s": p.settle_s, "dwell_s": p.dwell_s})
         rows = {"location": p.location, "freq_hz": p.freq_hz, "reason": ""}
@@ -491,8 +513,8 @@ class Runner:
         records = []
         try:
             for _ in range(p.averages):
-                rig.scope.single()
-                fg.trigger()
+                measure.arm(rig.scope)     # armed before the sweep starts: in NORMal sweep a start
+                fg.trigger()               # the scope missed would be a timeout
                 rig.scope.wait_done(p.length_s * 2 + ACQUIRE_MARGIN_S)
                 wd = rig.scope.read_waveform(rig.drive_channel)
                 wv = rig.scope.read_waveform(rig.velocity_channel)
@@ -505,7 +527,8 @@ class Runner:
                 fg.sweep_off()
             except InstrumentError:
                 pass
-        f, h, coh = measure.chirp_h1(records, rig.scale_mm_s_per_v, p.start_hz, p.stop_hz)
+        f, h, coh = measure.chirp_h1(records, rig.scale_mm_s_per_v, p.start_hz, p.stop_hz,
+                                     rig.velocity_delay_s)
         self.timing.append({"waited_s": p.averages * p.length_s})
         rows = {"location": p.location, "freq_hz": float("nan"), "reason": ""}
         loc = {"location": p.location, "freq_hz": f, "frf": h, "quality": coh, "coherence": coh,
@@ -544,7 +567,7 @@ class Runner:
             self.guard.on()
             rec, w = self._settle_and_acquire(f, p.settle_s, p.dwell_s, t_changed)
             waited += w
-            tray = measure.sine_phasors(rec, f, rig.scale_mm_s_per_v)
+            tray = measure.sine_phasors(rec, f, rig.scale_mm_s_per_v, rig.velocity_delay_s)
             self._check_measured_drive(tray)
             x_um = measure.displacement_um(tray.velocity_mm_s, f)
             iterations += 1
@@ -575,7 +598,7 @@ class Runner:
         self._move_spot(p.robot_spot, drive_off=False)
         robot_rec, w = self._settle_and_acquire(f, p.settle_s, p.dwell_s, time.monotonic())
         waited += w
-        robot = measure.sine_phasors(robot_rec, f, rig.scale_mm_s_per_v)
+        robot = measure.sine_phasors(robot_rec, f, rig.scale_mm_s_per_v, rig.velocity_delay_s)
         self._check_measured_drive(robot)
         from labkit.analysis.frf import transmissibility
 

@@ -110,12 +110,21 @@ class LabControl:
         self.check(cmd)
 
     def record_video(self, path: str | Path, duration_s: float) -> dict[str, Any]:
-        """Film ``duration_s`` into ``path`` (on the lab's machine); -> Camera dict."""
-        cmd = f'CAM:REC "{Path(path)}",{float(duration_s):g}'
+        """Film ``duration_s`` into ``path``; -> Camera dict. The lab films into its own folder
+        (``CAM:DIR?``, on this machine); the clip is then moved to ``path``."""
+        import shutil
+
+        path = Path(path)
+        if not path.parent.is_dir():
+            raise InstrumentError(f"camera: no such directory: {path.parent}", instrument=self.name,
+                                  command="CAM:REC")
+        cmd = f'CAM:REC "{path.name}",{float(duration_s):g}'
         reply = self.query(cmd, timeout_s=self.timeout_s + 10 * float(duration_s))
         if not reply.strip().lstrip("+").isdigit() or int(reply) == 0:
             self.check(cmd)
             raise InstrumentError(f"unexpected reply {reply[:40]!r}", instrument=self.name, command=cmd)
+        folder = Path(self.query("CAM:DIR?").strip().strip('"'))
+        shutil.move(str(folder / path.name), str(path))
         stamps = self.query("CAM:TIMESTAMPS?")
         times = [float(v) for v in stamps.split(",") if v.strip()]
         return {"path": str(path), "frames": int(reply), "timestamps_s": times}

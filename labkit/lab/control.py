@@ -12,13 +12,15 @@ film without Python access:
 ``LAB:TRUTh?``                         the lab's truth as one JSON line
 ``LAB:OUTPut? <inst>,<ch>``            last output state from the timeline (0/1)
 ``CAM:FPS <fps>``                      ``CAM:FPS?``
-``CAM:REC "<path>",<duration_s>``      film the robot; answers ``<frames>`` (0: failed, see SYST:ERR?)
+``CAM:REC "<name>",<duration_s>``      film into CAM:DIR?/<name>; answers ``<frames>`` (0: failed, see SYST:ERR?)
+``CAM:DIRectory?``                     the only folder the camera writes to
 ``CAM:TIMEstamps?``                    the last recording's frame times, s
 =====================================  =============================================
 """
 from __future__ import annotations
 
 import json
+import threading
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -32,6 +34,7 @@ class Bench(Protocol):
 
     camera_fps: float
     last_recording: dict[str, Any] | None
+    recordings_dir: Path
 
     @property
     def spot(self) -> str: ...
@@ -63,6 +66,15 @@ def _unquote(text: str) -> str:
     return text
 
 
+#: the most frames one clip may hold (10 min at 30 fps; 640 x 480 frames)
+MAX_FRAMES = 20_000
+
+
+def _plain_name(name: str) -> bool:
+    """A file name without a directory part (no ``/``, ``\\``, ``..``, nor a leading dot)."""
+    return bool(name) and "/" not in name and "\\" not in name and not name.startswith(".") and len(name) <= 200
+
+
 class SimLabControl(SimScpiInstrument):
     name = "control"
     idn = f"labkit,VirtualLab control,0,{__version__}"
@@ -82,6 +94,8 @@ class SimLabControl(SimScpiInstrument):
         self.add("CAM:FPS", set=lambda c: setattr(self.lab, "camera_fps", self.num(c.one(), "", 1.0, 1000.0)),
                  query=lambda c: fmt_num(self.lab.camera_fps))
         self.add("CAM:RECord", set=self._record, query=self._record, answers=True)
+        self.add("CAM:DIRectory", query=lambda c: '"' + str(self.lab.recordings_dir) + '"')
+        self._filming = threading.Lock()
         self.add("CAM:TIMEstamps", query=self._timestamps)
 
     def _spot(self, c: Call) -> None:
@@ -119,15 +133,34 @@ class SimLabControl(SimScpiInstrument):
         return "1" if self.lab.output_state(inst, ch) else "0"
 
     def _record(self, c: Call) -> str:
+        """``CAM:REC "<file name>",<s>``: a clip into the lab's recording folder only (``CAM:DIR?``),
+        at most :data:`MAX_FRAMES` frames; filmed with the channel's lock released, so the other
+        control commands go on meanwhile. Answers the frame count (0: failed, the reason queued)."""
         if len(c.params) != 2:
             raise ScpiError(-109)
-        path = _unquote(c.params[0])
+        name = _unquote(c.params[0])
         duration = self.num(c.params[1], "S", 0.05, 600.0)
+        folder = Path(self.lab.recordings_dir)
+        if not _plain_name(name):
+            self.push_error(-224, "Illegal parameter value;camera: a file name only, written to CAM:DIR?")
+            return "0"
+        if duration * self.lab.camera_fps > MAX_FRAMES:
+            self.push_error(-222, f"Data out of range;camera: more than {MAX_FRAMES} frames")
+            return "0"
+        if not self._filming.acquire(blocking=False):
+            self.push_error(-221, "Settings conflict;camera: already recording")
+            return "0"
+        self.lock.release()
         try:
-            info = self.lab.record_video(path, duration)
+            info = self.lab.record_video(folder / name, duration)
         except (OSError, ValueError) as exc:
+            info = {"frames": 0, "error": str(exc)}
+        finally:
+            self.lock.acquire()
+            self._filming.release()
+        if "error" in info:
             # always answer (a client waits for the frame count): 0 frames, and the reason queued
-            self.push_error(-230, f"Data corrupt or stale;camera: {exc}"[:200])
+            self.push_error(-230, f"Data corrupt or stale;camera: {info['error']}"[:200])
             return "0"
         return str(info["frames"])
 

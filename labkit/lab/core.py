@@ -18,9 +18,11 @@ decayed (12 time constants of the slowest mode), then analytically (sine).
 """
 from __future__ import annotations
 
+import tempfile
 import threading
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +40,49 @@ from labkit.lab.transport import Fault, PtyServer, TcpServer
 from labkit.lab.vibrometer import FULL_SCALE_V, SimOFV3001, SimOFV5000
 
 SETUPS = ("inchip", "shaker")
+#: the lab's log keeps this many entries (the newest), each text at most LOG_TEXT_CHARS long
+LOG_ENTRIES = 20_000
+LOG_TEXT_CHARS = 240
+
+LogEntry = tuple[float, str, str, str]
+
+
+class LogRing:
+    """The lab's log: the newest :data:`LOG_ENTRIES` entries ``(t_s, instrument, direction, text)``.
+
+    ``len()`` and indices count every entry ever appended, so ``log[n:]`` is what came
+    after the first ``n`` (less whatever has been dropped since); iteration sees a copy.
+    """
+
+    def __init__(self, maxlen: int = LOG_ENTRIES) -> None:
+        self._entries: deque[LogEntry] = deque(maxlen=maxlen)
+        self._count = 0
+        self._lock = threading.Lock()
+
+    def append(self, entry: LogEntry) -> None:
+        with self._lock:
+            self._entries.append(entry)
+            self._count += 1
+
+    def __len__(self) -> int:
+        return self._count
+
+    def _kept(self) -> tuple[int, list[LogEntry]]:
+        with self._lock:
+            return self._count - len(self._entries), list(self._entries)
+
+    def __iter__(self) -> Iterator[LogEntry]:
+        return iter(self._kept()[1])
+
+    def __getitem__(self, key: int | slice) -> Any:
+        first, kept = self._kept()
+        if isinstance(key, slice):
+            start, stop, step = key.indices(self._count)
+            return [kept[i - first] for i in range(start, stop, step) if i >= first]
+        i = key + self._count if key < 0 else key
+        if not first <= i < self._count:
+            raise IndexError("log entry dropped or not yet written")
+        return kept[i - first]
 
 
 def _pick(role: str, model: str, table: dict[str, str]) -> str:
@@ -124,7 +169,8 @@ class VirtualLab:
                  noise_v_rms: float = 5e-4, noise_mm_s_rms: float = 0.01,
                  sim_duration_s: float = 1.0, scope_memory_points: int = 1_000_000,
                  funcgen_model: str = "33522B", scope_model: str = "DSOX3024T",
-                 vibrometer_model: str = "OFV-5000", miswire: Miswiring | None = None) -> None:
+                 vibrometer_model: str = "OFV-5000", miswire: Miswiring | None = None,
+                 vxi11: bool = False) -> None:
         self.seed = int(seed)
         self.miswire = miswire or Miswiring()
         self.params = load_robot(robot)
@@ -145,12 +191,17 @@ class VirtualLab:
         self._state_lock = threading.Lock()
         self._sim_cache: OrderedDict[tuple[float, float], Any] = OrderedDict()
         self._sim_lock = threading.Lock()
-        self.log: list[tuple[float, str, str, str]] = []
+        self.log = LogRing()
         self.output_timeline: list[tuple[float, str, int, bool]] = []
         self.t0 = time.monotonic()
         self.servers: dict[str, TcpServer | PtyServer] = {}
+        #: VXI-11 servers of the generator and the scope (``vxi11=True``; needs root for port 111)
+        self.vxi11 = bool(vxi11)
+        self.vxi11_servers: dict[str, Any] = {}
         self.camera_fps = 30.0
         self.last_recording: dict[str, Any] | None = None
+        #: the only folder the camera writes to (``CAM:REC "<file name>"``); a fresh one per lab
+        self.recordings_dir = Path(tempfile.mkdtemp(prefix="labkit-lab-camera-"))
 
         self.burst_timeline: list[tuple[float, str, int, float]] = []
         fg_model = _pick("funcgen", funcgen_model, FUNCGEN_MODELS)
@@ -188,6 +239,13 @@ class VirtualLab:
         }
         for server in self.servers.values():
             server.start()
+        if self.vxi11:
+            from labkit.lab.vxi11 import Vxi11Server
+
+            for name in ("funcgen", "scope"):
+                vx = Vxi11Server(self.servers[name])
+                vx.start()
+                self.vxi11_servers[name] = vx
         self._started = True
         return self
 
@@ -197,11 +255,16 @@ class VirtualLab:
             with self.funcgen.lock:
                 self.funcgen._set_output(ch, False)
         self.scope.close()
+        for vx in self.vxi11_servers.values():
+            vx.close()
+        self.vxi11_servers = {}
         for server in self.servers.values():
             server._stop.set()   # every server winds down at once, then each is joined
         for server in self.servers.values():
             server.close()
         self._started = False
+        import shutil
+        shutil.rmtree(self.recordings_dir, ignore_errors=True)    # clips not moved out are the lab's
 
     def __enter__(self) -> VirtualLab:
         return self.start()
@@ -213,6 +276,11 @@ class VirtualLab:
     def resources(self) -> dict[str, str]:
         """VISA resource strings of the instruments and of the control channel."""
         return {name: server.resource for name, server in self.servers.items()}
+
+    @property
+    def vxi11_resources(self) -> dict[str, str]:
+        """``TCPIP0::127.x.y.z::inst0::INSTR`` of the generator and the scope (with ``vxi11=True``)."""
+        return {name: server.resource for name, server in self.vxi11_servers.items()}
 
     # -- the person at the bench ----------------------------------------------------------------
     def set_spot(self, spot: str) -> None:
@@ -242,16 +310,17 @@ class VirtualLab:
         return self._setup
 
     def inject_fault(self, instrument: str, kind: str = "drop", after: int = 0, match: str | None = None,
-                     count: int = 1) -> Fault:
+                     count: int = 1, interval_s: float = 0.5) -> Fault:
         """Arm a fault on ``instrument``'s replies (see :class:`labkit.lab.transport.Fault`).
 
         ``after`` replies (to commands containing ``match``, if given) go out
         normally first; the next ``count`` are dropped mid-transfer, withheld
-        (``stall``) or replaced by ``garbage``.
+        (``stall``), replaced by ``garbage`` or sent a byte every ``interval_s``
+        (``trickle``).
         """
         if instrument not in self.servers:
             raise ValueError(f"instrument must be one of {', '.join(self.servers)}, not {instrument!r}")
-        fault = Fault(kind, int(after), match, int(count))
+        fault = Fault(kind, int(after), match, int(count), float(interval_s))
         self.servers[instrument].inject(fault)
         self._log("lab", "state", f"fault armed on {instrument}: {kind} after {after} (match {match!r})")
         return fault
@@ -289,6 +358,8 @@ class VirtualLab:
         return time.monotonic() - self.t0
 
     def _log(self, instrument: str, direction: str, text: str) -> None:
+        if len(text) > LOG_TEXT_CHARS:      # a 1 MiB line is logged by its start and its length
+            text = text[:LOG_TEXT_CHARS] + f"...<{len(text)} chars>"
         self.log.append((self.now_s(), instrument, direction, text))
 
     def _output(self, instrument: str, channel: int, on: bool) -> None:
@@ -393,6 +464,7 @@ class VirtualLab:
             spot, setup = self._spot, self._setup
         drive = self.funcgen.drive(1)
         scale = self.vibrometer.scale_mm_s_per_v
+        delay = self.vibrometer.signal_delay_s    # the decoder's output lags the velocity
 
         def render(t_abs: np.ndarray, rng: np.random.Generator,
                    channels: tuple[int, ...] = (1, 2, 3, 4)) -> dict[int, np.ndarray]:
@@ -403,8 +475,8 @@ class VirtualLab:
                 if src == 1:
                     out[ch] = drive.voltage(t_abs)
                 elif src == 2 or (src == 3 and setup == "shaker"):
-                    v = (self._spot_velocity(spot, setup, drive, t_abs) if src == 2
-                         else self._tray_velocity(drive, t_abs))
+                    v = (self._spot_velocity(spot, setup, drive, t_abs - delay) if src == 2
+                         else self._tray_velocity(drive, t_abs - delay))
                     v = v + rng.normal(0.0, self.noise_mm_s_rms, n)
                     if src == 2:
                         self.vibrometer.clipped = bool(np.max(np.abs(v)) > scale * FULL_SCALE_V)
@@ -420,7 +492,9 @@ class VirtualLab:
         """The scope's trigger: generator sync (EXT) or a rising edge of the drive (CHAN1)."""
         drive = self.funcgen.drive(1)
         if source == "EXT":
-            return None if self.miswire.sync_disconnected else drive.next_sync(t_min)
+            # EXT is cabled to the Sync connector: off (or following a silent channel), or the
+            # cable pulled out (a miswired lab), no trigger
+            return None if self.miswire.sync_disconnected else self.funcgen.sync_edge(t_min)
         if source == "CHAN1":
             if drive.is_sine() and drive.amp_v > 0:
                 level = self.scope.trigger_level("CHAN1")

@@ -16,6 +16,7 @@ output voltage and rescales the displayed amplitude.
 """
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -30,6 +31,8 @@ MAX_FREQ_HZ = 30e6
 MIN_FREQ_HZ = 1e-6
 SOURCE_OHM = 50.0
 MAX_VPP_OPEN = 20.0   # open-circuit (10 Vpp into 50 ohm)
+#: a number and its suffix (the amplitude's unit may be in the suffix)
+_NUMBER = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z]*)\s*$")
 
 
 @dataclass(frozen=True)
@@ -270,6 +273,17 @@ def _shape(func: str, phase: np.ndarray) -> np.ndarray:
 BurstFn = Callable[[int, float, float], None]
 
 
+@dataclass
+class SavedState:
+    """What ``*SAV`` keeps: stored settings, loads, units, sync states and each channel's drive."""
+
+    settings: dict
+    load: dict[int, float]
+    vunit: dict[int, str]
+    sync: dict[int, bool]
+    ch: dict[int, Drive]
+
+
 class SimKeysight33500B(SimScpiInstrument):
     """The simulated 33500B generator (33522B by default); ``drive(ch)`` is its output for the physics.
 
@@ -362,6 +376,37 @@ class SimKeysight33500B(SimScpiInstrument):
         with self.lock:
             return self.ch[channel]
 
+    # -- the Sync connector (cabled to the scope's EXT input) -----------------------------------
+    def sync_channel(self) -> int | None:
+        """The channel whose sync reaches the Sync connector, or None when the connector is off
+        (``OUTPut:SYNC:SOURce`` picks the channel, ``OUTPut:SYNC`` switches it)."""
+        src = self.settings.get("sync_source", "CH1")
+        n = int(str(src)[-1]) if str(src)[-1].isdigit() else 1
+        return n if n in self.ch and self.sync[n] else None
+
+    def sync_inverted(self, n: int) -> bool:
+        """Whether channel ``n``'s sync pulse is inverted (its rising edge at half a cycle)."""
+        return self.get("sync_pol", n) == "INV"
+
+    def sync_edge(self, t_min: float) -> float | None:
+        """The next rising edge at the Sync connector at or after ``t_min``, or None.
+
+        The connector is off, or follows another channel: whatever that channel does
+        (nothing, if it is off). A plain waveform's sync rises at phase zero of each
+        cycle, inverted at half a cycle; sweeps and bursts mark their starts.
+        """
+        with self.lock:
+            n = self.sync_channel()
+            if n is None or self.get("sync_mode", n) != "NORM":
+                return None
+            d = self.ch[n]
+            inverted = self.sync_inverted(n)
+        if inverted and not (d.sweep or d.burst):
+            half = 0.5 / d.freq_hz
+            t = d.next_sync(t_min - half)
+            return None if t is None else t + half
+        return d.next_sync(t_min)
+
     # -- helpers ------------------------------------------------------------------------------
     def _chan(self, c: Call, i: int = 0) -> int:
         n = c.suffix(i)
@@ -383,13 +428,27 @@ class SimKeysight33500B(SimScpiInstrument):
     def _display_vpp(self, n: int) -> float:
         return 2 * self.ch[n].amp_v / self._factor(n)
 
+    def _amp_unit(self, n: int, text: str) -> tuple[str, str]:
+        """(unit, number) of an amplitude: a ``VPP``/``MVPP``, ``VRMS``/``MVRMS`` or ``DBM`` suffix
+        names its own unit; a bare number (or ``V``/``MV``) is in ``VOLTage:UNIT``'s."""
+        m = _NUMBER.match(text)
+        suffix = m.group(2).upper() if m else ""
+        for unit, forms in (("VPP", ("VPP", "MVPP")), ("VRMS", ("VRMS", "MVRMS")), ("DBM", ("DBM",))):
+            if suffix in forms and m is not None:
+                scale = 1e-3 if suffix.startswith("MV") else 1.0
+                return unit, repr(float(m.group(1)) * scale)
+        return self.vunit[n], text
+
     def _set_amp(self, n: int, text: str) -> None:
         f = self._factor(n)
         limit = MAX_VPP_OPEN / f
-        if self.vunit[n] == "VRMS":
+        unit, text = self._amp_unit(n, text)
+        if unit == "DBM" and np.isinf(self.load[n]):
+            raise ScpiError(-221, "Settings conflict;dBm units not allowed with high impedance load")
+        if unit == "VRMS":
             value = self.num(text, "V", 1e-3 / (2 * 2 ** 0.5), limit / (2 * 2 ** 0.5), 0.1 / (2 * 2 ** 0.5))
             vpp = value * 2 * 2 ** 0.5
-        elif self.vunit[n] == "DBM":
+        elif unit == "DBM":
             dbm = self.num(text, "", _vpp_to_dbm(1e-3, self.load[n]), _vpp_to_dbm(limit, self.load[n]),
                            _vpp_to_dbm(0.1, self.load[n]))
             vpp = _dbm_to_vpp(dbm, self.load[n])
@@ -448,10 +507,12 @@ class SimKeysight33500B(SimScpiInstrument):
             query=lambda c: self._amp_query(self._chan(c), c))
         add(S + "VOLTage:UNIT", set=self._set_unit, query=lambda c: self.vunit[self._chan(c)])
         add(S + "VOLTage[:LEVel][:IMMediate]:OFFSet", set=self._set_offset,
-            query=lambda c: self.flevel(self.ch[self._chan(c)].offset_v / self._factor(self._chan(c))))
+            query=self._limited(lambda c: self.ch[self._chan(c)].offset_v / self._factor(self._chan(c)),
+                                lambda c: self._offset_limits(self._chan(c)), 0.0))
         add(S + "PHASe[:ADJust]",
-            set=lambda c: self._update(self._chan(c), phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
-            query=lambda c: self.flevel(np.rad2deg(self.ch[self._chan(c)].phase_rad)))
+            set=lambda c: self._update(self._chan(c), phase_rad=self._angle(c.one())),
+            query=self._limited(lambda c: self._angle_out(self.ch[self._chan(c)].phase_rad),
+                                lambda c: self._angle_limits(), 0.0))
         add(S + "APPLy:SINusoid", set=self._apply_sin, query=None)
         add(S + "APPLy", query=lambda c: self._apply_query(self._chan(c)))
         add(S + "SWEep:STATe", set=lambda c: self._update(self._chan(c), sweep=parse_bool(c.one())),
@@ -475,8 +536,9 @@ class SimKeysight33500B(SimScpiInstrument):
         add(S + "BURSt:INTernal:PERiod", set=fset("burst_period_s", "S", 1e-6, 8000.0, 0.01),
             query=fget("burst_period_s", 1e-6, 8000.0))
         add(S + "BURSt:PHASe",
-            set=lambda c: self._update(self._chan(c), burst_phase_rad=np.deg2rad(self.num(c.one(), "", -360, 360, 0))),
-            query=lambda c: self.flevel(np.rad2deg(self.ch[self._chan(c)].burst_phase_rad)))
+            set=lambda c: self._update(self._chan(c), burst_phase_rad=self._angle(c.one())),
+            query=self._limited(lambda c: self._angle_out(self.ch[self._chan(c)].burst_phase_rad),
+                                lambda c: self._angle_limits(), 0.0))
         add("OUTPut#[:STATe]", set=lambda c: self._set_output(self._chan(c), parse_bool(c.one())),
             query=lambda c: "1" if self.ch[self._chan(c)].on else "0")
         add("OUTPut#:LOAD", set=self._set_load, query=self._load_query)
@@ -575,9 +637,12 @@ class SimKeysight33500B(SimScpiInstrument):
         S = "[SOURce#:]"
         add = self.add
         add(S + "VOLTage[:LEVel][:IMMediate]:HIGH", set=lambda c: self._set_level(c, "HIGH"),
-            query=lambda c: self.fnum(self._levels(self._chan(c))[0]))
+            query=self._limited(lambda c: self._levels(self._chan(c))[0],
+                                lambda c: self._offset_limits(self._chan(c)), 0.05, self.fnum))
         add(S + "VOLTage[:LEVel][:IMMediate]:LOW", set=lambda c: self._set_level(c, "LOW"),
-            query=lambda c: self.fnum(self._levels(self._chan(c))[1]))
+            query=self._limited(lambda c: self._levels(self._chan(c))[1],
+                                lambda c: self._offset_limits(self._chan(c)), -0.05, self.fnum))
+        self._build_common()
         self.setting(S + "FUNCtion:SQUare:DCYCle", "square_dcyc", 50.0,
                      lambda t: self.num(t, "", 0.01, 99.99), self.fnum, True, (0.01, 99.99))
         self.setting(S + "FUNCtion:RAMP:SYMMetry", "ramp_symm", 100.0,
@@ -608,8 +673,10 @@ class SimKeysight33500B(SimScpiInstrument):
         self.setting("OUTPut#:POLarity", "polarity", "NORM", lambda t: parse_enum(t, ["NORMal", "INVerted"]),
                      str, True)
         self.setting("OUTPut:SYNC:SOURce", "sync_source", "CH1", lambda t: parse_enum(t, ["CH1", "CH2"]), str)
-        self.setting("OUTPut:SYNC:MODE", "sync_mode", "NORM",
-                     lambda t: parse_enum(t, ["NORMal", "CARRier", "MARKer"]), str)
+        self.setting("OUTPut#:SYNC:MODE", "sync_mode", "NORM",
+                     lambda t: parse_enum(t, ["NORMal", "CARRier", "MARKer"]), str, True)
+        self.setting("OUTPut#:SYNC:POLarity", "sync_pol", "NORM",
+                     lambda t: parse_enum(t, ["NORMal", "INVerted"]), str, True)
         self.setting("OUTPut:TRIGger[:STATe]", "trig_out", False, parse_bool, yes_no)
         self.setting("OUTPut:TRIGger:SLOPe", "trig_out_slope", "POS",
                      lambda t: parse_enum(t, ["POSitive", "NEGative"]), str)
@@ -640,6 +707,108 @@ class SimKeysight33500B(SimScpiInstrument):
         for n in self.ch:
             self.ch[n] = replace(self.ch[n], t_epoch=now)
 
+    # -- ? MIN|MAX|DEF on every numeric query, angles, and the rest of the common commands ----------
+    def _limited(self, value: Callable[[Call], float], limits: Callable[[Call], tuple[float, float]],
+                 default: float, fmt: Callable[[float], str] | None = None) -> Callable[[Call], str]:
+        """A numeric query answering ``? MIN|MAX|DEF`` (the limits now, the ``*RST`` value) too."""
+        out = fmt or self.flevel
+
+        def query(c: Call) -> str:
+            if c.params:
+                return out(self.query_limit(c, limits(c), default))
+            return out(value(c))
+        return query
+
+    def _offset_limits(self, n: int) -> tuple[float, float]:
+        """Offset (and high/low level) range for the declared load: +-10 V open circuit."""
+        lim = (MAX_VPP_OPEN / 2) / self._factor(n)
+        return -lim, lim
+
+    #: UNIT:ANGLe: radians per unit (SECond is a time: the phase as a delay at the frequency)
+    _ANGLE = {"DEG": np.pi / 180, "RAD": 1.0}
+
+    def _angle_unit(self) -> str:
+        return str(self.settings.get("angle_unit", "DEG"))
+
+    def _angle(self, text: str) -> float:
+        """A phase in ``UNIT:ANGLe``'s unit (-360..360 degrees) as radians."""
+        k = self._ANGLE[self._angle_unit()]
+        return self.num(text, "", -2 * np.pi / k, 2 * np.pi / k, 0.0) * k
+
+    def _angle_out(self, rad: float) -> float:
+        return rad / self._ANGLE[self._angle_unit()]
+
+    def _angle_limits(self) -> tuple[float, float]:
+        k = self._ANGLE[self._angle_unit()]
+        return -2 * np.pi / k, 2 * np.pi / k
+
+    def _build_common(self) -> None:
+        """UNIT:ANGLe, MARKer, DATA:ARBitrary, *SAV/*RCL (KS "UNIT Subsystem", "MARKer Subsystem",
+        "DATA Subsystem", IEEE 488.2 10.27/10.29)."""
+        S = "[SOURce#:]"
+        self.setting("UNIT:ANGLe", "angle_unit", "DEG", lambda t: parse_enum(t, ["DEGree", "RADian"]), str)
+        self.setting(S + "MARKer:FREQuency", "marker_hz", 500.0, lambda t: self.num(t, "HZ", MIN_FREQ_HZ, MAX_FREQ_HZ),
+                     self.fnum, True, (MIN_FREQ_HZ, MAX_FREQ_HZ))
+        self.setting(S + "MARKer:CYCLe", "marker_cycle", 2.0, lambda t: self.num(t, "", 2, 1e8), self.fnum, True,
+                     (2.0, 1e8))
+        self.setting(S + "MARKer:POINt", "marker_point", 32.0, lambda t: self.num(t, "", 4, 65536), self.fnum, True,
+                     (4.0, 65536.0))
+        self.arbs: dict[str, int] = {}
+        self.add(S + "DATA:ARBitrary", set=self._data_arb)
+        self.add(S + "DATA:ATTRibute:POINts", query=lambda c: self.fnum(self._arb(c.one())))
+        self.saved: dict[int, SavedState] = {}
+        self.add("*SAV", set=lambda c: self.saved.__setitem__(self._slot(c), self._state_copy()))
+        self.add("*RCL", set=lambda c: self._recall(self._slot(c)))
+
+    def _arb(self, name: str) -> int:
+        key = name.strip().strip('"').upper()
+        if key not in self.arbs:
+            raise ScpiError(-224, "Illegal parameter value;no such arbitrary waveform")
+        return self.arbs[key]
+
+    def _data_arb(self, c: Call) -> None:
+        """``DATA:ARB <name>,<block of float32>`` or ``<name>,<v>,<v>...`` (values -1..1, 8 to 65536
+        points): kept in volatile memory under ``name``."""
+        if len(c.params) < 2:
+            raise ScpiError(-109)
+        name, data = c.params[0].strip().strip('"'), c.params[1:]
+        if len(data) == 1 and data[0].startswith("#"):
+            raw = data[0].encode("latin-1")
+            n = int(raw[1:2])
+            size = int(raw[2:2 + n]) if n else -1
+            if n == 0 or len(raw) != 2 + n + size or size % 4:
+                raise ScpiError(-161, "Invalid block data")
+            points = size // 4
+        else:
+            values = [self.num(v, "", -1.0, 1.0) for v in data]
+            points = len(values)
+        if not 8 <= points <= 65536:
+            raise ScpiError(-222, "Data out of range;8 to 65536 points")
+        self.arbs[name.upper()] = points
+
+    def _slot(self, c: Call) -> int:
+        return int(self.num(c.one(), "", 0, 4))
+
+    def _state_copy(self) -> SavedState:
+        import copy
+        return SavedState(copy.deepcopy(self.settings), dict(self.load), dict(self.vunit), dict(self.sync),
+                          dict(self.ch))
+
+    def _recall(self, slot: int) -> None:
+        """``*RCL``: the saved settings back; outputs stay as they are (488.2 10.29: the state, not
+        the outputs, which the 33500B turns off on recall only from power-on)."""
+        import copy
+        if slot not in self.saved:
+            raise ScpiError(-221, "Settings conflict;nothing stored in that state")
+        saved = self.saved[slot]
+        self.settings.update(copy.deepcopy(saved.settings))
+        self.load.update(saved.load)
+        self.vunit.update(saved.vunit)
+        self.sync.update(saved.sync)
+        keep = ("on", "t_epoch", "trig_times")
+        for n, d in saved.ch.items():
+            self._update(n, **{k: v for k, v in d.__dict__.items() if k not in keep})
+
     def _set_offset(self, c: Call) -> None:
         n = self._chan(c)
         f = self._factor(n)
@@ -660,6 +829,8 @@ class SimKeysight33500B(SimScpiInstrument):
         self.load[n] = load  # the output voltage is kept; the displayed amplitude rescales
 
     def _load_query(self, c: Call) -> str:
+        if c.params:     # OUTPut:LOAD? {MINimum|MAXimum|DEFault}: 1 ohm, 10 kohm, 50 ohm
+            return self.fnum(self.query_limit(c, (1.0, 10e3), 50.0))
         load = self.load[self._chan(c)]
         return self.inf_reply if np.isinf(load) else self.fnum(load)
 
@@ -767,10 +938,13 @@ class SimRigolDG1000Z(SimKeysight33500B):
         add(S + "BURSt:MODE", set=self._set_rigol_burst_mode, query=self._rigol_burst_mode_query)
         add(S + "APPLy", query=lambda c: self._rigol_apply_query(self._chan(c)))
         self.commands = [cmd for cmd in self.commands if cmd.pattern not in ("[SOURce#:]APPLy:SINusoid",
-                                                                             "OUTPut#:SYNC[:STATe]")]
+                                                                             "OUTPut#:SYNC[:STATe]",
+                                                                             "OUTPut#:SYNC:POLarity")]
         add(S + "APPLy:SINusoid", set=self._rigol_apply_sin)
         add("OUTPut#:SYNC[:STATe]", set=lambda c: self.sync.__setitem__(self._chan(c), parse_bool(c.one())),
             query=lambda c: "ON" if self.sync[self._chan(c)] else "OFF")
+        self.setting("OUTPut#:SYNC:POLarity", "sync_pol", "POS", lambda t: parse_enum(t, ["POSitive", "NEGative"]),
+                     str, True)
         add(S + "SWEep:TRIGger:SOURce", set=self._set_rigol_trig, query=self._rigol_trig_query)
         add(S + "BURSt:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
         add(S + "SWEep:TRIGger[:IMMediate]", set=lambda c: self._trigger([self._chan(c)], force=True))
@@ -785,6 +959,13 @@ class SimRigolDG1000Z(SimKeysight33500B):
         self.setting("OUTPut#:GATe:POLarity", "gate_out_pol", "POSITIVE",
                      lambda t: {"POS": "POSITIVE", "NEG": "NEGATIVE"}[parse_enum(t, ["POSitive", "NEGative"])],
                      str, True)
+
+    def sync_channel(self) -> int | None:
+        """The lab cables channel 1's rear-panel sync to the scope: on with ``:OUTPut1:SYNC ON``."""
+        return 1 if self.sync[1] else None
+
+    def sync_inverted(self, n: int) -> bool:
+        return self.get("sync_pol", n) == "NEG"
 
     def trigger_delay(self, n: int) -> float:
         """``:SOURce<n>:BURSt:TDELay``: the burst starts this long after its trigger."""

@@ -24,12 +24,49 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from labkit.lab.scpi import Call, ScpiError, SimScpiInstrument, parse_bool, parse_enum
+from labkit.lab.scpi import Call, ScpiError, SimScpiInstrument, parse_bool, parse_enum, parse_number
 
 NORMAL_MAX_POINTS = 62_500
 RAW_MAX_POINTS = 8_000_000
 AUTO_TRIGGER_S = 0.05
 MAX_SRATE_SA_S = 5e9
+
+
+#: :MEASure queries answered (IV ":MEASure Commands"; a signal without edges answers 9.9E37)
+MEASUREMENTS = ("VPP", "VAMPlitude", "VRMS", "VAVerage", "VMAX", "VMIN", "FREQuency", "PERiod")
+
+
+def measure(item: str, volts: np.ndarray, dt_s: float) -> float:
+    """One of :data:`MEASUREMENTS` on a record (``dt_s`` between samples)."""
+    key = item.upper()[:4]
+    if key in ("VPP", "VAMP"):
+        return float(np.ptp(volts))
+    if key == "VRMS":
+        return float(np.sqrt(np.mean(volts ** 2)))
+    if key == "VAVE":
+        return float(np.mean(volts))
+    if key in ("VMAX", "VMIN"):
+        return float(np.max(volts) if key == "VMAX" else np.min(volts))
+    mid = (np.max(volts) + np.min(volts)) / 2
+    rising = np.flatnonzero((volts[:-1] < mid) & (volts[1:] >= mid))
+    if len(rising) < 2 or np.ptp(volts) <= 0:
+        return 9.9e37
+    period = (rising[-1] - rising[0]) * dt_s / (len(rising) - 1)
+    return float(1 / period if key == "FREQ" else period)
+
+
+def screen_png(width: int = 800, height: int = 480) -> bytes:
+    """The screen as a PNG (a blank grey graticule: the lab draws no traces)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    row = b"\x00" + b"\x20" * width
+    body = zlib.compress(row * height, 9)
+    head = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", head) + chunk(b"IDAT", body) + chunk(b"IEND", b"")
 
 
 # render(t_abs, rng, channels) -> {channel: volts}: the lab's physics, frozen at one moment
@@ -79,6 +116,19 @@ class Acquisition:
     lock: threading.Lock = field(default_factory=threading.Lock)
     cancelled: bool = False
     error: str | None = None
+    averages: int = 1
+    t_trigs: tuple[float, ...] = ()
+
+    def _render_at(self, idx: np.ndarray, step: int) -> dict[int, np.ndarray]:
+        """The record's samples ``idx``: one trigger's, or the mean over the averaged triggers."""
+        assert self.render is not None and self.t_trig is not None
+        trigs = self.t_trigs or (self.t_trig,)
+        total: dict[int, np.ndarray] = {}
+        for k, t0 in enumerate(trigs):
+            rng = np.random.default_rng([*self.seed, step] if k == 0 else [*self.seed, step, k])
+            for ch, v in self.render(t0 + self.xorig_s + self.xinc_s * idx, rng, self.channels).items():
+                total[ch] = total[ch] + v if ch in total else v
+        return {ch: v / len(trigs) for ch, v in total.items()}
 
     def get(self, step: int) -> dict[int, np.ndarray]:
         """Every ``step``-th sample of the record, per channel (computed once)."""
@@ -87,10 +137,7 @@ class Acquisition:
                 if self.render is None or self.t_trig is None:
                     self.volts[step] = {}
                 else:
-                    idx = np.arange(0, self.points, step)
-                    t_abs = self.t_trig + self.xorig_s + self.xinc_s * idx
-                    rng = np.random.default_rng([*self.seed, step])
-                    self.volts[step] = self.render(t_abs, rng, self.channels)
+                    self.volts[step] = self._render_at(np.arange(0, self.points, step), step)
             return self.volts[step]
 
 
@@ -227,6 +274,67 @@ class SimInfiniiVision(SimScpiInstrument):
                      lambda t: parse_enum(t, ["AC", "DC", "LFReject"]), str)
         self.setting(":TRIGger:HOLDoff", "holdoff", 40e-9, lambda t: self.num(t, "S", 40e-9, 10.0), self.fnum)
         self.setting(":DISPlay:LABel", "display_label", False, parse_bool, yes_no)
+        self._build_common()
+
+    # -- measurements, set-ups, the screen, saved states -----------------------------------------
+    def _build_common(self) -> None:
+        """IV ":MEASure Commands" (VPP, VAMPlitude, VRMS, VAVerage, FREQuency, PERiod: on the
+        latest record), ":SYSTem:SETup" (a definite-length block holding the set-up; sent back, it
+        restores it), ":DISPlay:DATA?" (the screen as a PNG block), 488.2 ``*SAV``/``*RCL``."""
+        for item in MEASUREMENTS:
+            self.add(f":MEASure:{item}", query=self._measure_query(item), query_params=True)
+        self.add(":SYSTem:SETup", set=self._set_setup, query=lambda c: self.block(self._setup_bytes()))
+        self.add(":DISPlay:DATA", query=lambda c: self.block(screen_png()), query_params=True)
+        self.saved: dict[int, bytes] = {}
+        self.add("*SAV", set=lambda c: self.saved.__setitem__(self._slot(c), self._setup_bytes()))
+        self.add("*RCL", set=lambda c: self._load_setup(self.saved.get(self._slot(c))))
+
+    def _measure_query(self, item: str) -> Callable[[Call], str]:
+        return lambda c: self.fnum(self._measure(item, c))
+
+    def _slot(self, c: Call) -> int:
+        return int(self.num(c.one(), "", 0, 9))
+
+    def _setup_bytes(self) -> bytes:
+        import json
+
+        return json.dumps({"settings": self.settings, "levels": self.trig_levels},
+                          default=lambda o: sorted(o) if isinstance(o, set) else str(o)).encode()
+
+    def _set_setup(self, c: Call) -> None:
+        text = c.one()
+        raw = text.encode("latin-1")
+        if not raw.startswith(b"#") or not raw[1:2].isdigit() or raw[1:2] == b"0":
+            raise ScpiError(-161, "Invalid block data")
+        n = int(raw[1:2])
+        self._load_setup(raw[2 + n:])
+
+    def _load_setup(self, data: bytes | None) -> None:
+        import json
+
+        if data is None:
+            raise ScpiError(-221, "Settings conflict;nothing stored there")
+        try:
+            saved = json.loads(data)
+            for key, value in saved["settings"].items():
+                if key not in self.setting_defaults:
+                    continue
+                per_suffix = self.setting_defaults[key][1]
+                self.settings[key] = {int(k): v for k, v in value.items()} if per_suffix else value
+            self.trig_levels = {str(k): float(v) for k, v in saved["levels"].items()}
+        except (ValueError, KeyError, AttributeError, TypeError):
+            raise ScpiError(-161, "Invalid block data;not a set-up of this scope") from None
+
+    def _measure(self, item: str, c: Call) -> float:
+        """One measurement on the latest record of ``c``'s source (default: channel 1)."""
+        ch = 1
+        if c.params:
+            ch = int(parse_enum(c.one(), ["CHANnel1", "CHANnel2", "CHANnel3", "CHANnel4"])[-1])
+        acq = self._last_acq()
+        volts = acq.get(max(1, acq.points // 10_000)).get(ch)
+        if volts is None or volts.size < 4:
+            raise ScpiError(-221, "Settings conflict;source channel is off")
+        return measure(item, volts, acq.xinc_s * max(1, acq.points // 10_000))
 
     def _channel_summary(self, c: Call) -> str:
         """``:CHANnel<n>?``: every channel setting, with headers (the form PyMeasure parses)."""
@@ -311,7 +419,7 @@ class SimInfiniiVision(SimScpiInstrument):
         points, xinc, xorig = self._record_geometry()
         self.n_acq += 1
         acq = Acquisition(points, xinc, xorig, t_arm=self.clock(), channels=self._displayed(),
-                          seed=(self.seed, self.n_acq))
+                          seed=(self.seed, self.n_acq), averages=self.averages())
         self.acq = acq
         self.run_state = state
         source = self.get("trig_source")
@@ -319,6 +427,10 @@ class SimInfiniiVision(SimScpiInstrument):
         threading.Thread(target=self._acquire, args=(acq, source, sweep_mode), daemon=True,
                          name="lab-scope-acq").start()
         return acq
+
+    def averages(self) -> int:
+        """Records one acquisition averages (``:ACQuire:TYPE AVERage``, ``:ACQuire:COUNt``)."""
+        return int(self.get("acq_count")) if self.get("acq_type") == "AVER" else 1
 
     def _step_for(self, acq: Acquisition | None) -> int:
         """Decimation step a transfer with today's ``:WAVeform:POINts`` settings uses."""
@@ -328,7 +440,8 @@ class SimInfiniiVision(SimScpiInstrument):
         raw = self.get("points_mode") != "NORM" and self._stopped()
         want = min(self.settings.get("points", 1000), RAW_MAX_POINTS if raw else NORMAL_MAX_POINTS)
         depth = acq.points if acq is not None else self._record_geometry()[0]
-        return max(1, depth // max(1, want))
+        # never more points than asked: "the number of points actually transferred may be fewer"
+        return max(1, -(-depth // max(1, want)))
 
     def _force(self) -> None:
         """A forced trigger: an armed acquisition that waits for its trigger takes it now."""
@@ -336,25 +449,27 @@ class SimInfiniiVision(SimScpiInstrument):
             self.forced = True
 
     def _acquire(self, acq: Acquisition, source: str, sweep_mode: str) -> None:
-        """Wait for a trigger in real time, then for the post-trigger time; compute the record."""
+        """Wait for a trigger in real time, then for the post-trigger time; compute the record.
+
+        Averaging (``:ACQuire:TYPE AVERage``) takes ``acq.averages`` records, each armed
+        when the one before it is complete and aligned on its own trigger."""
         try:
             t_min = acq.t_arm + max(0.0, -acq.xorig_s)  # the pre-trigger part must be filled first
-            while not acq.cancelled:
-                now = self.clock()
-                t_trig = max(now, t_min) if self.forced else self.sync(source, t_min)
-                if t_trig is None and sweep_mode == "AUTO" and now >= t_min + AUTO_TRIGGER_S:
-                    t_trig = now   # auto trigger: no edge came
-                if t_trig is not None:
-                    break
-                time.sleep(0.002)
-            if acq.cancelled or t_trig is None:
-                return
-            acq.t_trig = t_trig
-            t_end = t_trig + acq.xorig_s + acq.points * acq.xinc_s
-            while not acq.cancelled and self.clock() < t_end:
-                time.sleep(min(0.01, max(0.0, t_end - self.clock())))
-            if acq.cancelled:
-                return
+            trigs: list[float] = []
+            while len(trigs) < acq.averages:
+                t_trig = self._wait_trigger(acq, source, sweep_mode, t_min)
+                if t_trig is None:
+                    return
+                if not trigs:
+                    acq.t_trig = t_trig
+                trigs.append(t_trig)
+                t_end = t_trig + acq.xorig_s + acq.points * acq.xinc_s
+                while not acq.cancelled and self.clock() < t_end:
+                    time.sleep(min(0.01, max(0.0, t_end - self.clock())))
+                if acq.cancelled:
+                    return
+                t_min = t_end + max(0.0, -acq.xorig_s)
+            acq.t_trigs = tuple(trigs)
             acq.render = self.signals()
             acq.get(self._step_for(acq))     # digitise now what the next transfer will ask for
             self.triggered = True
@@ -364,6 +479,19 @@ class SimInfiniiVision(SimScpiInstrument):
             acq.done.set()
             with self._cond:
                 self._cond.notify_all()
+
+    def _wait_trigger(self, acq: Acquisition, source: str, sweep_mode: str, t_min: float) -> float | None:
+        """The trigger time (None when cancelled): an edge of ``source``; a forced trigger; in AUTO
+        sweep, no edge within :data:`AUTO_TRIGGER_S` triggers anyway (an untriggered record)."""
+        while not acq.cancelled:
+            now = self.clock()
+            t_trig = max(now, t_min) if self.forced else self.sync(source, t_min)
+            if t_trig is None and sweep_mode == "AUTO" and now >= t_min + AUTO_TRIGGER_S:
+                t_trig = now   # auto trigger: no edge came
+            if t_trig is not None:
+                return t_trig
+            time.sleep(0.002)
+        return None
 
     def _displayed(self) -> tuple[int, ...]:
         """Channels switched on: only these are digitised (and cost time)."""
@@ -512,6 +640,12 @@ class SimInfiniiVision(SimScpiInstrument):
 #: :WAVeform:STARt: "BYTE 250000, WORD 125000, ASCii 15625" points)
 RIGOL_MAX_POINTS = {"BYTE": 250_000, "WORD": 125_000, "ASC": 15_625}
 RIGOL_SCREEN_POINTS = 1200
+#: DS1000Z Programming Guide, :ACQuire:MDEPth: depths per channels on (1, 2, 3-4), and the
+#: maximum sample rate (data sheet: 1 GSa/s single channel, 500 MSa/s dual, 250 MSa/s more)
+RIGOL_MDEPTHS = {1: (12_000, 120_000, 1_200_000, 12_000_000, 24_000_000),
+                 2: (6_000, 60_000, 600_000, 6_000_000, 12_000_000),
+                 4: (3_000, 30_000, 300_000, 3_000_000, 6_000_000)}
+RIGOL_MAX_SRATE = {1: 1e9, 2: 5e8, 4: 2.5e8}
 
 
 class SimRigolDS1000Z(SimInfiniiVision):
@@ -534,6 +668,8 @@ class SimRigolDS1000Z(SimInfiniiVision):
     """
 
     idn = "RIGOL TECHNOLOGIES,DS1104Z,DS1ZA000000001,00.04.04.SP3"
+    #: ``:ACQuire:MDEPth`` (None: AUTO)
+    mdepth: int | None = None
     block_digits = 9
     int_sign = False
     no_error = '0,"No error"'
@@ -548,11 +684,11 @@ class SimRigolDS1000Z(SimInfiniiVision):
                 # InfiniiVision commands the DS1000Z does not have (-113 there)
                 ":DIGitize", ":RSTate", ":ASTate", ":TER", ":OPERegister:CONDition", ":OPERegister[:EVENt]",
                 ":WAVeform:POINts", ":WAVeform:POINts:MODE", ":WAVeform:BYTeorder", ":WAVeform:UNSigned",
-                ":WAVeform:VIEW", ":WAVeform:YORigin", ":TRIGger:FORCe", ":TRIGger[:EDGE]:SLOPe"}
+                ":WAVeform:VIEW", ":WAVeform:YORigin", ":TRIGger:FORCe", ":TRIGger[:EDGE]:SLOPe",
+                # replaced by the DS1000Z's own forms below
+                ":TRIGger[:EDGE]:SOURce", ":TRIGger[:EDGE]:LEVel", ":TRIGger:SWEep", ":ACQuire:TYPE",
+                ":ACQuire:COUNt", ":CHANnel#:BWLimit"}
         self.commands = [cmd for cmd in self.commands if cmd.pattern not in drop]
-        # :TRIGger:EDGe:SLOPe {POSitive|NEGative|RFALl} (DS1000Z guide; no EITHer/ALTernate)
-        self.setting(":TRIGger[:EDGE]:SLOPe", "trig_slope", "POS",
-                     lambda t: parse_enum(t, ["POSitive", "NEGative", "RFALl"]), str)
         self.add(":TFORce", set=lambda c: self._force())
         self.add(":CHANnel#:OFFSet", set=self._set_offset,
                  query=lambda c: self.fnum(self.get("offset", self._ch(c))))
@@ -574,7 +710,80 @@ class SimRigolDS1000Z(SimInfiniiVision):
         self.setting(":WAVeform:STOP", "wav_stop", RIGOL_SCREEN_POINTS,
                      lambda t: int(self.num(t, "", 1, 24_000_000)), self.fmt_int)
         self.add(":TRIGger:STATus", query=lambda c: self._trigger_status())
-        self.add(":ACQuire:MDEPth", set=lambda c: None, query=lambda c: self.fmt_int(self._record_geometry()[0]))
+        self.add(":ACQuire:MDEPth", set=self._set_mdepth, query=lambda c: self._mdepth_query())
+        # :MEASure:ITEM? <item>[,<source>] (DS ":MEASure:ITEM"): VPP, VAMP, VRMS, VAVG, VMAX, VMIN, FREQ, PER
+        self.add(":MEASure:ITEM", query=self._measure_item, query_params=True)
+        # :ACQuire:TYPE {NORMal|AVERages|PEAK|HRESolution}, :ACQuire:AVERages 2^n (n = 1..10)
+        self.setting(":ACQuire:TYPE", "acq_type", "NORM",
+                     lambda t: parse_enum(t, ["NORMal", "AVERages", "PEAK", "HRESolution"]), str)
+        self.setting(":ACQuire:AVERages", "acq_count", 2, self._parse_averages, self.fmt_int)
+        self.setting(":TRIGger:SWEep", "trig_sweep", "AUTO", lambda t: parse_enum(t, ["AUTO", "NORMal", "SINGle"]),
+                     str)
+        # :TRIGger:EDGe:SOURce/SLOPe/LEVel: the DS1000Z's node is EDGe (short form EDG)
+        self.setting(":TRIGger[:EDGe]:SOURce", "trig_source", "CHAN1",
+                     lambda t: parse_enum(t, ["CHANnel1", "CHANnel2", "CHANnel3", "CHANnel4", "EXTernal", "AC"]),
+                     str)
+        self.setting(":TRIGger[:EDGe]:SLOPe", "trig_slope", "POS",
+                     lambda t: parse_enum(t, ["POSitive", "NEGative", "RFALl"]), str)
+        self.add(":TRIGger[:EDGe]:LEVel", set=self._set_trig_level, query=self._trig_level_query)
+        # :CHANnel<n>:BWLimit {20M|OFF}
+        self.setting(":CHANnel#:BWLimit", "bwlimit", "OFF", lambda t: parse_enum(t, ["20M", "OFF"]), str, True)
+
+    def _measure_item(self, c: Call) -> str:
+        if not c.params or len(c.params) > 2:
+            raise ScpiError(-109 if not c.params else -108)
+        item = parse_enum(c.params[0], ["VPP", "VAMP", "VRMS", "VAVG", "VMAX", "VMIN", "FREQuency", "PERiod"])
+        src = Call(c.params[1:], c.suffixes, c.header, True)
+        return self.fnum(self._measure({"VAVG": "VAVE"}.get(item, item), src))
+
+    def _parse_averages(self, text: str) -> int:
+        n = int(self.num(text, "", 2, 1024))
+        if n & (n - 1):
+            raise ScpiError(-224, "Illegal parameter value;averages must be a power of two")
+        return n
+
+    def averages(self) -> int:
+        return int(self.get("acq_count")) if self.get("acq_type") == "AVER" else 1
+
+    def _channels_on(self) -> int:
+        on = len(self._displayed())
+        return 1 if on <= 1 else 2 if on == 2 else 4
+
+    def _set_mdepth(self, c: Call) -> None:
+        """``:ACQuire:MDEPth AUTO|<points>``: only a depth the guide lists for the channels now on,
+        and only while running (else -221)."""
+        word = c.one().strip().upper()
+        if word == "AUTO":
+            self.mdepth = None
+            return
+        depth = int(parse_number(word, ""))
+        allowed = RIGOL_MDEPTHS[self._channels_on()]
+        if depth not in allowed:
+            raise ScpiError(-224, f"Illegal parameter value;memory depth {depth} not one of {allowed}")
+        if self.run_state != "RUN":
+            raise ScpiError(-221, "Settings conflict;memory depth can only be set while running")
+        self.mdepth = depth
+
+    def _mdepth_query(self) -> str:
+        if self.mdepth is None:
+            return "AUTO"
+        return self.fmt_int(self._record_geometry()[0])
+
+    def _record_geometry(self) -> tuple[int, float, float]:
+        """A set memory depth fills the screen's 12 divisions, at most at the channels' maximum
+        sample rate (1 GSa/s one channel, 500 MSa/s two, 250 MSa/s more); AUTO: as the base."""
+        depth = self.mdepth
+        if depth is None:
+            return super()._record_geometry()
+        rng = self.get("range")
+        points = int(min(depth, max(100, rng * RIGOL_MAX_SRATE[self._channels_on()])))
+        xinc = rng / points
+        ref = {"LEFT": 0.1, "CENT": 0.5, "RIGH": 0.9}[self.get("reference")]
+        return points, xinc, self.get("position") - ref * rng
+
+    def reset(self) -> None:
+        super().reset()
+        self.mdepth = None
 
     def offset_limit(self, ch: int) -> float:
         """The largest ``|:CHANnel<n>:OFFSet|`` at the channel's scale and probe ratio (DS1000Z
@@ -614,6 +823,8 @@ class SimRigolDS1000Z(SimInfiniiVision):
                                else self._record_geometry())
         step = self._step_for(acq)
         points = len(range(0, points, step))
+        if not self._raw():
+            points = min(points, RIGOL_SCREEN_POINTS)   # NORMal: the screen's 1200 points, no more
         yinc = self.get("scale", ch) / 25.0
         # the offset is added to the signal: code = volts / yinc + yorigin + yreference, so the
         # centre code (yreference) is the input voltage -offset

@@ -63,6 +63,10 @@ ERRORS = {
     -420: "Query UNTERMINATED",
 }
 
+#: headers remembered by :meth:`SimScpiInstrument.lookup`; longer headers than this are undefined
+LOOKUP_CACHE = 4096
+MAX_HEADER_CHARS = 256
+
 #: ESR bits (IEEE 488.2-1992, 11.5.1.1)
 ESR_OPC, ESR_QYE, ESR_DDE, ESR_EXE, ESR_CME = 1, 4, 8, 16, 32
 #: status byte bits (IEEE 488.2-1992, 11.2; SCPI 1999 vol. 1, 9.1: bit 2 error/event queue)
@@ -159,34 +163,74 @@ class Command:
 
 
 def _split_outside_quotes(text: str, sep: str) -> tuple[list[str], bool]:
-    """Split on ``sep`` where it is not inside '...' or "..."; also say whether a quote was left open."""
-    out, cur, quote = [], [], None
-    for c in text:
-        if quote:
-            cur.append(c)
-            if c == quote:
-                quote = None
-        elif c in "\"'":
-            quote = c
-            cur.append(c)
-        elif c == sep:
-            out.append("".join(cur))
-            cur = []
+    """Split on ``sep`` where it is not inside '...', "..." or a definite-length block
+    (``#<n><length><bytes>``, skipped by its length); also say whether a quote was left open.
+    Linear in the text: the scan jumps from one special character to the next."""
+    special = _SPECIALS[sep]
+    out: list[str] = []
+    start = pos = 0
+    while True:
+        m = special.search(text, pos)
+        if m is None:
+            break
+        c, at = m.group(), m.start()
+        if c == sep:
+            out.append(text[start:at])
+            start = pos = at + 1
+        elif c == "#":
+            pos = _past_block(text, at)
         else:
-            cur.append(c)
-    out.append("".join(cur))
-    return out, quote is not None
+            end = text.find(c, at + 1)
+            if end < 0:
+                out.append(text[start:])
+                return out, True
+            pos = end + 1
+    out.append(text[start:])
+    return out, False
+
+
+_SPECIALS = {sep: re.compile("[" + re.escape(sep) + "#\"']") for sep in (",", ";")}
+
+
+_QUOTE_OR_BLOCK = re.compile("[#\"']")
+
+
+def _strip(text: str) -> str:
+    """``text.strip()``, except that a definite-length block keeps its bytes (blank ones too)."""
+    text = text.lstrip()
+    end = pos = 0
+    while True:
+        m = _QUOTE_OR_BLOCK.search(text, pos)
+        if m is None:
+            break
+        if m.group() == "#":
+            pos = _past_block(text, m.start())
+            end = max(end, pos) if pos > m.start() + 1 else end
+        else:
+            close = text.find(m.group(), m.start() + 1)
+            pos = len(text) if close < 0 else close + 1
+    return text[:end] + text[end:].rstrip()
+
+
+def _past_block(text: str, at: int) -> int:
+    """The index after a definite-length block starting at ``at`` (``#``), or after the ``#`` alone."""
+    if at + 1 < len(text) and "1" <= text[at + 1] <= "9":
+        n = int(text[at + 1])
+        digits = text[at + 2:at + 2 + n]
+        if len(digits) == n and digits.isdigit():
+            return min(len(text), at + 2 + n + int(digits))
+    return at + 1
 
 
 def split_params(text: str) -> list[str]:
     """Split a parameter list on commas outside quotes; strip blanks."""
-    text = text.strip()
+    text = _strip(text)
     if not text:
         return []
     parts, open_quote = _split_outside_quotes(text, ",")
     if open_quote:
         raise ScpiError(-102, "Syntax error;unterminated string")
-    return [p.strip() for p in parts]
+    return [_strip(p) for p in parts]
 
 
 #: a program message unit: header, then (after white space: space or tab) the data
@@ -196,7 +240,7 @@ _UNIT = re.compile(r"^\s*([:*]?[A-Za-z0-9_:*]*\??)(?:[ \t]+(.*))?$", re.S)
 def split_commands(line: str) -> list[str]:
     """Split a program message on ``;`` outside quotes."""
     parts, _ = _split_outside_quotes(line, ";")
-    return [p.strip() for p in parts if p.strip()]
+    return [q for q in (_strip(p) for p in parts) if q]
 
 
 # ------------------------------------------------------------------------------------------
@@ -206,7 +250,7 @@ _NUM = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-z/]
 #: SI suffixes per unit; SCPI reads ``MHZ`` as megahertz and ``MV`` as millivolt
 _SUFFIX = {
     "HZ": {"HZ": 1.0, "KHZ": 1e3, "MHZ": 1e6, "MAHZ": 1e6, "GHZ": 1e9},
-    "V": {"V": 1.0, "MV": 1e-3, "UV": 1e-6, "KV": 1e3, "VPP": 1.0, "MVPP": 1e-3, "VRMS": 1.0},
+    "V": {"V": 1.0, "MV": 1e-3, "UV": 1e-6, "KV": 1e3},
     "S": {"S": 1.0, "MS": 1e-3, "US": 1e-6, "NS": 1e-9, "PS": 1e-12, "KS": 1e3},
     "OHM": {"OHM": 1.0, "KOHM": 1e3, "MOHM": 1e6},
     "": {},
@@ -506,12 +550,23 @@ class SimScpiInstrument:
 
     # -- dispatch ----------------------------------------------------------------------------
     def lookup(self, header: str) -> tuple[Command, list[int]] | None:
+        """The command a header names and its numeric suffixes (remembered: a message repeating
+        one command 100 000 times costs one search)."""
         up = header.upper()
+        cache = self.__dict__.setdefault("_lookups", {})
+        key = (up, len(self.commands))      # the table may still grow after build()
+        if key in cache:
+            return cache[key]
+        found = None
         for cmd in self.commands:
             m = cmd.regex.fullmatch(up)
             if m:
-                return cmd, [int(g) if g is not None else 1 for g in m.groups()]
-        return None
+                found = cmd, [int(g) if g is not None else 1 for g in m.groups()]
+                break
+        if len(cache) > LOOKUP_CACHE:
+            cache.clear()
+        cache[key] = found
+        return found
 
     def handle(self, line: str) -> bytes | None:
         """Execute one received line; return the reply (with ``\\n``) or None."""
@@ -533,10 +588,13 @@ class SimScpiInstrument:
             query = full.endswith("?")
             bare = full[:-1] if query else full
             if not bare.startswith("*"):
-                prefix = bare.rsplit(":", 1)[0] if ":" in bare else ""
+                # an undefined header leaves the path at the root: a relative header repeated
+                # after an error does not grow the path (nor the cost of every later lookup)
+                known = len(bare) <= MAX_HEADER_CHARS and self.lookup(bare) is not None
+                prefix = bare.rsplit(":", 1)[0] if ":" in bare and known else ""
             reply = self.execute(bare, rest, query)
             if reply is not None:
-                replies.append(reply if isinstance(reply, bytes) else str(reply).encode("ascii"))
+                replies.append(reply if isinstance(reply, bytes) else str(reply).encode("ascii", "replace"))
         if not replies:
             return None
         return b";".join(replies) + b"\n"
@@ -549,7 +607,7 @@ class SimScpiInstrument:
         return True
 
     def execute(self, header: str, rest: str, query: bool) -> Any:
-        found = self.lookup(header)
+        found = self.lookup(header) if len(header) <= MAX_HEADER_CHARS else None
         if found is None:
             self.push_error(-113)
             return None

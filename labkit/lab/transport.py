@@ -9,18 +9,19 @@ goes to ``on_log(instrument, "rx"|"tx", text)``.
 Faults (:class:`Fault`) are applied to replies: ``drop`` sends half of the
 reply and closes the connection (a pulled cable, mid-block for a waveform),
 ``stall`` swallows the reply (a hung instrument), ``garbage`` replaces it with
-random bytes and a ``\\n``.
+random bytes and a ``\\n``, ``trickle`` sends it a byte at a time (raw sockets).
 """
 from __future__ import annotations
 
 import os
+import re
 import select
 import socket
 import threading
 import tty
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -32,6 +33,10 @@ class Handler(Protocol):
 
 
 LogFn = Callable[[str, str, str], None]
+
+
+#: ``trickle``: the reply leaves one byte every ``interval_s`` (a scope whose link crawls)
+FAULT_KINDS = ("drop", "stall", "garbage", "trickle")
 
 
 @dataclass
@@ -55,10 +60,11 @@ class Fault:
     after: int = 0
     match: str | None = None
     count: int = 1
+    interval_s: float = 0.5
 
     def __post_init__(self) -> None:
-        if self.kind not in ("drop", "stall", "garbage"):
-            raise ValueError(f"fault kind must be drop, stall or garbage, not {self.kind!r}")
+        if self.kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, not {self.kind!r}")
 
     def hits(self, command: str) -> bool:
         """Count a reply to ``command``; True when this one is to be spoiled."""
@@ -84,6 +90,87 @@ def describe(data: bytes) -> str:
     return text.decode("ascii", "replace")
 
 
+#: the longest program message a server accepts (a longer one is dropped whole: -223)
+MAX_MESSAGE_BYTES = 8 << 20
+_SPECIAL = re.compile(rb"[\n#\"']")
+
+
+class Framer:
+    """Cuts a byte stream into program messages at LF (IEEE 488.2 7.5), in linear time.
+
+    A LF inside a quoted string or inside a definite-length block (``#<n><length><bytes>``,
+    488.2 7.7.6) does not end the message: the block is skipped by its length. A message
+    longer than ``max_bytes`` is dropped up to its LF (only its start was kept); it comes
+    out as ``None``, for the instrument to report (``-223,"Too much data"``).
+    """
+
+    def __init__(self, max_bytes: int = MAX_MESSAGE_BYTES) -> None:
+        self.max_bytes = int(max_bytes)
+        self.buf = bytearray()
+        self.start = 0          # where the message being read begins
+        self.pos = 0            # scanned up to here
+        self.quote: int | None = None
+        self.skip = 0           # block bytes still to pass over
+        self.dropping = False   # inside a message that is too long
+
+    def feed(self, data: bytes) -> list[bytes | None]:
+        """The messages completed by ``data`` (without their LF; None: one that was too long)."""
+        self.buf += data
+        out: list[bytes | None] = []
+        while self.pos < len(self.buf):
+            if self.skip:
+                n = min(self.skip, len(self.buf) - self.pos)
+                self.skip -= n
+                self.pos += n
+                continue
+            if self.quote is not None:
+                end = self.buf.find(bytes([self.quote]), self.pos)
+                if end < 0:
+                    self.pos = len(self.buf)
+                    break
+                self.quote, self.pos = None, end + 1
+                continue
+            m = _SPECIAL.search(self.buf, self.pos)
+            if m is None:
+                self.pos = len(self.buf)
+                break
+            c, at = m.group()[0], m.start()
+            if c == 0x0A:
+                out.append(None if self.dropping else bytes(self.buf[self.start:at]))
+                self.start = self.pos = at + 1
+                self.dropping = False
+            elif c == 0x23:         # '#': a block header, once it is all here
+                if not self._block_at(at):
+                    break
+            else:
+                self.quote, self.pos = c, at + 1
+        if self.pos - self.start > self.max_bytes or self.dropping:   # too long: keep only the state
+            self.dropping = True
+            self.start = self.pos
+        del self.buf[:self.start]
+        self.pos -= self.start
+        self.start = 0
+        return out
+
+    def _block_at(self, at: int) -> bool:
+        """Pass a ``#<n><length>`` header at ``at`` (and arrange to skip its bytes); False: wait."""
+        if at + 2 > len(self.buf):
+            self.pos = at
+            return False
+        d = self.buf[at + 1]
+        if not 0x31 <= d <= 0x39:           # '#0' (indefinite) or not a block: an ordinary byte
+            self.pos = at + 1
+            return True
+        n = d - 0x30
+        if at + 2 + n > len(self.buf):
+            self.pos = at
+            return False
+        digits = bytes(self.buf[at + 2:at + 2 + n])
+        self.pos = at + 2 + n
+        self.skip = int(digits) if digits.isdigit() else 0
+        return True
+
+
 class _Endpoint:
     """What the TCP and pty servers share: faults, logging, reply shaping."""
 
@@ -94,6 +181,7 @@ class _Endpoint:
         self._rng = np.random.default_rng(seed)
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        self._trickle_s = 0.5
 
     @property
     def name(self) -> str:
@@ -117,6 +205,28 @@ class _Endpoint:
             self.faults = [f for f in self.faults if f.count > 0]
             return hit
 
+    def too_long(self) -> None:
+        """A message longer than :data:`MAX_MESSAGE_BYTES` was dropped: the instrument says so
+        (``-223,"Too much data"``, IEEE 488.2 / SCPI vol. 2 21.8.9), if it has an error queue."""
+        self.on_log(self.name, "rx", f"<message over {MAX_MESSAGE_BYTES} bytes dropped>")
+        push = getattr(self.handler, "push_error", None)
+        if push is not None:
+            with self.handler_lock():
+                push(-223, "Too much data")
+
+    def handler_lock(self) -> Any:
+        return getattr(self.handler, "lock", None) or threading.Lock()
+
+    def lines(self, framer: Framer, chunk: bytes) -> Iterator[str]:
+        """The non-empty messages ``chunk`` completes, as text (bytes kept one to one: latin-1)."""
+        for msg in framer.feed(chunk):
+            if msg is None:
+                self.too_long()
+                continue
+            line = msg.rstrip(b"\r").decode("latin-1")
+            if line.strip():
+                yield line
+
     def process(self, line: str) -> tuple[bytes | None, str | None]:
         """Run one line; return (bytes to send, fault kind or None)."""
         self.on_log(self.name, "rx", line)
@@ -134,6 +244,11 @@ class _Endpoint:
         if fault.kind == "stall":
             self.on_log(self.name, "fault", f"stall: reply to {line!r} withheld")
             return None, "stall"
+        if fault.kind == "trickle":
+            self.on_log(self.name, "fault", f"trickle: the reply to {line!r} leaves a byte every "
+                        f"{fault.interval_s:g} s")
+            self._trickle_s = fault.interval_s
+            return reply, "trickle"
         if fault.kind == "garbage":
             junk = bytes(self._rng.integers(128, 256, size=max(8, min(len(reply), 64)), dtype=np.uint8)) + b"\n"
             self.on_log(self.name, "fault", f"garbage: {junk[:-1]!r} instead of the reply to {line!r}")
@@ -163,24 +278,11 @@ class TcpServer(_Endpoint):
         self._threads.append(t)
 
     def _accept(self) -> None:
-        self.sock.settimeout(0.05)
-        while not self._stop.is_set():
-            try:
-                conn, _ = self.sock.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            with self._lock:
-                self._conns.add(conn)
-            t = threading.Thread(target=self._serve, args=(conn,), name=f"lab-{self.name}-conn",
-                                 daemon=True)
-            t.start()
-            self._threads.append(t)
+        accept_loop(self.sock, self._stop, self._lock, self._conns, self._threads, self._serve,
+                    f"lab-{self.name}-conn")
 
     def _serve(self, conn: socket.socket) -> None:
-        buf = b""
+        framer = Framer()
         conn.settimeout(0.05)
         try:
             while not self._stop.is_set():
@@ -190,14 +292,11 @@ class TcpServer(_Endpoint):
                     continue
                 if not chunk:
                     return
-                buf += chunk
-                while b"\n" in buf:
-                    raw, buf = buf.split(b"\n", 1)
-                    line = raw.rstrip(b"\r").decode("ascii", "replace")
-                    if not line.strip():
-                        continue
+                for line in self.lines(framer, chunk):
                     data, fault = self.process(line)
-                    if data:
+                    if data and fault == "trickle":
+                        self._send_trickle(conn, data)
+                    elif data:
                         conn.settimeout(None)
                         conn.sendall(data)
                         conn.settimeout(0.05)
@@ -211,21 +310,55 @@ class TcpServer(_Endpoint):
                 self._conns.discard(conn)
             conn.close()
 
+    def _send_trickle(self, conn: socket.socket, data: bytes) -> None:
+        """One byte every ``_trickle_s`` until the reply is out, the client leaves or the lab stops."""
+        for i in range(len(data)):
+            if self._stop.wait(self._trickle_s):
+                return
+            conn.sendall(data[i:i + 1])
+
     def close(self) -> None:
-        self._stop.set()
+        shut_down(self._stop, [self.sock], self._lock, self._conns, self._threads)
+
+
+def accept_loop(sock: socket.socket, stop: threading.Event, lock: Any, conns: set[socket.socket],
+                threads: list[threading.Thread], serve: Callable[[socket.socket], None], name: str) -> None:
+    """Accept connections on ``sock`` until ``stop``; each is served by ``serve(conn)`` in its own thread."""
+    sock.settimeout(0.05)
+    while not stop.is_set():
         try:
-            self.sock.close()
+            conn, _ = sock.accept()
+        except TimeoutError:
+            continue
+        except OSError:
+            return
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        with lock:
+            conns.add(conn)
+        t = threading.Thread(target=serve, args=(conn,), name=name, daemon=True)
+        t.start()
+        threads.append(t)
+
+
+def shut_down(stop: threading.Event, listeners: list[socket.socket], lock: Any,
+              conns: set[socket.socket], threads: list[threading.Thread]) -> None:
+    """Stop a socket server: the stop flag, its listening sockets closed, its connections shut
+    down (their threads see it at once), then every thread joined."""
+    stop.set()
+    for sock in listeners:
+        try:
+            sock.close()
         except OSError:
             pass
-        with self._lock:
-            conns = list(self._conns)
-        for c in conns:
-            try:
-                c.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-        for t in self._threads:
-            t.join(timeout=2)
+    with lock:
+        open_conns = list(conns)
+    for c in open_conns:
+        try:
+            c.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+    for t in threads:
+        t.join(timeout=2)
 
 
 class PtyServer(_Endpoint):
@@ -256,7 +389,7 @@ class PtyServer(_Endpoint):
         self._dead = False
 
     def _serve(self) -> None:
-        buf = b""
+        framer = Framer()
         while not self._stop.is_set():
             r, _, _ = select.select([self.master], [], [], 0.05)
             if not r:
@@ -265,12 +398,7 @@ class PtyServer(_Endpoint):
                 chunk = os.read(self.master, 4096)
             except OSError:
                 return
-            buf += chunk
-            while b"\n" in buf:
-                raw, buf = buf.split(b"\n", 1)
-                line = raw.rstrip(b"\r").decode("ascii", "replace")
-                if not line.strip():
-                    continue
+            for line in self.lines(framer, chunk):
                 if self._dead:
                     self.on_log(self.name, "rx", line)
                     continue

@@ -5,7 +5,8 @@ Protocol (RS-232, ``\\n``): ``Get,<Dev>,<i>,<Prop>`` answers one line;
 ``GetDevInfo,<Dev>,<i>,<Prop>`` answers the allowed values, comma-separated.
 Unknown devices, properties or values get no answer at all (a driver times
 out), except ``GetDevInfo`` of an unknown device which answers
-``Not Available``. The velocity decoder is ``VeloDec,1``.
+``Not Available``. The velocity decoder is ``VeloDec,1``; its analog output
+lags the velocity by ``SignalDelay`` (7.6 us here), which the lab simulates.
 
 The analog output is velocity / scale factor, at most +-10 V;
 ``Get,VeloDec,1,OverRange`` is ``1`` while the velocity at the laser spot
@@ -31,6 +32,8 @@ class _Controller:
 
     name = "vibrometer"
     scale_mm_s_per_v: float
+    #: the decoder's signal delay: the analog output is the velocity this long ago
+    signal_delay_s = 0.0
 
     def __init__(self, peak_velocity_mm_s: Callable[[], float] = lambda: 0.0) -> None:
         self.peak_velocity_mm_s = peak_velocity_mm_s
@@ -58,6 +61,9 @@ class _Controller:
 class SimOFV5000(_Controller):
     """The controller's state and line protocol; ``peak_velocity_mm_s()`` comes from the lab."""
 
+    #: VD-09 decoder: 7.6 us (the lab's value, answered as ``SignalDelay``)
+    signal_delay_s = 7.6e-6
+
     def __init__(self, peak_velocity_mm_s: Callable[[], float] = lambda: 0.0) -> None:
         super().__init__(peak_velocity_mm_s)
         self.scale_mm_s_per_v = 125.0
@@ -72,7 +78,8 @@ class SimOFV5000(_Controller):
             ("SensorHead", 0, "Name"): "OFV-505",
             ("VeloDec", 1, "Name"): "VD-09",
             ("VeloDec", 1, "MaxFreq"): "1.5MHz",
-            ("VeloDec", 1, "SignalDelay"): "7.6us",
+            ("VeloDec", 1, "SignalDelay"): f"{self.signal_delay_s * 1e6:g}us",
+            ("SensorHead", 0, "SignalLevel"): "87",
             ("VeloDec", 1, "Filter"): "Off",
             ("VeloDec", 1, "Tracking"): "Off",
         }
@@ -94,8 +101,8 @@ class SimOFV5000(_Controller):
         if reply is None:
             return None
         if self.props[("Interface", 0, "Echo")] == "On":
-            return (line + "\n" + reply + "\n").encode("ascii")
-        return (reply + "\n").encode("ascii")
+            return (line + "\n" + reply + "\n").encode("ascii", "replace")
+        return (reply + "\n").encode("ascii", "replace")
 
     def _handle(self, parts: list[str]) -> str | None:
         if len(parts) < 4 or not parts[2].isdigit():

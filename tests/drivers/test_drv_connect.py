@@ -97,3 +97,18 @@ def test_declared_scope_channels_must_agree_with_the_identity():
                                handshake=False, channels=4):
             pass
     assert ei.value.key == "channels"
+
+
+@pytest.mark.parametrize("resource, says", [
+    ("TCPIP0::127.9.9.9::hislip0::INSTR", "no HiSLIP server answered at 127.9.9.9, port 4880"),
+    ("TCPIP0::127.9.9.9::inst0::INSTR", "no VXI-11 portmapper at 127.9.9.9, port 111"),
+    ("USB0::0x0957::0x2C07::MY1::INSTR", "USB resources need the pyusb package"),
+    ("GPIB0::10::INSTR", "GPIB resources need linux-gpib or gpib-ctypes"),
+])
+def test_every_resource_form_fails_with_one_clear_line(resource, says):
+    """Every form a user writes is accepted; where nothing answers or a back-end is missing, one line
+    says which and what to write instead (pyvisa-py's own 'resource not present' for HiSLIP misleads)."""
+    with pytest.raises(InstrumentError) as exc:
+        Keysight33500B.open(resource, timeout_s=1)
+    text = str(exc.value)
+    assert says in text and "\n" not in text and exc.value.command == "open"

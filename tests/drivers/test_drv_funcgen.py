@@ -213,7 +213,8 @@ def test_snapshot_records_settings_and_state():
         fg.set_sine(1000, 2, 0.5)
         snap = json.loads(json.dumps(fg.snapshot()))
     assert snap["settings"] == {"timeout_s": pytest.approx(0.3), "check_errors": True, "channel": 2,
-                                "max_amp_vpp": 5.0, "max_v": 4.0, "max_freq_hz": None}
+                                "max_amp_vpp": 5.0, "max_v": 4.0, "max_freq_hz": None,
+                                "amplitude_unit": "VPP", "load_ohm": "INF"}
     assert snap["state"]["freq_hz"] == 1000 and snap["state"]["offset_v"] == 0.5
     assert snap["identity"].startswith("Keysight")
     assert snap["connect"] == {"instrument_model": "33522B", "channels": 2, "errors_at_connect": []}
@@ -241,3 +242,73 @@ def test_shrinking_offset_is_sent_before_the_amplitude():
     with expected_protocol(Keysight33500B, first + second, max_v=5.0) as fg:
         fg.set_sine(1000, 1.0, 4.0)
         fg.set_sine(1000, 8.0, 0.0)
+
+
+@pytest.mark.parametrize("cls, kw, script", [
+    # 33220A User's Guide, OUTPut:SYNC {OFF|ON}: one Sync connector, one channel
+    (Agilent33220A, {}, _w("OUTP:SYNC ON") + [(b"SYST:ERR?\n", OK), (b"OUTP:SYNC?\n", b"1\n")]),
+    # 33500B Operating and Service Guide, OUTPut:SYNC:SOURce {CH1|CH2}, OUTPut[1|2]:SYNC:MODE,
+    # OUTPut[1|2]:SYNC:POLarity, OUTPut:SYNC: the connector follows the drive channel
+    (Keysight33500B, {"channel": 2},
+     _w("OUTP:SYNC:SOUR CH2", "OUTP2:SYNC:MODE NORM", "OUTP2:SYNC:POL NORM", "OUTP:SYNC ON")
+     + [(b"SYST:ERR?\n", OK), (b"OUTP:SYNC:SOUR?\n", b"CH2\n"), (b"OUTP2:SYNC:MODE?\n", b"NORM\n"),
+        (b"OUTP2:SYNC:POL?\n", b"NORM\n"), (b"OUTP:SYNC?\n", b"1\n")]),
+    # DG1000Z Programming Guide, :OUTPut<n>:SYNC[:STATe], :OUTPut<n>:SYNC:POLarity {POSitive|NEGative}
+    (RigolDG1000Z, {}, _w(":OUTP1:SYNC:POL POS", ":OUTP1:SYNC ON")
+     + [(b":SYST:ERR?\n", RIGOL_OK), (b":OUTP1:SYNC:POL?\n", b"POS\n"), (b":OUTP1:SYNC?\n", b"ON\n")]),
+])
+def test_enable_sync_routes_the_drive_channel_and_reads_it_back(cls, kw, script):
+    with expected_protocol(cls, script, **kw) as fg:
+        fg.enable_sync()
+    assert fg.state["sync"] == {"on": True, "channel": kw.get("channel", 1)}
+
+
+def test_sync_that_does_not_take_is_an_error():
+    """A generator whose Sync connector stays off: the scope would never trigger; say so."""
+    script = _w("OUTP:SYNC ON") + [(b"SYST:ERR?\n", OK), (b"OUTP:SYNC?\n", b"0\n")]
+    with expected_protocol(Agilent33220A, script) as fg:
+        with pytest.raises(InstrumentError, match="sync not set.*OUTP:SYNC.*never fire"):
+            fg.enable_sync()
+
+
+@pytest.mark.parametrize("kw, level", [
+    # 2 Vpp at the load: 0.7071 Vrms (a sine's rms is its peak over sqrt 2); into 50 ohm that is
+    # 10 log10(0.7071^2 / 50 / 1 mW) = 10 dBm (33500B Operating and Service Guide, VOLTage:UNIT)
+    ({"amplitude_unit": "VRMS"}, ("INF", "VRMS", "0.7071067812")),
+    ({"amplitude_unit": "DBM", "load_ohm": 50}, ("50", "DBM", "10")),
+    ({"amplitude_unit": "vpp", "load_ohm": 600}, ("600", "VPP", "2")),
+])
+def test_amplitude_unit_and_load_as_configured(kw, level):
+    load, unit, volt = level
+    script = _w(f"OUTP1:LOAD {load}", "SOUR1:FUNC SIN", f"SOUR1:VOLT:UNIT {unit}", "SOUR1:FREQ 1000",
+                f"SOUR1:VOLT {volt}", "SOUR1:VOLT:OFFS 0") + [(b"SYST:ERR?\n", OK)]
+    with expected_protocol(Keysight33500B, script, **kw) as fg:
+        fg.set_sine(1000, 2.0)
+    assert fg.state["amp_vpp"] == 2.0 and fg.state["load"] == load
+
+
+def test_a_finite_load_lowers_the_output_range_and_is_read_back():
+    """+-10 V open circuit through the 50 ohm source: +-5 V into 50 ohm (data sheet: 10 Vpp into
+    50 ohm); refused before anything is sent. The load is read back after it is set."""
+    script = _w("OUTP1:LOAD 50") + [(b"SYST:ERR?\n", OK), (b"OUTP1:LOAD?\n", b"+5.000000000000000E+01\n")]
+    script += _w("OUTP1:LOAD 50") + [(b"SYST:ERR?\n", OK), (b"OUTP1:LOAD?\n", b"+9.900000000000000E+37\n")]
+    with expected_protocol(Keysight33500B, script, load_ohm=50) as fg:
+        with pytest.raises(LimitError, match=r"\+-5 V into 50 ohm"):
+            fg.set_sine(1000, 12.0)
+        fg.set_load()
+        assert fg.state["load"] == "50"
+        with pytest.raises(InstrumentError, match="load not set"):
+            fg.set_load()
+
+
+@pytest.mark.parametrize("kw, key", [
+    ({"amplitude_unit": "DBM"}, "amplitude_unit"),       # dBm into high Z: undefined
+    ({"amplitude_unit": "VOLTS"}, "amplitude_unit"),
+    ({"load_ohm": 0.5}, "load_ohm"),
+    ({"load_ohm": "open"}, "load_ohm"),
+])
+def test_bad_unit_or_load_is_a_config_error_before_anything_is_sent(kw, key):
+    with pytest.raises(ConfigError) as exc:
+        with expected_protocol(Keysight33500B, [], handshake=False, **kw):
+            pass
+    assert exc.value.key == key

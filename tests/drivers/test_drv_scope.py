@@ -33,13 +33,55 @@ KS_WORD_SETUP = _w(":WAV:SOUR CHAN2", ":WAV:FORM WORD", ":WAV:BYT MSBF", ":WAV:U
 def test_infiniivision_setup_and_timebase():
     script = _w(":CHAN1:DISP 1", ":CHAN1:COUP AC", ":CHAN1:SCAL 0.05", ":CHAN1:OFFS -0.1") + [
         (b":SYST:ERR?\n", OK)] + _w(":TIM:SCAL 0.001") + [(b":SYST:ERR?\n", OK)] + _w(
-        ":TRIG:MODE EDGE", ":TRIG:EDGE:SOUR CHAN2", ":TRIG:EDGE:LEV 0.1", ":TRIG:EDGE:SLOP NEG") + [
-        (b":SYST:ERR?\n", OK)]
+        ":TRIG:MODE EDGE", ":TRIG:EDGE:SOUR CHAN2", ":TRIG:EDGE:LEV 0.1", ":TRIG:EDGE:SLOP NEG",
+        ":TRIG:SWE NORM") + [(b":SYST:ERR?\n", OK)] + READBACK
     with expected_protocol(InfiniiVision, script) as sc:
         sc.setup_channel(1, volts_per_div=0.05, offset_v=-0.1, coupling="ac")
         sc.set_timebase(record_s=0.01)
         sc.set_trigger("chan2", 0.1, "NEG")
     assert sc.state["channels"]["1"]["coupling"] == "AC" and sc.state["time_per_div_s"] == 0.001
+    assert sc.state["trigger"]["sweep"] == "NORM"
+
+
+#: what set_trigger("CHAN2", 0.1, "NEG") reads back (3000 X-Series Programmer's Guide, :TRIGger
+#: Commands: the queries answer the short forms)
+READBACK = [(b":TRIG:EDGE:SOUR?\n", b"CHAN2\n"), (b":TRIG:EDGE:SLOP?\n", b"NEG\n"),
+            (b":TRIG:SWE?\n", b"NORM\n"), (b":TRIG:EDGE:LEV?\n", b"+1.00000E-01\n")]
+TRIGGER = _w(":TRIG:MODE EDGE", ":TRIG:EDGE:SOUR CHAN2", ":TRIG:EDGE:LEV 0.1", ":TRIG:EDGE:SLOP NEG",
+             ":TRIG:SWE NORM") + [(b":SYST:ERR?\n", OK)]
+
+
+@pytest.mark.parametrize("bad, match", [
+    ((b":TRIG:SWE?\n", b"AUTO\n"), "TRIG:SWE"),              # the sweep did not take: AUTO records anyway
+    ((b":TRIG:EDGE:SOUR?\n", b"CHAN1\n"), "TRIG:EDGE:SOUR"),
+    ((b":TRIG:EDGE:LEV?\n", b"+2.00000E+00\n"), "trigger level"),
+])
+def test_trigger_settings_are_read_back(bad, match):
+    """A scope that does not hold a trigger setting is an error, not a run on untriggered records."""
+    rb = [bad if q == bad[0] else (q, r) for q, r in READBACK]
+    upto = [q for q, _ in rb].index(bad[0]) + 1
+    with expected_protocol(InfiniiVision, TRIGGER + rb[:upto]) as sc:
+        with pytest.raises(InstrumentError, match=match):
+            sc.set_trigger("CHAN2", 0.1, "NEG")
+
+
+def test_rigol_memory_depth_for_the_channels_on_and_averaging():
+    """DS1000Z :ACQuire:MDEPth: the smallest listed depth for two channels holding 5000 points is
+    6k, set while running and read back; :ACQuire:AVERages takes powers of two only."""
+    script = []
+    for ch in (1, 2):
+        script += _w(f":CHAN{ch}:DISP 1", f":CHAN{ch}:COUP DC", f":CHAN{ch}:SCAL 0.5", f":CHAN{ch}:OFFS 0") + [
+            (b":SYST:ERR?\n", R_OK)]
+    script += _w(":RUN", ":ACQ:MDEP 6000") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:MDEP?\n", b"6000\n")]
+    script += _w(":ACQ:TYPE AVER", ":ACQ:AVER 16") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:TYPE?\n", b"AVER\n")]
+    with expected_protocol(RigolDS1000Z, script) as sc:
+        sc.setup_channel(1, 0.5)
+        sc.setup_channel(2, 0.5)
+        sc.set_record_points(5000)
+        sc.set_averaging(16)
+        with pytest.raises(LimitError, match="averages 2, 4"):
+            sc.set_averaging(12)
+    assert sc.state["record_points"] == 6000 and sc.state["averages"] == 16
 
 
 @pytest.mark.parametrize("cls, ok, offs", [
@@ -236,3 +278,11 @@ def test_wait_done_stall_is_instrument_error():
     with expected_protocol(RigolDS1000Z, [(b":TRIG:STAT?\n", STALL)], timeout_s=0.2) as sc:
         with pytest.raises(InstrumentError, match="no reply"):
             sc.wait_done(5.0)
+
+
+def test_infiniivision_record_points_mode_read_back():
+    script = _w(":WAV:POIN:MODE RAW", ":WAV:POIN 20000") + [(b":SYST:ERR?\n", OK),
+                                                           (b":WAV:POIN:MODE?\n", b"NORM\n")]
+    with expected_protocol(InfiniiVision, script) as sc:
+        with pytest.raises(InstrumentError, match="WAV:POIN:MODE.*RAW was set"):
+            sc.set_record_points(20000)

@@ -134,3 +134,28 @@ def test_parse_range_text():
     assert parse_range_text(" 0.5 mm/s/V ") == 0.5
     with pytest.raises(ValueError):
         parse_range_text("125")
+
+
+def test_ofv5000_signal_delay_asked_once_and_decoder_settings_read_back():
+    """The decoder's signal delay (``Get,VeloDec,1,SignalDelay`` -> ``7.6us``) is asked once and kept;
+    Filter/Tracking settings are read back (the controller ignores an invalid value silently)."""
+    script = [(b"Get,VeloDec,1,SignalDelay\n", b"7.6us\n"), (b"Set,VeloDec,1,Filter,20kHz\n", None),
+              (b"Get,VeloDec,1,Filter\n", b"20kHz\n"), (b"Set,VeloDec,1,Tracking,Maybe\n", None),
+              (b"Get,VeloDec,1,Tracking\n", b"Off\n")]
+    with expected_protocol(OFV5000, script, handshake=False) as v:
+        assert v.signal_delay_s == pytest.approx(7.6e-6)
+        assert v.signal_delay_s == pytest.approx(7.6e-6)       # cached: not asked again
+        v.set_decoder("Filter", "20kHz")
+        with pytest.raises(InstrumentError, match="Tracking not accepted"):
+            v.set_decoder("Tracking", "Maybe")
+    assert v.state["filter"] == "20kHz"
+
+
+def test_declared_signal_delay_is_not_asked_and_garbled_delay_is_an_error():
+    with expected_protocol(OFV5000, [], handshake=False, signal_delay_s=3e-6) as v:
+        assert v.signal_delay_s == 3e-6
+    with expected_protocol(OFV3001, [], signal_delay_s=2e-6) as v3:
+        assert v3.signal_delay_s == 2e-6 and v3.settings()["signal_delay_s"] == 2e-6
+    with expected_protocol(OFV5000, [(b"Get,VeloDec,1,SignalDelay\n", b"soon\n")], handshake=False) as v:
+        with pytest.raises(InstrumentError, match="garbled reply 'soon'"):
+            _ = v.signal_delay_s

@@ -107,6 +107,36 @@ def read_word(sc: Raw, ch: int) -> tuple[np.ndarray, np.ndarray]:
     return (np.arange(len(data)) - xref) * xinc + xorig, (data - yref) * yinc + yorig
 
 
+def instruments_toml(res: dict[str, str], *, scope_model: str = "InfiniiVision", scope_timeout_s: float = 10,
+                     funcgen_timeout_s: float | None = None) -> str:
+    """The ``[instruments.*]`` tables of an in-chip config for a lab's resources (33500B, the given
+    scope driver, OFV-5000, the control channel)."""
+    fg_timeout = "" if funcgen_timeout_s is None else f"timeout_s = {funcgen_timeout_s}\n"
+    return f"""[instruments.funcgen]
+model = "33500B"
+resource = "{res['funcgen']}"
+{fg_timeout}
+[instruments.scope]
+model = "{scope_model}"
+resource = "{res['scope']}"
+timeout_s = {scope_timeout_s}
+
+[instruments.vibrometer]
+model = "OFV-5000"
+resource = "{res['vibrometer']}"
+
+[instruments.control]
+model = "LabControl"
+resource = "{res['control']}"
+"""
+
+
+def decoder_lag(lab: VirtualLab, freq_hz: float) -> complex:
+    """What the vibrometer decoder's signal delay does to a velocity phasor at ``freq_hz``: the
+    analog output is the velocity ``signal_delay_s`` ago (7.6 us on the lab's OFV-5000)."""
+    return complex(np.exp(-2j * np.pi * freq_hz * lab.vibrometer.signal_delay_s))
+
+
 def settle(lab: VirtualLab) -> None:
     """Wait until the structure's transient after a drive change has died out."""
     time.sleep(lab.model.settle_s() + 0.02)

@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 import pyvisa
-from labhelpers import drive_sine, fit_sine, lab, raw, read_word  # noqa: F401  (fixtures)
+from labhelpers import decoder_lag, drive_sine, fit_sine, lab, raw, read_word  # noqa: F401  (fixtures)
 
 from labkit.errors import InstrumentError
 from labkit.lab import VirtualLab
@@ -77,7 +78,7 @@ def test_shaker_setup_drives_the_tray_and_the_simulated_robot(lab, raw):
     # the tray: generator -> 20 dB -> shaker, 25 um at 240 Hz
     tray_v = fit_sine(t, tray * scale, freq_hz)
     assert abs(tray_v) / (2 * np.pi * freq_hz) * 1e3 == pytest.approx(amp_um, rel=0.01)
-    h = lab.chain.tray_velocity_frf(freq_hz)
+    h = lab.chain.tray_velocity_frf(freq_hz) * decoder_lag(lab, freq_hz)    # the decoder's output lags
     assert np.angle(tray_v / fit_sine(t, drive, freq_hz) / h) == pytest.approx(0, abs=0.01)
     # the knee: the hybrid simulator's answer for that tray motion (cached per freq, amp)
     from labkit.sim import Shaker, simulate
@@ -188,3 +189,25 @@ def test_camera_sees_the_robot_walk_during_a_sine_burst_only(lab, raw, tmp_path)
     assert fg.query("*TRG;*OPC?") == "1"
     lab.record_video(tmp_path / "burst.avi", 0.5)
     assert lab.last_recording["speed_mm_s"] == walking                 # inside the burst: as the sine
+
+
+def test_cam_rec_writes_only_inside_the_labs_folder_and_leaves_the_channel_free(lab, raw, tmp_path):
+    """A path with a directory part is refused (it overwrote an unrelated file); a clip's length does not
+    hold the control channel (LAB:SPOT? answers meanwhile); too many frames is refused up front."""
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    ctl, other = raw("control"), raw("control")
+    for bad in (str(victim), "../victim.txt", ".hidden.avi"):
+        assert ctl.query(f'CAM:REC "{bad}",0.1') == "0"
+        assert "file name only" in ctl.query("SYST:ERR?")
+    assert victim.read_text() == "keep me"
+    assert ctl.query("CAM:FPS 1000;:CAM:REC? \"big.avi\",600") == "0"
+    assert "more than 20000 frames" in ctl.query("SYST:ERR?")
+    ctl.write("CAM:FPS 20")
+    ctl.write('CAM:REC "clip.avi",1.5')
+    t0 = time.monotonic()
+    assert other.query("LAB:SPOT?") in ("KNEE", "HIP", "BODY", "TRAY")
+    assert time.monotonic() - t0 < 0.5                  # not held for the clip's 1.5 s
+    assert ctl.readline() == "30"
+    folder = ctl.query("CAM:DIR?").strip('"')
+    assert (Path(folder) / "clip.avi").is_file() and Path(folder) == lab.recordings_dir
