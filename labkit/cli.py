@@ -101,6 +101,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except LabkitError as exc:
         _fail(args, str(exc), exc.exit_code)
         return _exit(exc.exit_code, argv)
+    except BrokenPipeError:
+        # the reader of standard output went away (``labkit info FILE | head``): not an error of
+        # ours; nothing more can be printed, and Python's final flush must not complain either
+        _quiet_stdout()
+        return _exit(0, argv)
     except (FileNotFoundError, NotADirectoryError, IsADirectoryError, PermissionError) as exc:
         # a path the person gave (an --out folder that does not exist, a read-only place):
         # bad input, not a crash
@@ -128,6 +133,18 @@ def _banner(exc: DriveNotOff) -> None:
         lines.append(f"!!  the run had stopped because: {exc.original}")
     lines.append(bar)
     _say("\n".join(lines))
+
+
+def _quiet_stdout() -> None:
+    """Point standard output at /dev/null (its reader closed the pipe)."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
 
 
 def _say(text: str) -> None:

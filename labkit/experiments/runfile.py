@@ -136,7 +136,9 @@ def _make_table(group: Any, fields: dict[str, tuple[str, str]], with_index: bool
     for name, (code, units) in items:
         if name in group:
             continue
-        ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=_dtype(code), chunks=(256,))
+        # a Fletcher-32 checksum per chunk (HDF5 refuses filters on variable-length strings)
+        ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=_dtype(code), chunks=(256,),
+                                  fletcher32=code != _STR)
         ds.attrs["units"] = units
 
 
@@ -317,7 +319,10 @@ class RunFile:
         try:
             f = h5py.File(path, "r+")
         except OSError as exc:
-            raise InputError(f"cannot open for appending ({exc})", file=path, key="--resume") from None
+            from labkit.h5io import why_unreadable
+
+            raise InputError(f"cannot open for appending: {why_unreadable(path, exc)}", file=path,
+                             key="--resume") from None
         stored = json.loads(f.attrs.get("config_json", "{}"))
         if stored != json.loads(json.dumps(config_json, sort_keys=True)):
             diff = sorted(k for k in set(stored) | set(config_json)
@@ -411,7 +416,7 @@ class RunFile:
             if name in g:
                 del g[name]
             ds = g.create_dataset(name, data=np.asarray(data, dtype=np.float32), compression="gzip",
-                                  compression_opts=1, shuffle=True)
+                                  compression_opts=1, shuffle=True, fletcher32=True)
             ds.attrs["units"] = units
         if "t_s" in g:
             del g["t_s"]
