@@ -5,6 +5,7 @@ This is what ``labkit sweep inchip`` and ``labkit shaker`` call.
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -111,6 +112,10 @@ def _output_path(out: str | Path | None, resume: str | Path | None) -> Path:
         path = Path(resume)
         if not path.is_file():
             raise InputError("no such run file", file=path, key="--resume")
+        check_writable(path.parent, "--resume")
+        if not os.access(path, os.W_OK):
+            raise InputError("the run file is read-only", file=path, key="--resume",
+                             expected="a run file this user can append to")
         return path
     if out is None:
         raise InputError("no output file", key="--out", expected="--out FILE (or --resume FILE)")
@@ -119,7 +124,21 @@ def _output_path(out: str | Path | None, resume: str | Path | None) -> Path:
         raise InputError("already exists; use --resume to continue it, or another --out", file=path, key="--out")
     if not path.parent.is_dir():
         raise InputError("the folder does not exist", file=path, key="--out")
+    check_writable(path.parent, "--out")
     return path
+
+
+def check_writable(folder: Path, key: str) -> None:
+    """InputError unless a file can be created in ``folder`` (tried, not guessed: root ignores modes)."""
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".labkit-probe.", dir=folder)
+    except OSError as exc:
+        raise InputError(f"cannot write in this folder ({exc.strerror or exc})", file=folder, key=key,
+                         expected="a folder this user can create files in") from None
+    os.close(fd)
+    os.unlink(probe)
 
 
 def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: Any, resume: str | Path | None,

@@ -184,6 +184,30 @@ def test_second_run_sends_nothing(tmp_path, lab):
     assert not (tmp_path / "b.h5").exists()
 
 
+def test_a_read_only_out_folder_is_refused_before_any_command(tmp_path, lab, capsys):
+    """A folder nobody may write in (a read-only mount: root ignores file modes) ends the run
+    before the first byte to an instrument (31 commands were sent first)."""
+    from labkit.cli import main
+
+    cfg = sweep_cfg(tmp_path, lab, FREQS[:2])
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    if os.geteuid() == 0:
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(ro)], capture_output=True)
+        assert done.returncode == 0, done.stderr
+    else:
+        ro.chmod(0o555)
+    try:
+        before = {inst: rx_count(lab, inst) for inst in ("funcgen", "scope", "vibrometer", "control")}
+        assert main(["sweep", "inchip", str(cfg), "--out", str(ro / "run.h5"), "--quiet"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and str(ro) in err[0] and "cannot write in this folder" in err[0], err
+        assert {inst: rx_count(lab, inst) for inst in before} == before
+    finally:
+        if os.geteuid() == 0:
+            subprocess.run(["umount", "-l", str(ro)], capture_output=True)
+
+
 @pytest.mark.slow
 def test_output_switched_off_behind_the_runs_back_is_caught(tmp_path, lab):
     cfg, out = sweep_cfg(tmp_path, lab), tmp_path / "run.h5"
@@ -341,6 +365,17 @@ def test_unconfirmed_off_is_loud_then_labkit_off_recovers(tmp_path, lab):
     ("shaker", "current_limit_a = 1.0", "current_limit_a = 1.0\nmax_input_vrms = 5", "amplifier.max_input_vrms"),
     ("shaker", "tray_max_um = 60.0", "tray_max_um = inf", "interlock.tray_max_um"),
     ("shaker", "tray_max_um = 60.0", "tray_max_um = 9000.0", "interlock.tray_max_um"),
+    # below what any generator puts out (it was sent, and a run file made, without naming the key)
+    ("inchip", "amp_vpp = 4.0", "amp_vpp = 1e-9", "drive.amp_vpp"),
+    ("shaker", "start_vpp", "start_vpp", "grid.drive_vpp[0]"),         # (replaced below: a 1e-9 Vpp grid)
+    # a link timeout of -1 or 0 s silently became 1 ms; nan or 1e9 s ended in exit 3 after connecting
+    ("inchip", 'model = "33500B"', 'model = "33500B"\ntimeout_s = -1', "instruments.funcgen.timeout_s"),
+    ("inchip", 'model = "33500B"', 'model = "33500B"\ntimeout_s = 0', "instruments.funcgen.timeout_s"),
+    ("inchip", 'model = "33500B"', 'model = "33500B"\ntimeout_s = nan', "instruments.funcgen.timeout_s"),
+    ("inchip", 'model = "33500B"', 'model = "33500B"\ntimeout_s = 1e9', "instruments.funcgen.timeout_s"),
+    # the 33500B family has two channels: channel 3 was found only after connecting
+    ("inchip", 'model = "33500B"', 'model = "33500B"\nchannel = 3', "instruments.funcgen.channel"),
+    ("inchip", "velocity_channel = 2", "velocity_channel = 2\nsamples_per_cycle = 1e300", "scope.samples_per_cycle"),
 ])
 def test_bad_config_exits_2_naming_file_and_key_nothing_sent(tmp_path, lab, capsys, kind, old, new, key):
     from labkit.cli import main
@@ -350,6 +385,8 @@ def test_bad_config_exits_2_naming_file_and_key_nothing_sent(tmp_path, lab, caps
     else:
         cfg = shaker_toml(tmp_path / "c.toml", [150.0], [10.0])
     text = cfg.read_text()
+    if old == "start_vpp":
+        old, new = "tray_amp_um = [10]", "drive_vpp = [1e-9]"
     assert old in text
     cfg.write_text(text.replace(old, new))
     on_lab(cfg, lab)
