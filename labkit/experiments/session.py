@@ -164,8 +164,13 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
         if run is not None:
             n_left = len(experiment.plan(cfg, run.done).points)
         # the whole run must fit (HDF5 cannot survive a full disk); nothing opened yet if not
-        rf.check_room(path, (0 if run is not None else rf.BASE_BYTES) + n_left * experiment.point_bytes(cfg),
-                      key="--resume" if run is not None else "--out")
+        need = (0 if run is not None else rf.BASE_BYTES) + n_left * experiment.point_bytes(cfg)
+        rf.check_room(path, need, key="--resume" if run is not None else "--out")
+        # set aside for the file: a disk that fills up meanwhile cannot take it (two points and the
+        # reserve more than the estimate, so the last point's room check passes)
+        reserve = need + 2 * experiment.point_bytes(cfg) + rf.RESERVE_BYTES
+        if run is not None:
+            run.reserve(reserve)
         runner = None
         try:
             from labkit.experiments.rig import PromptSpot, Rig
@@ -176,7 +181,8 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
             # instruments first (the drive stays off): a rig that cannot be opened leaves no new file
             rig = stack.enter_context(Rig(cfg, spot=spot))
             if run is None:
-                run = rf.RunFile.create(path, cfg, cfg_json, experiment.plan(cfg, ()).points_total)
+                run = rf.RunFile.create(path, cfg, cfg_json, experiment.plan(cfg, ()).points_total,
+                                        reserve_bytes=reserve)
             plan: Plan = experiment.plan(cfg, run.done)
             for role, (model, resource, snap) in rig.snapshots().items():
                 run.set_instrument(role, model, resource, snap)
@@ -200,6 +206,7 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
                     run.close()
                     if lab_obj is not None and rf.headroom_bytes(path) > rf.RESERVE_BYTES / 2:
                         _store_lab_record(path, lab_obj)
+                    rf.release_space(path)          # what the run did not use
     out_summary = rf.summary(path)
     out_summary.update(ok=True, status=status)
     if runner is not None:

@@ -528,13 +528,11 @@ def test_every_generator_drives_finite_bursts(tmp_path, lab_model, driver):
 
 @pytest.fixture
 def small_fs(tmp_path):
-    """A 6 MB tmpfs mounted for the test (root in a container may; else the file-size-limit test
-    above covers the same path)."""
+    """A 6 MB tmpfs mounted for the test (CI runs as root; a test never skips)."""
     mnt = tmp_path / "small"
     mnt.mkdir()
     done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=6m", "tmpfs", str(mnt)], capture_output=True)
-    if done.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.decode().strip()}); see the RLIMIT_FSIZE test")
+    assert done.returncode == 0, f"cannot mount a tmpfs (needs root): {done.stderr.decode().strip()}"
     try:
         yield mnt
     finally:
@@ -545,25 +543,28 @@ def small_fs(tmp_path):
 @pytest.mark.parametrize("leave_bytes", [0, 1 << 20])
 def test_full_filesystem_mid_run(tmp_path, lab, small_fs, leave_bytes):
     """Another process fills the run file's file system mid-run (to the last byte, or to 1 MB):
-    exit 2 with one line, drive off, no crash, the file opens with every completed point, and
-    --resume completes it once space is freed."""
+    the space the run set aside before its first point (``fallocate``, kept by the file) is
+    not the filler's to take, so the run completes: exit 0, every point, status complete
+    (it stopped with "running" or a crash before)."""
     cfg, out = sweep_cfg(tmp_path, lab), small_fs / "run.h5"
 
     def fill(proc):
         st = os.statvfs(small_fs)
         with open(small_fs / "filler", "wb") as f:
-            f.write(b"\0" * max(0, st.f_bavail * st.f_frsize - leave_bytes))
+            try:
+                f.write(b"\0" * max(0, st.f_bavail * st.f_frsize - leave_bytes))
+            except OSError:
+                pass
+        return os.statvfs(small_fs).f_bavail * os.statvfs(small_fs).f_frsize
 
-    proc, _, stderr, _ = act_mid_run(cfg, out, 3, fill)
-    assert proc.returncode == 2, stderr
-    assert "not enough room to write the next point" in stderr and "Traceback" not in stderr
+    proc, _, stderr, free = act_mid_run(cfg, out, 3, fill)
+    assert free <= leave_bytes
+    assert proc.returncode == 0 and "Traceback" not in stderr, stderr
     assert lab.output_state("funcgen", 1) is False
-    # with 1 MB left the final status is written; with nothing left the file still says "running"
-    status = summarise_h5(out)["attrs"]["status"]
-    assert status.startswith("aborted: DiskFull") if leave_bytes else status == "running", status
+    assert summarise_h5(out)["attrs"]["status"] == "complete"
     with h5py.File(out, "r") as f:
-        n = f["points/index"].shape[0]
-        assert 3 <= n < len(FREQS) and np.all(np.isfinite(f["locations/hip/frf"][:n]))
+        assert f["points/index"].shape[0] == len(FREQS)
+        assert np.all(np.isfinite(f["locations/hip/frf"][...]))
+    # what the run did not use went back to the file system
+    assert os.stat(out).st_blocks * 512 - os.stat(out).st_size < 1 << 16
     (small_fs / "filler").unlink()
-    summary = run_session("inchip", cfg, None, resume=out, quiet=True)
-    assert summary["status"] == "complete" and summary["points_ok"] == len(FREQS)
