@@ -190,6 +190,9 @@ def _trim(group: Any, n: int) -> None:
             ds.resize((n,))
 
 
+#: the status of a point an interlock stopped that ``--resume --retry-interlocked`` measured again
+RETRIED = "interlock, retried"
+
 #: free bytes every write leaves untouched: HDF5's metadata, the shutdown's events and final status
 RESERVE_BYTES = 2 * 1024 * 1024
 #: bytes a run file takes before its first point (attributes, config text, empty tables)
@@ -327,6 +330,16 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def check_free_bytes(folder: str | Path, need_bytes: float, what: str) -> None:
+    """DiskFull unless the file system (not counting any run file's reserve) has twice ``need_bytes``."""
+    st = os.statvfs(folder)
+    free = float(st.f_bavail) * st.f_frsize
+    if free < 2 * need_bytes:
+        raise DiskFull(f"not enough room for {what} ({_mb(free)} free, about {_mb(need_bytes)} needed); "
+                       "the file holds every completed point; free some space, then continue with --resume",
+                       file=folder, key="--out")
+
+
 def _mb(n: float) -> str:
     return f"{n / 1e6:.3g} MB"
 
@@ -348,7 +361,8 @@ class RunFile:
         idx = f["points/index"][...]
         st = f["points/status"].asstr()[...] if len(idx) else []
         for i, s in zip(idx, st):
-            self.done[int(i)] = str(s)
+            if str(s) != RETRIED:
+                self.done[int(i)] = str(s)
 
     # -- opening ---------------------------------------------------------------------------
     @classmethod
@@ -421,8 +435,13 @@ class RunFile:
         label_dimensions(f)             # coordinates for h5py, xarray and HDFView (schema 2)
 
     @classmethod
-    def resume(cls, path: str | Path, cfg: Any, config_json: dict[str, Any]) -> RunFile:
+    def resume(cls, path: str | Path, cfg: Any, config_json: dict[str, Any],
+               retry_interlocked: bool = False) -> RunFile:
         """Reopen a run file to continue it after its last complete point.
+
+        With ``retry_interlocked``, points an interlock stopped are measured again: their rows
+        stay (the record of what happened) with status ``interlock, retried``, and the new
+        measurement is appended as a row of its own.
 
         Raises
         ------
@@ -468,6 +487,11 @@ class RunFile:
                 for key in list(f[name]):
                     if int(key[1:]) not in done:
                         del f[name][key]
+        if retry_interlocked:
+            st = f["points/status"]
+            values = st.asstr()[...]
+            if np.any(values == "interlock"):
+                st[...] = np.where(values == "interlock", RETRIED, values).astype(object)
         f.attrs["status"] = "running"
         f.attrs["ended_utc"] = ""
         resumed = get_json(f, "resumed_utc_json", [])
@@ -624,8 +648,9 @@ def summary(path: str | Path) -> dict[str, Any]:
     st = run.points.get("status", np.array([], dtype=str))
     out: dict[str, Any] = {
         "file": os.fspath(path), "kind": run.kind, "status": run.status, "points_planned": run.points_planned,
-        "points_done": run.complete_points, "points_ok": int(np.sum(st == "ok")),
-        "points_interlocked": int(np.sum(st == "interlock")),
+        "points_done": int(np.sum(st != RETRIED)) if st.size else run.complete_points,
+        "points_ok": int(np.sum(st == "ok")), "points_interlocked": int(np.sum(st == "interlock")),
+        "points_retried": int(np.sum(st == RETRIED)),
     }
     if isinstance(run, InchipRun) and run.locations:
         out["locations"] = {loc: int(lg.freq_hz.size) for loc, lg in run.locations.items()}

@@ -163,7 +163,10 @@ class TcpServer(_Endpoint):
         self._threads.append(t)
 
     def _accept(self) -> None:
-        self.sock.settimeout(0.05)
+        try:
+            self.sock.settimeout(0.05)
+        except OSError:         # the lab was closed before this thread ran (EBADF): nothing to serve
+            return
         while not self._stop.is_set():
             try:
                 conn, _ = self.sock.accept()
@@ -258,7 +261,10 @@ class PtyServer(_Endpoint):
     def _serve(self) -> None:
         buf = b""
         while not self._stop.is_set():
-            r, _, _ = select.select([self.master], [], [], 0.05)
+            try:
+                r, _, _ = select.select([self.master], [], [], 0.05)
+            except (OSError, ValueError):       # closed meanwhile (EBADF)
+                return
             if not r:
                 continue
             try:
