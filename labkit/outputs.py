@@ -35,8 +35,8 @@ from pathlib import Path
 
 from labkit.errors import InputError
 
-__all__ = ["check_outputs", "check_output_dir", "atomic_output", "atomic_outputs", "remove_stale_temporaries",
-           "staged_dir", "temp_name"]
+__all__ = ["check_outputs", "check_output_dir", "atomic_output", "atomic_outputs", "process_alive",
+           "remove_stale_temporaries", "staged_dir", "temp_name"]
 
 
 def _hint(resume: bool) -> str:
@@ -115,7 +115,7 @@ def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
         return gone
     for p in folder.iterdir():
         m = _TEMPORARY.match(p.name)
-        if not m or _alive(int(m.group(1) or m.group(2))):
+        if not m or process_alive(int(m.group(1) or m.group(2))):
             continue
         if p.is_dir():
             shutil.rmtree(p, ignore_errors=True)
@@ -126,7 +126,8 @@ def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
     return gone
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` still runs (another user's counts as running)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

@@ -311,23 +311,15 @@ def partial_path(path: Path) -> Path:
 
 def remove_stale_partials(path: Path) -> list[Path]:
     """Remove what a killed run left while making ``path`` (its process is gone); return them."""
+    from labkit.outputs import process_alive
+
     gone = []
     for p in path.parent.glob(f".{path.name}.partial.*"):
         pid = p.name.rsplit(".", 1)[-1]
-        if pid.isdigit() and not _alive(int(pid)):
+        if pid.isdigit() and not process_alive(int(pid)):
             p.unlink(missing_ok=True)
             gone.append(p)
     return gone
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def check_free_bytes(folder: str | Path, need_bytes: float, what: str) -> None:

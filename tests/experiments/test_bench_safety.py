@@ -18,7 +18,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from labcfg import inchip_toml, points_done, shaker_toml, wait_points
+from labcfg import inchip_toml, points_done, shaker_toml, small_tmpfs, wait_points
 
 from clihelpers import REPO
 from labkit.commands.info import summarise_h5
@@ -190,22 +190,12 @@ def test_a_read_only_out_folder_is_refused_before_any_command(tmp_path, lab, cap
     from labkit.cli import main
 
     cfg = sweep_cfg(tmp_path, lab, FREQS[:2])
-    ro = tmp_path / "ro"
-    ro.mkdir()
-    if os.geteuid() == 0:
-        done = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(ro)], capture_output=True)
-        assert done.returncode == 0, done.stderr
-    else:
-        ro.chmod(0o555)
-    try:
+    with small_tmpfs(tmp_path / "ro", "1m", "ro") as ro:
         before = {inst: rx_count(lab, inst) for inst in ("funcgen", "scope", "vibrometer", "control")}
         assert main(["sweep", "inchip", str(cfg), "--out", str(ro / "run.h5"), "--quiet"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and str(ro) in err[0] and "cannot write in this folder" in err[0], err
         assert {inst: rx_count(lab, inst) for inst in before} == before
-    finally:
-        if os.geteuid() == 0:
-            subprocess.run(["umount", "-l", str(ro)], capture_output=True)
 
 
 @pytest.mark.slow
@@ -538,14 +528,8 @@ def test_every_generator_drives_finite_bursts(tmp_path, lab_model, driver):
 @pytest.fixture
 def small_fs(tmp_path):
     """A 6 MB tmpfs mounted for the test (CI runs as root; a test never skips)."""
-    mnt = tmp_path / "small"
-    mnt.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=6m", "tmpfs", str(mnt)], capture_output=True)
-    assert done.returncode == 0, f"cannot mount a tmpfs (needs root): {done.stderr.decode().strip()}"
-    try:
+    with small_tmpfs(tmp_path / "small", "6m") as mnt:
         yield mnt
-    finally:
-        subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
 
 
 @pytest.mark.slow

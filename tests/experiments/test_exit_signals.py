@@ -15,14 +15,12 @@ from pathlib import Path
 
 import h5py
 import pytest
-from labcfg import inchip_toml, wait_points
+from labcfg import inchip_toml, on_lab_resources, wait_points
 
 from clihelpers import REPO
 from labkit.lab import VirtualLab
 
 STOPS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT]
-_PLACEHOLDERS = {"funcgen": "TCPIP0::192.0.2.1::5025::SOCKET", "scope": "TCPIP0::192.0.2.2::5025::SOCKET",
-                 "vibrometer": "ASRL/dev/ttyUSB0::INSTR"}
 
 
 @pytest.fixture(scope="module")
@@ -33,12 +31,7 @@ def lab():
 
 def _config(tmp_path: Path, lab: VirtualLab, freqs=(600.0, 900.0, 1300.0, 1800.0, 2400.0, 3000.0)) -> Path:
     cfg = inchip_toml(tmp_path / "c.toml", freqs, locations=("hip",), settle_s=0.03, dwell_cycles=15)
-    text = cfg.read_text()
-    for role, placeholder in _PLACEHOLDERS.items():
-        text = text.replace(placeholder, lab.resources[role])
-    cfg.write_text(text.replace("[instruments.funcgen]", f'[instruments.control]\nmodel = "LabControl"\n'
-                                f'resource = "{lab.resources["control"]}"\n\n[instruments.funcgen]', 1))
-    return cfg
+    return on_lab_resources(cfg, lab)
 
 
 def _start(*args: str) -> subprocess.Popen:

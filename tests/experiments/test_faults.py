@@ -19,7 +19,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from labcfg import inchip_toml
+from labcfg import inchip_toml, on_lab_resources, small_tmpfs
 
 from clihelpers import REPO
 from labkit.commands.info import summarise_h5
@@ -28,8 +28,6 @@ from labkit.experiments.session import run_session
 from labkit.lab import VirtualLab
 
 FREQS = [800.0, 1200.0, 1800.0, 2500.0]
-_PLACEHOLDERS = {"funcgen": "TCPIP0::192.0.2.1::5025::SOCKET", "scope": "TCPIP0::192.0.2.2::5025::SOCKET",
-                 "vibrometer": "ASRL/dev/ttyUSB0::INSTR"}
 
 
 @pytest.fixture(scope="module")
@@ -41,25 +39,14 @@ def lab():
 @pytest.fixture(scope="module")
 def small_fs(tmp_path_factory):
     """A 24 MB tmpfs of its own (mounted as root; CI is root)."""
-    mnt = tmp_path_factory.mktemp("smallfs")
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=24m", "tmpfs", str(mnt)], capture_output=True)
-    assert done.returncode == 0, f"cannot mount a tmpfs (the fault suite needs root): {done.stderr!r}"
-    try:
+    with small_tmpfs(tmp_path_factory.mktemp("smallfs"), "24m") as mnt:
         yield mnt
-    finally:
-        subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
 
 
 def config(folder: Path, lab: VirtualLab, keep_raw: bool = False) -> Path:
     cfg = inchip_toml(folder / "c.toml", FREQS, locations=("hip",), settle_s=0.02, dwell_cycles=12,
                       keep_raw=keep_raw)
-    text = cfg.read_text()
-    for role, placeholder in _PLACEHOLDERS.items():
-        text = text.replace(placeholder, lab.resources[role])
-    text = text.replace("[instruments.funcgen]", f'[instruments.control]\nmodel = "LabControl"\n'
-                        f'resource = "{lab.resources["control"]}"\n\n[instruments.funcgen]', 1)
-    cfg.write_text(text)
-    return cfg
+    return on_lab_resources(cfg, lab)
 
 
 def start(cfg: Path, out: Path) -> subprocess.Popen:

@@ -15,14 +15,11 @@ import sys
 import threading
 
 import pytest
-from labcfg import inchip_toml
+from labcfg import inchip_toml, on_lab_resources
 
 from clihelpers import REPO
 from labkit.experiments.locks import claim_identity, lock_run, resource_key
 from labkit.lab import VirtualLab
-
-_PLACEHOLDERS = {"funcgen": "TCPIP0::192.0.2.1::5025::SOCKET", "scope": "TCPIP0::192.0.2.2::5025::SOCKET",
-                 "vibrometer": "ASRL/dev/ttyUSB0::INSTR"}
 
 
 @pytest.fixture(scope="module")
@@ -71,13 +68,7 @@ def _port(resource: str) -> int:
 
 def _config(tmp_path, lab, **spelled) -> str:
     cfg = inchip_toml(tmp_path / "c.toml", [1000.0, 2000.0], locations=("hip",))
-    text = cfg.read_text()
-    for role, placeholder in _PLACEHOLDERS.items():
-        text = text.replace(placeholder, spelled.get(role, lab.resources[role]))
-    text = text.replace("[instruments.funcgen]", f'[instruments.control]\nmodel = "LabControl"\n'
-                        f'resource = "{lab.resources["control"]}"\n\n[instruments.funcgen]', 1)
-    cfg.write_text(text)
-    return str(cfg)
+    return str(on_lab_resources(cfg, lab, **spelled))
 
 
 def _rx(lab, inst):

@@ -2,12 +2,10 @@
 are counted in the room check, and each is written aside and renamed into place."""
 from __future__ import annotations
 
-import subprocess
-
 import cv2
 import h5py
 import pytest
-from labcfg import shaker_toml
+from labcfg import shaker_toml, small_tmpfs
 
 from labkit.errors import InputError
 from labkit.experiments.runfile import DiskFull
@@ -49,11 +47,7 @@ def test_an_earlier_runs_video_is_refused_without_force_then_replaced_whole(tmp_
 def test_videos_are_counted_in_the_room_check(tmp_path):
     """Two points of 0.5 s video (counted 4.6 MB each) do not fit a 6 MB file system: exit 2
     before anything is sent (the videos were not counted: a truncated video and status running)."""
-    mnt = tmp_path / "small"
-    mnt.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=6m", "tmpfs", str(mnt)], capture_output=True)
-    assert done.returncode == 0, f"cannot mount a tmpfs (needs root): {done.stderr!r}"
-    try:
+    with small_tmpfs(tmp_path / "small", "6m") as mnt:
         cfg = shaker_toml(tmp_path / "s.toml", [150.0, 200.0], [5.0], video_s=0.5)
         with VirtualLab(seed=4) as lab:
             before = _rx(lab)
@@ -61,5 +55,3 @@ def test_videos_are_counted_in_the_room_check(tmp_path):
                 run_session("shaker", cfg, mnt / "run.h5", lab=lab, quiet=True)
             assert _rx(lab) == before
         assert list(mnt.iterdir()) == []
-    finally:
-        subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
