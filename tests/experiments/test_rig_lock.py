@@ -13,6 +13,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 
 import pytest
 from labcfg import inchip_toml, on_lab_resources
@@ -28,12 +29,28 @@ def lab():
         yield lab
 
 
-def _forward(port: int) -> tuple[int, threading.Event]:
-    """A TCP port forwarder to ``127.0.0.1:port`` (the same generator at another address)."""
-    srv = socket.create_server(("127.0.0.1", 0))
-    stop = threading.Event()
+class _Forward:
+    """A TCP port forwarder to ``127.0.0.1:port``: the same instrument at another address, and a
+    link that can be cut (every connection dropped, new ones refused) for a while."""
 
-    def pump(a: socket.socket, b: socket.socket) -> None:
+    def __init__(self, port: int) -> None:
+        self.srv = socket.create_server(("127.0.0.1", 0))
+        self.port = self.srv.getsockname()[1]
+        self.stop = threading.Event()
+        self.down_until = 0.0
+        self.socks: list[socket.socket] = []
+        threading.Thread(target=self._serve, args=(port,), daemon=True).start()
+
+    def cut(self, seconds: float) -> None:
+        self.down_until = time.monotonic() + seconds
+        for s in list(self.socks):
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+    @staticmethod
+    def _pump(a: socket.socket, b: socket.socket) -> None:
         try:
             while data := a.recv(65536):
                 b.sendall(data)
@@ -46,20 +63,28 @@ def _forward(port: int) -> tuple[int, threading.Event]:
                 except OSError:
                     pass
 
-    def serve() -> None:
-        srv.settimeout(0.2)
-        while not stop.is_set():
+    def _serve(self, port: int) -> None:
+        srv: socket.socket | None = self.srv
+        while not self.stop.is_set():
+            if time.monotonic() < self.down_until:
+                if srv is not None:             # the link is down: connections refused
+                    srv.close()
+                    srv = None
+                time.sleep(0.01)
+                continue
+            if srv is None:
+                srv = socket.create_server(("127.0.0.1", self.port))
+            srv.settimeout(0.05)
             try:
                 client, _ = srv.accept()
             except TimeoutError:
                 continue
             upstream = socket.create_connection(("127.0.0.1", port))
-            threading.Thread(target=pump, args=(client, upstream), daemon=True).start()
-            threading.Thread(target=pump, args=(upstream, client), daemon=True).start()
-        srv.close()
-
-    threading.Thread(target=serve, daemon=True).start()
-    return srv.getsockname()[1], stop
+            self.socks += [client, upstream]
+            threading.Thread(target=self._pump, args=(client, upstream), daemon=True).start()
+            threading.Thread(target=self._pump, args=(upstream, client), daemon=True).start()
+        if srv is not None:
+            srv.close()
 
 
 def _port(resource: str) -> int:
@@ -80,12 +105,12 @@ def test_four_spellings_of_one_rig_are_one_rig(tmp_path, lab):
     port = _port(fg)
     link = tmp_path / "ttyLAB"
     link.symlink_to(vib[len("ASRL"):-len("::INSTR")])
-    fwd_port, stop = _forward(port)
+    fwd = _Forward(port)
     spellings = [
         ("funcgen", f"TCPIP::localhost::{port}::SOCKET", "resource"),        # host name, no board number
         ("funcgen", f"tcpip0::127.0.0.1::{port}::socket", "resource"),       # letter case
         ("vibrometer", f"ASRL{link}::INSTR", "resource"),                     # a symlink to the serial port
-        ("funcgen", f"TCPIP0::127.0.0.1::{fwd_port}::SOCKET", "serial"),     # another address: its *IDN? serial
+        ("funcgen", f"TCPIP0::127.0.0.1::{fwd.port}::SOCKET", "serial"),     # another address: its *IDN? serial
     ]
     assert len({resource_key(s) for _, s, why in spellings if why == "resource" and _ == "funcgen"}) == 1
     env = dict(os.environ, XDG_RUNTIME_DIR=str(tmp_path))       # another user's runtime folder
@@ -112,7 +137,7 @@ def test_four_spellings_of_one_rig_are_one_rig(tmp_path, lab):
                 assert any(c.upper().startswith("*IDN") for c in sent), sent
             assert not (tmp_path / "second.h5").exists()
     finally:
-        stop.set()
+        fwd.stop.set()
 
 
 def _leave_on(lab) -> None:
@@ -160,3 +185,30 @@ def test_a_generator_failing_its_handshake_with_the_output_on(tmp_path, lab, fau
                          timeout=60)
     assert off.returncode == 0, off.stderr
     assert lab.output_state("funcgen", 1) is False
+
+
+def test_a_generator_link_down_for_a_moment_is_reconnected_for_its_off(tmp_path, lab):
+    """The generator's link drops mid-run and refuses connections for 1.6 s: the run stops
+    (exit 3), and its OFF goes through once the link is back (the reconnect window is 2 s; it was
+    3 quick tries, about 0.15 s: exit 4, the OFF not confirmed)."""
+    from labcfg import wait_points
+
+    fwd = _Forward(_port(lab.resources["funcgen"]))
+    try:
+        cfg = inchip_toml(tmp_path / "c.toml", [800.0 + 100 * i for i in range(30)], locations=("hip",),
+                          timeout_s=1.0)
+        cfg = on_lab_resources(cfg, lab, funcgen=f"TCPIP0::127.0.0.1::{fwd.port}::SOCKET")
+        out = tmp_path / "run.h5"
+        proc = subprocess.Popen([sys.executable, "-m", "labkit", "sweep", "inchip", str(cfg), "--out", str(out),
+                                 "--quiet"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            wait_points(out, 2, proc)
+            fwd.cut(1.6)
+            _, err = proc.communicate(timeout=120)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        assert proc.returncode == 3 and "DRIVE MAY STILL BE ON" not in err and "Traceback" not in err, err
+        assert lab.output_state("funcgen", 1) is False
+    finally:
+        fwd.stop.set()
