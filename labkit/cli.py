@@ -142,6 +142,16 @@ def _main(argv: Sequence[str] | None, previous: dict[int, Any], late: list[int])
         _hold(late)
         stop_handled()
         return _stopped(args, exc)
+    except Exception:
+        # a stop signal's exception turned into another one on its way (raised inside an extension
+        # module's import, numpy reports an ImportError): the stop it was
+        _hold(late)
+        try:
+            check_stop()
+        except (KeyboardInterrupt, Interrupted) as stop:
+            stop_handled()
+            return _stopped(args, stop)
+        raise
     return 0
 
 
