@@ -83,38 +83,107 @@ def main(argv: Sequence[str] | None = None) -> int:
     line on, before the subcommands are imported: each raises, so the drive is
     turned off and the run file finished exactly as for Ctrl-C (exit 130). A
     shell's background job starts with SIGINT and SIGQUIT ignored; this undoes it.
+    One that arrived while ``labkit`` itself was being imported (:func:`labkit.early_signals`)
+    stops the command before it starts. Once the command has ended (any way), further
+    stop signals are only noted: the exit code stays what the command earned (a second
+    Ctrl-C while the first is reported exits 130, not with a traceback), and a stop that
+    arrives after a run's file says ``complete`` exits 0 saying so.
     """
     previous: dict[int, Any] = {}
+    late: list[int] = []
+    try:
+        code = _main(argv, previous, late)
+    except (KeyboardInterrupt, Interrupted) as exc:      # a second stop while the first was reported
+        _hold(late)
+        stop_handled()
+        code = _stopped(None, exc)
+    finally:
+        _hold(late)
+        if argv is not None:        # called in-process (tests, scripts): give the handlers back
+            restore_handlers(previous)
+    return _exit(code, argv)
+
+
+def _main(argv: Sequence[str] | None, previous: dict[int, Any], late: list[int]) -> int:
     args: argparse.Namespace | None = None
     try:
         install_stop_handlers(previous)     # inside the try: a signal during it is handled too
+        check_stop()            # one that arrived while labkit was imported (labkit.early_signals)
         parser = build_parser()
         args = parser.parse_args(argv)
         summary = args._run(args)
+        _hold(late)             # the command is done: a stop from here on does not undo it
         check_stop()            # a stop signal whose exception was dropped still stops (exit 130)
         if args.json:
             emit_json(summary if isinstance(summary, dict) else {"result": summary})
     except DriveNotOff as exc:
+        _hold(late)
         _banner(exc)
         _fail(args, str(exc), exc.exit_code)
-        return _exit(exc.exit_code, argv)
+        return exc.exit_code
     except LabkitError as exc:
+        _hold(late)
         _fail(args, str(exc), exc.exit_code)
-        return _exit(exc.exit_code, argv)
+        return exc.exit_code
+    except BrokenPipeError:
+        # the reader of standard output went away (``labkit info FILE | head``): not an error of
+        # ours; nothing more can be printed, and Python's final flush must not complain either
+        _hold(late)
+        _quiet_stdout()
+        return 0
     except (FileNotFoundError, NotADirectoryError, IsADirectoryError, PermissionError) as exc:
         # a path the person gave (an --out folder that does not exist, a read-only place):
         # bad input, not a crash
+        _hold(late)
         where = f"{exc.filename}: " if exc.filename else ""
         _fail(args, f"{where}{exc.strerror or exc}", EXIT_INPUT)
-        return _exit(EXIT_INPUT, argv)
+        return EXIT_INPUT
     except (KeyboardInterrupt, Interrupted) as exc:
+        _hold(late)
         stop_handled()
-        name = exc.signame if isinstance(exc, Interrupted) else "SIGINT"
-        _fail(args, f"interrupted by {name}; outputs were turned off", EXIT_INTERRUPTED)
-        return _exit(EXIT_INTERRUPTED, argv)
-    finally:
-        restore_handlers(previous)
-    return _exit(0, argv)
+        return _stopped(args, exc)
+    except Exception:
+        # a stop signal's exception turned into another one on its way (raised inside an extension
+        # module's import, numpy reports an ImportError): the stop it was
+        _hold(late)
+        try:
+            check_stop()
+        except (KeyboardInterrupt, Interrupted) as stop:
+            stop_handled()
+            return _stopped(args, stop)
+        raise
+    return 0
+
+
+def _stopped(args: argparse.Namespace | None, exc: BaseException) -> int:
+    """Report a stop signal: exit 130, or 0 when it came after the run's file said complete."""
+    from labkit.experiments.safety import completed_run
+
+    name = exc.signame if isinstance(exc, Interrupted) else "SIGINT"
+    done = completed_run() if getattr(args, "command", None) in ("sweep", "shaker") else None
+    if done is not None:
+        _say(f"labkit: {name} arrived after the run had completed; {done} says complete")
+        if getattr(args, "json", False):
+            try:
+                emit_json({"ok": True, "status": "complete", "file": done, "signal_after_completion": name})
+            except (OSError, ValueError):
+                pass
+        return 0
+    _fail(args, f"interrupted by {name}; outputs were turned off", EXIT_INTERRUPTED)
+    return EXIT_INTERRUPTED
+
+
+def _hold(late: list[int]) -> None:
+    """From now on a stop signal is only noted in ``late`` (the command has ended)."""
+    import signal
+    import threading
+
+    from labkit.experiments.safety import STOP_SIGNALS
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for s in STOP_SIGNALS:
+        signal.signal(s, lambda signum, frame: late.append(signum))
 
 
 def _banner(exc: DriveNotOff) -> None:
@@ -128,6 +197,18 @@ def _banner(exc: DriveNotOff) -> None:
         lines.append(f"!!  the run had stopped because: {exc.original}")
     lines.append(bar)
     _say("\n".join(lines))
+
+
+def _quiet_stdout() -> None:
+    """Point standard output at /dev/null (its reader closed the pipe)."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
 
 
 def _say(text: str) -> None:
@@ -150,6 +231,15 @@ def _fail(args: argparse.Namespace | None, message: str, code: int) -> None:
 
 def _exit(code: int, argv: Sequence[str] | None) -> int:
     if argv is None:  # called as the console script
+        # Python's finalisation resets every handler it installed to the default, so a stop
+        # signal arriving while the interpreter shuts down would kill the process (exit -N)
+        # after its exit code was decided: the command has ended and reported; ignore them
+        import signal
+
+        from labkit.experiments.safety import STOP_SIGNALS
+
+        for s in STOP_SIGNALS:
+            signal.signal(s, signal.SIG_IGN)
         sys.exit(code)
     return code
 

@@ -68,11 +68,14 @@ def get_json(group: Any, name: str, default: Any = None) -> Any:
 
 
 
-def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None):
+def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None, verify: bool | None = None):
     """Open an HDF5 file labkit wrote; a clear :class:`InputError` if it is not one.
 
     With ``kind``, the file's ``kind`` attribute must match (a prefix match:
-    ``kind="run"`` accepts ``"run_inchip"``).
+    ``kind="run"`` accepts ``"run_inchip"``). A file that cannot be opened is named for
+    what it is (:func:`why_unreadable`): being written (by the run holding its lock, from
+    the lock file), truncated, or corrupt. With ``verify`` (the default for run files),
+    every dataset is read once, so a failed checksum names its dataset (:func:`verify_datasets`).
     """
     import h5py
 
@@ -82,30 +85,133 @@ def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None):
     try:
         f = h5py.File(path, mode)
     except OSError as exc:
-        if "lock" in str(exc).lower():      # another process has it open for writing
-            from labkit.lockfiles import describe, writer_of
+        raise InputError(why_unreadable(path, exc), file=path) from None
+    try:
+        _check_kind(f, path, mode, kind)
+        if mode == "r" and (verify or (verify is None and str(f.attrs.get("kind", "")).startswith("run"))):
+            verify_datasets(f, path)
+    except BaseException:
+        f.close()
+        raise
+    return f
 
-            who = writer_of(path)
-            by = f"by {describe(who)}" if who else "by another process (a run in progress holds it)"
-            raise InputError(f"being written {by}; read it when that run has ended", file=path) from None
-        raise InputError(f"not a readable HDF5 file ({exc})", file=path) from None
-    if kind is not None:
+
+def _check_kind(f: Any, path: Path, mode: str, kind: str | None) -> None:
+    try:
         found = f.attrs.get("kind")
-        if found is None or not str(found).startswith(kind):
-            f.close()
-            raise InputError(f"this file holds {found!r}", file=path, key="kind", expected=f"a '{kind}' file")
-    if mode == "r":
         raw = f.attrs.get("schema_version", 0)
+    except (OSError, RuntimeError, KeyError, ValueError) as exc:
+        raise InputError(f"corrupt: its root attributes cannot be read ({exc})", file=path) from None
+    if kind is not None and (found is None or not str(found).startswith(kind)):
+        raise InputError(f"this file holds {found!r}", file=path, key="kind", expected=f"a '{kind}' file")
+    if mode == "r":
         raw = raw.item() if isinstance(raw, np.generic) else raw
         try:
             version = int(raw)
         except (TypeError, ValueError):
             version = -1
         if not 0 <= version <= READS_SCHEMA_VERSION:
-            f.close()
             raise InputError(f"{raw!r}: written by a newer labkit, or not a version", file=path,
                              key="schema_version", expected=f"an integer 0..{READS_SCHEMA_VERSION}")
-    return f
+
+
+def why_unreadable(path: str | Path, exc: BaseException | None = None) -> str:
+    """Why HDF5 cannot open ``path``, in words: being written (by whom), truncated, corrupt, not HDF5.
+
+    Who writes it comes from the run's lock file (:func:`labkit.lockfiles.writer_of`); HDF5's
+    own file lock (errno EAGAIN) without a labkit run holding the file is another program.
+    Truncation is read from the file's superblock (its stored end-of-file address).
+    """
+    import errno
+    import os
+
+    from labkit.lockfiles import describe, writer_of
+
+    who = writer_of(path)
+    if who is not None and who.get("pid") != os.getpid():     # (this process's own lock: --resume)
+        return f"being written by {describe(who)}; read it when that run has ended"
+    if isinstance(exc, OSError) and exc.errno in (errno.EAGAIN, errno.EACCES) and exc.errno is not None:
+        if exc.errno == errno.EACCES:
+            return "not readable by this user (permission denied)"
+        return ("open for writing by another program (HDF5's file lock is held; no labkit run holds it); "
+                "read it when that program has closed it")
+    size = Path(path).stat().st_size
+    sb = superblock(path)
+    if sb is None:
+        if size == 0 or not Path(path).read_bytes()[:4096].strip(b"\0"):
+            return f"truncated: {size} bytes, nothing written yet (the writer stopped at its first byte)"
+        return "not a readable HDF5 file (no HDF5 signature: not HDF5, or its first bytes are damaged)"
+    base, eof = sb
+    if eof is not None and size < base + eof:
+        return (f"truncated: {size} bytes on disk, its header says {base + eof} (the writer was stopped "
+                "before it finished, or the copy is incomplete)")
+    return f"corrupt: HDF5 cannot read its structure ({_hdf5_reason(exc)})"
+
+
+def _hdf5_reason(exc: BaseException | None) -> str:
+    text = str(exc) if exc is not None else "unknown"
+    return text.split("(", 1)[-1].rstrip(")") if "(" in text else text
+
+
+_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def superblock(path: str | Path) -> tuple[int, int | None] | None:
+    """``(base address, stored end-of-file address)`` from an HDF5 superblock, None without a signature.
+
+    The end-of-file address is None when the file is too short to hold it. Layout: the
+    HDF5 File Format Specification, section II.A (versions 0-3).
+    """
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    for at in (0, 512, 1024, 2048, 4096, 8192, 16384, 32768):
+        if head[at:at + 8] != _SIGNATURE:
+            continue
+        b = head[at:]
+        if len(b) < 16:
+            return at, None
+        version = b[8]
+        if version in (0, 1):
+            so = b[13]
+            start = 24 + (4 if version == 1 else 0)
+        else:
+            so = b[9]
+            start = 12
+        fields = [b[start + i * so:start + (i + 1) * so] for i in range(3)]
+        if len(fields[2]) < so or so not in (2, 4, 8):
+            return at, None
+        return at, int.from_bytes(fields[2], "little")
+    return None
+
+
+def verify_datasets(f: Any, path: str | Path) -> int:
+    """Read every dataset (HDF5 checks the Fletcher-32 checksums of those that carry one).
+
+    Returns the number of datasets read. Raises :class:`InputError` (exit 2) naming the
+    first dataset, group or attribute that cannot be read.
+    """
+    import h5py
+
+    names: list[str] = []
+    try:
+        f.visit(names.append)
+    except (OSError, RuntimeError, KeyError, ValueError) as exc:
+        raise InputError(f"corrupt: its group structure cannot be read ({_hdf5_reason(exc)})", file=path) from None
+    n = 0
+    for name in names:
+        obj = None
+        try:
+            obj = f[name]
+            dict(obj.attrs)
+            if isinstance(obj, h5py.Dataset):
+                obj[()]
+                n += 1
+        except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
+            what = "dataset" if isinstance(obj, h5py.Dataset) else "object"
+            how = "fails its checksum" if getattr(obj, "fletcher32", False) else "cannot be read"
+            raise InputError(f"corrupt: {what} /{name} {how} ({_hdf5_reason(exc)})",
+                             file=path) from None
+    return n
 
 
 #: the datasets that are a group's axis, in order of preference: a table's point ``index``

@@ -1,11 +1,13 @@
 """Where run locks live and who holds one (base layer: read by ``labkit.h5io`` too).
 
-A run takes an exclusive ``flock`` on one small file per instrument resource and per
-run file (:mod:`labkit.experiments.locks`), in the user's runtime folder
-(``$XDG_RUNTIME_DIR/labkit``, else ``/tmp/labkit-<uid>``); the file holds the
-holder's PID, host, command and run file as JSON. This module only finds those
-files and reads who holds one, so that anything that meets a file being written
-(``labkit.open``, ``labkit info``, ``--resume``) can name the run writing it.
+A run takes an exclusive ``flock`` on one small file per instrument (its normalised
+resource, and once connected its ``*IDN?`` identity) and per run file
+(:mod:`labkit.experiments.locks`), in one folder shared by every user of the machine
+(:data:`LOCK_DIR`, sticky and world-writable like ``/tmp``; the lock files are readable and
+writable by all, so one user's run keeps another's off the rig). The file holds the holder's
+PID, host, command and run file as JSON. This module only finds those files and reads who
+holds one, so that anything that meets a file being written (``labkit.open``, ``labkit
+info``, ``--resume``) can name the run writing it.
 """
 from __future__ import annotations
 
@@ -17,20 +19,34 @@ import re
 from pathlib import Path
 from typing import Any
 
+#: the one folder of run locks on this machine (not per user: two users' runs share the rig)
+LOCK_DIR = Path("/tmp/labkit-locks")
+
 
 def runtime_dir() -> Path:
-    """The per-user folder of the lock files (created with mode 0700)."""
+    """The per-user folder of this user's records (a served lab's), created with mode 0700."""
     base = os.environ.get("XDG_RUNTIME_DIR")
     folder = Path(base) / "labkit" if base and Path(base).is_dir() else Path(f"/tmp/labkit-{os.getuid()}")
     folder.mkdir(mode=0o700, parents=True, exist_ok=True)
     return folder
 
 
+def lock_dir() -> Path:
+    """:data:`LOCK_DIR`, created sticky and world-writable (mode 1777) when missing."""
+    if not LOCK_DIR.is_dir():
+        try:
+            LOCK_DIR.mkdir(parents=True)
+            os.chmod(LOCK_DIR, 0o1777)
+        except FileExistsError:
+            pass
+    return LOCK_DIR
+
+
 def lock_path(key: str) -> Path:
     """The lock file for a resource string or a run file's absolute path."""
     slug = re.sub(r"[^A-Za-z0-9._-]+", "_", key)[-60:]
     digest = hashlib.sha1(key.encode()).hexdigest()[:12]
-    return runtime_dir() / f"{slug}.{digest}.lock"
+    return lock_dir() / f"{slug}.{digest}.lock"
 
 
 def file_key(path: str | Path) -> str:

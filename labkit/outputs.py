@@ -28,13 +28,15 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from labkit.errors import InputError
 
-__all__ = ["check_outputs", "check_output_dir", "atomic_output", "atomic_outputs", "staged_dir", "temp_name"]
+__all__ = ["check_outputs", "check_output_dir", "atomic_output", "atomic_outputs", "process_alive",
+           "remove_stale_temporaries", "staged_dir", "temp_name"]
 
 
 def _hint(resume: bool) -> str:
@@ -88,12 +90,52 @@ def check_outputs(paths: Iterable[str | os.PathLike[str] | None], *, force: bool
         if not parent.is_dir():
             raise InputError("the output's folder does not exist (labkit does not create it)",
                              file=path, key=key, expected=f"an existing folder {parent}")
+        remove_stale_temporaries(parent)
         if path.exists() and not force:
             raise InputError(f"already exists; {_hint(resume)}", file=path, key=key)
         if any(q.resolve() == path.resolve() for q in out):
             raise InputError("named twice among the outputs", file=path, key=key)
         out.append(path)
     return out
+
+
+_TEMPORARY = re.compile(r"^\.(?:staging\.(\d+)\.|.*\.(\d+)\.[^.]+\.partial)")
+
+
+def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
+    """Remove the temporary files and staging folders a killed labkit left in ``folder``.
+
+    Only those whose process (the PID in the name, see :func:`temp_name`, :func:`staged_dir`)
+    has ended: another command writing there now keeps its own. Returns what was removed.
+    """
+    import shutil
+
+    gone: list[Path] = []
+    folder = Path(folder)
+    if not folder.is_dir():
+        return gone
+    for p in folder.iterdir():
+        m = _TEMPORARY.match(p.name)
+        if not m or process_alive(int(m.group(1) or m.group(2))):
+            continue
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                p.unlink()
+        gone.append(p)
+    return gone
+
+
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` still runs (another user's counts as running)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def check_output_dir(path: str | os.PathLike[str], *, force: bool = False, key: str = "--out",
@@ -110,6 +152,7 @@ def check_output_dir(path: str | os.PathLike[str], *, force: bool = False, key: 
     if not d.resolve().parent.is_dir():
         raise InputError("the folder that would hold it does not exist (labkit creates only the output "
                          "folder itself)", file=d, key=key, expected=f"an existing folder {d.resolve().parent}")
+    remove_stale_temporaries(d)
     if d.is_dir() and not force:
         names = list(names)
         clash = [n for n in names if (d / n).exists()] if names else sorted(p.name for p in d.iterdir())
@@ -122,7 +165,8 @@ def check_output_dir(path: str | os.PathLike[str], *, force: bool = False, key: 
 def temp_name(path: str | os.PathLike[str]) -> Path:
     """A fresh temporary file name beside ``path`` with the same suffix (the file is not left open)."""
     path = Path(path)
-    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".partial{path.suffix}",
+    # the PID in the name: a later command removes what a killed one left (remove_stale_temporaries)
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=f".partial{path.suffix}",
                                 dir=path.resolve().parent)
     os.close(fd)
     # mkstemp makes the file private (0600); give it the mode a plain open() would have
@@ -200,7 +244,7 @@ def staged_dir(out: str | os.PathLike[str], names: Iterable[str]) -> Iterator[Pa
     import shutil
 
     out = Path(out)
-    stage = Path(tempfile.mkdtemp(prefix=".staging.", dir=out))
+    stage = Path(tempfile.mkdtemp(prefix=f".staging.{os.getpid()}.", dir=out))
     try:
         yield stage
         names = list(names)

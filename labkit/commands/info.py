@@ -168,7 +168,7 @@ def _summarise_h5(path: Path) -> dict[str, Any]:
     datasets: list[dict[str, Any]] = []
     groups: list[str] = []
     dims: dict[str, list[str]] = {}
-    with open_h5(path) as f:
+    with open_h5(path, verify=True) as f:
         attrs = {k: _attr(v) for k, v in f.attrs.items() if len(str(v)) < 400}
 
         def visit(name: str, obj: Any) -> None:

@@ -26,7 +26,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.experiments.session import run_session
 
     summary = run_session("shaker", args.config, args.out, lab="served" if args.lab else False,
-                          resume=args.resume, quiet=args.quiet, seed=args.seed)
+                          resume=args.resume, quiet=args.quiet, seed=args.seed, force=args.force,
+                          retry_interlocked=args.retry_interlocked)
     if not args.json:
         print_summary(summary)
     return summary

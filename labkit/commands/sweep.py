@@ -26,6 +26,11 @@ def add_experiment_arguments(p: argparse.ArgumentParser) -> None:
                    help="continue this interrupted run file after its last complete point")
     p.add_argument("--seed", type=int, default=0, help="virtual lab noise seed (with --lab, "
                    "when no lab is served)")
+    p.add_argument("--retry-interlocked", action="store_true",
+                   help="with --resume: measure again the points an interlock stopped (their rows stay, "
+                        "marked 'interlock, retried')")
+    p.add_argument("--force", action="store_true",
+                   help="replace an earlier run's per-point videos (FILE's _videos folder)")
 
 
 def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
@@ -40,7 +45,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.experiments.session import run_session
 
     summary = run_session("inchip", args.config, args.out, lab="served" if args.lab else False,
-                          resume=args.resume, quiet=args.quiet, seed=args.seed)
+                          resume=args.resume, quiet=args.quiet, seed=args.seed, force=args.force,
+                          retry_interlocked=args.retry_interlocked)
     if not args.json:
         print_summary(summary)
     return summary

@@ -67,6 +67,12 @@ VIB_OUTPUT_MAX_V = 10.0
 PZT_RATED_MAX_V = 20.0
 #: every supported generator's output range into a high-impedance load: +-10 V
 FUNCGEN_MAX_V = 10.0
+#: the smallest amplitude every supported generator puts out (the drivers' floor, Vpp)
+FUNCGEN_MIN_VPP = 1e-3
+#: the longest an instrument link may wait for a reply (the drivers' ceiling, s)
+MAX_TIMEOUT_S = 3600.0
+#: record points per drive period: more is a typo (the scope's record holds at most 8 M points)
+MAX_SAMPLES_PER_CYCLE = 1e5
 #: the highest sine frequency of each generator family (the smallest model of the family:
 #: 33220A 20 MHz, 33500B 20 MHz (33511B/33521B), DG1000Z 25 MHz (DG1022Z))
 FUNCGEN_MAX_HZ = {"33220A": 20e6, "33500B": 20e6, "DG1000Z": 25e6}
@@ -223,7 +229,7 @@ def load_inchip(path: str | Path) -> InchipConfig:
     drive.only(("amp_vpp", "offset_v", "pzt_max_v"))
     pzt_max_v = drive.number("pzt_max_v", default=DEFAULT_PZT_MAX_V, unit="V", minimum=0,
                              exclusive_minimum=True, maximum=PZT_RATED_MAX_V)
-    amp_vpp = drive.number("amp_vpp", unit="Vpp", minimum=0, exclusive_minimum=True)
+    amp_vpp = drive.number("amp_vpp", unit="Vpp", minimum=FUNCGEN_MIN_VPP)
     offset_v = drive.number("offset_v", default=0.0, unit="V")
     peak = abs(offset_v) + amp_vpp / 2
     if peak > pzt_max_v:
@@ -300,14 +306,16 @@ def load_shaker(path: str | Path) -> ShakerConfig:
         raise grid.error("tray_amp_um", "give the amplitudes one way",
                          "exactly one of grid.tray_amp_um (tray displacement, um) or grid.drive_vpp")
     kind = "tray_amp_um" if "tray_amp_um" in grid else "drive_vpp"
-    amps = grid.numbers(kind, unit="um" if kind == "tray_amp_um" else "Vpp", minimum=0, exclusive_minimum=True)
+    amps = grid.numbers(kind, unit="um" if kind == "tray_amp_um" else "Vpp",
+                        **({"minimum": 0, "exclusive_minimum": True} if kind == "tray_amp_um"
+                           else {"minimum": FUNCGEN_MIN_VPP}))
 
     tc = root.table("tray_control", required=False)
     tc.only(("tolerance", "max_iterations", "start_vpp", "max_step_ratio"))
     control = TrayControl(
         tolerance=tc.number("tolerance", default=0.02, minimum=0, maximum=0.5, exclusive_minimum=True),
         max_iterations=tc.integer("max_iterations", default=8, minimum=1, maximum=50),
-        start_vpp=tc.number("start_vpp", default=0.05, unit="Vpp", minimum=0, exclusive_minimum=True,
+        start_vpp=tc.number("start_vpp", default=0.05, unit="Vpp", minimum=FUNCGEN_MIN_VPP,
                             maximum=2 * math.sqrt(2) * (max_input_vrms or cap)),
         max_step_ratio=tc.number("max_step_ratio", default=4.0, minimum=1, exclusive_minimum=True))
 
@@ -422,6 +430,15 @@ def _check_driver(spec: Table, model: str, settings: dict[str, Any]) -> None:
     for key in settings:
         if key not in allowed:
             raise spec.error(key, f"not a setting of the {cls.model} driver", "one of " + ", ".join(sorted(allowed)))
+        value = settings[key]
+        if isinstance(value, float) and not math.isfinite(value):
+            raise spec.error(key, f"not finite: {value!r}", "a finite number")
+    if "timeout_s" in settings:
+        spec.number("timeout_s", unit="s", minimum=1e-3, maximum=MAX_TIMEOUT_S)
+    channels = getattr(cls, "channels", None)
+    if "channel" in settings and channels:
+        # the family's channel count (the identified model may have fewer: checked at connect)
+        spec.integer("channel", minimum=1, maximum=max(channels))
 
 
 def _frequencies(t: Table) -> tuple[float, ...]:
@@ -477,7 +494,7 @@ def _scope(t: Table) -> ScopeSetup:
                       t.number("velocity_volts_per_div", default=None, unit="V/div", minimum=0,
                                exclusive_minimum=True),
                       trig,
-                      t.number("samples_per_cycle", default=100.0, minimum=8),
+                      t.number("samples_per_cycle", default=100.0, minimum=8, maximum=MAX_SAMPLES_PER_CYCLE),
                       t.integer("max_points", default=100_000, minimum=100, maximum=8_000_000))
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 from typing import TYPE_CHECKING, Any, TextIO
 
-from labkit.errors import InputError, InstrumentError, LimitError
+from labkit.errors import DriveNotOff, InputError, InstrumentError, LimitError
 from labkit.experiments import kinds
 from labkit.experiments.config import VIB_OUTPUT_MAX_V, InstrumentSpec
 from labkit.experiments.kinds import Config
@@ -26,7 +26,7 @@ from labkit.experiments.protocols import (
     SpotMover,
     Vibrometer,
 )
-from labkit.experiments.safety import DriveGuard, Interlock
+from labkit.experiments.safety import RECONNECT_WINDOW_S, DriveGuard, Interlock
 
 if TYPE_CHECKING:  # pragma: no cover
     from labkit.lab.client import LabControl
@@ -83,6 +83,51 @@ def _open(spec: InstrumentSpec, **extra: Any) -> Any:
     return inst
 
 
+def _off_without_handshake(spec: InstrumentSpec, exc: InstrumentError, config: str) -> InstrumentError:
+    """The generator failed while connecting: send its OFF on a fresh link that skips the handshake.
+
+    Returns the error to raise: ``exc`` (exit 3) when the OFF was confirmed (or no link could
+    be opened at all: nothing answered at that address), else
+    :class:`DriveNotOff` (exit 4, the banner): an output left on by an earlier session must
+    not go unmentioned because the link failed before the run could turn it off.
+    """
+    import time
+
+    from labkit.drivers.registry import driver_class
+
+    if exc.command == "open":       # no link at all (nothing answers there): exit 3, as before
+        return exc
+    cls = driver_class(spec.model)
+    plain: Any = type(cls.__name__, (cls,), {"connect_on_open": False})
+    settings = {k: v for k, v in spec.settings.items() if not k.startswith("max")}
+    last: Exception = exc
+    t0 = time.monotonic()
+    while True:
+        try:
+            with plain.open(spec.resource, name=spec.role, **settings) as fg:   # __exit__: safe_off, close
+                fg.safe_off()
+            return exc
+        except (InstrumentError, InputError) as again:
+            last = again
+        if time.monotonic() - t0 > RECONNECT_WINDOW_S:
+            break
+        time.sleep(0.2)
+    return DriveNotOff("funcgen", f"{spec.model} at {spec.resource}", str(last),
+                       original=f"the generator failed while connecting: {exc}", config=config)
+
+
+def _claim(inst: Any, spec: InstrumentSpec) -> None:
+    """Lock the instrument by its ``*IDN?`` identity before anything else is sent to it; on
+    RigBusy (another run has it, spelled differently) only the link is closed."""
+    from labkit.experiments.locks import claim_identity
+
+    try:
+        claim_identity(spec.role, str(inst.identity), spec.resource)
+    except BaseException:
+        inst.close()
+        raise
+
+
 class Rig:
     """Open instruments for one run (use as a context manager: everything is closed at exit).
 
@@ -137,14 +182,20 @@ class Rig:
             if self.amplifier is not None:
                 self.max_drive_vpp = float(self.amplifier.max_input_vpp)
             self._funcgen_limits = dict(setup.funcgen_limits)
-            fg = _open(inst["funcgen"], **self._funcgen_limits)
             spec = inst["funcgen"]
+            try:
+                fg = _open(spec, **self._funcgen_limits)
+            except InstrumentError as exc:      # the handshake failed: is its output off?
+                raise _off_without_handshake(spec, exc, cfg.path) from exc
+            _claim(fg, spec)
             self.guard = DriveGuard(fg, reopen=self.reopen_funcgen, where=f"{spec.model} at {spec.resource}",
                                     config=cfg.path)
             # A generator may come up with its output on from an earlier session: off first.
             fg.safe_off()
             fg.set_load()         # the declared load_ohm (INF: the PZT, an amplifier input), read back
-            scope = self.scope = _open(inst["scope"])
+            scope = _open(inst["scope"])
+            _claim(scope, inst["scope"])
+            self.scope = scope
             scope.poll_s = 0.002       # completion polls: fine-grained (the record time is slept)
             vib = self.vibrometer = _open(inst["vibrometer"])
             vib.scale_mm_s_per_v = cfg.scale_mm_s_per_v

@@ -69,6 +69,7 @@ relative to the run file's folder; empty without video), ``video_frames`` (1).
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import platform
@@ -136,7 +137,9 @@ def _make_table(group: Any, fields: dict[str, tuple[str, str]], with_index: bool
     for name, (code, units) in items:
         if name in group:
             continue
-        ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=_dtype(code), chunks=(256,))
+        # a Fletcher-32 checksum per chunk (HDF5 refuses filters on variable-length strings)
+        ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=_dtype(code), chunks=(256,),
+                                  fletcher32=code != _STR)
         ds.attrs["units"] = units
 
 
@@ -187,6 +190,9 @@ def _trim(group: Any, n: int) -> None:
             ds.resize((n,))
 
 
+#: the status of a point an interlock stopped that ``--resume --retry-interlocked`` measured again
+RETRIED = "interlock, retried"
+
 #: free bytes every write leaves untouched: HDF5's metadata, the shutdown's events and final status
 RESERVE_BYTES = 2 * 1024 * 1024
 #: bytes a run file takes before its first point (attributes, config text, empty tables)
@@ -210,15 +216,66 @@ class DiskFull(InputError):
     """
 
 
+def reserved_bytes(path: str | Path) -> float:
+    """Bytes the file system holds for ``path`` beyond its end (:func:`reserve_space`); 0 without."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return 0.0
+    return float(max(0, st.st_blocks * 512 - st.st_size))
+
+
+def reserve_space(path: str | Path, nbytes: float) -> bool:
+    """Have the file system set ``nbytes`` aside for ``path`` beyond its end (``fallocate``, keep size).
+
+    HDF5 grows the file into those blocks, which no other process can take: a disk that
+    fills up meanwhile never meets the run's writes (HDF5 does not survive ENOSPC). The
+    file's size is unchanged, so HDF5 and every reader see the same file. Returns False
+    when the file system cannot (then :meth:`RunFile.ensure_room` alone guards); raises
+    :class:`DiskFull` when there is no room for the reservation.
+    """
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    fallocate = getattr(libc, "fallocate", None)
+    if fallocate is None or nbytes <= 0:
+        return False
+    fallocate.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_long, ctypes.c_long]
+    fd = os.open(path, os.O_WRONLY)
+    try:
+        size = os.fstat(fd).st_size
+        if fallocate(fd, _FALLOC_FL_KEEP_SIZE, size, int(nbytes)) == 0:
+            return True
+        err = ctypes.get_errno()
+    finally:
+        os.close(fd)
+    if err in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+        raise DiskFull(f"no room to set {_mb(nbytes)} aside for this run ({os.strerror(err)})", file=path,
+                       key="--out")
+    return False
+
+
+_FALLOC_FL_KEEP_SIZE = 1
+
+
+def release_space(path: str | Path) -> None:
+    """Give back what :func:`reserve_space` set aside and the run did not use (truncate to its size)."""
+    try:
+        os.truncate(path, os.stat(path).st_size)
+    except OSError:
+        pass
+
+
 def headroom_bytes(path: str | Path) -> float:
     """Bytes that may still be written to ``path``: free space on its file system for this
-    user, and no more than the soft ``RLIMIT_FSIZE`` allows the file to grow."""
+    user plus the space reserved for it (:func:`reserve_space`), and no more than the soft
+    ``RLIMIT_FSIZE`` allows the file to grow."""
     import resource
 
     path = Path(path)
     folder = path.parent if not path.is_dir() else path
     st = os.statvfs(folder if folder.exists() else Path.cwd())
-    free = float(st.f_bavail) * st.f_frsize
+    free = float(st.f_bavail) * st.f_frsize + (reserved_bytes(path) if path.is_file() else 0.0)
     soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
     if soft != resource.RLIM_INFINITY:
         size = path.stat().st_size if path.is_file() else 0
@@ -233,6 +290,46 @@ def check_room(path: str | Path, need_bytes: float, *, key: str = "--out") -> No
         raise DiskFull(f"not enough room for this run: about {_mb(need_bytes)} needed plus {_mb(RESERVE_BYTES)} "
                        f"kept in reserve, {_mb(free)} free (file system, or the file-size limit); "
                        "free some space or write elsewhere", file=path, key=key)
+
+
+def _link_into_place(tmp: Path, path: Path) -> None:
+    """``tmp`` becomes ``path`` (FileExistsError if ``path`` appeared meanwhile: never overwrite)."""
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise
+    except OSError:                 # a file system without hard links: rename, after one more look
+        if path.exists():
+            raise FileExistsError(path) from None
+        os.rename(tmp, path)
+
+
+def partial_path(path: Path) -> Path:
+    """Where :meth:`RunFile.create` makes ``path`` before linking it into place."""
+    return path.with_name(f".{path.name}.partial.{os.getpid()}")
+
+
+def remove_stale_partials(path: Path) -> list[Path]:
+    """Remove what a killed run left while making ``path`` (its process is gone); return them."""
+    from labkit.outputs import process_alive
+
+    gone = []
+    for p in path.parent.glob(f".{path.name}.partial.*"):
+        pid = p.name.rsplit(".", 1)[-1]
+        if pid.isdigit() and not process_alive(int(pid)):
+            p.unlink(missing_ok=True)
+            gone.append(p)
+    return gone
+
+
+def check_free_bytes(folder: str | Path, need_bytes: float, what: str) -> None:
+    """DiskFull unless the file system (not counting any run file's reserve) has twice ``need_bytes``."""
+    st = os.statvfs(folder)
+    free = float(st.f_bavail) * st.f_frsize
+    if free < 2 * need_bytes:
+        raise DiskFull(f"not enough room for {what} ({_mb(free)} free, about {_mb(need_bytes)} needed); "
+                       "the file holds every completed point; free some space, then continue with --resume",
+                       file=folder, key="--out")
 
 
 def _mb(n: float) -> str:
@@ -256,13 +353,19 @@ class RunFile:
         idx = f["points/index"][...]
         st = f["points/status"].asstr()[...] if len(idx) else []
         for i, s in zip(idx, st):
-            self.done[int(i)] = str(s)
+            if str(s) != RETRIED:
+                self.done[int(i)] = str(s)
 
     # -- opening ---------------------------------------------------------------------------
     @classmethod
     def create(cls, path: str | Path, cfg: Any, config_json: dict[str, Any], points_planned: int,
-               extra_attrs: dict[str, Any] | None = None) -> RunFile:
-        """A new run file for ``cfg`` (an InchipConfig or ShakerConfig); refuses to overwrite."""
+               extra_attrs: dict[str, Any] | None = None, reserve_bytes: float = 0.0) -> RunFile:
+        """A new run file for ``cfg`` (an InchipConfig or ShakerConfig); refuses to overwrite.
+
+        The file is made aside (``.<name>.partial.<pid>``), with ``reserve_bytes`` set aside
+        for it (:func:`reserve_space`) before anything is written, then linked into place
+        complete: ``path`` is a valid run file from its first byte on disk.
+        """
         import h5py
 
         path = Path(path)
@@ -270,10 +373,36 @@ class RunFile:
             raise InputError("already exists; use --resume to continue it, or another --out",
                              file=path, key="--out")
         path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_partials(path)
+        tmp = partial_path(path)
         try:
-            f = h5py.File(path, "w")
+            # the earliest file format on purpose: 1.10's superblock marks a file open for writing, and
+            # a killed run's file would then be refused by every reader until someone runs h5clear
+            f = h5py.File(tmp, "w")
         except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+                raise DiskFull(f"no room to create the run file ({os.strerror(exc.errno)})", file=path,
+                               key="--out") from None
             raise InputError(f"cannot create ({exc})", file=path, key="--out") from None
+        try:
+            reserve_space(tmp, reserve_bytes)
+            cls._lay_out(f, cfg, config_json, points_planned, extra_attrs)
+            f.flush()
+            _link_into_place(tmp, path)
+        except BaseException as exc:
+            f.close()
+            tmp.unlink(missing_ok=True)
+            if isinstance(exc, FileExistsError):
+                raise InputError("already exists; use --resume to continue it, or another --out",
+                                 file=path, key="--out") from None
+            raise
+        tmp.unlink(missing_ok=True)
+        return cls(f, path)
+
+    @staticmethod
+    def _lay_out(f: Any, cfg: Any, config_json: dict[str, Any], points_planned: int,
+                 extra_attrs: dict[str, Any] | None) -> None:
         from labkit.experiments import kinds
 
         kind = kinds.of(cfg)
@@ -296,12 +425,15 @@ class RunFile:
         for group, fields in tables.items():
             _make_table(f.require_group(group), fields, with_index=False)
         label_dimensions(f)             # coordinates for h5py, xarray and HDFView (schema 2)
-        f.flush()
-        return cls(f, path)
 
     @classmethod
-    def resume(cls, path: str | Path, cfg: Any, config_json: dict[str, Any]) -> RunFile:
+    def resume(cls, path: str | Path, cfg: Any, config_json: dict[str, Any],
+               retry_interlocked: bool = False) -> RunFile:
         """Reopen a run file to continue it after its last complete point.
+
+        With ``retry_interlocked``, points an interlock stopped are measured again: their rows
+        stay (the record of what happened) with status ``interlock, retried``, and the new
+        measurement is appended as a row of its own.
 
         Raises
         ------
@@ -317,7 +449,10 @@ class RunFile:
         try:
             f = h5py.File(path, "r+")
         except OSError as exc:
-            raise InputError(f"cannot open for appending ({exc})", file=path, key="--resume") from None
+            from labkit.h5io import why_unreadable
+
+            raise InputError(f"cannot open for appending: {why_unreadable(path, exc)}", file=path,
+                             key="--resume") from None
         stored = json.loads(f.attrs.get("config_json", "{}"))
         if stored != json.loads(json.dumps(config_json, sort_keys=True)):
             diff = sorted(k for k in set(stored) | set(config_json)
@@ -344,12 +479,21 @@ class RunFile:
                 for key in list(f[name]):
                     if int(key[1:]) not in done:
                         del f[name][key]
+        if retry_interlocked:
+            st = f["points/status"]
+            values = st.asstr()[...]
+            if np.any(values == "interlock"):
+                st[...] = np.where(values == "interlock", RETRIED, values).astype(object)
         f.attrs["status"] = "running"
         f.attrs["ended_utc"] = ""
         resumed = get_json(f, "resumed_utc_json", [])
         put_json(f, "resumed_utc_json", resumed + [utc_now()])
         f.flush()
         return cls(f, path)
+
+    def reserve(self, nbytes: float) -> bool:
+        """Set ``nbytes`` aside beyond the file's end for the rest of the run (:func:`reserve_space`)."""
+        return reserve_space(self.path, nbytes)
 
     # -- writing ---------------------------------------------------------------------------
     def set_instrument(self, role: str, model: str, resource: str, snapshot: dict[str, Any]) -> None:
@@ -411,7 +555,7 @@ class RunFile:
             if name in g:
                 del g[name]
             ds = g.create_dataset(name, data=np.asarray(data, dtype=np.float32), compression="gzip",
-                                  compression_opts=1, shuffle=True)
+                                  compression_opts=1, shuffle=True, fletcher32=True)
             ds.attrs["units"] = units
         if "t_s" in g:
             del g["t_s"]
@@ -496,8 +640,9 @@ def summary(path: str | Path) -> dict[str, Any]:
     st = run.points.get("status", np.array([], dtype=str))
     out: dict[str, Any] = {
         "file": os.fspath(path), "kind": run.kind, "status": run.status, "points_planned": run.points_planned,
-        "points_done": run.complete_points, "points_ok": int(np.sum(st == "ok")),
-        "points_interlocked": int(np.sum(st == "interlock")),
+        "points_done": int(np.sum(st != RETRIED)) if st.size else run.complete_points,
+        "points_ok": int(np.sum(st == "ok")), "points_interlocked": int(np.sum(st == "interlock")),
+        "points_retried": int(np.sum(st == RETRIED)),
     }
     if isinstance(run, InchipRun) and run.locations:
         out["locations"] = {loc: int(lg.freq_hz.size) for loc, lg in run.locations.items()}

@@ -46,7 +46,16 @@ from labkit.experiments.kinds import POINT_OVERHEAD_BYTES, Config
 from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, SinePoint
 from labkit.experiments.rig import Rig
 from labkit.experiments.runfile import RunFile, WriteFailed
-from labkit.experiments.safety import DriveGuard, Interlock, check_stop, deferred, shielded, signals_raise, stop_handled
+from labkit.experiments.safety import (
+    DriveGuard,
+    Interlock,
+    check_stop,
+    deferred,
+    mark_completed,
+    shielded,
+    signals_raise,
+    stop_handled,
+)
 from labkit.progress import progress
 
 #: how long past twice the record an acquisition may take before the scope counts as lost
@@ -142,6 +151,7 @@ class Runner:
         is finished.
         """
         status = "aborted: unexpected error"
+        mark_completed(None)
         n_done = plan.points_total - len(plan.points)
         try:
             with signals_raise(), progress(None, f"{plan.kind}", quiet=self.quiet) as bar:
@@ -210,6 +220,8 @@ class Runner:
             self._event(f"run ended: {status}")
             try:
                 self.file.finish(status)
+                if status == "complete":
+                    mark_completed(str(self.file.path))
             except Exception as exc:   # another error may be in flight: never mask it
                 finish_error = exc
             self.live.end(status, drive_error or ending or finish_error)
@@ -237,16 +249,14 @@ class Runner:
             offset = float(getattr(self.cfg, "offset_v", 0.0) or 0.0)
             if offset:
                 text += f" (between bursts its output holds the {offset:g} V DC offset)"
+                _warn(f"between bursts the generator holds the {offset:g} V DC offset on the PZT (its output "
+                      "stays on); if this computer dies mid-run that DC stays until someone runs 'labkit off "
+                      f"{self.cfg.path}' or presses the generator's Output key (docs/faults.md)")
         else:
             text = f"DRIVE NOT BOUNDED: {why}"
             if callable(getattr(fg, "burst_off", None)):
                 fg.burst_off()        # a bounded run before may have left burst mode on
-            import sys
-
-            try:        # said even with --quiet: the person must know
-                print(f"labkit: warning: {text}", file=sys.stderr, flush=True)
-            except (OSError, ValueError):
-                pass
+            _warn(text)
         self._event(text)
         try:
             self.file.set_attrs(drive_bounded=self.bounded, drive_bounded_note=text)
@@ -626,13 +636,45 @@ class Runner:
         return rows, None, records
 
     def _video(self, p: ShakerPoint) -> tuple[str, int]:
-        folder = self.file.path.with_name(self.file.path.stem + "_videos")
+        """Film the point into ``<run>_videos/p<index>.mkv``: room checked first, written aside and
+        renamed into place (a failed or cut recording leaves no partial video under that name)."""
+        from labkit.experiments.runfile import check_free_bytes
+        from labkit.outputs import atomic_output
+
+        folder = video_folder(self.file.path)
         folder.mkdir(exist_ok=True)
         path = folder / f"p{p.index:05d}.mkv"   # Matroska keeps each frame's own timestamp
-        info = self.rig.record_video(path, p.video_s)
+        check_free_bytes(folder, video_bytes(p.video_s), f"the video of point {p.index}")
+        with atomic_output(path) as tmp:
+            info = self.rig.record_video(tmp, p.video_s)
         self._event(f"video {path.name}: {info.get('frames', 0)} frames")
-        rel = os.path.relpath(Path(info.get("path", path)), self.file.path.parent)
+        rel = os.path.relpath(path, self.file.path.parent)
         return rel, int(info.get("frames", 0))
+
+
+#: bytes per second of video a point may write: the lab camera's 640 x 480 at 30 frames/s, one
+#: byte a pixel (Motion-JPEG stays well below; the room checks count this much)
+VIDEO_BYTES_PER_S = 30 * 640 * 480
+
+
+def video_bytes(video_s: float) -> float:
+    """Room one point's video is counted for (bytes)."""
+    return float(video_s) * VIDEO_BYTES_PER_S
+
+
+def video_folder(run_file: Path) -> Path:
+    """Where a run's per-point videos go: ``<run file's stem>_videos`` beside it."""
+    return run_file.with_name(run_file.stem + "_videos")
+
+
+def _warn(text: str) -> None:
+    """A warning on standard error, even with --quiet: the person at the bench must know."""
+    import sys
+
+    try:
+        print(f"labkit: warning: {text}", file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
 
 
 def _nbytes(loc_rows: dict[str, Any] | None, records: Any) -> float:

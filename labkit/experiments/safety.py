@@ -30,6 +30,10 @@ class Interlock(Exception):
         super().__init__(reason)
 
 
+#: how long a lost generator link is retried before its OFF counts as not confirmed, s
+RECONNECT_WINDOW_S = 2.0
+
+
 class DriveGuard:
     """The generator output(s) that drive the PZT or the shaker, with guaranteed shutdown.
 
@@ -82,7 +86,11 @@ class DriveGuard:
         InstrumentError) when every attempt failed: the person must act.
         """
         last: InstrumentError | None = None
-        for attempt in range(attempts):
+        t0 = time.monotonic()
+        attempt = 0
+        # at least ``attempts`` tries, and for RECONNECT_WINDOW_S: a link that drops for a moment
+        # (a switch, a cable nudged) is back before the run gives up on its OFF
+        while attempt < attempts or time.monotonic() - t0 < RECONNECT_WINDOW_S:
             try:
                 self.funcgen.safe_off()
                 self.is_on = self.maybe_on = False
@@ -96,7 +104,8 @@ class DriveGuard:
                     self.funcgen.close()
                 except Exception:
                     pass
-                time.sleep(0.05 * (attempt + 1))
+                attempt += 1
+                time.sleep(min(0.05 * attempt, 0.3))
                 try:
                     self.funcgen = self.reopen()
                 except InstrumentError as exc2:
@@ -175,7 +184,24 @@ def install_stop_handlers(previous: dict[int, Any] | None = None) -> dict[int, A
     for s in (*STOP_SIGNALS, signal.SIGXFSZ):
         previous[s] = signal.getsignal(s)
         signal.signal(s, signal.SIG_IGN if s == signal.SIGXFSZ else raise_stop_signal)
+    from labkit import early_signals
+
+    _PENDING.extend(early_signals())      # noted while the command started: check_stop() raises them
     return previous
+
+
+#: the run file of this process's latest run once it says "complete" (None while a run is going)
+_COMPLETED: list[str | None] = [None]
+
+
+def mark_completed(path: str | None) -> None:
+    """The latest run's file ``path`` now says complete (None: a run has started)."""
+    _COMPLETED[0] = path
+
+
+def completed_run() -> str | None:
+    """The latest run's file if it says complete, else None (``labkit``: a stop after it exits 0)."""
+    return _COMPLETED[0]
 
 
 def restore_handlers(previous: dict[int, Any]) -> None:

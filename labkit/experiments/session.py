@@ -5,6 +5,7 @@ This is what ``labkit sweep inchip`` and ``labkit shaker`` call.
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -16,6 +17,7 @@ from labkit.experiments import runfile as rf
 from labkit.experiments.config import InstrumentSpec, comparable
 from labkit.experiments.kinds import Config
 from labkit.experiments.plans import Plan
+from labkit.experiments.runner import video_bytes, video_folder
 from labkit.experiments.safety import shielded
 from labkit.jsonutil import to_jsonable
 
@@ -75,7 +77,7 @@ def virtual_lab(cfg: Any, seed: int = 0, lab: Any = None) -> Iterator[tuple[Any,
 
 def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: Any = False,
                 resume: str | Path | None = None, quiet: bool = False, seed: int = 0,
-                stdin: Any = None) -> dict[str, Any]:
+                stdin: Any = None, force: bool = False, retry_interlocked: bool = False) -> dict[str, Any]:
     """Run an in-chip sweep (``kind="inchip"``) or a shaker run; return the JSON summary.
 
     ``lab``: False (the config's instruments), True (start a virtual lab in-process for
@@ -101,7 +103,8 @@ def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: A
     from labkit.experiments.safety import signals_raise
 
     with signals_raise():
-        return _run_session(kind, config, out, lab=lab, resume=resume, quiet=quiet, seed=seed, stdin=stdin)
+        return _run_session(kind, config, out, lab=lab, resume=resume, quiet=quiet, seed=seed, stdin=stdin,
+                            force=force, retry_interlocked=retry_interlocked)
 
 
 def _output_path(out: str | Path | None, resume: str | Path | None) -> Path:
@@ -112,6 +115,10 @@ def _output_path(out: str | Path | None, resume: str | Path | None) -> Path:
         path = Path(resume)
         if not path.is_file():
             raise InputError("no such run file", file=path, key="--resume")
+        check_writable(path.parent, "--resume")
+        if not os.access(path, os.W_OK):
+            raise InputError("the run file is read-only", file=path, key="--resume",
+                             expected="a run file this user can append to")
         return path
     if out is None:
         raise InputError("no output file", key="--out", expected="--out FILE (or --resume FILE)")
@@ -120,11 +127,45 @@ def _output_path(out: str | Path | None, resume: str | Path | None) -> Path:
         raise InputError("already exists; use --resume to continue it, or another --out", file=path, key="--out")
     if not path.parent.is_dir():
         raise InputError("the folder does not exist", file=path, key="--out")
+    check_writable(path.parent, "--out")
     return path
 
 
+def _remove_partials(path: Path) -> None:
+    """Temporary files a killed run of ``path`` left: its partial videos and run file."""
+    folder = video_folder(path)
+    if folder.is_dir():
+        for p in folder.glob(".*.partial.mkv"):
+            p.unlink(missing_ok=True)
+    rf.remove_stale_partials(path)
+
+
+def _check_videos(path: Path, force: bool) -> None:
+    """An earlier run's videos in ``<run>_videos`` are refused (exit 2) unless ``--force``."""
+    from labkit.outputs import check_output_dir
+
+    folder = video_folder(path)
+    if folder.is_dir():
+        names = sorted(p.name for p in folder.iterdir() if p.suffix.lower() == ".mkv")
+        check_output_dir(folder, force=force, key="--out", names=names)
+
+
+def check_writable(folder: Path, key: str) -> None:
+    """InputError unless a file can be created in ``folder`` (tried, not guessed: root ignores modes)."""
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".labkit-probe.", dir=folder)
+    except OSError as exc:
+        raise InputError(f"cannot write in this folder ({exc.strerror or exc})", file=folder, key=key,
+                         expected="a folder this user can create files in") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
 def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: Any, resume: str | Path | None,
-                 quiet: bool, seed: int, stdin: Any) -> dict[str, Any]:
+                 quiet: bool, seed: int, stdin: Any, force: bool = False,
+                 retry_interlocked: bool = False) -> dict[str, Any]:
     from labkit.experiments.locks import lock_run
 
     experiment = kinds.get(kind)
@@ -133,6 +174,9 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
     cfg = experiment.load(config)
     experiment.preflight(cfg)
     path = _output_path(out, resume)
+    video_s = float(getattr(cfg, "video_s", 0.0) or 0.0)
+    if video_s > 0 and resume is None:
+        _check_videos(path, force)
     stack = contextlib.ExitStack()
     with stack:
         lab_obj = None
@@ -140,16 +184,26 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
             lab_obj, cfg = stack.enter_context(virtual_lab(cfg, seed=seed, lab=None if lab is True else lab))
         # one rig, one run: every instrument and the run file locked before anything is opened
         stack.enter_context(lock_run(((r, s.resource) for r, s in cfg.instruments.items()), path, str(cfg.path)))
+        _remove_partials(path)          # left by a run of this file that was killed (we hold its lock)
         cfg_json = comparable(cfg)
         n_left = experiment.plan(cfg, ()).points_total
         if resume is not None:
             rf.check_room(path, rf.RESERVE_BYTES, key="--resume")       # resuming writes a little at once
-        run = rf.RunFile.resume(path, cfg, cfg_json) if resume is not None else None   # checks the config
+        if retry_interlocked and resume is None:
+            raise InputError("--retry-interlocked continues a run file", key="--retry-interlocked",
+                             expected="--resume FILE as well")
+        run = (rf.RunFile.resume(path, cfg, cfg_json, retry_interlocked=retry_interlocked)   # checks the config
+               if resume is not None else None)
         if run is not None:
             n_left = len(experiment.plan(cfg, run.done).points)
         # the whole run must fit (HDF5 cannot survive a full disk); nothing opened yet if not
-        rf.check_room(path, (0 if run is not None else rf.BASE_BYTES) + n_left * experiment.point_bytes(cfg),
-                      key="--resume" if run is not None else "--out")
+        need = (0 if run is not None else rf.BASE_BYTES) + n_left * experiment.point_bytes(cfg)
+        rf.check_room(path, need + n_left * video_bytes(video_s), key="--resume" if run is not None else "--out")
+        # set aside for the file: a disk that fills up meanwhile cannot take it (two points and the
+        # reserve more than the estimate, so the last point's room check passes)
+        reserve = need + 2 * experiment.point_bytes(cfg) + rf.RESERVE_BYTES
+        if run is not None:
+            run.reserve(reserve)
         runner = None
         try:
             from labkit.experiments.rig import PromptSpot, Rig
@@ -160,7 +214,8 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
             # instruments first (the drive stays off): a rig that cannot be opened leaves no new file
             rig = stack.enter_context(Rig(cfg, spot=spot))
             if run is None:
-                run = rf.RunFile.create(path, cfg, cfg_json, experiment.plan(cfg, ()).points_total)
+                run = rf.RunFile.create(path, cfg, cfg_json, experiment.plan(cfg, ()).points_total,
+                                        reserve_bytes=reserve)
             plan: Plan = experiment.plan(cfg, run.done)
             for role, (model, resource, snap) in rig.snapshots().items():
                 run.set_instrument(role, model, resource, snap)
@@ -184,6 +239,7 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
                     run.close()
                     if lab_obj is not None and rf.headroom_bytes(path) > rf.RESERVE_BYTES / 2:
                         _store_lab_record(path, lab_obj)
+                    rf.release_space(path)          # what the run did not use
     out_summary = rf.summary(path)
     out_summary.update(ok=True, status=status)
     if runner is not None:

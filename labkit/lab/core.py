@@ -18,6 +18,8 @@ decayed (12 time constants of the slowest mode), then analytically (sine).
 """
 from __future__ import annotations
 
+import itertools
+import os
 import tempfile
 import threading
 import time
@@ -107,6 +109,18 @@ def load_robot(robot: Any) -> Any:
     if robot is None:
         return RobotParams()
     return RobotParams.from_toml(robot)
+
+
+#: numbers the labs of this process (each lab's instruments get serial numbers of their own)
+_BENCHES = itertools.count(1)
+
+
+def _own_serial(idn: str, bench: str) -> str:
+    """``*IDN?`` with ``-<bench>`` after its serial number (the third field)."""
+    parts = idn.split(",")
+    if len(parts) >= 3:
+        parts[2] = f"{parts[2]}-{bench}"
+    return ",".join(parts)
 
 
 class VirtualLab:
@@ -214,9 +228,13 @@ class VirtualLab:
                     "33220A": SimAgilent33220A}[self.models["funcgen"]]
         self.funcgen = fg_class(on_output=lambda ch, on: self._output("funcgen", ch, on),
                                 on_burst=lambda ch, t0, t1: self._burst("funcgen", ch, t0, t1), model=fg_model)
+        # each lab is a bench of its own: its instruments' serial numbers say so (runs lock them by identity)
+        bench = f"{os.getpid()}x{next(_BENCHES)}"
+        self.funcgen.idn = _own_serial(self.funcgen.idn, bench)
         sc_class = SimRigolDS1000Z if self.models["scope"] == "DS1000Z" else SimInfiniiVision
         self.scope = sc_class(self._signals, self._sync, seed=self.seed, memory_points=scope_memory_points)
         self.scope.idn = self.scope.idn.replace("DSOX3024T", sc_model).replace("DS1104Z", sc_model)
+        self.scope.idn = _own_serial(self.scope.idn, bench)
         vib_class = SimOFV3001 if vib_model == "OFV-3001" else SimOFV5000
         self.vibrometer: SimOFV5000 | SimOFV3001 = vib_class(self.spot_peak_velocity_mm_s)
         if self.miswire.vibrometer_range_mm_s_per_v is not None:

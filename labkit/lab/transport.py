@@ -324,7 +324,10 @@ class TcpServer(_Endpoint):
 def accept_loop(sock: socket.socket, stop: threading.Event, lock: Any, conns: set[socket.socket],
                 threads: list[threading.Thread], serve: Callable[[socket.socket], None], name: str) -> None:
     """Accept connections on ``sock`` until ``stop``; each is served by ``serve(conn)`` in its own thread."""
-    sock.settimeout(0.05)
+    try:
+        sock.settimeout(0.05)
+    except OSError:         # the lab was closed before this thread ran (EBADF): nothing to serve
+        return
     while not stop.is_set():
         try:
             conn, _ = sock.accept()
@@ -391,7 +394,10 @@ class PtyServer(_Endpoint):
     def _serve(self) -> None:
         framer = Framer()
         while not self._stop.is_set():
-            r, _, _ = select.select([self.master], [], [], 0.05)
+            try:
+                r, _, _ = select.select([self.master], [], [], 0.05)
+            except (OSError, ValueError):       # closed meanwhile (EBADF)
+                return
             if not r:
                 continue
             try:

@@ -1,8 +1,10 @@
 """Config writers and run-file readers shared by the experiment tests (the virtual lab replaces resources)."""
 from __future__ import annotations
 
+import contextlib
+import subprocess
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import h5py
@@ -124,3 +126,33 @@ def lab_timeline(f: h5py.File, channel: str = "1") -> tuple[np.ndarray, np.ndarr
     sel = (inst == "funcgen") & (ch == channel)
     t0 = float(f["virtual_lab"].attrs["t0_monotonic_s"])
     return t0 + g["t_s"][...][sel], g["on"][...][sel].astype(bool)
+
+
+#: the placeholder resources of :func:`inchip_toml` / :func:`shaker_toml`, by role
+PLACEHOLDERS = {"funcgen": "TCPIP0::192.0.2.1::5025::SOCKET", "scope": "TCPIP0::192.0.2.2::5025::SOCKET",
+                "vibrometer": "ASRL/dev/ttyUSB0::INSTR"}
+
+
+def on_lab_resources(cfg: Path, lab, **spelled: str) -> Path:
+    """Point a test config at a running lab (with its control channel); ``spelled`` gives a role
+    another spelling of its resource."""
+    text = cfg.read_text()
+    for role, placeholder in PLACEHOLDERS.items():
+        text = text.replace(placeholder, spelled.get(role, lab.resources[role]))
+    text = text.replace("[instruments.funcgen]", f'[instruments.control]\nmodel = "LabControl"\n'
+                        f'resource = "{lab.resources["control"]}"\n\n[instruments.funcgen]', 1)
+    cfg.write_text(text)
+    return cfg
+
+
+@contextlib.contextmanager
+def small_tmpfs(mnt: Path, size: str, options: str = "") -> Iterator[Path]:
+    """A size-limited tmpfs mounted at ``mnt`` for the block (needs root, as CI has; a test never skips)."""
+    mnt.mkdir(exist_ok=True)
+    opts = f"size={size}" + (f",{options}" if options else "")
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", opts, "tmpfs", str(mnt)], capture_output=True)
+    assert done.returncode == 0, f"cannot mount a tmpfs (needs root): {done.stderr.decode().strip()}"
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
