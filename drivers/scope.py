@@ -400,7 +400,9 @@ class RigolDS1000Z(Oscilloscope):
         """Memory depth (``:ACQuire:MDEPth``): the smallest the guide lists for the channels on
         (1: 12k..24M, 2: 6k..12M, 3-4: 3k..6M) holding ``points``; set while running; read back."""
         n = int(check_range("record points", points, 100, 24e6))
-        on = max(1, len(self.state["channels"]))
+        # the channels switched on, as the scope has them (one left on from before counts too)
+        on = max(1, sum(self.query(f":CHAN{c}:DISP?").strip().upper() in ("1", "ON")
+                        for c in range(1, self.n_channels + 1)))
         depths = MDEP_DEPTHS[1 if on == 1 else 2 if on == 2 else 4]
         depth = next((d for d in depths if d >= n), depths[-1])
         self.write(":RUN")          # the depth can only be changed while the scope runs

@@ -67,11 +67,13 @@ def test_trigger_settings_are_read_back(bad, match):
 
 def test_rigol_memory_depth_for_the_channels_on_and_averaging():
     """DS1000Z :ACQuire:MDEPth: the smallest listed depth for two channels holding 5000 points is
-    6k, set while running and read back; :ACQuire:AVERages takes powers of two only."""
+    6k, set while running and read back; :ACQuire:AVERages takes powers of two only. The channels
+    on are asked of the scope (one left on from before counts: the depths depend on it)."""
     script = []
     for ch in (1, 2):
         script += _w(f":CHAN{ch}:DISP 1", f":CHAN{ch}:COUP DC", f":CHAN{ch}:SCAL 0.5", f":CHAN{ch}:OFFS 0") + [
             (b":SYST:ERR?\n", R_OK)]
+    script += [(f":CHAN{c}:DISP?\n".encode(), b"1\n" if c <= 2 else b"0\n") for c in (1, 2, 3, 4)]
     script += _w(":RUN", ":ACQ:MDEP 6000") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:MDEP?\n", b"6000\n")]
     script += _w(":ACQ:TYPE AVER", ":ACQ:AVER 16") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:TYPE?\n", b"AVER\n")]
     with expected_protocol(RigolDS1000Z, script) as sc:
