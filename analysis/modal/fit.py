@@ -70,9 +70,10 @@ from labkit.analysis.modal import sdof as modal_sdof
 from labkit.analysis.modal.lscf import Stabilisation, choose_poles, modal_to_pole, pole_to_modal, stabilisation
 from labkit.analysis.modal.noise import misfit_to_noise, noise_variance
 from labkit.analysis.modal.refine import Channel, Refined, basis, refine, residues_ls
-from labkit.errors import InputError
+from labkit.errors import InputError as _InputError
 
-__all__ = ["Mode", "ModalFit", "fit_modes", "METHODS", "DEFAULT_RESIDUALS", "BACKGROUNDS", "MISFIT_WARN"]
+__all__ = ["Mode", "ModalFit", "fit_modes", "FitInputError", "METHODS", "DEFAULT_RESIDUALS", "BACKGROUNDS",
+           "MISFIT_WARN"]
 
 METHODS = ("lscf", "peak", "circle")
 
@@ -82,6 +83,13 @@ DEFAULT_RESIDUALS = {"mobility": (-1, 0, 1), "receptance": (-2, 0), "accelerance
                      "transmissibility": (0, 2), "scattering": (0, 1)}
 
 BACKGROUNDS = (None, "linear", "linear+delay")
+
+
+class FitInputError(_InputError, ValueError):
+    """Bad input to a fit: a ``ValueError`` to library callers, exit code 2 from the command line."""
+
+
+InputError = FitInputError
 
 #: A misfit above this many times the noise level is a warning (and lowers ``quality``).
 MISFIT_WARN = 2.0
@@ -183,6 +191,8 @@ def _channels(freq_hz: Any, frf: Any, locations: Sequence[str] | None, weights: 
         frfs = [frf[k] for k in frf]
     else:
         arr = frf if isinstance(frf, (list, tuple)) else np.asarray(frf)
+        if isinstance(arr, (list, tuple)) and len(arr) and all(np.ndim(x) == 0 for x in arr):
+            arr = np.asarray(arr)               # a list of numbers is one FRF, not one location per number
         if isinstance(arr, np.ndarray) and arr.ndim == 1:
             frfs = [arr]
         elif isinstance(arr, np.ndarray) and arr.ndim == 2:
@@ -210,6 +220,8 @@ def _channels(freq_hz: Any, frf: Any, locations: Sequence[str] | None, weights: 
             h = np.asarray(h, dtype=complex)
         except (TypeError, ValueError):
             raise InputError(f"location {name!r}: not numeric", expected="numbers") from None
+        if f.size == 0 or h.size == 0:
+            raise InputError(f"location {name!r}: empty freq_hz or frf", expected="1-D arrays of frequency lines")
         if f.ndim != 1 or h.shape != f.shape:
             raise InputError(f"location {name!r}: freq_hz has shape {f.shape}, frf {h.shape}",
                              expected="1-D arrays of equal length")
@@ -238,9 +250,16 @@ def _channels(freq_hz: Any, frf: Any, locations: Sequence[str] | None, weights: 
         if f.size < 12:
             raise InputError(f"location {name!r}: only {f.size} lines in {band[0]:g}-{band[1]:g} Hz",
                              expected="at least 12 frequency lines")
+        dup = f[1:][np.diff(f) == 0]
+        if dup.size:
+            raise InputError(f"location {name!r}: frequency {dup[0]:g} appears more than once ({dup.size} "
+                             "repeated lines)", expected="distinct lines (average repeated measurements first)")
         rms = float(np.sqrt(np.mean(np.abs(h) ** 2)))
         if rms == 0:
             raise InputError(f"location {name!r}: the FRF is zero everywhere", expected="a response")
+        if float(np.max(np.abs(h - h.mean()))) <= 1e-9 * rms:
+            raise InputError(f"location {name!r}: the FRF is constant ({complex(h[0]):.6g}) over the band",
+                             expected="an FRF with a resonance")
         chans.append(Channel(name, 2 * np.pi * f, h, wt / rms))
     return chans, band
 
