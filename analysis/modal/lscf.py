@@ -96,7 +96,13 @@ def _blocks(channels: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], n_max
     out = []
     powers = np.arange(n_max + 1)
     for w, H, wt in channels:
-        E = np.exp(1j * np.outer((w - wc) * dt, powers))              # (N, n+1): z_k^i
+        E = np.empty((w.size, powers.size), dtype=complex)           # (N, n+1): z_k^i
+        E[:, 0] = 1.0
+        if powers.size > 1:
+            # successive products (one complex multiply per entry, not an exp), re-anchored every 16 powers
+            z = np.exp(1j * (w - wc) * dt)
+            for i in range(1, powers.size):
+                E[:, i] = np.exp(1j * (w - wc) * dt * i) if i % 16 == 0 else E[:, i - 1] * z
         X = E * wt[:, None]
         Y = E * -(H * wt)[:, None]
         XH = X.conj().T

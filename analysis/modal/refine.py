@@ -59,7 +59,7 @@ def _basis_ef(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np
     cols[:, 0:2 * lam.size:2] = E + F
     cols[:, 1:2 * lam.size:2] = 1j * (E - F)
     for k, q in enumerate(powers):
-        t = (1j * w) ** q
+        t = (1j ** (q % 4)) * w ** float(q)                 # (j w)^q without a complex power (slow)
         cols[:, 2 * lam.size + 2 * k] = t
         cols[:, 2 * lam.size + 2 * k + 1] = 1j * t
     return cols, E, F
@@ -146,9 +146,10 @@ def _normal(terms, m: int, n_lin: int):
     A = np.zeros((P, P))
     g = np.zeros(P)
     for k, (r, Jp, B) in enumerate(terms):
-        J = np.hstack([Jp, B])
-        G = (J.conj().T @ J).real
-        gk = (J.conj().T @ r).real
+        full = np.hstack([Jp, B, r[:, None]])
+        X = np.vstack([full.real, full.imag])                # real-stacked: half the work of Re(J^H J)
+        Gx = X.T @ X
+        G, gk = Gx[:-1, :-1], Gx[:-1, -1]
         sl = slice(2 * m + k * n_lin, 2 * m + (k + 1) * n_lin)
         A[:2 * m, :2 * m] += G[:2 * m, :2 * m]
         A[:2 * m, sl] = G[:2 * m, 2 * m:]
@@ -167,10 +168,13 @@ def _blocks(terms, free_p: np.ndarray):
     G_pp = np.zeros((P, P))
     g_p = np.zeros(P)
     for r, Jp, B in terms:
-        J = Jp[:, free_p]
-        G_pp += (J.conj().T @ J).real
-        g_p += (J.conj().T @ r).real
-        chans.append(((J.conj().T @ B).real, (B.conj().T @ B).real, (B.conj().T @ r).real))
+        # Real-stacked rows [Re; Im]: one real symmetric product, half the work of Re(J^H J) in complex.
+        full = np.hstack([Jp[:, free_p], B, r[:, None]])
+        X = np.vstack([full.real, full.imag])
+        G = X.T @ X
+        G_pp += G[:P, :P]
+        g_p += G[:P, -1]
+        chans.append((G[:P, P:-1], G[P:-1, P:-1], G[P:-1, -1]))
     d_p = np.sqrt(np.diag(G_pp))
     d_p[d_p == 0] = 1.0
     out = []
