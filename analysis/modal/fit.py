@@ -112,11 +112,12 @@ class Mode:
     dominant_location: str
     freq_damping_cov: float = 0.0    # covariance of freq_hz and damping_ratio (Hz)
     given: bool = False              # frequency chosen by hand (poles_hz), not fitted
+    in_band: bool = True             # False: a pole fitted outside the band (a mode outside, seen by its tail)
 
     def to_dict(self, locations: Sequence[str]) -> dict[str, Any]:
         return {"freq_hz": self.freq_hz, "freq_hz_std": self.freq_hz_std,
                 "damping_ratio": self.damping_ratio, "damping_ratio_std": self.damping_ratio_std,
-                "dominant_location": self.dominant_location, "given": self.given,
+                "dominant_location": self.dominant_location, "given": self.given, "in_band": self.in_band,
                 "amplitude": {loc: [float(a.real), float(a.imag)] for loc, a in zip(locations, self.amplitude)},
                 "amplitude_std": dict(zip(locations, map(float, self.amplitude_std))),
                 "peak": dict(zip(locations, map(float, self.peak)))}
@@ -429,18 +430,46 @@ def _given_poles(poles: Sequence[float | tuple[float, float]], band: tuple[float
     return a[:, 0], a[:, 1]
 
 
+def _max_order(chans: list[Channel]) -> int:
+    """The highest LSCF order the lines support (the model's coefficients must stay well determined)."""
+    return int(max(2, (min(c.w.size for c in chans) - 4) // 2))
+
+
 def _default_n_max(chans: list[Channel], n_modes: int | None) -> int:
-    n_lines = min(c.w.size for c in chans)
+    """The first order of the diagram: 24 (grown from there without ``n_modes``), or enough for ``n_modes``."""
     cap = 24 if n_modes is None else min(40, max(16, 2 * n_modes + 10))
-    return int(max(2, min(cap, (n_lines - 4) // 2)))
+    return int(min(cap, _max_order(chans)))
+
+
+def _grow_order(data: list[tuple[np.ndarray, np.ndarray, np.ndarray]], band: tuple[float, float], n0: int,
+                limit: int) -> tuple[Stabilisation, np.ndarray]:
+    """The stabilisation diagram, its order grown by a third until it shows no new stable poles.
+
+    No fixed cap: the diagram at order ``n`` and at ``n + max(8, n // 3)`` are compared and the
+    order grows while the larger finds more stable poles (more modes than a given order can hold
+    appear only above it); only the number of lines (``limit``) stops it otherwise.
+    """
+    stab = stabilisation(data, n0, band)
+    lam = choose_poles(stab, None, band_hz=band)
+    n = n0
+    while n < limit:
+        n_next = min(limit, n + max(8, n // 3))
+        stab_next = stabilisation(data, n_next, band, previous=stab)
+        lam_next = choose_poles(stab_next, None, band_hz=band)
+        if lam_next.size <= lam.size:
+            break
+        n, stab, lam = n_next, stab_next, lam_next
+    return stab, lam
 
 
 def _fit_lscf(ctx: _Ctx, n_modes: int | None, n_max: int | None, kind: str) -> ModalFit:
     chans, band, warnings = ctx.chans, ctx.band, ctx.warnings
-    if n_max is None:
-        n_max = _default_n_max(chans, n_modes)
-    stab = stabilisation([(c.w, c.H, c.weight) for c in chans], n_max, band)
-    lam0 = choose_poles(stab, n_modes, band_hz=band)
+    data = [(c.w, c.H, c.weight) for c in chans]
+    if n_max is None and n_modes is None:
+        stab, lam0 = _grow_order(data, band, _default_n_max(chans, None), _max_order(chans))
+    else:
+        stab = stabilisation(data, _default_n_max(chans, n_modes) if n_max is None else n_max, band)
+        lam0 = choose_poles(stab, n_modes, band_hz=band)
     stab.chosen_hz = pole_to_modal(lam0)[0]
     if len(chans) > 1:
         _noise_weights(chans)
@@ -480,19 +509,25 @@ def _poles(ref: Refined) -> np.ndarray:
 
 
 def _prune(ctx: _Ctx, ref: Refined) -> Refined:
-    """Drop modes that are not credible (and say so), refitting the rest; never drops the last one."""
-    for _ in range(3):
-        keep, why = _credible(ctx.chans, ref, ctx.f_ref)
+    """Drop modes that are not credible (and say so), refitting the rest; never drops the last one.
+
+    One at a time, the least significant first: two poles sharing one mode are both uncertain
+    together, and dropping one makes the other credible.
+    """
+    while ref.freq_hz.size > 1:
+        snr: list[float] = []
+        keep, why = _credible(ctx.chans, ref, ctx.f_ref, snr=snr)
         if keep.all():
             break
-        if not keep.any():
-            ctx.warnings.append("no mode passes the credibility checks (" + "; ".join(why[i] for i in range(
-                len(why)) if why[i]) + "); kept them all")
-            break
-        for i in np.flatnonzero(~keep):
-            ctx.warnings.append(f"dropped a pole at {ctx.hz(ref.freq_hz[i])}: {why[i]}")
+        bad = np.flatnonzero(~keep)
+        i = int(bad[np.argmin(np.asarray(snr)[bad])])
+        ctx.warnings.append(f"dropped a pole at {ctx.hz(ref.freq_hz[i])}: {why[i]}")
+        keep = np.arange(ref.freq_hz.size) != i
         ref = refine(ctx.chans, modal_to_pole(ref.freq_hz[keep], ref.damping_ratio[keep]), ctx.powers,
                      band_hz=ctx.band, covariance=ctx.covariance)
+    keep, why = _credible(ctx.chans, ref, ctx.f_ref)
+    if not keep.all():
+        ctx.warnings.append(f"kept the only mode left at {ctx.hz(ref.freq_hz[0])} although {why[0]}")
     return ref
 
 
@@ -507,6 +542,13 @@ def _misfits(ctx: _Ctx, ref: Refined) -> np.ndarray:
 def _residual_peak(ctx: _Ctx, lam: np.ndarray) -> tuple[float, float] | None:
     """Frequency and damping guess where the residual of a fit with poles ``lam`` stands out most
     from the noise (summed over locations), or None."""
+    peaks = _residual_peaks(ctx, lam, 1)
+    return peaks[0] if peaks else None
+
+
+def _residual_peaks(ctx: _Ctx, lam: np.ndarray, n_peaks: int) -> list[tuple[float, float]]:
+    """Up to ``n_peaks`` (frequency, damping) guesses where the residual stands out most, each from
+    a separate hump of the residual (largest first)."""
     f_grid = np.unique(np.concatenate([c.w for c in ctx.chans]))
     e = np.zeros(f_grid.size)
     for c in ctx.chans:
@@ -518,24 +560,27 @@ def _residual_peak(ctx: _Ctx, lam: np.ndarray) -> tuple[float, float] | None:
         v = noise_variance(c.H)
         e += np.interp(f_grid, c.w, np.abs(r) ** 2 / v)
     if e.size < 5:
-        return None
+        return []
     es = np.convolve(e, np.ones(3) / 3, mode="same")
     # Not at the band's edges: there the residual terms stand in for modes outside.
     n = es.size
     lo, hi = max(1, n // 50), min(n - 1, n - n // 50)
-    if hi <= lo:
-        return None
-    k = lo + int(np.argmax(es[lo:hi]))
-    half = es[k] / 2
-    i, j = k, k
-    while i > 0 and es[i] > half:
-        i -= 1
-    while j < n - 1 and es[j] > half:
-        j += 1
-    fk = f_grid[k] / (2 * np.pi)
-    width = (f_grid[j] - f_grid[i]) / (2 * np.pi)
-    zeta = float(np.clip(width / (2 * fk) if width > 0 else 0.01, 1e-4, 0.3))
-    return float(fk), zeta
+    out: list[tuple[float, float]] = []
+    free = np.zeros(n, dtype=bool)
+    free[lo:hi] = True
+    while len(out) < n_peaks and free.any():
+        k = int(np.flatnonzero(free)[np.argmax(es[free])])
+        half = es[k] / 2
+        i, j = k, k
+        while i > 0 and es[i] > half:
+            i -= 1
+        while j < n - 1 and es[j] > half:
+            j += 1
+        free[i:j + 1] = False
+        fk = f_grid[k] / (2 * np.pi)
+        width = (f_grid[j] - f_grid[i]) / (2 * np.pi)
+        out.append((float(fk), float(np.clip(width / (2 * fk) if width > 0 else 0.01, 1e-4, 0.3))))
+    return out
 
 
 def _grow_to(ctx: _Ctx, lam: np.ndarray, n: int, *, quiet: bool = False) -> np.ndarray:
@@ -552,42 +597,84 @@ def _grow_to(ctx: _Ctx, lam: np.ndarray, n: int, *, quiet: bool = False) -> np.n
     return lam
 
 
-def _grow_while_misfit(ctx: _Ctx, ref: Refined, max_add: int = 3) -> Refined:
-    """While the misfit is above :data:`MISFIT_WARN` times the noise, try one more mode where the
-    residual is largest; keep it when it is credible and lowers the worst misfit by a fifth."""
-    for _ in range(max_add):
+def _grow_while_misfit(ctx: _Ctx, ref: Refined) -> Refined:
+    """While the misfit is above :data:`MISFIT_WARN` times the noise, try one more mode; keep it when
+    it is credible and lowers the worst misfit by a fifth (no fixed number: only the lines available
+    or a mode that does not help stop it).
+
+    Candidates: where the residual is largest inside the band, and just outside either edge (a
+    strong mode outside bends the FRF near the edge more than the residual terms can follow); the
+    one that lowers the misfit most with the poles held is refined first.  A pole that settles
+    outside the band is kept and reported as such (:func:`_warn_outside`).
+    """
+    while True:
         mis = _misfits(ctx, ref)
         if mis.max() <= MISFIT_WARN:
             break
         lam = _poles(ref)
-        pk = _residual_peak(ctx, lam)
-        if pk is None:
-            break
-        trial_lam = np.append(lam, modal_to_pole(np.array([pk[0]]), np.array([pk[1]])))
         try:
-            _check_size(ctx.chans, trial_lam.size, ctx.powers)
+            _check_size(ctx.chans, lam.size + 1, ctx.powers)
         except InputError:
             break
-        # Screen first with the poles held (linear, cheap): a mode that does not lower the misfit
-        # then is not worth the nonlinear refinement.
-        lin = residues_ls(ctx.chans, trial_lam, ctx.powers)
-        screen = max(misfit_to_noise(c.H, basis(c.w, trial_lam, ctx.powers) @ p, p.size + 2 * trial_lam.size /
-                                     len(ctx.chans)) for c, p in zip(ctx.chans, lin))
-        if screen > 0.95 * mis.max():
+        for new, inside_only in _candidates(ctx, lam, mis.max()):
+            trial = _try_mode(ctx, lam, new, mis.max(), inside_only)
+            if trial is not None:
+                where = "" if ctx.band[0] < trial.freq_hz[-1] < ctx.band[1] else " (outside the band)"
+                ctx.warnings.append(f"added a mode at {ctx.hz(trial.freq_hz[-1])}{where}: the stabilisation "
+                                    f"diagram's modes left a misfit {mis.max():.3g} times the noise level")
+                ref = trial
+                break
+        else:
             break
-        # A trial: a mode that does not settle in 20 iterations is not kept anyway.
-        trial = refine(ctx.chans, trial_lam, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance, max_iter=20)
-        if not trial.success:
-            break
-        keep, _ = _credible(ctx.chans, trial, ctx.f_ref, check_width=True)
-        lo, hi = ctx.band
-        inside = (trial.freq_hz > lo) & (trial.freq_hz < hi)
-        if not (keep.all() and inside.all()) or _misfits(ctx, trial).max() > 0.8 * mis.max():
-            break
-        ctx.warnings.append(f"added a mode at {ctx.hz(trial.freq_hz[-1])}: the stabilisation diagram's modes "
-                            f"left a misfit {mis.max():.3g} times the noise level")
-        ref = trial
     return ref
+
+
+def _screen(ctx: _Ctx, lam: np.ndarray) -> float:
+    """The worst misfit with poles ``lam`` held and only the residues fitted (linear, cheap)."""
+    lin = residues_ls(ctx.chans, lam, ctx.powers)
+    return max(misfit_to_noise(c.H, basis(c.w, lam, ctx.powers) @ p, p.size + 2 * lam.size / len(ctx.chans))
+               for c, p in zip(ctx.chans, lin))
+
+
+def _candidates(ctx: _Ctx, lam: np.ndarray, worst: float) -> list[tuple[complex, bool]]:
+    """Poles worth a trial, best first by their screened misfit: ``(pole, must stay inside the band)``."""
+    out: list[tuple[float, complex, bool]] = []
+    lo, hi = ctx.band
+    guesses = [(fk, zk, True) for fk, zk in _residual_peaks(ctx, lam, 3)]
+    guesses += [(edge, z, False) for edge in (hi * 1.01, hi * 1.04, hi * 1.1, lo * 0.99, lo * 0.96, lo * 0.9)
+                for z in (0.005, 0.02)]
+    for f0, z0, inside_only in guesses:
+        new = complex(modal_to_pole(np.array([f0]), np.array([z0]))[0])
+        sc = _screen(ctx, np.append(lam, new))
+        if sc <= 0.95 * worst:
+            out.append((sc, new, inside_only))
+    out.sort(key=lambda t: t[0])
+    seen_edges: set[bool] = set()
+    picked: list[tuple[complex, bool]] = []
+    for _, new, inside_only in out:             # every inside guess, the best one above and below
+        above = abs(new) > 2 * np.pi * hi
+        if inside_only:
+            picked.append((new, inside_only))
+        elif above not in seen_edges:
+            seen_edges.add(above)
+            picked.append((new, inside_only))
+    return picked
+
+
+def _try_mode(ctx: _Ctx, lam: np.ndarray, new: complex, worst: float, inside_only: bool) -> Refined | None:
+    """The fit with one more pole started at ``new``, or None when it does not settle, is not
+    credible, leaves the band (``inside_only``) or lowers the worst misfit by less than a fifth."""
+    # A trial: a mode that does not settle in 20 iterations is not kept anyway.
+    trial = refine(ctx.chans, np.append(lam, new), ctx.powers, band_hz=ctx.band, covariance=ctx.covariance,
+                   max_iter=20)
+    if not trial.success:
+        return None
+    keep, _ = _credible(ctx.chans, trial, ctx.f_ref, check_width=True)
+    lo, hi = ctx.band
+    inside = bool(lo < trial.freq_hz[-1] < hi) or not inside_only
+    if not (keep.all() and inside) or _misfits(ctx, trial).max() > 0.8 * worst:
+        return None
+    return trial
 
 
 def _fit_given(ctx: _Ctx, f_given: np.ndarray, z_given: np.ndarray, method: str, kind: str) -> ModalFit:
@@ -618,8 +705,8 @@ def _fit_given(ctx: _Ctx, f_given: np.ndarray, z_given: np.ndarray, method: str,
     return fit
 
 
-def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: bool = False
-              ) -> tuple[np.ndarray, list[str]]:
+def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: bool = False,
+              snr: list[float] | None = None) -> tuple[np.ndarray, list[str]]:
     """Which refined modes are real: significantly non-zero (and, with ``check_width``, resolvable).
 
     A mode whose residue is nowhere larger than 3 standard uncertainties is
@@ -630,7 +717,8 @@ def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: 
     impact tests are often that narrow and still well determined in frequency:
     those from the diagram are kept and flagged (:func:`_warn_narrow`).
     Returns the mask and, per mode, why not ("" if credible); ``f_ref``
-    converts the normalised frequencies in the messages to Hz.
+    converts the normalised frequencies in the messages to Hz; ``snr`` (a list) receives each mode's
+    largest residue-to-uncertainty ratio.
     """
     m = ref.freq_hz.size
     n_lin = ref.lin[0].size
@@ -640,7 +728,7 @@ def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: 
     for i in range(m):
         f, z = ref.freq_hz[i], ref.damping_ratio[i]
         spacing = np.inf
-        snr = 0.0
+        best = 0.0
         for k, c in enumerate(chans):
             fk = c.w / (2 * np.pi)
             j = int(np.searchsorted(fk, f))
@@ -649,12 +737,14 @@ def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: 
                 spacing = min(spacing, float(near[1] - near[0]))
             R = abs(complex(ref.lin[k][2 * i], ref.lin[k][2 * i + 1]))
             sd = np.sqrt(var[2 * m + k * n_lin + 2 * i] + var[2 * m + k * n_lin + 2 * i + 1])
-            snr = max(snr, R / sd if sd > 0 else np.inf)
-        if check_width and 2 * z * f < spacing:
+            best = max(best, R / sd if sd > 0 else np.inf)
+        if snr is not None:
+            snr.append(best)
+        if check_width and np.isfinite(spacing) and 2 * z * f < spacing:      # (outside the lines: no spacing)
             keep[i] = False
             why[i] = (f"its half-power bandwidth ({2 * z * f * f_ref:.3g} Hz) is under the line spacing "
                       f"({spacing * f_ref:.3g} Hz)")
-        elif snr < 3.0:
+        elif best < 3.0:
             keep[i] = False
             why[i] = "its residue is below 3 standard uncertainties at every location"
     return keep, why
@@ -770,12 +860,14 @@ def _judge(fit: ModalFit) -> None:
 
 
 def _warn_outside(fit: ModalFit, ctx: _Ctx) -> None:
-    """Warn about modes the refinement pushed out of the band (they model out-of-band behaviour)."""
+    """Flag and report modes fitted outside the band (a mode outside, fitted from its tail in the band)."""
     lo, hi = fit.band_hz
     for md in fit.modes:
         if not (lo <= md.freq_hz <= hi):
+            md.in_band = False
             fit.warnings.append(f"mode at {ctx.hz(md.freq_hz)} lies outside the band "
-                                f"{lo * ctx.f_ref:g}-{hi * ctx.f_ref:g} Hz")
+                                f"{lo * ctx.f_ref:g}-{hi * ctx.f_ref:g} Hz (in_band = False): fitted from its "
+                                "tail inside the band, so that the modes inside are not biased by it")
 
 
 # --------------------------------------------------------------------------------------------- delay

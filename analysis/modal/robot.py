@@ -297,7 +297,7 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
         m = fits[group].modes[i]
         listing.append({"index": fm.index, "group": group, "freq_hz": m.freq_hz, "freq_hz_std": m.freq_hz_std,
                         "damping_ratio": m.damping_ratio, "damping_ratio_std": m.damping_ratio_std,
-                        "dominant_location": m.dominant_location,
+                        "dominant_location": m.dominant_location, "in_band": m.in_band,
                         "assigned_to": next((s for s, v in mapping.items() if v is not None and v.index == fm.index),
                                             None)})
     new_f = list(base_p.modal_freq_hz)
