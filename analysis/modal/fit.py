@@ -69,7 +69,7 @@ from labkit.analysis.frf import KINDS
 from labkit.analysis.modal import sdof as modal_sdof
 from labkit.analysis.modal.lscf import Stabilisation, choose_poles, modal_to_pole, pole_to_modal, stabilisation
 from labkit.analysis.modal.noise import misfit_to_noise, noise_variance
-from labkit.analysis.modal.refine import Channel, Refined, basis, refine, residues_ls
+from labkit.analysis.modal.refine import Channel, Refined, basis, model_variance, refine, residues_ls
 from labkit.errors import InputError as _InputError
 
 __all__ = ["Mode", "ModalFit", "fit_modes", "FitInputError", "METHODS", "DEFAULT_RESIDUALS", "BACKGROUNDS",
@@ -496,6 +496,7 @@ def _fit_lscf(ctx: _Ctx, n_modes: int | None, n_max: int | None, kind: str) -> M
         ref = refine(chans, lam0, ctx.powers, band_hz=band, covariance=ctx.covariance)
         ref = _prune(ctx, ref)
         ref = _grow_while_misfit(ctx, ref)
+    ref = _honest_covariance(ctx, ref)
     if not ref.success:
         warnings.append("nonlinear refinement did not converge")
     fit = _from_refined(ctx, ref, "lscf", kind, stab)
@@ -532,11 +533,64 @@ def _prune(ctx: _Ctx, ref: Refined) -> Refined:
 
 
 def _misfits(ctx: _Ctx, ref: Refined) -> np.ndarray:
+    """Per location, the misfit against the noise and the model's own variance (see misfit_to_noise)."""
     lam = _poles(ref)
     out = []
-    for c, p in zip(ctx.chans, ref.lin):
-        out.append(misfit_to_noise(c.H, basis(c.w, lam, ctx.powers) @ p, p.size + 2 * lam.size / len(ctx.chans)))
+    for c, p, mv in zip(ctx.chans, ref.lin, _model_variance(ctx, ref)):
+        out.append(misfit_to_noise(c.H, basis(c.w, lam, ctx.powers) @ p, p.size + 2 * lam.size / len(ctx.chans),
+                                   model_var=mv))
     return np.array(out)
+
+
+def _model_variance(ctx: _Ctx, ref: Refined) -> list[np.ndarray | None]:
+    """Per location, the fitted model's variance at each line from the noise (or None)."""
+    out = model_variance(ctx.chans, ref, ctx.powers, [noise_variance(c.H) for c in ctx.chans])
+    return [None] * len(ctx.chans) if out is None else list(out)
+
+
+#: Lags over which correlated residuals are looked for (a fraction of the lines, at most this many).
+MAX_LAG = 50
+
+
+def _correlation_factor(ctx: _Ctx, ref: Refined) -> float:
+    """How much correlated residuals inflate the variance of the fitted parameters (>= 1).
+
+    A model that misses something leaves a smooth residual: neighbouring lines err together and
+    carry less independent information than the covariance assumes.  Per location, the residual
+    normalised by its expected size (noise plus the model's variance) gives autocorrelations
+    ``rho_k`` over the lines; ``1 + 2 sum rho_k`` (summed while positive: Geyer's initial positive
+    sequence) is the variance inflation of a mean over correlated samples; the largest over the
+    locations is returned.
+    """
+    lam = _poles(ref)
+    worst = 1.0
+    for c, p, mv in zip(ctx.chans, ref.lin, _model_variance(ctx, ref)):
+        u = (basis(c.w, lam, ctx.powers) @ p - c.H) / np.sqrt(noise_variance(c.H) + (0.0 if mv is None else mv))
+        u = u - u.mean()
+        norm = float(np.sum(np.abs(u) ** 2))
+        tau = 1.0
+        for k in range(1, min(MAX_LAG, u.size // 4)):
+            rho = float(np.real(np.sum(u[k:] * np.conj(u[:-k])))) / norm
+            if rho <= 0:
+                break
+            tau += 2 * rho
+        worst = max(worst, tau)
+    return worst
+
+
+def _honest_covariance(ctx: _Ctx, ref: Refined) -> Refined:
+    """Where the misfit is above :data:`MISFIT_WARN` times the noise (the model is not the whole
+    story), the covariance times :func:`_correlation_factor`, and said."""
+    mis = _misfits(ctx, ref)
+    ref.misfit = mis
+    if mis.max() <= MISFIT_WARN:
+        return ref
+    tau = _correlation_factor(ctx, ref)
+    if tau > 1.0:
+        ref.cov = ref.cov * tau
+        ctx.warnings.append(f"the residual is correlated from line to line (misfit {mis.max():.3g} times the "
+                            f"noise): the uncertainties are scaled up by {np.sqrt(tau):.3g} for it")
+    return ref
 
 
 def _residual_peak(ctx: _Ctx, lam: np.ndarray) -> tuple[float, float] | None:
@@ -769,14 +823,18 @@ def _noise_weights(chans: list[Channel]) -> None:
 
 def _from_refined(ctx: _Ctx, ref: Refined, method: str, kind: str, stab: Stabilisation | None) -> ModalFit:
     m = ref.freq_hz.size
+    misfit = dict(zip([c.name for c in ctx.chans], map(float, _misfits(ctx, ref) if ref.misfit is None
+                                                       else ref.misfit)))
     std = np.sqrt(np.clip(np.diag(ref.cov), 0, None))
     n_lin = ref.lin[0].size
     lin_var = [np.clip(np.diag(ref.cov)[2 * m + k * n_lin: 2 * m + (k + 1) * n_lin], 0, None)
                for k in range(len(ctx.chans))]
     fz_cov = np.array([ref.cov[2 * i, 2 * i + 1] for i in range(m)])
-    return _assemble(ctx.chans, ref.freq_hz, ref.damping_ratio, std[0:2 * m:2], std[1:2 * m:2], ref.lin, lin_var,
-                     np.argsort(ref.freq_hz), method, kind, ctx.band, ctx.powers, stab, ref.cov, ref.success,
-                     ctx.warnings, fz_cov)
+    fit = _assemble(ctx.chans, ref.freq_hz, ref.damping_ratio, std[0:2 * m:2], std[1:2 * m:2], ref.lin, lin_var,
+                    np.argsort(ref.freq_hz), method, kind, ctx.band, ctx.powers, stab, ref.cov, ref.success,
+                    ctx.warnings, fz_cov)
+    fit.misfit_to_noise = misfit                 # with the model's own variance (kept by _judge)
+    return fit
 
 
 def _assemble(chans, f, z, f_std, z_std, lin, lin_var, order, method, kind, band, powers, stab, cov,
@@ -846,8 +904,10 @@ def _judge(fit: ModalFit) -> None:
         r = model - H
         nr = float(np.sqrt(np.sum(np.abs(r) ** 2) / np.sum(np.abs(H) ** 2)))
         fit.nrmse[loc] = nr
-        ratio = misfit_to_noise(H, model, n_params)
-        fit.misfit_to_noise[loc] = ratio
+        ratio = fit.misfit_to_noise.get(loc)
+        if ratio is None:
+            ratio = misfit_to_noise(H, model, n_params)
+            fit.misfit_to_noise[loc] = ratio
         q.append(min(1 - nr ** 2, 1.0 if ratio <= MISFIT_WARN else (MISFIT_WARN / ratio) ** 2))
         fit.dominant_mode[loc] = int(np.argmax([md.peak[k] for md in fit.modes])) if fit.modes else -1
     fit.quality = float(np.clip(min(q), 0.0, 1.0))

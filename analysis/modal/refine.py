@@ -28,7 +28,7 @@ import numpy as np
 
 from labkit.analysis.modal.lscf import modal_to_pole, pole_to_modal
 
-__all__ = ["Channel", "Refined", "basis", "residues_ls", "model", "refine"]
+__all__ = ["Channel", "Refined", "basis", "residues_ls", "model", "refine", "model_variance"]
 
 
 @dataclass
@@ -97,6 +97,7 @@ class Refined:
     dof: int
     success: bool
     nfev: int
+    misfit: np.ndarray | None = None   # per channel, misfit to noise before any scaling of cov (set by the fit)
 
 
 def _unpack(theta: np.ndarray, m: int, n_lin: int, n_ch: int):
@@ -429,3 +430,38 @@ def _covariance(A: np.ndarray, terms, m: int, n_lin: int, dof: int, kind: str) -
             Jr = part * (res / (1.0 - lev))[:, None]
             meat[np.ix_(idx, idx)] += Jr.T @ Jr
     return inv @ meat @ inv
+
+
+def model_variance(channels: Sequence[Channel], ref: Refined, powers: Sequence[int],
+                   noise_var: Sequence[np.ndarray]) -> list[np.ndarray] | None:
+    """Per channel, the variance ``E|model - E model|^2`` of the fitted model at each line caused by
+    noise of variance ``noise_var`` (per channel and line, in the units of the FRF): the parameter
+    covariance ``A^-1 J^T diag(noise) J A^-1`` carried to each line (first order).
+
+    Where the noise differs from line to line (relative noise, a sharp peak), the parameters carry
+    the noise of the loud lines to the quiet ones: there the residual is this, not the local noise.
+    The noise, not the residual, is the meat, so a wrong model is not excused by its own misfit.
+    None when there are more than :data:`BLOCK_COVARIANCE_ABOVE` parameters (not worth the cost).
+    """
+    m = ref.freq_hz.size
+    n_lin = 2 * m + 2 * len(powers)
+    if ref.theta.size > BLOCK_COVARIANCE_ABOVE:
+        return None
+    terms = _channel_terms(ref.theta, channels, m, powers)
+    A, _ = _normal(terms, m, n_lin)
+    inv = _pinv_sym(A)
+    meat = np.zeros_like(A)
+    parts = []
+    for k, ((_, Jp, B), c, v) in enumerate(zip(terms, channels, noise_var)):
+        idx = np.r_[np.arange(2 * m), 2 * m + k * n_lin + np.arange(n_lin)]
+        J = np.hstack([Jp, B])
+        half = 0.5 * np.asarray(v, dtype=float) * c.weight ** 2          # per real component
+        meat[np.ix_(idx, idx)] += J.real.T @ (J.real * half[:, None]) + J.imag.T @ (J.imag * half[:, None])
+        parts.append((idx, J))
+    C = inv @ meat @ inv
+    out = []
+    for (idx, J), c in zip(parts, channels):
+        Ck = C[np.ix_(idx, idx)]
+        var = np.sum((J.real @ Ck) * J.real, axis=1) + np.sum((J.imag @ Ck) * J.imag, axis=1)
+        out.append(np.clip(var, 0.0, None) / np.maximum(c.weight, 1e-300) ** 2)
+    return out
