@@ -542,10 +542,9 @@ def _misfits(ctx: _Ctx, ref: Refined) -> np.ndarray:
     return np.array(out)
 
 
-def _model_variance(ctx: _Ctx, ref: Refined) -> list[np.ndarray | None]:
-    """Per location, the fitted model's variance at each line from the noise (or None)."""
-    out = model_variance(ctx.chans, ref, ctx.powers, [noise_variance(c.H) for c in ctx.chans])
-    return [None] * len(ctx.chans) if out is None else list(out)
+def _model_variance(ctx: _Ctx, ref: Refined) -> list[np.ndarray]:
+    """Per location, the fitted model's variance at each line from the noise."""
+    return model_variance(ctx.chans, ref, ctx.powers, [noise_variance(c.H) for c in ctx.chans])
 
 
 #: Lags over which correlated residuals are looked for (a fraction of the lines, at most this many).
@@ -565,7 +564,7 @@ def _correlation_factor(ctx: _Ctx, ref: Refined) -> float:
     lam = _poles(ref)
     worst = 1.0
     for c, p, mv in zip(ctx.chans, ref.lin, _model_variance(ctx, ref)):
-        u = (basis(c.w, lam, ctx.powers) @ p - c.H) / np.sqrt(noise_variance(c.H) + (0.0 if mv is None else mv))
+        u = (basis(c.w, lam, ctx.powers) @ p - c.H) / np.sqrt(noise_variance(c.H) + mv)
         u = u - u.mean()
         norm = float(np.sum(np.abs(u) ** 2))
         tau = 1.0

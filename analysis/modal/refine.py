@@ -433,7 +433,7 @@ def _covariance(A: np.ndarray, terms, m: int, n_lin: int, dof: int, kind: str) -
 
 
 def model_variance(channels: Sequence[Channel], ref: Refined, powers: Sequence[int],
-                   noise_var: Sequence[np.ndarray]) -> list[np.ndarray] | None:
+                   noise_var: Sequence[np.ndarray]) -> list[np.ndarray]:
     """Per channel, the variance ``E|model - E model|^2`` of the fitted model at each line caused by
     noise of variance ``noise_var`` (per channel and line, in the units of the FRF): the parameter
     covariance ``A^-1 J^T diag(noise) J A^-1`` carried to each line (first order).
@@ -441,13 +441,14 @@ def model_variance(channels: Sequence[Channel], ref: Refined, powers: Sequence[i
     Where the noise differs from line to line (relative noise, a sharp peak), the parameters carry
     the noise of the loud lines to the quiet ones: there the residual is this, not the local noise.
     The noise, not the residual, is the meat, so a wrong model is not excused by its own misfit.
-    None when there are more than :data:`BLOCK_COVARIANCE_ABOVE` parameters (not worth the cost).
+    Above :data:`BLOCK_COVARIANCE_ABOVE` parameters (many locations, whose common poles are well
+    determined) each channel's own residues and residual terms only, with the poles held.
     """
     m = ref.freq_hz.size
     n_lin = 2 * m + 2 * len(powers)
-    if ref.theta.size > BLOCK_COVARIANCE_ABOVE:
-        return None
     terms = _channel_terms(ref.theta, channels, m, powers)
+    if ref.theta.size > BLOCK_COVARIANCE_ABOVE:
+        return [_linear_model_variance(B, c.weight, v) for (_, _, B), c, v in zip(terms, channels, noise_var)]
     A, _ = _normal(terms, m, n_lin)
     inv = _pinv_sym(A)
     meat = np.zeros_like(A)
@@ -465,3 +466,13 @@ def model_variance(channels: Sequence[Channel], ref: Refined, powers: Sequence[i
         var = np.sum((J.real @ Ck) * J.real, axis=1) + np.sum((J.imag @ Ck) * J.imag, axis=1)
         out.append(np.clip(var, 0.0, None) / np.maximum(c.weight, 1e-300) ** 2)
     return out
+
+
+def _linear_model_variance(B: np.ndarray, weight: np.ndarray, noise_var: np.ndarray) -> np.ndarray:
+    """:func:`model_variance` of one channel with its poles held (weighted basis ``B``)."""
+    half = 0.5 * np.asarray(noise_var, dtype=float) * weight ** 2
+    X = np.vstack([B.real, B.imag])
+    inv = _pinv_sym(X.T @ X)
+    C = inv @ (B.real.T @ (B.real * half[:, None]) + B.imag.T @ (B.imag * half[:, None])) @ inv
+    var = np.sum((B.real @ C) * B.real, axis=1) + np.sum((B.imag @ C) * B.imag, axis=1)
+    return np.clip(var, 0.0, None) / np.maximum(weight, 1e-300) ** 2
