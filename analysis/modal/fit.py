@@ -533,13 +533,19 @@ def _prune(ctx: _Ctx, ref: Refined) -> Refined:
 
 
 def _misfits(ctx: _Ctx, ref: Refined) -> np.ndarray:
-    """Per location, the misfit against the noise and the model's own variance (see misfit_to_noise)."""
+    """Per location, the misfit against the noise and the model's own variance (see misfit_to_noise).
+
+    The model's variance only lowers the ratio, so it is computed (a pass over the Jacobian) only
+    when a location's ratio against the noise alone is above :data:`MISFIT_WARN`.
+    """
     lam = _poles(ref)
-    out = []
-    for c, p, mv in zip(ctx.chans, ref.lin, _model_variance(ctx, ref)):
-        out.append(misfit_to_noise(c.H, basis(c.w, lam, ctx.powers) @ p, p.size + 2 * lam.size / len(ctx.chans),
-                                   model_var=mv))
-    return np.array(out)
+    models = [basis(c.w, lam, ctx.powers) @ p for c, p in zip(ctx.chans, ref.lin)]
+    n_par = [p.size + 2 * lam.size / len(ctx.chans) for p in ref.lin]
+    out = np.array([misfit_to_noise(c.H, mod, n) for c, mod, n in zip(ctx.chans, models, n_par)])
+    if out.max() > MISFIT_WARN:
+        out = np.array([misfit_to_noise(c.H, mod, n, model_var=mv)
+                        for c, mod, n, mv in zip(ctx.chans, models, n_par, _model_variance(ctx, ref))])
+    return out
 
 
 def _model_variance(ctx: _Ctx, ref: Refined) -> list[np.ndarray]:

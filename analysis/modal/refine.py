@@ -147,8 +147,7 @@ def _normal(terms, m: int, n_lin: int):
     A = np.zeros((P, P))
     g = np.zeros(P)
     for k, (r, Jp, B) in enumerate(terms):
-        full = np.hstack([Jp, B, r[:, None]])
-        X = np.vstack([full.real, full.imag])                # real-stacked: half the work of Re(J^H J)
+        X = _stacked(Jp, B, r)                                # real-stacked: half the work of Re(J^H J)
         Gx = X.T @ X
         G, gk = Gx[:-1, :-1], Gx[:-1, -1]
         sl = slice(2 * m + k * n_lin, 2 * m + (k + 1) * n_lin)
@@ -161,6 +160,16 @@ def _normal(terms, m: int, n_lin: int):
     return A, g
 
 
+def _stacked(Jp: np.ndarray, B: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``[[Re Jp, Re B, Re r], [Im Jp, Im B, Im r]]`` as one real array (filled in place, no copies)."""
+    n, a, b = r.size, Jp.shape[1], B.shape[1]
+    X = np.empty((2 * n, a + b + 1))
+    X[:n, :a], X[n:, :a] = Jp.real, Jp.imag
+    X[:n, a:a + b], X[n:, a:a + b] = B.real, B.imag
+    X[:n, -1], X[n:, -1] = r.real, r.imag
+    return X
+
+
 def _blocks(terms, free_p: np.ndarray):
     """The normal equations in blocks, scaled to unit diagonal: the shared (free) pole parameters
     ``(G_pp, g_p, d_p)`` and per channel ``(G_pl, G_ll, g_l, d_l)`` (see :func:`_lm_step`)."""
@@ -170,8 +179,7 @@ def _blocks(terms, free_p: np.ndarray):
     g_p = np.zeros(P)
     for r, Jp, B in terms:
         # Real-stacked rows [Re; Im]: one real symmetric product, half the work of Re(J^H J) in complex.
-        full = np.hstack([Jp[:, free_p], B, r[:, None]])
-        X = np.vstack([full.real, full.imag])
+        X = _stacked(Jp[:, free_p], B, r)
         G = X.T @ X
         G_pp += G[:P, :P]
         g_p += G[:P, -1]
