@@ -1,29 +1,28 @@
 """Benchmark: modal fits of real size, stabilisation diagram included.
 
 1. A three-location fit of 4000 frequency lines (median of repeats; target < 0.5 s).
-2. A 7-mode, 6-location fit of 3000 lines (1 % noise), timed against sdypy-EMA's LSCF on the
-   same data when it is installed (``pip install 'labkit[bench]'``): its poles (order 50, the
-   seven stable poles nearest the truth picked the way its users do) and its LSFD modal
-   constants, which give no uncertainties; labkit's fit chooses the modes itself and gives
-   standard uncertainties.  ``ratio`` is labkit's time over sdypy-EMA's (target <= 1).
+2. Side by side with sdypy-EMA's LSCF (``pip install 'labkit[bench]'``) on the same data: its poles
+   (the stable poles nearest the truth picked the way its users do) and its LSFD modal constants,
+   which give no uncertainties; labkit's fit chooses the modes itself and gives standard
+   uncertainties.  Two cases: 7 modes x 6 locations x 2941 lines, and 22 modes x 3 locations x
+   7950 lines.  Both grids start on a multiple of their spacing (``f_k = k df``), which sdypy-EMA's
+   LSCF assumes (it models the lines as ``z = exp(j w dt)`` with ``dt = 1 / (2 f_max)``); elsewhere
+   it is an order of magnitude less accurate and the comparison would not be fair.  ``ratio`` is
+   labkit's time over sdypy-EMA's (target <= 0.5), both accuracies are printed beside the times.
 
 Prints one JSON object: wall times, the ratio, and the accuracy of both fits against the truth.
 
-BLAS runs single-threaded unless ``OPENBLAS_NUM_THREADS`` is set: the matrices
-here are small (4000 x ~40), where thread start-up costs more than it saves,
-and a multi-threaded BLAS on a shared, busy machine can be 10x slower.
+BLAS threads are left at their default: :func:`labkit.analysis.modal.fit.fit_modes` limits them
+itself (``threadpoolctl``), so the default is what users get.
 """
 from __future__ import annotations
 
+import json
 import os
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-
-import json  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import sys
+import time
+import warnings
+from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -33,7 +32,7 @@ from labkit.analysis.modal.fit import fit_modes  # noqa: E402
 from labkit.analysis.modal.synth import synthetic_frf  # noqa: E402
 
 TARGET_S = 0.5
-TARGET_RATIO = 1.0
+TARGET_RATIO = 0.5
 
 #: 7 modes (Hz, damping) and 6 locations' modal constants (locations x modes)
 FN7 = np.array([438.0, 830.0, 1200.0, 1800.0, 2450.0, 3400.0, 4200.0])
@@ -50,30 +49,33 @@ def _median_time(fn, repeats: int) -> tuple[float, object]:
     return float(np.median(times)), out
 
 
-def seven_modes(repeats: int = 7) -> dict:
-    f = np.linspace(100.0, 5000.0, 3000)
-    rng = np.random.default_rng(1)
-    shapes = rng.uniform(0.2, 1.0, (6, FN7.size)) * rng.choice([-1, 1], (6, FN7.size))
-    for k in range(6):                                  # each location dominated by one mode (the robot's parts)
-        shapes[k, k] = 1.5
-    shapes *= (2 * np.pi * FN7) ** 2 / 1e3
-    H = synthetic_frf(f, FN7, ZETA7, shapes, kind="receptance", noise=0.01, seed=2)
+def _accuracy(prefix: str, got_f: np.ndarray, got_z: np.ndarray, fn: np.ndarray, zeta: np.ndarray,
+              std: np.ndarray | None = None) -> dict:
+    out: dict = {f"{prefix}_n_modes": int(got_f.size)}
+    if got_f.size != fn.size:
+        return out
+    o = np.argsort(got_f)
+    out[f"{prefix}_freq_rel_err_max"] = float(np.max(np.abs(got_f[o] / fn - 1)))
+    out[f"{prefix}_damping_rel_err_max"] = float(np.max(np.abs(got_z[o] / zeta - 1)))
+    if std is not None:
+        out[f"{prefix}_freq_within_2_std"] = int(np.sum(np.abs(got_f[o] - fn) <= 2 * std[o]))
+    return out
+
+
+def compare(f: np.ndarray, H: np.ndarray, fn: np.ndarray, zeta: np.ndarray, *, n_modes: int | None,
+            order: int, repeats: int) -> dict:
+    """labkit's fit and sdypy-EMA's LSCF + LSFD on receptances ``H``, timed interleaved."""
     def run_lab():
-        return fit_modes(f, list(H), kind="receptance")
+        return fit_modes(f, list(H), kind="receptance", n_modes=n_modes)
 
     t_lab, fit = _median_time(run_lab, repeats)         # alone (replaced below when sdypy-EMA runs too)
-    got = np.array([m.freq_hz for m in fit.modes])
-    out: dict = {"lines": int(f.size), "locations": 6, "modes_true": int(FN7.size), "labkit_s": t_lab,
-                 "labkit_n_modes": int(got.size)}
-    if got.size == FN7.size:
-        out["labkit_freq_rel_err_max"] = float(np.max(np.abs(got / FN7 - 1)))
-        out["labkit_damping_rel_err_max"] = float(np.max(np.abs(np.array([m.damping_ratio for m in fit.modes])
-                                                                / ZETA7 - 1)))
-        out["labkit_freq_within_2_std"] = int(np.sum(np.abs(got - FN7) <= 2 * np.array(
-            [m.freq_hz_std for m in fit.modes])))
+    out: dict = {"lines": int(f.size), "locations": int(H.shape[0]), "modes_true": int(fn.size),
+                 "grid_hz": [float(f[0]), float(f[1] - f[0]), float(f[-1])], "labkit_n_modes_asked": n_modes,
+                 "labkit_s": t_lab}
+    out.update(_accuracy("labkit", np.array([m.freq_hz for m in fit.modes]),
+                         np.array([m.damping_ratio for m in fit.modes]), fn, zeta,
+                         np.array([m.freq_hz_std for m in fit.modes])))
     try:
-        import warnings
-
         import sdypy.EMA as ema
     except ImportError:
         out["sdypy_ema"] = "not installed (pip install 'labkit[bench]')"
@@ -82,9 +84,10 @@ def seven_modes(repeats: int = 7) -> dict:
     def run_ema():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            m = ema.Model(frf=H, freq=f, lower=100.0, upper=5000.0, pol_order_high=50, frf_form="receptance")
+            m = ema.Model(frf=H, freq=f, lower=float(f[0]), upper=float(f[-1]), pol_order_high=order,
+                          frf_form="receptance")
             m.get_poles(show_progress=False)
-            m.select_closest_poles(list(FN7), f_window=50)
+            m.select_closest_poles(list(fn), f_window=min(50.0, 0.3 * float(np.min(np.diff(fn)))))
             m.get_constants(whose_poles="own")
         return m
 
@@ -93,20 +96,41 @@ def seven_modes(repeats: int = 7) -> dict:
     t_lab_i, t_ema_i = [], []
     m = run_ema()
     for _ in range(repeats):
-        for fn, acc in ((run_lab, t_lab_i), (run_ema, t_ema_i)):
+        for fn_, acc in ((run_lab, t_lab_i), (run_ema, t_ema_i)):
             t0 = time.perf_counter()
-            r = fn()
+            r = fn_()
             acc.append(time.perf_counter() - t0)
-            if fn is run_ema:
+            if fn_ is run_ema:
                 m = r
     t_lab, t_ema = float(np.median(t_lab_i)), float(np.median(t_ema_i))
     out["labkit_s"] = t_lab
-    out.update({"sdypy_ema_version": getattr(ema, "__version__", "?"), "sdypy_ema_s": t_ema,
-                "ratio": t_lab / t_ema, "target_ratio": TARGET_RATIO,
-                "sdypy_ema_freq_rel_err_max": float(np.max(np.abs(np.sort(m.nat_freq) / FN7 - 1))),
-                "sdypy_ema_damping_rel_err_max": float(np.max(np.abs(np.array(m.nat_xi)[np.argsort(m.nat_freq)]
-                                                                     / ZETA7 - 1)))})
+    out.update({"sdypy_ema_version": getattr(ema, "__version__", "?"), "sdypy_ema_pol_order_high": order,
+                "sdypy_ema_s": t_ema, "ratio": t_lab / t_ema, "target_ratio": TARGET_RATIO})
+    out.update(_accuracy("sdypy_ema", np.asarray(m.nat_freq, float), np.asarray(m.nat_xi, float), fn, zeta))
     return out
+
+
+def seven_modes(repeats: int = 7) -> dict:
+    df = 5000.0 / 3000
+    f = np.arange(60, 3001) * df                        # 100 .. 5000 Hz on multiples of the spacing
+    rng = np.random.default_rng(1)
+    shapes = rng.uniform(0.2, 1.0, (6, FN7.size)) * rng.choice([-1, 1], (6, FN7.size))
+    for k in range(6):                                  # each location dominated by one mode (the robot's parts)
+        shapes[k, k] = 1.5
+    shapes *= (2 * np.pi * FN7) ** 2 / 1e3
+    H = synthetic_frf(f, FN7, ZETA7, shapes, kind="receptance", noise=0.01, seed=2)
+    return compare(f, H, FN7, ZETA7, n_modes=None, order=50, repeats=repeats)
+
+
+def many_modes(repeats: int = 3, n_modes: int | None = 22) -> dict:
+    """22 modes x 3 locations x 7950 lines (1 Hz from 50 Hz), 1 % noise."""
+    rng = np.random.default_rng(5)
+    f = np.arange(50, 8000) * 1.0
+    fn = np.sort(np.linspace(150, 7800, 22) * (1 + 0.02 * rng.uniform(-1, 1, 22)))
+    zeta = rng.uniform(0.003, 0.02, 22)
+    shapes = rng.uniform(0.3, 1.0, (3, 22)) * rng.choice([-1, 1], (3, 22)) * (2 * np.pi * fn) ** 2 / 1e3
+    H = synthetic_frf(f, fn, zeta, shapes, kind="receptance", noise=0.01, seed=6)
+    return compare(f, H, fn, zeta, n_modes=n_modes, order=50, repeats=repeats)
 
 
 def scan(n_locations: int = 60) -> dict:
@@ -148,13 +172,16 @@ def main() -> dict:
         "freq_rel_err_max": float(np.max(np.abs(got_f / fn - 1))) if ok_modes else None,
         "damping_rel_err_max": float(np.max(np.abs(got_z / zeta - 1))) if ok_modes else None,
         "freq_rel_std": [float(m.freq_hz_std / m.freq_hz) for m in fit.modes],
-        "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
+        "blas_threads_env": os.environ.get("OPENBLAS_NUM_THREADS"),
     }
     seven = seven_modes()
     out["seven_modes_six_locations"] = seven
+    many = many_modes()
+    out["modes_22_lines_7950"] = many
+    out["modes_22_lines_7950_automatic"] = many_modes(n_modes=None)
     out["scan_60_locations"] = scan()
     out["ok"] = bool(ok_modes and out["seconds_median"] < TARGET_S and seven.get("labkit_n_modes") == FN7.size
-                     and seven.get("ratio", 0.0) <= TARGET_RATIO)
+                     and seven.get("ratio", 0.0) <= TARGET_RATIO and many.get("ratio", 0.0) <= TARGET_RATIO)
     return out
 
 

@@ -69,10 +69,11 @@ from labkit.analysis.frf import KINDS
 from labkit.analysis.modal import sdof as modal_sdof
 from labkit.analysis.modal.lscf import Stabilisation, choose_poles, modal_to_pole, pole_to_modal, stabilisation
 from labkit.analysis.modal.noise import misfit_to_noise, noise_variance
-from labkit.analysis.modal.refine import Channel, Refined, basis, refine, residues_ls
-from labkit.errors import InputError
+from labkit.analysis.modal.refine import Channel, Refined, basis, model_variance, refine, residues_ls
+from labkit.errors import InputError as _InputError
 
-__all__ = ["Mode", "ModalFit", "fit_modes", "METHODS", "DEFAULT_RESIDUALS", "BACKGROUNDS", "MISFIT_WARN"]
+__all__ = ["Mode", "ModalFit", "fit_modes", "FitInputError", "METHODS", "DEFAULT_RESIDUALS", "BACKGROUNDS",
+           "MISFIT_WARN"]
 
 METHODS = ("lscf", "peak", "circle")
 
@@ -82,6 +83,16 @@ DEFAULT_RESIDUALS = {"mobility": (-1, 0, 1), "receptance": (-2, 0), "accelerance
                      "transmissibility": (0, 2), "scattering": (0, 1)}
 
 BACKGROUNDS = (None, "linear", "linear+delay")
+
+
+class FitInputError(_InputError, ValueError):
+    """Bad input to a fit: a ``ValueError`` to library callers, exit code 2 from the command line."""
+
+
+InputError = FitInputError
+
+#: BLAS threads inside a fit (see :func:`fit_modes`; ``threadpoolctl`` sets them and restores them after).
+FIT_BLAS_THREADS = 1
 
 #: A misfit above this many times the noise level is a warning (and lowers ``quality``).
 MISFIT_WARN = 2.0
@@ -101,11 +112,12 @@ class Mode:
     dominant_location: str
     freq_damping_cov: float = 0.0    # covariance of freq_hz and damping_ratio (Hz)
     given: bool = False              # frequency chosen by hand (poles_hz), not fitted
+    in_band: bool = True             # False: a pole fitted outside the band (a mode outside, seen by its tail)
 
     def to_dict(self, locations: Sequence[str]) -> dict[str, Any]:
         return {"freq_hz": self.freq_hz, "freq_hz_std": self.freq_hz_std,
                 "damping_ratio": self.damping_ratio, "damping_ratio_std": self.damping_ratio_std,
-                "dominant_location": self.dominant_location, "given": self.given,
+                "dominant_location": self.dominant_location, "given": self.given, "in_band": self.in_band,
                 "amplitude": {loc: [float(a.real), float(a.imag)] for loc, a in zip(locations, self.amplitude)},
                 "amplitude_std": dict(zip(locations, map(float, self.amplitude_std))),
                 "peak": dict(zip(locations, map(float, self.peak)))}
@@ -183,6 +195,8 @@ def _channels(freq_hz: Any, frf: Any, locations: Sequence[str] | None, weights: 
         frfs = [frf[k] for k in frf]
     else:
         arr = frf if isinstance(frf, (list, tuple)) else np.asarray(frf)
+        if isinstance(arr, (list, tuple)) and len(arr) and all(np.ndim(x) == 0 for x in arr):
+            arr = np.asarray(arr)               # a list of numbers is one FRF, not one location per number
         if isinstance(arr, np.ndarray) and arr.ndim == 1:
             frfs = [arr]
         elif isinstance(arr, np.ndarray) and arr.ndim == 2:
@@ -210,6 +224,8 @@ def _channels(freq_hz: Any, frf: Any, locations: Sequence[str] | None, weights: 
             h = np.asarray(h, dtype=complex)
         except (TypeError, ValueError):
             raise InputError(f"location {name!r}: not numeric", expected="numbers") from None
+        if f.size == 0 or h.size == 0:
+            raise InputError(f"location {name!r}: empty freq_hz or frf", expected="1-D arrays of frequency lines")
         if f.ndim != 1 or h.shape != f.shape:
             raise InputError(f"location {name!r}: freq_hz has shape {f.shape}, frf {h.shape}",
                              expected="1-D arrays of equal length")
@@ -238,9 +254,16 @@ def _channels(freq_hz: Any, frf: Any, locations: Sequence[str] | None, weights: 
         if f.size < 12:
             raise InputError(f"location {name!r}: only {f.size} lines in {band[0]:g}-{band[1]:g} Hz",
                              expected="at least 12 frequency lines")
+        dup = f[1:][np.diff(f) == 0]
+        if dup.size:
+            raise InputError(f"location {name!r}: frequency {dup[0]:g} appears more than once ({dup.size} "
+                             "repeated lines)", expected="distinct lines (average repeated measurements first)")
         rms = float(np.sqrt(np.mean(np.abs(h) ** 2)))
         if rms == 0:
             raise InputError(f"location {name!r}: the FRF is zero everywhere", expected="a response")
+        if float(np.max(np.abs(h - h.mean()))) <= 1e-9 * rms:
+            raise InputError(f"location {name!r}: the FRF is constant ({complex(h[0]):.6g}) over the band",
+                             expected="an FRF with a resonance")
         chans.append(Channel(name, 2 * np.pi * f, h, wt / rms))
     return chans, band
 
@@ -317,6 +340,22 @@ def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple
         12 lines in the band, an unknown method, kind or background, ``n_modes``
         modes that cannot be found, a circle fit that ends at its bounds.
     """
+    from threadpoolctl import threadpool_limits
+
+    # One BLAS thread: the fit's matrices are small (lines x tens of columns) and many; thread start-up
+    # and contention cost more than they save (3x slower with 2 threads on 2 cores, 10x on a busy machine).
+    with threadpool_limits(limits=FIT_BLAS_THREADS, user_api="blas"):
+        return _fit_modes(freq_hz, frf, n_modes, band_hz, method, locations=locations, weights=weights, kind=kind,
+                          residual_powers=residual_powers, covariance=covariance, n_max=n_max, n_boot=n_boot,
+                          seed=seed, poles_hz=poles_hz, background=background)
+
+
+def _fit_modes(freq_hz: Any, frf: Any, n_modes: int | None, band_hz: tuple[float, float] | None,
+               method: str, *, locations: Sequence[str] | None, weights: Any, kind: str,
+               residual_powers: Sequence[int] | None, covariance: str, n_max: int | None, n_boot: int,
+               seed: int, poles_hz: Sequence[float | tuple[float, float]] | None,
+               background: str | None) -> ModalFit:
+    """:func:`fit_modes` with the BLAS threads already limited."""
     if method not in METHODS:
         raise InputError(f"method = {method!r}", expected=f"one of {', '.join(METHODS)}")
     if kind not in DEFAULT_RESIDUALS:
@@ -391,18 +430,46 @@ def _given_poles(poles: Sequence[float | tuple[float, float]], band: tuple[float
     return a[:, 0], a[:, 1]
 
 
+def _max_order(chans: list[Channel]) -> int:
+    """The highest LSCF order the lines support (the model's coefficients must stay well determined)."""
+    return int(max(2, (min(c.w.size for c in chans) - 4) // 2))
+
+
 def _default_n_max(chans: list[Channel], n_modes: int | None) -> int:
-    n_lines = min(c.w.size for c in chans)
+    """The first order of the diagram: 24 (grown from there without ``n_modes``), or enough for ``n_modes``."""
     cap = 24 if n_modes is None else min(40, max(16, 2 * n_modes + 10))
-    return int(max(2, min(cap, (n_lines - 4) // 2)))
+    return int(min(cap, _max_order(chans)))
+
+
+def _grow_order(data: list[tuple[np.ndarray, np.ndarray, np.ndarray]], band: tuple[float, float], n0: int,
+                limit: int) -> tuple[Stabilisation, np.ndarray]:
+    """The stabilisation diagram, its order grown by a third until it shows no new stable poles.
+
+    No fixed cap: the diagram at order ``n`` and at ``n + max(8, n // 3)`` are compared and the
+    order grows while the larger finds more stable poles (more modes than a given order can hold
+    appear only above it); only the number of lines (``limit``) stops it otherwise.
+    """
+    stab = stabilisation(data, n0, band)
+    lam = choose_poles(stab, None, band_hz=band)
+    n = n0
+    while n < limit:
+        n_next = min(limit, n + max(8, n // 3))
+        stab_next = stabilisation(data, n_next, band, previous=stab)
+        lam_next = choose_poles(stab_next, None, band_hz=band)
+        if lam_next.size <= lam.size:
+            break
+        n, stab, lam = n_next, stab_next, lam_next
+    return stab, lam
 
 
 def _fit_lscf(ctx: _Ctx, n_modes: int | None, n_max: int | None, kind: str) -> ModalFit:
     chans, band, warnings = ctx.chans, ctx.band, ctx.warnings
-    if n_max is None:
-        n_max = _default_n_max(chans, n_modes)
-    stab = stabilisation([(c.w, c.H, c.weight) for c in chans], n_max, band)
-    lam0 = choose_poles(stab, n_modes, band_hz=band)
+    data = [(c.w, c.H, c.weight) for c in chans]
+    if n_max is None and n_modes is None:
+        stab, lam0 = _grow_order(data, band, _default_n_max(chans, None), _max_order(chans))
+    else:
+        stab = stabilisation(data, _default_n_max(chans, n_modes) if n_max is None else n_max, band)
+        lam0 = choose_poles(stab, n_modes, band_hz=band)
     stab.chosen_hz = pole_to_modal(lam0)[0]
     if len(chans) > 1:
         _noise_weights(chans)
@@ -429,6 +496,7 @@ def _fit_lscf(ctx: _Ctx, n_modes: int | None, n_max: int | None, kind: str) -> M
         ref = refine(chans, lam0, ctx.powers, band_hz=band, covariance=ctx.covariance)
         ref = _prune(ctx, ref)
         ref = _grow_while_misfit(ctx, ref)
+    ref = _honest_covariance(ctx, ref)
     if not ref.success:
         warnings.append("nonlinear refinement did not converge")
     fit = _from_refined(ctx, ref, "lscf", kind, stab)
@@ -442,33 +510,104 @@ def _poles(ref: Refined) -> np.ndarray:
 
 
 def _prune(ctx: _Ctx, ref: Refined) -> Refined:
-    """Drop modes that are not credible (and say so), refitting the rest; never drops the last one."""
-    for _ in range(3):
-        keep, why = _credible(ctx.chans, ref, ctx.f_ref)
+    """Drop modes that are not credible (and say so), refitting the rest; never drops the last one.
+
+    One at a time, the least significant first: two poles sharing one mode are both uncertain
+    together, and dropping one makes the other credible.
+    """
+    while ref.freq_hz.size > 1:
+        snr: list[float] = []
+        keep, why = _credible(ctx.chans, ref, ctx.f_ref, snr=snr)
         if keep.all():
             break
-        if not keep.any():
-            ctx.warnings.append("no mode passes the credibility checks (" + "; ".join(why[i] for i in range(
-                len(why)) if why[i]) + "); kept them all")
-            break
-        for i in np.flatnonzero(~keep):
-            ctx.warnings.append(f"dropped a pole at {ctx.hz(ref.freq_hz[i])}: {why[i]}")
+        bad = np.flatnonzero(~keep)
+        i = int(bad[np.argmin(np.asarray(snr)[bad])])
+        ctx.warnings.append(f"dropped a pole at {ctx.hz(ref.freq_hz[i])}: {why[i]}")
+        keep = np.arange(ref.freq_hz.size) != i
         ref = refine(ctx.chans, modal_to_pole(ref.freq_hz[keep], ref.damping_ratio[keep]), ctx.powers,
                      band_hz=ctx.band, covariance=ctx.covariance)
+    keep, why = _credible(ctx.chans, ref, ctx.f_ref)
+    if not keep.all():
+        ctx.warnings.append(f"kept the only mode left at {ctx.hz(ref.freq_hz[0])} although {why[0]}")
     return ref
 
 
 def _misfits(ctx: _Ctx, ref: Refined) -> np.ndarray:
+    """Per location, the misfit against the noise and the model's own variance (see misfit_to_noise).
+
+    The model's variance only lowers the ratio, so it is computed (a pass over the Jacobian) only
+    when a location's ratio against the noise alone is above :data:`MISFIT_WARN`.
+    """
     lam = _poles(ref)
-    out = []
-    for c, p in zip(ctx.chans, ref.lin):
-        out.append(misfit_to_noise(c.H, basis(c.w, lam, ctx.powers) @ p, p.size + 2 * lam.size / len(ctx.chans)))
-    return np.array(out)
+    models = [basis(c.w, lam, ctx.powers) @ p for c, p in zip(ctx.chans, ref.lin)]
+    n_par = [p.size + 2 * lam.size / len(ctx.chans) for p in ref.lin]
+    out = np.array([misfit_to_noise(c.H, mod, n) for c, mod, n in zip(ctx.chans, models, n_par)])
+    if out.max() > MISFIT_WARN:
+        out = np.array([misfit_to_noise(c.H, mod, n, model_var=mv)
+                        for c, mod, n, mv in zip(ctx.chans, models, n_par, _model_variance(ctx, ref))])
+    return out
+
+
+def _model_variance(ctx: _Ctx, ref: Refined) -> list[np.ndarray]:
+    """Per location, the fitted model's variance at each line from the noise."""
+    return model_variance(ctx.chans, ref, ctx.powers, [noise_variance(c.H) for c in ctx.chans])
+
+
+#: Lags over which correlated residuals are looked for (a fraction of the lines, at most this many).
+MAX_LAG = 50
+
+
+def _correlation_factor(ctx: _Ctx, ref: Refined) -> float:
+    """How much correlated residuals inflate the variance of the fitted parameters (>= 1).
+
+    A model that misses something leaves a smooth residual: neighbouring lines err together and
+    carry less independent information than the covariance assumes.  Per location, the residual
+    normalised by its expected size (noise plus the model's variance) gives autocorrelations
+    ``rho_k`` over the lines; ``1 + 2 sum rho_k`` (summed while positive: Geyer's initial positive
+    sequence) is the variance inflation of a mean over correlated samples; the largest over the
+    locations is returned.
+    """
+    lam = _poles(ref)
+    worst = 1.0
+    for c, p, mv in zip(ctx.chans, ref.lin, _model_variance(ctx, ref)):
+        u = (basis(c.w, lam, ctx.powers) @ p - c.H) / np.sqrt(noise_variance(c.H) + mv)
+        u = u - u.mean()
+        norm = float(np.sum(np.abs(u) ** 2))
+        tau = 1.0
+        for k in range(1, min(MAX_LAG, u.size // 4)):
+            rho = float(np.real(np.sum(u[k:] * np.conj(u[:-k])))) / norm
+            if rho <= 0:
+                break
+            tau += 2 * rho
+        worst = max(worst, tau)
+    return worst
+
+
+def _honest_covariance(ctx: _Ctx, ref: Refined) -> Refined:
+    """Where the misfit is above :data:`MISFIT_WARN` times the noise (the model is not the whole
+    story), the covariance times :func:`_correlation_factor`, and said."""
+    mis = _misfits(ctx, ref)
+    ref.misfit = mis
+    if mis.max() <= MISFIT_WARN:
+        return ref
+    tau = _correlation_factor(ctx, ref)
+    if tau > 1.0:
+        ref.cov = ref.cov * tau
+        ctx.warnings.append(f"the residual is correlated from line to line (misfit {mis.max():.3g} times the "
+                            f"noise): the uncertainties are scaled up by {np.sqrt(tau):.3g} for it")
+    return ref
 
 
 def _residual_peak(ctx: _Ctx, lam: np.ndarray) -> tuple[float, float] | None:
     """Frequency and damping guess where the residual of a fit with poles ``lam`` stands out most
     from the noise (summed over locations), or None."""
+    peaks = _residual_peaks(ctx, lam, 1)
+    return peaks[0] if peaks else None
+
+
+def _residual_peaks(ctx: _Ctx, lam: np.ndarray, n_peaks: int) -> list[tuple[float, float]]:
+    """Up to ``n_peaks`` (frequency, damping) guesses where the residual stands out most, each from
+    a separate hump of the residual (largest first)."""
     f_grid = np.unique(np.concatenate([c.w for c in ctx.chans]))
     e = np.zeros(f_grid.size)
     for c in ctx.chans:
@@ -480,24 +619,27 @@ def _residual_peak(ctx: _Ctx, lam: np.ndarray) -> tuple[float, float] | None:
         v = noise_variance(c.H)
         e += np.interp(f_grid, c.w, np.abs(r) ** 2 / v)
     if e.size < 5:
-        return None
+        return []
     es = np.convolve(e, np.ones(3) / 3, mode="same")
     # Not at the band's edges: there the residual terms stand in for modes outside.
     n = es.size
     lo, hi = max(1, n // 50), min(n - 1, n - n // 50)
-    if hi <= lo:
-        return None
-    k = lo + int(np.argmax(es[lo:hi]))
-    half = es[k] / 2
-    i, j = k, k
-    while i > 0 and es[i] > half:
-        i -= 1
-    while j < n - 1 and es[j] > half:
-        j += 1
-    fk = f_grid[k] / (2 * np.pi)
-    width = (f_grid[j] - f_grid[i]) / (2 * np.pi)
-    zeta = float(np.clip(width / (2 * fk) if width > 0 else 0.01, 1e-4, 0.3))
-    return float(fk), zeta
+    out: list[tuple[float, float]] = []
+    free = np.zeros(n, dtype=bool)
+    free[lo:hi] = True
+    while len(out) < n_peaks and free.any():
+        k = int(np.flatnonzero(free)[np.argmax(es[free])])
+        half = es[k] / 2
+        i, j = k, k
+        while i > 0 and es[i] > half:
+            i -= 1
+        while j < n - 1 and es[j] > half:
+            j += 1
+        free[i:j + 1] = False
+        fk = f_grid[k] / (2 * np.pi)
+        width = (f_grid[j] - f_grid[i]) / (2 * np.pi)
+        out.append((float(fk), float(np.clip(width / (2 * fk) if width > 0 else 0.01, 1e-4, 0.3))))
+    return out
 
 
 def _grow_to(ctx: _Ctx, lam: np.ndarray, n: int, *, quiet: bool = False) -> np.ndarray:
@@ -514,42 +656,84 @@ def _grow_to(ctx: _Ctx, lam: np.ndarray, n: int, *, quiet: bool = False) -> np.n
     return lam
 
 
-def _grow_while_misfit(ctx: _Ctx, ref: Refined, max_add: int = 3) -> Refined:
-    """While the misfit is above :data:`MISFIT_WARN` times the noise, try one more mode where the
-    residual is largest; keep it when it is credible and lowers the worst misfit by a fifth."""
-    for _ in range(max_add):
+def _grow_while_misfit(ctx: _Ctx, ref: Refined) -> Refined:
+    """While the misfit is above :data:`MISFIT_WARN` times the noise, try one more mode; keep it when
+    it is credible and lowers the worst misfit by a fifth (no fixed number: only the lines available
+    or a mode that does not help stop it).
+
+    Candidates: where the residual is largest inside the band, and just outside either edge (a
+    strong mode outside bends the FRF near the edge more than the residual terms can follow); the
+    one that lowers the misfit most with the poles held is refined first.  A pole that settles
+    outside the band is kept and reported as such (:func:`_warn_outside`).
+    """
+    while True:
         mis = _misfits(ctx, ref)
         if mis.max() <= MISFIT_WARN:
             break
         lam = _poles(ref)
-        pk = _residual_peak(ctx, lam)
-        if pk is None:
-            break
-        trial_lam = np.append(lam, modal_to_pole(np.array([pk[0]]), np.array([pk[1]])))
         try:
-            _check_size(ctx.chans, trial_lam.size, ctx.powers)
+            _check_size(ctx.chans, lam.size + 1, ctx.powers)
         except InputError:
             break
-        # Screen first with the poles held (linear, cheap): a mode that does not lower the misfit
-        # then is not worth the nonlinear refinement.
-        lin = residues_ls(ctx.chans, trial_lam, ctx.powers)
-        screen = max(misfit_to_noise(c.H, basis(c.w, trial_lam, ctx.powers) @ p, p.size + 2 * trial_lam.size /
-                                     len(ctx.chans)) for c, p in zip(ctx.chans, lin))
-        if screen > 0.95 * mis.max():
+        for new, inside_only in _candidates(ctx, lam, mis.max()):
+            trial = _try_mode(ctx, lam, new, mis.max(), inside_only)
+            if trial is not None:
+                where = "" if ctx.band[0] < trial.freq_hz[-1] < ctx.band[1] else " (outside the band)"
+                ctx.warnings.append(f"added a mode at {ctx.hz(trial.freq_hz[-1])}{where}: the stabilisation "
+                                    f"diagram's modes left a misfit {mis.max():.3g} times the noise level")
+                ref = trial
+                break
+        else:
             break
-        # A trial: a mode that does not settle in 20 iterations is not kept anyway.
-        trial = refine(ctx.chans, trial_lam, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance, max_iter=20)
-        if not trial.success:
-            break
-        keep, _ = _credible(ctx.chans, trial, ctx.f_ref, check_width=True)
-        lo, hi = ctx.band
-        inside = (trial.freq_hz > lo) & (trial.freq_hz < hi)
-        if not (keep.all() and inside.all()) or _misfits(ctx, trial).max() > 0.8 * mis.max():
-            break
-        ctx.warnings.append(f"added a mode at {ctx.hz(trial.freq_hz[-1])}: the stabilisation diagram's modes "
-                            f"left a misfit {mis.max():.3g} times the noise level")
-        ref = trial
     return ref
+
+
+def _screen(ctx: _Ctx, lam: np.ndarray) -> float:
+    """The worst misfit with poles ``lam`` held and only the residues fitted (linear, cheap)."""
+    lin = residues_ls(ctx.chans, lam, ctx.powers)
+    return max(misfit_to_noise(c.H, basis(c.w, lam, ctx.powers) @ p, p.size + 2 * lam.size / len(ctx.chans))
+               for c, p in zip(ctx.chans, lin))
+
+
+def _candidates(ctx: _Ctx, lam: np.ndarray, worst: float) -> list[tuple[complex, bool]]:
+    """Poles worth a trial, best first by their screened misfit: ``(pole, must stay inside the band)``."""
+    out: list[tuple[float, complex, bool]] = []
+    lo, hi = ctx.band
+    guesses = [(fk, zk, True) for fk, zk in _residual_peaks(ctx, lam, 3)]
+    guesses += [(edge, z, False) for edge in (hi * 1.01, hi * 1.04, hi * 1.1, lo * 0.99, lo * 0.96, lo * 0.9)
+                for z in (0.005, 0.02)]
+    for f0, z0, inside_only in guesses:
+        new = complex(modal_to_pole(np.array([f0]), np.array([z0]))[0])
+        sc = _screen(ctx, np.append(lam, new))
+        if sc <= 0.95 * worst:
+            out.append((sc, new, inside_only))
+    out.sort(key=lambda t: t[0])
+    seen_edges: set[bool] = set()
+    picked: list[tuple[complex, bool]] = []
+    for _, new, inside_only in out:             # every inside guess, the best one above and below
+        above = abs(new) > 2 * np.pi * hi
+        if inside_only:
+            picked.append((new, inside_only))
+        elif above not in seen_edges:
+            seen_edges.add(above)
+            picked.append((new, inside_only))
+    return picked
+
+
+def _try_mode(ctx: _Ctx, lam: np.ndarray, new: complex, worst: float, inside_only: bool) -> Refined | None:
+    """The fit with one more pole started at ``new``, or None when it does not settle, is not
+    credible, leaves the band (``inside_only``) or lowers the worst misfit by less than a fifth."""
+    # A trial: a mode that does not settle in 20 iterations is not kept anyway.
+    trial = refine(ctx.chans, np.append(lam, new), ctx.powers, band_hz=ctx.band, covariance=ctx.covariance,
+                   max_iter=20)
+    if not trial.success:
+        return None
+    keep, _ = _credible(ctx.chans, trial, ctx.f_ref, check_width=True)
+    lo, hi = ctx.band
+    inside = bool(lo < trial.freq_hz[-1] < hi) or not inside_only
+    if not (keep.all() and inside) or _misfits(ctx, trial).max() > 0.8 * worst:
+        return None
+    return trial
 
 
 def _fit_given(ctx: _Ctx, f_given: np.ndarray, z_given: np.ndarray, method: str, kind: str) -> ModalFit:
@@ -580,8 +764,8 @@ def _fit_given(ctx: _Ctx, f_given: np.ndarray, z_given: np.ndarray, method: str,
     return fit
 
 
-def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: bool = False
-              ) -> tuple[np.ndarray, list[str]]:
+def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: bool = False,
+              snr: list[float] | None = None) -> tuple[np.ndarray, list[str]]:
     """Which refined modes are real: significantly non-zero (and, with ``check_width``, resolvable).
 
     A mode whose residue is nowhere larger than 3 standard uncertainties is
@@ -592,7 +776,8 @@ def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: 
     impact tests are often that narrow and still well determined in frequency:
     those from the diagram are kept and flagged (:func:`_warn_narrow`).
     Returns the mask and, per mode, why not ("" if credible); ``f_ref``
-    converts the normalised frequencies in the messages to Hz.
+    converts the normalised frequencies in the messages to Hz; ``snr`` (a list) receives each mode's
+    largest residue-to-uncertainty ratio.
     """
     m = ref.freq_hz.size
     n_lin = ref.lin[0].size
@@ -602,7 +787,7 @@ def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: 
     for i in range(m):
         f, z = ref.freq_hz[i], ref.damping_ratio[i]
         spacing = np.inf
-        snr = 0.0
+        best = 0.0
         for k, c in enumerate(chans):
             fk = c.w / (2 * np.pi)
             j = int(np.searchsorted(fk, f))
@@ -611,12 +796,14 @@ def _credible(chans: list[Channel], ref: Refined, f_ref: float, *, check_width: 
                 spacing = min(spacing, float(near[1] - near[0]))
             R = abs(complex(ref.lin[k][2 * i], ref.lin[k][2 * i + 1]))
             sd = np.sqrt(var[2 * m + k * n_lin + 2 * i] + var[2 * m + k * n_lin + 2 * i + 1])
-            snr = max(snr, R / sd if sd > 0 else np.inf)
-        if check_width and 2 * z * f < spacing:
+            best = max(best, R / sd if sd > 0 else np.inf)
+        if snr is not None:
+            snr.append(best)
+        if check_width and np.isfinite(spacing) and 2 * z * f < spacing:      # (outside the lines: no spacing)
             keep[i] = False
             why[i] = (f"its half-power bandwidth ({2 * z * f * f_ref:.3g} Hz) is under the line spacing "
                       f"({spacing * f_ref:.3g} Hz)")
-        elif snr < 3.0:
+        elif best < 3.0:
             keep[i] = False
             why[i] = "its residue is below 3 standard uncertainties at every location"
     return keep, why
@@ -641,14 +828,18 @@ def _noise_weights(chans: list[Channel]) -> None:
 
 def _from_refined(ctx: _Ctx, ref: Refined, method: str, kind: str, stab: Stabilisation | None) -> ModalFit:
     m = ref.freq_hz.size
+    misfit = dict(zip([c.name for c in ctx.chans], map(float, _misfits(ctx, ref) if ref.misfit is None
+                                                       else ref.misfit)))
     std = np.sqrt(np.clip(np.diag(ref.cov), 0, None))
     n_lin = ref.lin[0].size
     lin_var = [np.clip(np.diag(ref.cov)[2 * m + k * n_lin: 2 * m + (k + 1) * n_lin], 0, None)
                for k in range(len(ctx.chans))]
     fz_cov = np.array([ref.cov[2 * i, 2 * i + 1] for i in range(m)])
-    return _assemble(ctx.chans, ref.freq_hz, ref.damping_ratio, std[0:2 * m:2], std[1:2 * m:2], ref.lin, lin_var,
-                     np.argsort(ref.freq_hz), method, kind, ctx.band, ctx.powers, stab, ref.cov, ref.success,
-                     ctx.warnings, fz_cov)
+    fit = _assemble(ctx.chans, ref.freq_hz, ref.damping_ratio, std[0:2 * m:2], std[1:2 * m:2], ref.lin, lin_var,
+                    np.argsort(ref.freq_hz), method, kind, ctx.band, ctx.powers, stab, ref.cov, ref.success,
+                    ctx.warnings, fz_cov)
+    fit.misfit_to_noise = misfit                 # with the model's own variance (kept by _judge)
+    return fit
 
 
 def _assemble(chans, f, z, f_std, z_std, lin, lin_var, order, method, kind, band, powers, stab, cov,
@@ -718,8 +909,10 @@ def _judge(fit: ModalFit) -> None:
         r = model - H
         nr = float(np.sqrt(np.sum(np.abs(r) ** 2) / np.sum(np.abs(H) ** 2)))
         fit.nrmse[loc] = nr
-        ratio = misfit_to_noise(H, model, n_params)
-        fit.misfit_to_noise[loc] = ratio
+        ratio = fit.misfit_to_noise.get(loc)
+        if ratio is None:
+            ratio = misfit_to_noise(H, model, n_params)
+            fit.misfit_to_noise[loc] = ratio
         q.append(min(1 - nr ** 2, 1.0 if ratio <= MISFIT_WARN else (MISFIT_WARN / ratio) ** 2))
         fit.dominant_mode[loc] = int(np.argmax([md.peak[k] for md in fit.modes])) if fit.modes else -1
     fit.quality = float(np.clip(min(q), 0.0, 1.0))
@@ -732,12 +925,14 @@ def _judge(fit: ModalFit) -> None:
 
 
 def _warn_outside(fit: ModalFit, ctx: _Ctx) -> None:
-    """Warn about modes the refinement pushed out of the band (they model out-of-band behaviour)."""
+    """Flag and report modes fitted outside the band (a mode outside, fitted from its tail in the band)."""
     lo, hi = fit.band_hz
     for md in fit.modes:
         if not (lo <= md.freq_hz <= hi):
+            md.in_band = False
             fit.warnings.append(f"mode at {ctx.hz(md.freq_hz)} lies outside the band "
-                                f"{lo * ctx.f_ref:g}-{hi * ctx.f_ref:g} Hz")
+                                f"{lo * ctx.f_ref:g}-{hi * ctx.f_ref:g} Hz (in_band = False): fitted from its "
+                                "tail inside the band, so that the modes inside are not biased by it")
 
 
 # --------------------------------------------------------------------------------------------- delay

@@ -96,7 +96,13 @@ def _blocks(channels: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], n_max
     out = []
     powers = np.arange(n_max + 1)
     for w, H, wt in channels:
-        E = np.exp(1j * np.outer((w - wc) * dt, powers))              # (N, n+1): z_k^i
+        E = np.empty((w.size, powers.size), dtype=complex)           # (N, n+1): z_k^i
+        E[:, 0] = 1.0
+        if powers.size > 1:
+            # successive products (one complex multiply per entry, not an exp), re-anchored every 16 powers
+            z = np.exp(1j * (w - wc) * dt)
+            for i in range(1, powers.size):
+                E[:, i] = np.exp(1j * (w - wc) * dt * i) if i % 16 == 0 else E[:, i - 1] * z
         X = E * wt[:, None]
         Y = E * -(H * wt)[:, None]
         XH = X.conj().T
@@ -140,15 +146,19 @@ def lscf_poles(channels, n: int, band_hz: tuple[float, float], *, max_damping: f
 
 
 def stabilisation(channels, n_max: int, band_hz: tuple[float, float], *, n_min: int = 1, step: int = 1,
-                  max_damping: float = 0.9, freq_tol: float = FREQ_TOL, damp_tol: float = DAMP_TOL
-                  ) -> Stabilisation:
+                  max_damping: float = 0.9, freq_tol: float = FREQ_TOL, damp_tol: float = DAMP_TOL,
+                  previous: Stabilisation | None = None) -> Stabilisation:
     """Poles for every order ``n_min, n_min + step, ..., n_max`` and their stability status.
 
     Frequency stability is judged relative to ``min(f, band width)``, so a
     narrow (zoomed) band is held to the same standard as a wide one.
+    ``previous``: a diagram of the same data and band to a lower order, whose
+    poles are reused (an order's poles do not depend on the highest order).
     """
     wc, dt = _mapping(channels)
-    blocks = _blocks(channels, n_max, wc, dt)
+    reuse = {} if previous is None else previous.poles_by_order
+    blocks = _blocks(channels, n_max, wc, dt) if any(int(n) not in reuse for n in
+                                                     range(n_min, n_max + 1, step)) else []
     band_w = (2 * np.pi * band_hz[0], 2 * np.pi * band_hz[1])
     width_hz = band_hz[1] - band_hz[0]
     orders = np.arange(n_min, n_max + 1, step)
@@ -156,7 +166,8 @@ def stabilisation(channels, n_max: int, band_hz: tuple[float, float], *, n_min: 
     by_order: dict[int, np.ndarray] = {}
     prev_f = prev_z = None
     for n in orders:
-        lam = _physical(_poles_for_order(blocks, int(n), wc, dt), band_w, max_damping)
+        lam = reuse[int(n)] if int(n) in reuse else _physical(_poles_for_order(blocks, int(n), wc, dt), band_w,
+                                                              max_damping)
         f, z = pole_to_modal(lam)
         order_ix = np.argsort(f)
         lam, f, z = lam[order_ix], f[order_ix], z[order_ix]
@@ -231,11 +242,14 @@ def choose_poles(stab: Stabilisation, n_modes: int | None, *, band_hz: tuple[flo
 
     # A physical pole settles as the order grows; one that keeps drifting (typically towards a band
     # edge, standing in for what lies outside) does not: judge the spread over the higher half of orders.
+    # The spread is robust (twice the normal-consistent median absolute deviation): a spurious pole
+    # that joined the cluster at one order does not unsettle a mode seen at every other.
     def settled(c: list[int]) -> bool:
         oc = o[c]
-        top = [i for i, oo in zip(c, oc) if oo >= np.median(oc)]
+        top = f[c][oc >= np.median(oc)]
         fc, zc = float(np.median(f[c])), float(np.median(z[c]))
-        return float(np.ptp(f[top])) <= max(0.001 * min(fc, width), 0.5 * zc * fc)
+        spread = 2 * 1.4826 * float(np.median(np.abs(top - np.median(top))))
+        return spread <= max(0.001 * min(fc, width), 0.5 * zc * fc)
 
     clusters = [c for c in clusters if inside(c) and settled(c)]
     n_orders = max(len(stab.orders), 1)

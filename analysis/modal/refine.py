@@ -28,7 +28,7 @@ import numpy as np
 
 from labkit.analysis.modal.lscf import modal_to_pole, pole_to_modal
 
-__all__ = ["Channel", "Refined", "basis", "residues_ls", "model", "refine"]
+__all__ = ["Channel", "Refined", "basis", "residues_ls", "model", "refine", "model_variance"]
 
 
 @dataclass
@@ -59,7 +59,7 @@ def _basis_ef(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np
     cols[:, 0:2 * lam.size:2] = E + F
     cols[:, 1:2 * lam.size:2] = 1j * (E - F)
     for k, q in enumerate(powers):
-        t = (1j * w) ** q
+        t = (1j ** (q % 4)) * w ** float(q)                 # (j w)^q without a complex power (slow)
         cols[:, 2 * lam.size + 2 * k] = t
         cols[:, 2 * lam.size + 2 * k + 1] = 1j * t
     return cols, E, F
@@ -97,6 +97,7 @@ class Refined:
     dof: int
     success: bool
     nfev: int
+    misfit: np.ndarray | None = None   # per channel, misfit to noise before any scaling of cov (set by the fit)
 
 
 def _unpack(theta: np.ndarray, m: int, n_lin: int, n_ch: int):
@@ -146,9 +147,9 @@ def _normal(terms, m: int, n_lin: int):
     A = np.zeros((P, P))
     g = np.zeros(P)
     for k, (r, Jp, B) in enumerate(terms):
-        J = np.hstack([Jp, B])
-        G = (J.conj().T @ J).real
-        gk = (J.conj().T @ r).real
+        X = _stacked(Jp, B, r)                                # real-stacked: half the work of Re(J^H J)
+        Gx = X.T @ X
+        G, gk = Gx[:-1, :-1], Gx[:-1, -1]
         sl = slice(2 * m + k * n_lin, 2 * m + (k + 1) * n_lin)
         A[:2 * m, :2 * m] += G[:2 * m, :2 * m]
         A[:2 * m, sl] = G[:2 * m, 2 * m:]
@@ -159,6 +160,16 @@ def _normal(terms, m: int, n_lin: int):
     return A, g
 
 
+def _stacked(Jp: np.ndarray, B: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``[[Re Jp, Re B, Re r], [Im Jp, Im B, Im r]]`` as one real array (filled in place, no copies)."""
+    n, a, b = r.size, Jp.shape[1], B.shape[1]
+    X = np.empty((2 * n, a + b + 1))
+    X[:n, :a], X[n:, :a] = Jp.real, Jp.imag
+    X[:n, a:a + b], X[n:, a:a + b] = B.real, B.imag
+    X[:n, -1], X[n:, -1] = r.real, r.imag
+    return X
+
+
 def _blocks(terms, free_p: np.ndarray):
     """The normal equations in blocks, scaled to unit diagonal: the shared (free) pole parameters
     ``(G_pp, g_p, d_p)`` and per channel ``(G_pl, G_ll, g_l, d_l)`` (see :func:`_lm_step`)."""
@@ -167,10 +178,12 @@ def _blocks(terms, free_p: np.ndarray):
     G_pp = np.zeros((P, P))
     g_p = np.zeros(P)
     for r, Jp, B in terms:
-        J = Jp[:, free_p]
-        G_pp += (J.conj().T @ J).real
-        g_p += (J.conj().T @ r).real
-        chans.append(((J.conj().T @ B).real, (B.conj().T @ B).real, (B.conj().T @ r).real))
+        # Real-stacked rows [Re; Im]: one real symmetric product, half the work of Re(J^H J) in complex.
+        X = _stacked(Jp[:, free_p], B, r)
+        G = X.T @ X
+        G_pp += G[:P, :P]
+        g_p += G[:P, -1]
+        chans.append((G[:P, P:-1], G[P:-1, P:-1], G[P:-1, -1]))
     d_p = np.sqrt(np.diag(G_pp))
     d_p[d_p == 0] = 1.0
     out = []
@@ -425,3 +438,49 @@ def _covariance(A: np.ndarray, terms, m: int, n_lin: int, dof: int, kind: str) -
             Jr = part * (res / (1.0 - lev))[:, None]
             meat[np.ix_(idx, idx)] += Jr.T @ Jr
     return inv @ meat @ inv
+
+
+def model_variance(channels: Sequence[Channel], ref: Refined, powers: Sequence[int],
+                   noise_var: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Per channel, the variance ``E|model - E model|^2`` of the fitted model at each line caused by
+    noise of variance ``noise_var`` (per channel and line, in the units of the FRF): the parameter
+    covariance ``A^-1 J^T diag(noise) J A^-1`` carried to each line (first order).
+
+    Where the noise differs from line to line (relative noise, a sharp peak), the parameters carry
+    the noise of the loud lines to the quiet ones: there the residual is this, not the local noise.
+    The noise, not the residual, is the meat, so a wrong model is not excused by its own misfit.
+    Above :data:`BLOCK_COVARIANCE_ABOVE` parameters (many locations, whose common poles are well
+    determined) each channel's own residues and residual terms only, with the poles held.
+    """
+    m = ref.freq_hz.size
+    n_lin = 2 * m + 2 * len(powers)
+    terms = _channel_terms(ref.theta, channels, m, powers)
+    if ref.theta.size > BLOCK_COVARIANCE_ABOVE:
+        return [_linear_model_variance(B, c.weight, v) for (_, _, B), c, v in zip(terms, channels, noise_var)]
+    A, _ = _normal(terms, m, n_lin)
+    inv = _pinv_sym(A)
+    meat = np.zeros_like(A)
+    parts = []
+    for k, ((_, Jp, B), c, v) in enumerate(zip(terms, channels, noise_var)):
+        idx = np.r_[np.arange(2 * m), 2 * m + k * n_lin + np.arange(n_lin)]
+        J = np.hstack([Jp, B])
+        half = 0.5 * np.asarray(v, dtype=float) * c.weight ** 2          # per real component
+        meat[np.ix_(idx, idx)] += J.real.T @ (J.real * half[:, None]) + J.imag.T @ (J.imag * half[:, None])
+        parts.append((idx, J))
+    C = inv @ meat @ inv
+    out = []
+    for (idx, J), c in zip(parts, channels):
+        Ck = C[np.ix_(idx, idx)]
+        var = np.sum((J.real @ Ck) * J.real, axis=1) + np.sum((J.imag @ Ck) * J.imag, axis=1)
+        out.append(np.clip(var, 0.0, None) / np.maximum(c.weight, 1e-300) ** 2)
+    return out
+
+
+def _linear_model_variance(B: np.ndarray, weight: np.ndarray, noise_var: np.ndarray) -> np.ndarray:
+    """:func:`model_variance` of one channel with its poles held (weighted basis ``B``)."""
+    half = 0.5 * np.asarray(noise_var, dtype=float) * weight ** 2
+    X = np.vstack([B.real, B.imag])
+    inv = _pinv_sym(X.T @ X)
+    C = inv @ (B.real.T @ (B.real * half[:, None]) + B.imag.T @ (B.imag * half[:, None])) @ inv
+    var = np.sum((B.real @ C) * B.real, axis=1) + np.sum((B.imag @ C) * B.imag, axis=1)
+    return np.clip(var, 0.0, None) / np.maximum(weight, 1e-300) ** 2

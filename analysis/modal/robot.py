@@ -27,7 +27,7 @@ from labkit.analysis.modal.fit import ModalFit, fit_modes
 from labkit.analysis.modal.io import RunChannels, read_frf, runs_json, write_fit_h5
 from labkit.errors import InputError
 
-__all__ = ["RobotFit", "fit_robot", "GROUP_KIND", "output_paths"]
+__all__ = ["RobotFit", "fit_robot", "GROUP_KIND", "output_paths", "modes_only"]
 
 #: FRF kind fitted for each group of run files (``"frf"``: the file's own kind).
 GROUP_KIND = {"inchip": "mobility", "shaker": "transmissibility"}
@@ -57,6 +57,10 @@ class RobotFit:
         which :meth:`write` adds).
     warnings:
         Everything that was not as it should be, run files and fits together.
+    modes_only:
+        Only FRF files other than labkit runs were fitted and no mapping onto the
+        simulator's modes was given: :meth:`write` writes the fitted modes, not a
+        robot parameter file.
     """
 
     fits: dict[str, ModalFit]
@@ -67,6 +71,7 @@ class RobotFit:
     provenance: dict[str, Any]
     assign_text: str | None
     warnings: list[str] = field(default_factory=list)
+    modes_only: bool = False
     _base: tuple[Any, str] = field(default=(None, ""), repr=False)
     _options: dict[str, Any] = field(default_factory=dict, repr=False)
     _read_warnings: list[str] = field(default_factory=list, repr=False)
@@ -95,7 +100,7 @@ class RobotFit:
                 "misfit_to_noise": {g: f.misfit_to_noise for g, f in self.fits.items()},
                 "dominant_mode": {g: f.dominant_mode for g, f in self.fits.items()},
                 "mac": {g: f.mac().tolist() for g, f in self.fits.items() if len(f.locations) > 1 and f.modes},
-                "warnings": list(self.warnings)}
+                "warnings": list(self.warnings), "modes_only": self.modes_only}
 
     def write(self, out: str | Path, *, figures: bool = True, force: bool = False,
               uff: bool = False) -> dict[str, Any]:
@@ -118,7 +123,10 @@ class RobotFit:
         # every file to a temporary name first, all renamed at the end: a failure leaves every old file
         with atomic_outputs(targets) as temps:
             tmp_out, tmp_fit, rest = temps[0], temps[1], temps[2:]
-            self.params.to_toml(tmp_out, provenance=prov)
+            if self.modes_only:
+                _write_modes_toml(tmp_out, self.listing, prov)
+            else:
+                self.params.to_toml(tmp_out, provenance=prov)
             write_fit_h5(tmp_fit, self.fits, runs_json(self.runs), ma.as_dict(self.mapping),
                          {g: f.summary() for g, f in self.fits.items()})
             if paths["uff_file"] is not None:
@@ -140,6 +148,17 @@ class RobotFit:
         written = [str(p) for _, p in figs]
         return {"out": str(paths["out"]), "fit_file": str(paths["fit_file"]), "figures": written,
                 "uff_file": None if paths["uff_file"] is None else str(paths["uff_file"])}
+
+
+def _write_modes_toml(path: str | Path, listing: list[dict[str, Any]], provenance: dict[str, Any]) -> None:
+    """The fitted modes as a TOML table ``[[modes]]`` (not a robot parameter file)."""
+    import tomli_w
+
+    prov = {k: v for k, v in provenance.items() if k not in ("modes", "assignment")}   # no simulator modes
+    table = {"modes": [{k: v for k, v in m.items() if v is not None} for m in listing], "provenance": prov}
+    head = ("# labkit fitted modes (not a robot parameter file: the input was not a labkit run;\n"
+            "# `labkit fit ... --assign 1=#K,...` maps modes onto the simulator's and writes one)\n\n")
+    Path(path).write_text(head + tomli_w.dumps(table), encoding="utf-8")
 
 
 def output_paths(out: str | Path, *, figures: bool, fits: dict[str, ModalFit] | None = None,
@@ -239,8 +258,15 @@ def fit_robot(runs: Sequence[str | Path | RunChannels], *, base: Any = None, ass
         warnings += [f"{group}: {w}" for w in fit.warnings]
 
     options = {"method": method, "covariance": covariance, "band_hz": band_hz, "n_modes": n_modes,
-               "min_quality": min_quality, "poles_hz": poles_hz, "background": background}
+               "min_quality": min_quality, "poles_hz": poles_hz, "background": background,
+               "modes_only": modes_only(chans, assign)}
     return _assign(fits, chans, warnings, base_p, base_name, assign, options)
+
+
+def modes_only(chans: Sequence[RunChannels], assign: str | None) -> bool:
+    """True when no input is a labkit run and no mapping onto the simulator's modes is given: then the
+    fit writes the modes only (a robot file from someone else's FRF needs an explicit ``--assign``)."""
+    return all(r.group == "frf" for r in chans) and (assign is None or assign.strip().lower() in ("none", "keep"))
 
 
 def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: list[str], base_p: Any,
@@ -258,8 +284,12 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
         for i, m in enumerate(fit.modes):
             fitted.append(ma.FittedMode(len(fitted) + 1, group, m.freq_hz, m.damping_ratio))
             where.append((group, i))
-    mapping = ma.assign(fitted, base_p.modal_freq_hz, spec)
-    if all(v is None for v in mapping.values()):
+    only = bool(options.get("modes_only"))
+    mapping = ma.assign(fitted, base_p.modal_freq_hz, ma.parse_assign("none") if only else spec)
+    if only:
+        warnings.append("no labkit run among the inputs and no --assign: wrote the fitted modes only, not a "
+                        "robot parameter file (--assign 1=#K,... maps them onto the simulator's modes)")
+    elif all(v is None for v in mapping.values()):
         warnings.append("no fitted mode assigned to the simulator: every mode keeps the base value "
                         "(use --assign, e.g. --assign 1=#1)")
     listing = []
@@ -267,7 +297,7 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
         m = fits[group].modes[i]
         listing.append({"index": fm.index, "group": group, "freq_hz": m.freq_hz, "freq_hz_std": m.freq_hz_std,
                         "damping_ratio": m.damping_ratio, "damping_ratio_std": m.damping_ratio_std,
-                        "dominant_location": m.dominant_location,
+                        "dominant_location": m.dominant_location, "in_band": m.in_band,
                         "assigned_to": next((s for s, v in mapping.items() if v is not None and v.index == fm.index),
                                             None)})
     new_f = list(base_p.modal_freq_hz)
@@ -311,7 +341,9 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
         provenance["poles_hz"] = [p if isinstance(p, (int, float)) else list(p) for p in options["poles_hz"]]
     if options["background"]:
         provenance["background"] = options["background"]
-    return RobotFit(fits, chans, listing, mapping, params, provenance, assign, warnings,
+    if only:
+        provenance["written"] = "fitted modes only (no labkit run, no --assign)"
+    return RobotFit(fits, chans, listing, mapping, params, provenance, assign, warnings, only,
                     _base=(base_p, base_name), _options=options, _read_warnings=list(read_warnings))
 
 

@@ -36,7 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("runs", nargs="+", metavar="FILE",
                         help="in-chip and/or shaker run files (.h5), or FRFs as UFF 58 (.uff/.unv), CSV (.csv/.txt) "
                              "or Touchstone (.s1p/.s2p)")
-    parser.add_argument("--out", required=True, metavar="robot.toml", help="robot parameter file to write")
+    parser.add_argument("--out", required=True, metavar="robot.toml",
+                        help="robot parameter file to write (FRF files that are not labkit runs, without --assign: "
+                             "the fitted modes only, as [[modes]])")
     parser.add_argument("--assign", metavar="SPEC",
                         help="fitted -> simulator modes: '1=438,2=#3,3=keep' (Hz, #listed number, keep) or "
                              "'none'; default: nearest within 15%% of the base file's modes")
@@ -148,6 +150,10 @@ def _print(s: dict[str, Any]) -> None:
         print(f"{g}: MAC between its modes (1 = same shape over the locations):")
         for i, row in enumerate(mac):
             print(f"  #{first + i:<3}" + " ".join(f"{v:5.2f}" for v in row))
+    if s.get("modes_only"):
+        print(f"wrote the fitted modes only to {s['out']} (no labkit run among the inputs; --assign 1=#K,... "
+              f"writes a robot parameter file), and {s['fit_file']}")
+        return
     print(f"assignment: {s['assignment_rule']}")
     print("simulator modes: " + ", ".join(f"{f:.5g} Hz (zeta {z:.3g})"
                                           for f, z in zip(s["modal_freq_hz"], s["modal_damping_ratio"])))
