@@ -49,6 +49,7 @@ def summary(track: Track, speed: SpeedResult | None) -> dict[str, Any]:
         if out["outliers_dropped"]:
             out["warnings"].append(f"{out['outliers_dropped']} position(s) far off the smoothed path (> 8 robust "
                                    f"sigmas) left out of the speed")
+        out["change_points_s"] = list(speed.meta.get("change_points_s", []))
         unc = speed.meta.get("uncertainty", {})
         out["speed_uncertainty"] = {k: unc[k] for k in ("speed_std_mm_s", "noise_part_mm_s", "timestamp_part_mm_s",
                                                          "scale_part_mm_s", "noise_bias_mm_s", "position_noise_mm",

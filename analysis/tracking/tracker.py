@@ -198,6 +198,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     cov_hist: list[float] = []      # the robot's weighted area in clear frames (what a whole robot shows)
     shapes: list[tuple[float, float]] = []
     shape_ref: tuple[float, float] | None = None
+    shape_spread: tuple[float, ...] = (0.0, 0.0)
     unlike = 0
     area_hist: list[float] = []
     area_ref = expected_area_px
@@ -249,9 +250,9 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 jumps += int(finder.find(img, 0, 0, rw, rh, pred=None, area_ref=area_ref, area_tol=tol)[0]
                              is not None)
         if (blob is not None and not blob.border and shape_ref is not None
-                and not (0.8 < blob.major_px / shape_ref[0] < 1.25 and 0.7 < blob.minor_px / shape_ref[1] < 1.45)):
-            # robot-sized but not robot-shaped (a tweezer's prong, the robot merged with something):
-            # not a position
+                and not _shaped_like(blob, shape_ref, shape_spread, pred, major)):
+            # robot-sized but not robot-shaped (a tweezer's prong, the robot merged with something)
+            # and off the motion's prediction: not a position
             blob = None
             unlike += 1
         ts.append(t)
@@ -299,9 +300,12 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 if q == QUALITY_OK:
                     shapes.append((blob.major_px, blob.minor_px))
                     if len(shapes) >= 5 and (len(shapes) <= 25 or len(shapes) % 10 == 0):
-                        # the robot's outline (length, width) from its first confident frames
-                        arr = np.asarray(shapes[-25:])
-                        shape_ref = (float(np.median(arr[:, 0])), float(np.median(arr[:, 1])))
+                        # the robot's outline (length, width) from its recent confident frames, and how
+                        # much it varies by itself (a soft body, blur that changes with the speed)
+                        arr = np.log(np.asarray(shapes[-25:]))
+                        med = np.median(arr, axis=0)
+                        shape_ref = (float(np.exp(med[0])), float(np.exp(med[1])))
+                        shape_spread = tuple(1.4826 * np.median(np.abs(arr - med), axis=0))
                 if blob.weights is not None:
                     lengths.append(body_length_px(blob.weights, blob.u - blob.origin[0], blob.v - blob.origin[1],
                                                   blob.theta))
@@ -320,6 +324,24 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 n_length=int(lengths_a.size), best_contrast=finder.best_contrast,
                 robot_contrast=float(np.median(contrasts)) if contrasts else float("nan"),
                 ambiguous=finder.ambiguous, jumps=jumps, unlike=unlike, min_contrast=seg.min_contrast, noise=seg.noise)
+
+
+def _shaped_like(blob: Any, ref: tuple[float, float], spread: tuple[float, ...],
+                 pred: tuple[float, float] | None, major: float | None) -> bool:
+    """Whether a candidate may be the robot by its outline.
+
+    Its length and width must be within the fixed tolerance of the robot's recent
+    outline (0.8-1.25 x length, 0.7-1.45 x width) widened to 5 of the outline's own
+    robust sigmas (a soft body or a blur that changes with the speed varies by
+    itself); a candidate outside that but where the motion predicted the robot
+    (within 2 px + 5 % of its length) is the robot changing shape, not something else.
+    """
+    lo_l, hi_l = min(0.8, np.exp(-5 * spread[0])), max(1.25, np.exp(5 * spread[0]))
+    lo_w, hi_w = min(0.7, np.exp(-5 * spread[1])), max(1.45, np.exp(5 * spread[1]))
+    if lo_l < blob.major_px / ref[0] < hi_l and lo_w < blob.minor_px / ref[1] < hi_w:
+        return True
+    return (pred is not None and major is not None
+            and bool(np.hypot(blob.u - pred[0], blob.v - pred[1]) < 2.0 + 0.05 * major))
 
 
 def resolve_heading(t_s: np.ndarray, u_px: np.ndarray, v_px: np.ndarray, theta: np.ndarray,

@@ -94,6 +94,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
               f"scale {track.mm_per_px:.5g} +- {track.scale.mm_per_px_std:.2g} mm/px ({track.scale.method})")
         print(f"  mean speed {speed.mean_speed_mm_s:.4g} mm/s, {int(100 * speed.ci_level)}% CI "
               f"[{lo:.4g}, {hi:.4g}] (smoothed path, window {speed.window_s:.3g} s)")
+        if np.isfinite(speed.moving_speed_mm_s) and speed.moving_s < 0.98 * speed.duration_s:
+            mlo, mhi = speed.moving_speed_ci_mm_s
+            print(f"  while moving ({speed.moving_s:.3g} of {speed.duration_s:.3g} s): "
+                  f"{speed.moving_speed_mm_s:.4g} mm/s [{mlo:.4g}, {mhi:.4g}]; "
+                  f"the mean above is over the whole clip, pauses included")
         print(f"  frame-to-frame {speed.frame_to_frame_speed_mm_s:.4g} mm/s (overstates under jitter), "
               f"net displacement {speed.net_speed_mm_s:.4g} mm/s (understates on curves)")
         vx, vy = speed.mean_velocity_mm_s
