@@ -197,7 +197,7 @@ def plot_path(path: str | Path, track: Track, speed: SpeedResult | None = None) 
 
 def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
                   speed: SpeedResult | None = None, *, fps: float | None = None,
-                  timestamps: str | Path | None = None) -> Path:
+                  timestamps: str | Path | None = None, bayer: str = "auto") -> Path:
     """Re-read the video and draw the trajectory so far, the centroid and the heading on each frame.
 
     Written as Motion-JPEG (``.avi`` recommended) at the video's nominal rate.
@@ -208,7 +208,7 @@ def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
     from labkit.analysis.tracking.video_io import iter_frames, open_source
     from labkit.video import write_video
 
-    cap, info = open_source(video_path, fps=fps, timestamps=timestamps)
+    cap, info = open_source(video_path, fps=fps, timestamps=timestamps, bayer=bayer)
     out_path = Path(out_path)
     px_per_mm = 1.0 / track.mm_per_px if track.mm_per_px > 0 else 1.0
     arrow = 0.45 * (track.length_px if np.isfinite(track.length_px) else 60.0)
@@ -225,7 +225,7 @@ def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
         for k, (gray, _t) in enumerate(iter_frames(cap, info)):
             if k >= track.frames:
                 break
-            img = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
+            img = cv2.cvtColor(np.clip(gray, 0, 255).astype(np.uint8), cv2.COLOR_GRAY2BGR)
             x, y, w, h = track.roi
             cv2.rectangle(img, (x, y), (x + w - 1, y + h - 1), (128, 128, 128), 1)
             if trail is None:

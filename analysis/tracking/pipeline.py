@@ -36,9 +36,10 @@ def output_paths(out: str | Path | None) -> list[Path]:
     if out is None:
         return []
     out = Path(out)
-    if out.suffix.lower() in (".csv", ".png"):
-        raise InputError("the track file would clash with its own .csv/.png sidecar", file=out,
-                         key="--out", expected="a .h5 file name")
+    if out.suffix.lower() not in (".h5", ".hdf5"):
+        # the track is HDF5: a .txt or .csv name would hold something other than it says
+        raise InputError(f"the track file is HDF5, not {out.suffix or 'suffix-less'}", file=out,
+                         key="--out", expected="a .h5 file name (the .csv and .png are written beside it)")
     return [out, out.with_suffix(".csv"), out.with_suffix(".png")]
 
 
@@ -91,7 +92,8 @@ def track_file(source: str | Path, *, out: str | Path | None = None, overlay: st
     if overlay is not None:
         jobs.append(("overlay", Path(overlay),
                      lambda p: write_overlay(source, track, p, speed, fps=track_kw.get("fps"),
-                                             timestamps=track_kw.get("timestamps"))))
+                                             timestamps=track_kw.get("timestamps"),
+                                             bayer=track_kw.get("bayer", "auto"))))
     # all written to temporary names first, renamed together: every old file survives any failed write
     with atomic_outputs([target for _, target, _ in jobs]) as temps:
         for (_, _, write), tmp in zip(jobs, temps):

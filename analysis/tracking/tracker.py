@@ -169,14 +169,15 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                  flat: np.ndarray | None = None, seg: Segmentation | None = None,
                  margin_px: int = 4, min_area_px: int = 20,
                  expected_area_px: float | None = None, max_speed_px_s: float | None = None,
-                 max_speed_body_s: float = 5.0, reacquire_s: float = 1.0,
+                 max_speed_body_s: float | None = None, reacquire_s: float = 1.0,
                  progress: Any = None) -> dict:
     """Track over ``(grey frame, t_s)`` pairs (full frames); returns raw per-frame arrays.
 
     ``valid`` (bool, full frame) marks where the robot may be. The motion model
     (constant velocity) predicts the next position; a candidate farther from it
     than the robot can go (``max_speed_px_s``, or ``max_speed_body_s`` body
-    lengths per second while the scale is unknown, plus the vibration jitter)
+    lengths per second, by default one body length per frame interval, plus the
+    vibration jitter)
     is not the robot: the frame is lost (an occlusion), and the gate grows with
     the time since the last good frame until, after ``reacquire_s``, the robot
     may be found anywhere. See :func:`track_video` for the public entry point.
@@ -210,14 +211,24 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     jumps = 0
     raw_area: list[float] = []     # each found component's area (px), for re-checking the first frames
 
+    frame_dts: list[float] = []
+
     def gate(dt: float) -> float | None:
         if major is None or dt > reacquire_s:
             return None
-        vmax = max_speed_px_s if max_speed_px_s else max_speed_body_s * major
+        if max_speed_px_s:
+            vmax = max_speed_px_s
+        elif max_speed_body_s:
+            vmax = max_speed_body_s * major
+        else:
+            # one body length per frame interval: the physical limit of frame-to-frame identity
+            vmax = major / (float(np.median(frame_dts)) if frame_dts else max(dt, 1e-6))
         # jitter of a vibrating robot (a tenth of its length) + what it can walk in dt
         return 3.0 + 0.1 * major + vmax * dt
 
     for k, (frame, t) in enumerate(frames):
+        if ts and len(frame_dts) < 15 and t > ts[-1]:
+            frame_dts.append(t - ts[-1])
         img = frame[ry:ry + rh, rx:rx + rw] if roi else frame
         blob = None
         pred = None
@@ -306,6 +317,11 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                         med = np.median(arr, axis=0)
                         shape_ref = (float(np.exp(med[0])), float(np.exp(med[1])))
                         shape_spread = tuple(1.4826 * np.median(np.abs(arr - med), axis=0))
+                        if seg.body_width_px < 1.1 * shape_ref[1]:
+                            # the robot is wider than the background filter was sized for (no size known
+                            # before): resized to the width just learned, so the filter never eats it
+                            seg = _resized(seg, rw, rh, shape_ref[1])
+                            finder.seg = seg
                 if blob.weights is not None:
                     lengths.append(body_length_px(blob.weights, blob.u - blob.origin[0], blob.v - blob.origin[1],
                                                   blob.theta))
@@ -324,6 +340,13 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 n_length=int(lengths_a.size), best_contrast=finder.best_contrast,
                 robot_contrast=float(np.median(contrasts)) if contrasts else float("nan"),
                 ambiguous=finder.ambiguous, jumps=jumps, unlike=unlike, min_contrast=seg.min_contrast, noise=seg.noise)
+
+
+def _resized(seg: Segmentation, width: int, height: int, body_width_px: float) -> Segmentation:
+    """``seg`` with its background filter sized for a body ``body_width_px`` wide (threshold kept)."""
+    new = Segmentation.for_frame(width, height, body_width_px, seg.min_contrast, seg.noise)
+    new.auto = seg.auto
+    return new
 
 
 def _shaped_like(blob: Any, ref: tuple[float, float], spread: tuple[float, ...],
@@ -407,6 +430,41 @@ ROBOT_WIDTH_MM = 2.0
 
 
 @dataclass
+class RobotSize:
+    """What the tracker expects of the robot's outline (``None`` parts are learned from the first confident frames)."""
+
+    length_mm: float | None
+    width_mm: float | None
+    area_mm2: float | None
+
+    @property
+    def declared(self) -> bool:
+        return self.area_mm2 is not None
+
+
+def robot_size(size_mm: tuple[float, float] | str | None) -> RobotSize:
+    """``None``: the lab's 5 x 2 mm chip (with its leg stubs); ``(length, width)`` mm: any robot, a
+    rectangle's area; ``"learn"``: nothing assumed, the outline learned from the first confident frames."""
+    if size_mm is None:
+        return RobotSize(ROBOT_LENGTH_MM, ROBOT_WIDTH_MM, CHIP_AREA_MM2)
+    vals: list[float] = []
+    if isinstance(size_mm, str):
+        if size_mm.strip().lower() == "learn":
+            return RobotSize(None, None, None)
+        try:
+            vals = [float(v) for v in size_mm.split(",")]
+        except ValueError:
+            vals = []
+    else:
+        vals = [float(v) for v in size_mm]
+    if len(vals) != 2 or not all(np.isfinite(v) and v > 0 for v in vals):
+        raise InputError(f"bad robot size {size_mm!r}", key="--robot-size-mm",
+                         expected="LENGTH,WIDTH in mm (both > 0), or 'learn'")
+    length, width = max(vals), min(vals)
+    return RobotSize(length, width, length * width)
+
+
+@dataclass
 class PreparedScene:
     """What is known before tracking: the search region, the static scene, the segmentation."""
 
@@ -421,7 +479,7 @@ class PreparedScene:
 
 def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str | None = None, mask: Any = None,
                   scale: Scale | None = None, min_contrast: float | None = None,
-                  static_mask: bool = True) -> PreparedScene:
+                  static_mask: bool = True, size: RobotSize | None = None) -> PreparedScene:
     """Region of interest, mask, static scene (rim, dust, flat field, noise) and contrast threshold.
 
     Reads sample frames from ``cap`` and rewinds it (see :func:`track_video`)."""
@@ -432,7 +490,8 @@ def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str |
     valid = load_mask(mask, W, H)
     if min_contrast is not None and not 0 < min_contrast < 1:
         raise InputError(f"bad contrast {min_contrast}", key="--min-contrast", expected="a share between 0 and 1")
-    body_w = ROBOT_WIDTH_MM / scale.mm_per_px if scale is not None else None
+    size = size or robot_size(None)
+    body_w = size.width_mm / scale.mm_per_px if scale is not None and size.width_mm else None
     seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast)
     static = None
     flat = None
@@ -455,14 +514,16 @@ def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str |
                          valid_with_objects=with_objects if static_mask else valid)
 
 
-def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path | None, size: tuple[int, int],
+def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path | None, bayer: str,
+                  size: tuple[int, int],
                   roi: tuple[int, int, int, int] | None, valid: np.ndarray | None, seg: Segmentation,
-                  margin_px: int, expected: float | None, vmax: float | None, scale: Scale | None) -> dict | None:
+                  margin_px: int, expected: float | None, vmax: float | None, scale: Scale | None,
+                  length_mm: float | None) -> dict | None:
     """Track again with static objects searchable (and no flat field, which holds them); the result
     only if a robot-sized, robot-long object was found in most frames."""
     from labkit.analysis.tracking.video_io import iter_frames, open_source
 
-    cap, info = open_source(source, fps=fps, timestamps=timestamps)
+    cap, info = open_source(source, fps=fps, timestamps=timestamps, bayer=bayer)
     try:
         raw = track_frames(iter_frames(cap, info), size, roi=roi, valid=valid, flat=None, seg=seg,
                            margin_px=margin_px, expected_area_px=expected, max_speed_px_s=vmax)
@@ -474,18 +535,19 @@ def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path 
     area = float(np.median(raw["area_px"][found]))
     length = float(raw["length_px"])
     # the size and the length at the known scale (the shape alone does not tell a chip from a speck)
-    if scale is None or expected is None:
+    if scale is None or expected is None or length_mm is None:
         return None
-    ok = 0.75 < area / expected < 1.33 and abs(length * scale.mm_per_px / ROBOT_LENGTH_MM - 1) < 0.12
+    ok = 0.75 < area / expected < 1.33 and abs(length * scale.mm_per_px / length_mm - 1) < 0.12
     return raw if ok else None
 
 
 def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | None = None,
                 mask: Any = None, scale: Scale | None = None, mm_per_px: float | None = None,
-                robot_length_mm: float = ROBOT_LENGTH_MM, robot_length_std_mm: float = 0.05,
+                robot_length_mm: float | None = None, robot_length_std_mm: float = 0.05,
+                robot_size_mm: tuple[float, float] | str | None = None,
                 margin_px: int = 4, min_contrast: float | None = None, static_mask: bool = True,
-                max_speed_mm_s: float = 25.0, fps: float | None = None,
-                timestamps: str | Path | None = None, quiet: bool = True) -> Track:
+                max_speed_mm_s: float | None = None, fps: float | None = None,
+                timestamps: str | Path | None = None, bayer: str = "auto", quiet: bool = True) -> Track:
     """Track the robot through a video file or an image sequence.
 
     Parameters
@@ -501,6 +563,12 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         The image scale; without either, it is measured from the robot's known
         ``robot_length_mm`` (uncertain by ``robot_length_std_mm``). A known scale
         also gives the robot's expected size in pixels (its identity).
+    robot_size_mm:
+        The robot's outline: ``None`` the lab's 5 x 2 mm chip, ``(length, width)``
+        in mm any other robot, ``"learn"`` nothing assumed (learned from the first
+        confident frames). With a known scale it gives the robot's expected area and
+        width in pixels (its identity at acquisition); its length is the default
+        ``robot_length_mm``.
     margin_px:
         Width of the band around the dark component whose pixels weigh in the
         moments: at least the blur's half-length.
@@ -513,7 +581,14 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         (:func:`~labkit.analysis.tracking.measure.background_model`).
     max_speed_mm_s:
         What the robot can walk: a candidate beyond it (plus jitter) from the
-        predicted position is an occlusion, not the robot.
+        predicted position is an occlusion, not the robot. Default (None): one
+        body length per frame interval (beyond that no tracker can tell which
+        object is which from frame to frame), i.e. the robot's length times the
+        frame rate -- 150 mm/s for the 5 mm chip at 30 fps.
+    bayer:
+        Raw Bayer frames (a sensor's mosaic, one colour per pixel): ``"auto"``
+        (detected from the 2 x 2 pattern of the first frame), ``"none"``, or the
+        pattern ``"RGGB"``, ``"BGGR"``, ``"GRBG"``, ``"GBRG"``; demosaiced to grey.
     fps, timestamps:
         Frame times of an image sequence (a rate, or a CSV with a ``t_s`` column).
 
@@ -528,24 +603,35 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
     from labkit.analysis.tracking.video_io import check_timestamps, iter_frames, open_source
     from labkit.progress import progress as bar
 
-    cap, info = open_source(source, fps=fps, timestamps=timestamps)
+    cap, info = open_source(source, fps=fps, timestamps=timestamps, bayer=bayer)
     warnings: list[str] = []
+    if info.bayer:
+        warnings.append(f"raw Bayer frames ({info.bayer}{', detected' if bayer == 'auto' else ''}): demosaiced "
+                        f"to grey")
     try:
         if info.width <= 0 or info.height <= 0:
             raise InputError("the video holds no frames", file=source)
         W, H = info.width, info.height
         if scale is None and mm_per_px is not None:
             scale = scale_given(mm_per_px)
+        size = robot_size(robot_size_mm)
+        if robot_length_mm is None:
+            robot_length_mm = size.length_mm or ROBOT_LENGTH_MM
+        if max_speed_mm_s is not None and not max_speed_mm_s > 0:
+            raise InputError(f"bad speed limit {max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
         scene = prepare_scene(cap, info, roi=roi, mask=mask, scale=scale, min_contrast=min_contrast,
-                              static_mask=static_mask)
+                              static_mask=static_mask, size=size)
         roi_t, valid, seg, static, flat = scene.roi, scene.valid, scene.seg, scene.static, scene.flat
         warnings.extend(scene.warnings)
-        expected = CHIP_AREA_MM2 / scale.mm_per_px ** 2 if scale is not None else None
-        vmax = max_speed_mm_s / scale.mm_per_px if scale is not None else None
+        expected = size.area_mm2 / scale.mm_per_px ** 2 if scale is not None and size.area_mm2 else None
+        vmax = max_speed_mm_s / scale.mm_per_px if scale is not None and max_speed_mm_s else None
+        # without a scale a declared limit is counted in body lengths
+        body_s = max_speed_mm_s / robot_length_mm if max_speed_mm_s and vmax is None else None
         with bar(info.frame_count or None, "track", quiet=quiet, unit="frame") as pb:
             raw = track_frames(iter_frames(cap, info), (W, H), roi=roi_t if roi is not None else None,
                                valid=valid, flat=flat, seg=seg, margin_px=margin_px,
-                               expected_area_px=expected, max_speed_px_s=vmax, progress=pb)
+                               expected_area_px=expected, max_speed_px_s=vmax, max_speed_body_s=body_s,
+                               progress=pb)
             finish_progress(pb, int(raw["t_s"].size), info.frame_count)
     finally:
         cap.release()
@@ -553,8 +639,8 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
             and scale is not None and raw["t_s"].size):
         # nothing moved: a static object may still be the robot vibrating in place (a drive that
         # does not make it walk). Only an object of the robot's size and length counts, never dust.
-        still = _static_robot(source, fps, timestamps, (W, H), roi_t if roi is not None else None,
-                              scene.valid_with_objects, seg, margin_px, expected, vmax, scale)
+        still = _static_robot(source, fps, timestamps, bayer, (W, H), roi_t if roi is not None else None,
+                              scene.valid_with_objects, seg, margin_px, expected, vmax, scale, size.length_mm)
         if still is not None:
             raw = still
             warnings.append("the robot did not move: the only robot-like object is static (its size and length "
@@ -563,6 +649,9 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         if info.undecodable:
             raise InputError(f"none of the {info.undecodable} frames could be decoded", file=source)
         raise InputError("the video holds no frames", file=source)
+    if info.times is not None and raw["t_s"].size + info.undecodable != info.times.size:
+        raise InputError(f"{info.times.size} declared times for {raw['t_s'].size + info.undecodable} frames",
+                         file=timestamps, key="--timestamps", expected="one time per frame of the video")
     if info.undecodable:
         warnings.insert(0, f"{info.undecodable} frame(s) could not be decoded and were skipped "
                            f"(damaged or truncated file); {raw['t_s'].size} kept")

@@ -30,7 +30,11 @@ class VideoInfo:
     raw_jpeg: bool = False   # Motion-JPEG read as packets and decoded straight to grey
     undecodable: int = 0     # frames skipped because they did not decode
     count_exact: bool = False  # frame_count counted from the packets (not the container's estimate)
-    timestamps_from: str = "container"   # "container", or for an image sequence "csv" / "fps"
+    timestamps_from: str = "container"   # "container", or (declared) "csv" / "fps"
+    bayer: str | None = None   # raw Bayer pattern (RGGB, BGGR, GRBG, GBRG) demosaiced to grey
+    gain: float | None = None  # deeper than 8 bits: frames scaled by this to float32 (the tray ~200), not cut
+    times: np.ndarray | None = None   # declared frame times (a CSV) that replace a video's own
+    fps_declared: float | None = None  # a declared rate that replaces a video's own times (frame k at k / rate)
 
 
 def open_video(path: str | Path, *, grey: bool = True):
@@ -89,12 +93,90 @@ def count_packets(path: str | Path) -> int:
         cap.release()
 
 
+BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
+# OpenCV's older names for the same mosaics (named by the second row's second and third pixels)
+_BAYER_ALIAS = {"RGGB": "BG", "BGGR": "RG", "GRBG": "GB", "GBRG": "GR"}
+
+
+def _bayer_code(pattern: str) -> int:
+    import cv2
+
+    return int(getattr(cv2, f"COLOR_Bayer{pattern}2GRAY", getattr(cv2, f"COLOR_Bayer{_BAYER_ALIAS[pattern]}2GRAY")))
+
+
+def detect_bayer(raw: np.ndarray, min_share: float = 0.03) -> str | None:
+    """The Bayer pattern of a raw sensor frame, or None when the frame is not a colour mosaic.
+
+    A mosaic shows a 2 x 2 pattern over the whole frame: the four phases' means
+    differ by the light's colour (no real scene does that at the pixel pitch).
+    The two greens are the diagonal pair closest to each other; red is taken as
+    the brighter of the other two (a warm light; for a grey image the choice of
+    red or blue moves nothing).
+    """
+    if raw.ndim != 2 or min(raw.shape) < 8:
+        return None
+    f = raw[: raw.shape[0] // 2 * 2, : raw.shape[1] // 2 * 2].astype(np.float64)
+    p = np.array([f[0::2, 0::2].mean(), f[0::2, 1::2].mean(), f[1::2, 0::2].mean(), f[1::2, 1::2].mean()])
+    spread = float(p.max() - p.min())
+    if spread < min_share * max(float(p.mean()), 1e-9):
+        return None
+    if abs(p[1] - p[2]) <= abs(p[0] - p[3]):          # greens at (0,1), (1,0)
+        if abs(p[1] - p[2]) > 0.3 * spread:
+            return None
+        return "RGGB" if p[0] >= p[3] else "BGGR"
+    if abs(p[0] - p[3]) > 0.3 * spread:
+        return None
+    return "GRBG" if p[1] >= p[2] else "GBRG"
+
+
 def _grey(frame: np.ndarray, info: VideoInfo) -> np.ndarray | None:
+    """One decoded frame -> grey at its own depth: 8-bit as uint8, deeper as float32 x ``info.gain``."""
     import cv2
 
     if info.raw_jpeg:
         return cv2.imdecode(frame.reshape(-1), cv2.IMREAD_GRAYSCALE)
-    return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
+    if info.bayer is not None:
+        mosaic = frame[..., 0] if frame.ndim == 3 else frame     # a grey video decodes to 3 equal channels
+        g = cv2.cvtColor(np.ascontiguousarray(mosaic), _bayer_code(info.bayer))
+    elif frame.ndim == 3:
+        g = cv2.cvtColor(frame, cv2.COLOR_BGRA2GRAY if frame.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
+    else:
+        g = frame
+    if g.dtype != np.uint8 or info.gain is not None:
+        return np.asarray(g, np.float32) * np.float32(info.gain or 1.0)
+    return g
+
+
+def inspect_first_frame(cap, info: VideoInfo, bayer: str = "auto") -> None:
+    """Bayer pattern and bit depth from the first frame; the capture is rewound.
+
+    ``bayer``: ``"auto"`` (:func:`detect_bayer`), ``"none"``, or a pattern. A
+    frame deeper than 8 bits sets ``info.gain`` so the tray's bright level maps
+    to ~200 in float32: a dim 12-bit frame keeps its fractions instead of
+    becoming grey levels 0-3.
+    """
+    key = (bayer or "auto").strip().upper()
+    if key not in ("AUTO", "NONE", *BAYER_PATTERNS):
+        raise InputError(f"bad Bayer pattern {bayer!r}", key="--bayer",
+                         expected="auto, none, " + ", ".join(BAYER_PATTERNS))
+    if info.raw_jpeg:
+        if key not in ("AUTO", "NONE"):
+            raise InputError("a Motion-JPEG video holds no raw Bayer frames", file=info.path, key="--bayer")
+        return
+    ok, frame = cap.read()
+    _rewind(cap, info)
+    if not ok or frame is None or frame.size == 0:
+        return
+    mono = frame.ndim == 2 or (frame.shape[2] >= 3 and np.array_equal(frame[..., 0], frame[..., 1])
+                               and np.array_equal(frame[..., 1], frame[..., 2]))
+    if key == "AUTO":
+        info.bayer = detect_bayer(frame if frame.ndim == 2 else frame[..., 0]) if mono else None
+    elif key != "NONE":
+        info.bayer = key
+    if frame.dtype != np.uint8:
+        g = _grey(frame, info)
+        if g is not None:
+            info.gain = 200.0 / max(float(np.percentile(g, 99)), 1e-9)
 
 
 def iter_frames(cap, info: VideoInfo) -> Iterator[tuple[np.ndarray, float]]:
@@ -105,11 +187,20 @@ def iter_frames(cap, info: VideoInfo) -> Iterator[tuple[np.ndarray, float]]:
     (Frames from a capture opened with ``grey=False`` are converted to grey too.)"""
     import cv2
 
+    k = 0
     while True:
         ok, frame = cap.read()
         if not ok or frame is None:
             return
         t_ms = cap.get(cv2.CAP_PROP_POS_MSEC)
+        if info.times is not None:
+            if k >= info.times.size:
+                raise InputError(f"the video holds more frames than the {info.times.size} declared times",
+                                 file=info.path, key="--timestamps", expected="one time per frame")
+            t_ms = 1000.0 * float(info.times[k])
+        elif info.fps_declared:
+            t_ms = 1000.0 * k / info.fps_declared
+        k += 1
         try:
             grey = _grey(frame, info)
         except cv2.error:
@@ -260,8 +351,10 @@ def sequence_files(source: str | Path) -> list[Path] | None:
     return None
 
 
-def read_timestamps_csv(path: str | Path, files: list[Path]) -> np.ndarray:
-    """Frame times from a CSV: a ``t_s`` column, matched by a ``file`` column if there is one, else in order."""
+def read_timestamps_csv(path: str | Path, files: list[Path] | None) -> np.ndarray:
+    """Frame times from a CSV: a ``t_s`` column, matched by a ``file`` column if there is one, else in order.
+
+    ``files`` None (a video): the times in order, their count checked against the frames later."""
     import csv
 
     path = Path(path)
@@ -287,6 +380,8 @@ def read_timestamps_csv(path: str | Path, files: list[Path]) -> np.ndarray:
         order.append(t)
         if fi is not None and fi < len(r):
             times[Path(r[fi].strip()).name] = t
+    if files is None:
+        return np.asarray(order, float)
     if fi is not None:
         missing = [f.name for f in files if f.name not in times]
         if missing:
@@ -322,7 +417,8 @@ class ImageSequence:
 
         if self._cur is None:
             return False, None
-        img = cv2.imread(str(self.files[self._cur]), cv2.IMREAD_GRAYSCALE)
+        # as stored: 16-bit and colour kept (converted to grey at depth by iter_frames)
+        img = cv2.imread(str(self.files[self._cur]), cv2.IMREAD_UNCHANGED)
         return img is not None, img
 
     def read(self):
@@ -355,21 +451,43 @@ class ImageSequence:
         pass
 
 
-def open_source(source: str | Path, *, fps: float | None = None, timestamps: str | Path | None = None):
+def open_source(source: str | Path, *, fps: float | None = None, timestamps: str | Path | None = None,
+                bayer: str = "auto"):
     """A video file or an image sequence -> ``(capture, VideoInfo)``; frames via :func:`iter_frames`.
 
     An image sequence (a folder, or a pattern such as ``frame_%05d.png``) takes
     its frame times from ``timestamps`` (a CSV with a ``t_s`` column), else
     from a ``timestamps.csv`` beside the images, else from ``fps``; without
-    any it is refused (a sequence carries no times of its own).
+    any it is refused (a sequence carries no times of its own). A video file
+    takes ``timestamps`` (one ``t_s`` per frame, in order) or ``fps`` in place
+    of its container's times when given (a high-speed camera that wrote a
+    playback rate); the first frame sets the Bayer pattern and the bit depth
+    (:func:`inspect_first_frame`).
     """
-    import cv2
-
     files = sequence_files(source)
     if files is None:
         if not Path(source).exists() and "%" not in str(source):
             raise InputError("no such video file or image folder", file=source)
-        return open_video(source)
+        cap, info = open_video(source)
+        if timestamps is not None:
+            info.times = read_timestamps_csv(timestamps, None)
+            info.timestamps_from = "csv"
+        elif fps is not None:
+            if not fps > 0:
+                raise InputError(f"bad frame rate {fps}", key="--fps", expected="frames per second > 0")
+            info.fps_declared = float(fps)
+            info.timestamps_from = "fps"
+        inspect_first_frame(cap, info, bayer)
+        return cap, info
+    cap, info = _open_sequence(source, files, fps, timestamps)
+    inspect_first_frame(cap, info, bayer)
+    return cap, info
+
+
+def _open_sequence(source: str | Path, files: list[Path], fps: float | None, timestamps: str | Path | None):
+    """An image sequence and its frame times (see :func:`open_source`)."""
+    import cv2
+
     side = Path(timestamps) if timestamps is not None else files[0].parent / "timestamps.csv"
     if timestamps is not None or side.is_file():
         t_s = read_timestamps_csv(side, files)
@@ -380,10 +498,10 @@ def open_source(source: str | Path, *, fps: float | None = None, timestamps: str
     else:
         raise InputError("an image sequence carries no frame times", file=source,
                          expected="--fps RATE, or a timestamps.csv (file,t_s) beside the images, or --timestamps CSV")
-    first = cv2.imread(str(files[0]), cv2.IMREAD_GRAYSCALE)
+    first = cv2.imread(str(files[0]), cv2.IMREAD_UNCHANGED)
     if first is None:
         raise InputError("cannot read the first image", file=files[0])
-    h, w = first.shape
+    h, w = first.shape[:2]
     info = VideoInfo(str(source), w, h, len(files), float(fps or 0.0), f"images/{files[0].suffix[1:].lower()}",
                      count_exact=True)
     info.timestamps_from = how

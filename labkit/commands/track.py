@@ -33,9 +33,19 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--min-contrast", type=float, metavar="C",
                         help="darkness (tray - robot) / tray a robot must have (default: from the pixel noise)")
     parser.add_argument("--fps", type=float, metavar="RATE",
-                        help="frame rate of an image sequence without a timestamps.csv")
+                        help="frame rate: of an image sequence without a timestamps.csv, or replacing a video's "
+                             "own frame times (a high-speed camera that wrote its playback rate)")
     parser.add_argument("--timestamps", metavar="CSV",
-                        help="frame times of an image sequence (a CSV with a t_s column, optionally file)")
+                        help="frame times (a CSV with a t_s column, optionally file): of an image sequence, or "
+                             "one per frame replacing a video's own")
+    parser.add_argument("--robot-size-mm", metavar="L,W",
+                        help="the robot's length and width (mm; default the 5 x 2 mm chip), or 'learn' to assume "
+                             "nothing and learn its outline from the first clear frames")
+    parser.add_argument("--max-speed-mm-s", type=float, metavar="V",
+                        help="fastest the robot can go (a farther candidate is an occlusion); default one body "
+                             "length per frame interval")
+    parser.add_argument("--bayer", default="auto", metavar="PATTERN",
+                        help="raw Bayer frames: auto (detected), none, RGGB, BGGR, GRBG or GBRG (demosaiced to grey)")
     parser.add_argument("--preview", type=int, metavar="FRAME",
                         help="only draw frame FRAME (0-based) with the segmentation and the ROI into a PNG "
                              "(--preview-png), to see why a video fails")
@@ -61,7 +71,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     import numpy as np
 
     from labkit.analysis.tracking.pipeline import track_file
-    from labkit.analysis.tracking.tracker import ROBOT_LENGTH_MM, scale_given
+    from labkit.analysis.tracking.tracker import ROBOT_LENGTH_MM, robot_size, scale_given
 
     scale = None
     if args.mm_per_px is not None:
@@ -70,7 +80,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         scale = scale_given(args.mm_per_px, args.mm_per_px_std)
     elif args.scale_bar is not None:
         scale = _scale_bar(args.scale_bar)
-    length = args.robot_length_mm if args.robot_length_mm is not None else ROBOT_LENGTH_MM
+    length = args.robot_length_mm
+    if length is None:
+        length = robot_size(args.robot_size_mm).length_mm or ROBOT_LENGTH_MM
     if not length > 0:
         raise InputError(f"bad robot length {length}", key="--robot-length-mm", expected="a length > 0 mm")
     if args.fps is not None and not args.fps > 0:
@@ -78,14 +90,17 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.min_contrast is not None and not 0 < args.min_contrast < 1:
         raise InputError(f"bad contrast {args.min_contrast}", key="--min-contrast",
                          expected="a share between 0 and 1, e.g. 0.1")
+    if args.max_speed_mm_s is not None and not args.max_speed_mm_s > 0:
+        raise InputError(f"bad speed limit {args.max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
     common = dict(roi=args.roi, mask=args.mask, min_contrast=args.min_contrast, fps=args.fps,
-                  timestamps=args.timestamps)
+                  timestamps=args.timestamps, bayer=args.bayer, robot_size_mm=args.robot_size_mm)
     if args.preview is not None:
         return _preview(args, scale, common)
     if args.preview_png is not None:
         raise InputError("--preview-png needs --preview FRAME", key="--preview-png")
     res = track_file(args.video, out=args.out, overlay=args.overlay, force=args.force, scale=scale,
-                     robot_length_mm=length, window_s=args.window_s, quiet=args.quiet, **common)
+                     robot_length_mm=length, max_speed_mm_s=args.max_speed_mm_s, window_s=args.window_s,
+                     quiet=args.quiet, **common)
     track, speed, result = res.track, res.speed, res.summary
     if not args.json:
         lo, hi = speed.speed_ci_mm_s
