@@ -50,6 +50,9 @@ def summary(track: Track, speed: SpeedResult | None) -> dict[str, Any]:
             out["warnings"].append(f"{out['outliers_dropped']} position(s) far off the smoothed path (> 8 robust "
                                    f"sigmas) left out of the speed")
         out["change_points_s"] = list(speed.meta.get("change_points_s", []))
+        if "budget" in speed.meta:
+            out["error_budget"] = speed.meta["budget"]
+            out["warnings"].extend(speed.meta.get("budget_warnings", []))
         unc = speed.meta.get("uncertainty", {})
         out["speed_uncertainty"] = {k: unc[k] for k in ("speed_std_mm_s", "noise_part_mm_s", "timestamp_part_mm_s",
                                                          "scale_part_mm_s", "noise_bias_mm_s", "position_noise_mm",

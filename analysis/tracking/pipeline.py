@@ -45,7 +45,8 @@ def output_paths(out: str | Path | None) -> list[Path]:
 
 def track_file(source: str | Path, *, out: str | Path | None = None, overlay: str | Path | None = None,
                force: bool = False, scale: Scale | None = None, mm_per_px: float | None = None,
-               window_s: float | None = None, quiet: bool = True, **track_kw: Any) -> TrackResult:
+               window_s: float | None = None, quiet: bool = True, line_time_s: float | None = None,
+               line_time_std_s: float = 0.0, timestamp_std_s: float | None = None, **track_kw: Any) -> TrackResult:
     """Track ``source`` (a video, an image folder or a ``frame_%05d.png`` pattern) and write the results.
 
     Parameters
@@ -61,6 +62,9 @@ def track_file(source: str | Path, *, out: str | Path | None = None, overlay: st
         Passed to :func:`~labkit.analysis.tracking.tracker.track_video` (``roi``,
         ``mask``, ``robot_length_mm``, ``min_contrast``, ``fps``, ``timestamps``,
         ...) and :func:`~labkit.analysis.tracking.speed.track_speed`.
+    line_time_s, line_time_std_s, timestamp_std_s:
+        Declared camera properties for the error budget (see
+        :func:`~labkit.analysis.tracking.speed.track_speed`).
 
     Returns
     -------
@@ -82,7 +86,8 @@ def track_file(source: str | Path, *, out: str | Path | None = None, overlay: st
     if overlay is not None and outs:
         check_outputs([*outs, overlay], force=True, key="--overlay")      # not the same file twice
     track = track_video(source, scale=scale, mm_per_px=mm_per_px, quiet=quiet, **track_kw)
-    speed = track_speed(track, window_s=window_s)
+    speed = track_speed(track, window_s=window_s, line_time_s=line_time_s, line_time_std_s=line_time_std_s,
+                        timestamp_std_s=timestamp_std_s)
     result = summary(track, speed)
     jobs: list[tuple[str, Path, Callable[[Path], Any]]] = []
     if outs:

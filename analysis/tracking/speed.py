@@ -58,6 +58,10 @@ quadrature:
    scatter also shows in the residuals, so it is counted on the safe side.)
 4. **Scale** -- the image scale's relative uncertainty times the speed.
 
+:func:`track_speed` adds the systematic parts a track shows or its user declares (scale across
+the field, illumination, rolling shutter, the clock's accuracy), each by name:
+:mod:`~labkit.analysis.tracking.budget`.
+
 The noise's bias on ``|v|`` (``E|v + e| > |v|``) is subtracted; where the
 speed is within three noise sigmas of zero (a robot vibrating in place) the
 correction is ``sqrt(|v|^2 - var)`` and counts as uncertain by its whole size.
@@ -429,6 +433,7 @@ def speed_uncertainty(t: np.ndarray, z: np.ndarray, z_s: np.ndarray, v: np.ndarr
             "position_noise_mm": [float(np.sqrt(sig2[0])), float(np.sqrt(sig2[1]))],
             "timestamp_jitter_s": sig_t, "residual_lag1_corr": rho1, "noise_ar1": phi,
             "sample_speed_std_mm_s": np.sqrt(var_tot),
+            "timestamp_sensitivity_mm_s2": float(np.sqrt(np.sum((g * v).sum(axis=1) ** 2))),
             "max_lag": max_lag, "residual_dof": dof}
 
 
@@ -573,13 +578,57 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
         moving_s=moving_s, moving_stretches_s=_stretches(t, moving))
 
 
-def track_speed(track, **kw) -> SpeedResult:
-    """:func:`speed_analysis` of a :class:`labkit.analysis.tracking.tracker.Track`.
+def _track_xy(track, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Image positions -> world mm (as :attr:`Track.x_mm`, :attr:`Track.y_mm`)."""
+    return (u + 0.5) * track.mm_per_px, (track.frame_size[1] - 0.5 - v) * track.mm_per_px
 
-    The track's scale uncertainty is included.
+
+def track_speed(track, *, line_time_s: float | None = None, line_time_std_s: float = 0.0,
+                timestamp_std_s: float | None = None, budget: bool = True, **kw) -> SpeedResult:
+    """:func:`speed_analysis` of a :class:`labkit.analysis.tracking.tracker.Track`, with its error budget.
+
+    The interval holds the random part and every systematic part of
+    :mod:`~labkit.analysis.tracking.budget` (scale, scale across the field,
+    illumination, rolling shutter, timestamps), each in ``meta["budget"]``.
+    ``line_time_s``: a rolling shutter's delay per row (the frame times are
+    corrected at the robot's row), uncertain by ``line_time_std_s``;
+    ``timestamp_std_s``: the clock's declared accuracy per frame.
+    ``budget=False``: the random part and the scale only.
     """
+    from labkit.analysis.tracking.budget import error_budget
+
     rel = 0.0
     if track.scale is not None and track.scale.mm_per_px > 0:
         rel = track.scale.mm_per_px_std / track.scale.mm_per_px
-    return speed_analysis(track.t_s, track.x_mm, track.y_mm, track.heading_rad, track.quality,
-                          mm_per_px_rel_std=rel, **kw)
+    if line_time_s is not None and not (line_time_s >= 0 and line_time_std_s >= 0):
+        raise InputError(f"bad line time {line_time_s}", key="--line-time-us", expected="a delay per row >= 0")
+
+    def run(lt: float | None, u: np.ndarray, v: np.ndarray, heading: Any = None, **extra: Any) -> SpeedResult:
+        t = track.t_s + track.v_px * lt if lt else track.t_s
+        x, y = _track_xy(track, u, v)
+        return speed_analysis(t, x, y, heading, track.quality, mm_per_px_rel_std=rel, **{**kw, **extra})
+
+    sp = run(line_time_s, track.u_px, track.v_px, track.heading_rad)
+    if not budget:
+        return sp
+    same = {"window_s": sp.window_s}
+    alt = float("nan")
+    if track.u_alt_px is not None:
+        alt = run(line_time_s, track.u_alt_px, track.v_alt_px, **same).mean_speed_mm_s
+    rs_part = rs_bound = 0.0
+    if line_time_s is not None and line_time_std_s > 0:
+        rs_part = abs(run(line_time_s + line_time_std_s, track.u_px, track.v_px, **same).mean_speed_mm_s
+                      - sp.mean_speed_mm_s)
+    if line_time_s is None and track.frames > 2:
+        longest = float(np.median(np.diff(track.t_s))) / max(track.frame_size[1], 1)
+        rs_bound = abs(run(longest, track.u_px, track.v_px, **same).mean_speed_mm_s - sp.mean_speed_mm_s)
+    eb = error_budget(track, sp, alt_speed_mm_s=alt, rs_bound_mm_s=rs_bound, line_time_s=line_time_s,
+                      rs_part_mm_s=rs_part, timestamp_std_s=timestamp_std_s)
+    zq = NormalDist().inv_cdf(0.5 + sp.ci_level / 2)
+    s = sp.mean_speed_mm_s
+    sp.speed_ci_mm_s = (max(s - zq * eb.total_std_mm_s, 0.0), s + zq * eb.total_std_mm_s)
+    k = sp.moving_speed_mm_s / s if s > 0 else float("nan")
+    sp.moving_speed_ci_mm_s = (sp.speed_ci_mm_s[0] * k, sp.speed_ci_mm_s[1] * k)
+    sp.meta["budget"] = eb.as_dict()
+    sp.meta["budget_warnings"] = eb.warnings
+    return sp

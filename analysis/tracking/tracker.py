@@ -16,7 +16,8 @@ Method, per frame (the functions' docstrings say why):
    light by Otsu's threshold on that window; a window whose dark/light contrast
    is below the threshold holds no robot.
 3. Identity: the dark component of the robot's expected area (from the scale
-   and the 5 x 2 mm body, then from the first confident frames) and, at
+   and the declared body, by default the 5 x 2 mm chip, then from the first
+   confident frames) and, at
    acquisition, elongated shape, nearest the constant-velocity prediction, is
    the robot. A candidate beyond what the robot can walk since the last good
    frame (``max_speed_mm_s`` plus jitter) is an occlusion: the frame is lost
@@ -89,6 +90,11 @@ class Track:
     length_px: float = float("nan")
     length_px_std: float = float("nan")
     meta: dict = field(default_factory=dict)
+    # per frame: the position without the flat-field model, and the outline's length (moments, px):
+    # what the error budget (:mod:`~labkit.analysis.tracking.budget`) measures lighting and scale from
+    u_alt_px: np.ndarray | None = None
+    v_alt_px: np.ndarray | None = None
+    major_px: np.ndarray | None = None
 
     @property
     def frames(self) -> int:
@@ -192,6 +198,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     us: list[float] = []
     vs: list[float] = []
     ths: list[float] = []
+    alts: list[tuple[float, float, float]] = []
     qs: list[int] = []
     areas: list[float] = []
     lengths: list[float] = []
@@ -203,6 +210,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     unlike = 0
     area_hist: list[float] = []
     area_ref = expected_area_px
+    area_lo, area_hi = 0.8, 1.25     # a whole robot's area relative to its reference (widened for a soft body)
     # with only the expected area (from the scale) the tolerance is wide: blur and legs vary it
     tol_first = (0.5, 2.0)
     major = None
@@ -212,6 +220,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     raw_area: list[float] = []     # each found component's area (px), for re-checking the first frames
 
     frame_dts: list[float] = []
+    frame_dt = [0.0]          # their median (updated as they come)
 
     def gate(dt: float) -> float | None:
         if major is None or dt > reacquire_s:
@@ -222,13 +231,14 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
             vmax = max_speed_body_s * major
         else:
             # one body length per frame interval: the physical limit of frame-to-frame identity
-            vmax = major / (float(np.median(frame_dts)) if frame_dts else max(dt, 1e-6))
+            vmax = major / (frame_dt[0] if frame_dts else max(dt, 1e-6))
         # jitter of a vibrating robot (a tenth of its length) + what it can walk in dt
         return 3.0 + 0.1 * major + vmax * dt
 
     for k, (frame, t) in enumerate(frames):
         if ts and len(frame_dts) < 15 and t > ts[-1]:
             frame_dts.append(t - ts[-1])
+            frame_dt[0] = float(np.median(frame_dts))
         img = frame[ry:ry + rh, rx:rx + rw] if roi else frame
         blob = None
         pred = None
@@ -247,7 +257,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                     break
                 blob, touched = finder.find(img, x0, y0, x1, y1, pred=pred, area_ref=area_ref,
                                             keep_weights=len(lengths) < 100 and k % 3 == 0, gate_px=g,
-                                            area_tol=tol)
+                                            area_tol=tol, alt=k % 4 == 0)
                 if blob is None or not touched:
                     break
         if blob is None:
@@ -271,20 +281,23 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
         if blob is None:
             for column in (us, vs, ths, areas):
                 column.append(np.nan)
+            alts.append((np.nan, np.nan, np.nan))
             qs.append(QUALITY_LOST)
             if last is not None and t - last[2] > 1.0:
                 vel = (0.0, 0.0)
         else:
             q = QUALITY_OK
-            if blob.border or (area_ref and not 0.8 < blob.area / area_ref < 1.25):
+            if blob.border or (area_ref and not area_lo < blob.area / area_ref < area_hi):
                 q = QUALITY_DEGRADED
-            elif blob.masked and cov_hist and abs(blob.coverage / float(np.median(cov_hist[-25:])) - 1) > 0.01:
+            elif blob.masked and cov_hist and abs(blob.coverage / float(np.median(cov_hist[-25:])) - 1) > \
+                    max(0.01, 5 * _log_spread(cov_hist[-25:])):
                 # touching static dust (or the rim) and missing part of its darkness: partly hidden by it
                 q = QUALITY_DEGRADED
             if q == QUALITY_OK and not blob.masked:
                 cov_hist.append(blob.coverage)
             us.append(blob.u + rx)
             vs.append(blob.v + ry)
+            alts.append((blob.u_alt + rx, blob.v_alt + ry, blob.major_px))
             ths.append(blob.theta)
             areas.append(blob.coverage)
             qs.append(q)
@@ -301,11 +314,15 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 area_hist.append(blob.area)
                 if len(area_hist) <= 25 or len(area_hist) % 10 == 0:
                     area_ref = float(np.median(area_hist[-25:]))
+                    if len(area_hist) >= 5:
+                        # the area's own variation (a soft body curls and stretches) widens the tolerance
+                        spread = _log_spread(area_hist[-25:])
+                        area_lo, area_hi = min(0.8, np.exp(-5 * spread)), max(1.25, np.exp(5 * spread))
                     if len(area_hist) == 5:
                         # the first confident frames now define the robot: re-check them
                         qs_a = np.asarray(qs)
                         for j in np.flatnonzero(qs_a == QUALITY_OK):
-                            if not 0.8 < raw_area[j] / area_ref < 1.25:
+                            if not area_lo < raw_area[j] / area_ref < area_hi:
                                 qs[j] = QUALITY_DEGRADED
                 major = blob.major_px if major is None else 0.9 * major + 0.1 * blob.major_px
                 if q == QUALITY_OK:
@@ -332,7 +349,18 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
             progress.update(1)
     lengths_a = np.asarray(lengths, float)
     lengths_a = lengths_a[np.isfinite(lengths_a)]
+    alt = np.asarray(alts, float).reshape(-1, 3)
+    # the lighting model's shift of the position is smooth along the path: measured every 4th frame
+    # (a second measurement costs as much as the first), interpolated in time between
+    t_a = np.asarray(ts, float)
+    for col, pos in ((0, us), (1, vs)):
+        p = np.asarray(pos, float)
+        shift = alt[:, col] - p
+        known = np.isfinite(shift)
+        if known.sum() >= 1:
+            alt[:, col] = p + np.interp(t_a, t_a[known], shift[known])
     return dict(t_s=np.asarray(ts, float), u_px=np.asarray(us, float), v_px=np.asarray(vs, float),
+                u_alt=alt[:, 0], v_alt=alt[:, 1], major_px=alt[:, 2],
                 theta=np.asarray(ths, float), quality=np.asarray(qs, np.int8), area_px=np.asarray(areas, float),
                 length_px=float(np.median(lengths_a)) if lengths_a.size else float("nan"),
                 length_px_std=(float(1.2533 * np.std(lengths_a) / np.sqrt(lengths_a.size))
@@ -340,6 +368,14 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 n_length=int(lengths_a.size), best_contrast=finder.best_contrast,
                 robot_contrast=float(np.median(contrasts)) if contrasts else float("nan"),
                 ambiguous=finder.ambiguous, jumps=jumps, unlike=unlike, min_contrast=seg.min_contrast, noise=seg.noise)
+
+
+def _log_spread(values: list[float]) -> float:
+    """Robust sigma of the logarithms (a relative spread); 0 for fewer than 5 values."""
+    if len(values) < 5:
+        return 0.0
+    la = np.log(np.maximum(np.asarray(values, float), 1e-12))
+    return 1.4826 * float(np.median(np.abs(la - np.median(la))))
 
 
 def _resized(seg: Segmentation, width: int, height: int, body_width_px: float) -> Segmentation:
@@ -479,10 +515,12 @@ class PreparedScene:
 
 def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str | None = None, mask: Any = None,
                   scale: Scale | None = None, min_contrast: float | None = None,
-                  static_mask: bool = True, size: RobotSize | None = None) -> PreparedScene:
+                  static_mask: bool = True, size: RobotSize | None = None,
+                  samples: list[np.ndarray] | None = None) -> PreparedScene:
     """Region of interest, mask, static scene (rim, dust, flat field, noise) and contrast threshold.
 
-    Reads sample frames from ``cap`` and rewinds it (see :func:`track_video`)."""
+    Reads sample frames from ``cap`` and rewinds it (see :func:`track_video`), unless ``samples``
+    are given (frames spread over the clip, already decoded)."""
     from labkit.analysis.tracking.video_io import load_mask, parse_roi, read_sample_frames
 
     W, H = info.width, info.height
@@ -498,7 +536,7 @@ def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str |
     with_objects = valid
     warnings: list[str] = []
     if static_mask:
-        static = background_model(read_sample_frames(cap, info, 15), seg)
+        static = background_model(samples if samples is not None else read_sample_frames(cap, info, 15), seg)
         seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast, noise=static.noise)
         flat = static.flat
         if static.rim is not None:
@@ -600,11 +638,12 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         Raises :class:`InputError` if the source is missing, unreadable, empty,
         or no robot is found (the message gives the contrast found).
     """
-    from labkit.analysis.tracking.video_io import check_timestamps, iter_frames, open_source
+    from labkit.analysis.tracking.video_io import SpooledFrames, check_timestamps, iter_frames, open_source, spools
     from labkit.progress import progress as bar
 
     cap, info = open_source(source, fps=fps, timestamps=timestamps, bayer=bayer)
     warnings: list[str] = []
+    spool = None
     if info.bayer:
         warnings.append(f"raw Bayer frames ({info.bayer}{', detected' if bayer == 'auto' else ''}): demosaiced "
                         f"to grey")
@@ -619,8 +658,12 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
             robot_length_mm = size.length_mm or ROBOT_LENGTH_MM
         if max_speed_mm_s is not None and not max_speed_mm_s > 0:
             raise InputError(f"bad speed limit {max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
+        # a decoded video is decoded once, into a spool: samples and tracking read it (no seeking)
+        spool = SpooledFrames(cap, info) if spools(info) else None
+        frames = spool if spool is not None else iter_frames(cap, info)
         scene = prepare_scene(cap, info, roi=roi, mask=mask, scale=scale, min_contrast=min_contrast,
-                              static_mask=static_mask, size=size)
+                              static_mask=static_mask, size=size,
+                              samples=spool.samples(15) if spool is not None else None)
         roi_t, valid, seg, static, flat = scene.roi, scene.valid, scene.seg, scene.static, scene.flat
         warnings.extend(scene.warnings)
         expected = size.area_mm2 / scale.mm_per_px ** 2 if scale is not None and size.area_mm2 else None
@@ -628,13 +671,15 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         # without a scale a declared limit is counted in body lengths
         body_s = max_speed_mm_s / robot_length_mm if max_speed_mm_s and vmax is None else None
         with bar(info.frame_count or None, "track", quiet=quiet, unit="frame") as pb:
-            raw = track_frames(iter_frames(cap, info), (W, H), roi=roi_t if roi is not None else None,
+            raw = track_frames(frames, (W, H), roi=roi_t if roi is not None else None,
                                valid=valid, flat=flat, seg=seg, margin_px=margin_px,
                                expected_area_px=expected, max_speed_px_s=vmax, max_speed_body_s=body_s,
                                progress=pb)
             finish_progress(pb, int(raw["t_s"].size), info.frame_count)
     finally:
         cap.release()
+        if spool is not None:
+            spool.close()
     if (np.all(raw["quality"] == QUALITY_LOST) and static is not None and static.object_boxes
             and scale is not None and raw["t_s"].size):
         # nothing moved: a static object may still be the robot vibrating in place (a drive that
@@ -659,7 +704,7 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
     if info.timestamps_from != "container":
         ts_source = info.timestamps_from
     if faulty.any():
-        for key in ("u_px", "v_px", "theta", "area_px"):
+        for key in ("u_px", "v_px", "theta", "area_px", "u_alt", "v_alt", "major_px"):
             raw[key][faulty] = np.nan
         raw["quality"][faulty] = QUALITY_LOST
     if np.all(raw["quality"] == QUALITY_LOST):
@@ -695,7 +740,8 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
     track = Track(t_s=t_s, u_px=raw["u_px"], v_px=raw["v_px"], heading_rad=heading, quality=raw["quality"],
                   area_px=raw["area_px"], frame_size=(W, H), roi=roi_t, source=str(source),
                   timestamps_source=ts_source, heading_sense=sense, length_px=raw["length_px"],
-                  length_px_std=raw["length_px_std"],
+                  length_px_std=raw["length_px_std"], u_alt_px=raw["u_alt"], v_alt_px=raw["v_alt"],
+                  major_px=raw["major_px"],
                   meta={"fps_nominal": info.fps_nominal, "fourcc": info.fourcc,
                         "timestamp_faults": int(faulty.sum()), "undecodable_frames": info.undecodable,
                         "static_mask_px": int(static.rim.sum()) if static is not None and static.rim is not None

@@ -33,6 +33,7 @@ class VideoInfo:
     timestamps_from: str = "container"   # "container", or (declared) "csv" / "fps"
     bayer: str | None = None   # raw Bayer pattern (RGGB, BGGR, GRBG, GBRG) demosaiced to grey
     gain: float | None = None  # deeper than 8 bits: frames scaled by this to float32 (the tray ~200), not cut
+    luma: bool = False         # FFmpeg hands over the decoded luma plane (no colour conversion at all)
     times: np.ndarray | None = None   # declared frame times (a CSV) that replace a video's own
     fps_declared: float | None = None  # a declared rate that replaces a video's own times (frame k at k / rate)
 
@@ -70,12 +71,45 @@ def open_video(path: str | Path, *, grey: bool = True):
         # 3x faster than FFmpeg's decode + BGR conversion + grey conversion, and the container
         # still gives each packet's timestamp
         info.raw_jpeg = bool(cap.set(cv2.CAP_PROP_FORMAT, -1))
+    elif grey:
+        _try_luma(cap, info)
     if path.suffix.lower() in (".mkv", ".webm", ".mka") or info.frame_count <= 0:
         # Matroska stores no frame count: OpenCV estimates it from the duration and the time
         # base (1967 "frames" for a 60-frame file with a 1 ms base); count the packets instead
         info.frame_count = count_packets(path)
         info.count_exact = True
     return cap, info
+
+
+def _read(cap, info: VideoInfo):
+    """``cap.read()``; OpenCV's per-frame note that it passes a YUV frame's luma plane on is silenced."""
+    if not info.luma:
+        return cap.read()
+    import cv2
+
+    log = cv2.utils.logging
+    level = log.getLogLevel()
+    log.setLogLevel(log.LOG_LEVEL_ERROR)
+    try:
+        return cap.read()
+    finally:
+        log.setLogLevel(level)
+
+
+def _try_luma(cap, info: VideoInfo) -> None:
+    """Ask FFmpeg for frames without colour conversion: a planar YUV frame then arrives as its luma
+    plane (H x W), the grey image itself, without the BGR conversion and back. Kept only if the first
+    frame comes out so; the capture is rewound either way."""
+    import cv2
+
+    if not cap.set(cv2.CAP_PROP_CONVERT_RGB, 0):
+        return
+    info.luma = True
+    ok, frame = _read(cap, info)
+    if not (ok and frame is not None and frame.ndim == 2 and frame.shape == (info.height, info.width)):
+        info.luma = False
+        cap.set(cv2.CAP_PROP_CONVERT_RGB, 1)
+    cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
 
 
 def count_packets(path: str | Path) -> int:
@@ -163,7 +197,7 @@ def inspect_first_frame(cap, info: VideoInfo, bayer: str = "auto") -> None:
         if key not in ("AUTO", "NONE"):
             raise InputError("a Motion-JPEG video holds no raw Bayer frames", file=info.path, key="--bayer")
         return
-    ok, frame = cap.read()
+    ok, frame = _read(cap, info)
     _rewind(cap, info)
     if not ok or frame is None or frame.size == 0:
         return
@@ -189,7 +223,7 @@ def iter_frames(cap, info: VideoInfo) -> Iterator[tuple[np.ndarray, float]]:
 
     k = 0
     while True:
-        ok, frame = cap.read()
+        ok, frame = _read(cap, info)
         if not ok or frame is None:
             return
         t_ms = cap.get(cv2.CAP_PROP_POS_MSEC)
@@ -231,6 +265,59 @@ def check_timestamps(t_s: np.ndarray, fps_nominal: float, path: str) -> tuple[np
     return t_s, "container", faulty
 
 
+class SpooledFrames:
+    """Every frame decoded once, in order, into a temporary file; read back as often as needed.
+
+    An inter-frame codec (H.264, MPEG-4) cannot seek without decoding from the
+    last key frame, so sampling 15 frames spread over a clip by seeking costs
+    several decodings of the whole clip. Spooling decodes each frame once: the
+    static scene's samples and the tracking pass then read the spool (the
+    operating system's page cache; the file is removed on :meth:`close`).
+    """
+
+    def __init__(self, cap, info: VideoInfo):
+        import tempfile
+
+        self.info = info
+        self.times: list[float] = []
+        self._fh = tempfile.TemporaryFile(prefix="labkit-spool-")
+        self.dtype: np.dtype = np.dtype(np.uint8)
+        for grey, t in iter_frames(cap, info):
+            if not self.times:
+                self.dtype = grey.dtype
+            self._fh.write(np.ascontiguousarray(grey, self.dtype).tobytes())
+            self.times.append(t)
+        self._fh.flush()
+        self._frames = (np.memmap(self._fh, dtype=self.dtype, mode="r", shape=(len(self.times), info.height,
+                                                                                info.width))
+                        if self.times else np.zeros((0, info.height, info.width), self.dtype))
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def samples(self, count: int) -> list[np.ndarray]:
+        """Up to ``count`` frames spread evenly over the clip."""
+        n = len(self)
+        if n == 0:
+            return []
+        idx = np.unique(np.linspace(0, n - 1, min(count, n)).round().astype(int))
+        return [np.asarray(self._frames[i]) for i in idx]
+
+    def __iter__(self) -> Iterator[tuple[np.ndarray, float]]:
+        for k, t in enumerate(self.times):
+            yield np.asarray(self._frames[k]), t
+
+    def close(self) -> None:
+        self._frames = np.zeros((0, self.info.height, self.info.width), self.dtype)
+        self._fh.close()
+
+
+def spools(info: VideoInfo) -> bool:
+    """Whether a source is read through :class:`SpooledFrames`: a decoded video (Motion-JPEG's own
+    packets and image files are read where they lie, cheaply)."""
+    return not info.raw_jpeg and not info.fourcc.startswith("images/")
+
+
 def read_sample_frames(cap, info: VideoInfo, count: int) -> list[np.ndarray]:
     """Up to ``count`` grey frames spread over the video (by seeking), then rewind."""
     import cv2
@@ -261,7 +348,7 @@ def read_sample_frames(cap, info: VideoInfo, count: int) -> list[np.ndarray]:
         return out
     for idx in want:
         cap.set(cv2.CAP_PROP_POS_FRAMES, int(idx))
-        ok, frame = cap.read()
+        ok, frame = _read(cap, info)
         if ok and frame is not None:
             g = _grey(frame, info)
             if g is not None:
@@ -280,6 +367,8 @@ def _rewind(cap, info: VideoInfo) -> None:
         cap.open(info.path, cv2.CAP_FFMPEG)
         if info.raw_jpeg:
             cap.set(cv2.CAP_PROP_FORMAT, -1)
+        if info.luma:
+            cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
     else:
         cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
 

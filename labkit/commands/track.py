@@ -44,6 +44,13 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--max-speed-mm-s", type=float, metavar="V",
                         help="fastest the robot can go (a farther candidate is an occlusion); default one body "
                              "length per frame interval")
+    parser.add_argument("--line-time-us", type=float, metavar="US",
+                        help="rolling shutter: the delay between rows (us; 0 = global shutter); frame times are "
+                             "corrected at the robot's row. Undeclared, the error budget allows for any shutter")
+    parser.add_argument("--line-time-std-us", type=float, default=0.0, metavar="US",
+                        help="standard uncertainty of --line-time-us (default 0)")
+    parser.add_argument("--timestamp-std-ms", type=float, metavar="MS",
+                        help="the camera clock's accuracy per frame (ms), if worse than the frame times' own scatter")
     parser.add_argument("--bayer", default="auto", metavar="PATTERN",
                         help="raw Bayer frames: auto (detected), none, RGGB, BGGR, GRBG or GBRG (demosaiced to grey)")
     parser.add_argument("--preview", type=int, metavar="FRAME",
@@ -98,7 +105,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         return _preview(args, scale, common)
     if args.preview_png is not None:
         raise InputError("--preview-png needs --preview FRAME", key="--preview-png")
-    res = track_file(args.video, out=args.out, overlay=args.overlay, force=args.force, scale=scale,
+    for key, val in (("--line-time-us", args.line_time_us), ("--line-time-std-us", args.line_time_std_us),
+                     ("--timestamp-std-ms", args.timestamp_std_ms)):
+        if val is not None and not val >= 0:
+            raise InputError(f"bad {key} {val}", key=key, expected="a time >= 0")
+    declared = dict(line_time_s=None if args.line_time_us is None else 1e-6 * args.line_time_us,
+                    line_time_std_s=1e-6 * args.line_time_std_us,
+                    timestamp_std_s=None if args.timestamp_std_ms is None else 1e-3 * args.timestamp_std_ms)
+    res = track_file(args.video, out=args.out, overlay=args.overlay, force=args.force, scale=scale, **declared,
                      robot_length_mm=length, max_speed_mm_s=args.max_speed_mm_s, window_s=args.window_s,
                      quiet=args.quiet, **common)
     track, speed, result = res.track, res.speed, res.summary
@@ -119,6 +133,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         vx, vy = speed.mean_velocity_mm_s
         print(f"  mean velocity ({vx:.4g}, {vy:.4g}) mm/s, path {speed.path_length_mm:.4g} mm, "
               f"turning {np.degrees(speed.mean_turn_rate_rad_s):.3g} deg/s")
+        for part in speed.meta.get("budget", {}).get("parts", []):
+            print(f"  +- {part['std_mm_s']:.2g} mm/s {part['name']} ({part['kind']}, {part['source']})")
         c, thr, nz = (track.meta.get(k, float("nan")) for k in ("robot_contrast", "min_contrast", "noise"))
         print(f"  contrast: robot {100 * c:.1f} % darker than the tray; threshold {100 * thr:.1f} % "
               f"(pixel noise {100 * nz:.2f} %)")
