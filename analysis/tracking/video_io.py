@@ -266,34 +266,52 @@ def check_timestamps(t_s: np.ndarray, fps_nominal: float, path: str) -> tuple[np
 
 
 class SpooledFrames:
-    """Every frame decoded once, in order, into a temporary file; read back as often as needed.
+    """Every frame decoded once, in order, kept to be read as often as needed.
 
     An inter-frame codec (H.264, MPEG-4) cannot seek without decoding from the
     last key frame, so sampling 15 frames spread over a clip by seeking costs
     several decodings of the whole clip. Spooling decodes each frame once: the
-    static scene's samples and the tracking pass then read the spool (the
-    operating system's page cache; the file is removed on :meth:`close`).
+    static scene's samples and the tracking pass then read the spool. Frames
+    stay in memory up to ``memory_bytes``; beyond, they go on to a temporary
+    file (the operating system's page cache; removed on :meth:`close`).
     """
 
-    def __init__(self, cap, info: VideoInfo):
+    def __init__(self, cap, info: VideoInfo, memory_bytes: int = 1 << 30):
         import tempfile
 
         self.info = info
         self.times: list[float] = []
-        self._fh = tempfile.TemporaryFile(prefix="labkit-spool-")
+        self._held: list[np.ndarray] = []
+        self._fh = None
+        self._on_file = 0
         self.dtype: np.dtype = np.dtype(np.uint8)
+        size = 0
         for grey, t in iter_frames(cap, info):
             if not self.times:
                 self.dtype = grey.dtype
-            self._fh.write(np.ascontiguousarray(grey, self.dtype).tobytes())
             self.times.append(t)
-        self._fh.flush()
-        self._frames = (np.memmap(self._fh, dtype=self.dtype, mode="r", shape=(len(self.times), info.height,
-                                                                                info.width))
-                        if self.times else np.zeros((0, info.height, info.width), self.dtype))
+            size += grey.nbytes
+            if size <= memory_bytes:
+                self._held.append(grey)
+                continue
+            if self._fh is None:
+                self._fh = tempfile.TemporaryFile(prefix="labkit-spool-")
+            self._fh.write(np.ascontiguousarray(grey, self.dtype).tobytes())
+            self._on_file += 1
+        self._file_frames: np.ndarray | None = None
+        if self._fh is not None:
+            self._fh.flush()
+            self._file_frames = np.memmap(self._fh, dtype=self.dtype, mode="r",
+                                          shape=(self._on_file, info.height, info.width))
 
     def __len__(self) -> int:
         return len(self.times)
+
+    def _frame(self, k: int) -> np.ndarray:
+        if k < len(self._held):
+            return self._held[k]
+        assert self._file_frames is not None
+        return np.asarray(self._file_frames[k - len(self._held)])
 
     def samples(self, count: int) -> list[np.ndarray]:
         """Up to ``count`` frames spread evenly over the clip."""
@@ -301,15 +319,17 @@ class SpooledFrames:
         if n == 0:
             return []
         idx = np.unique(np.linspace(0, n - 1, min(count, n)).round().astype(int))
-        return [np.asarray(self._frames[i]) for i in idx]
+        return [self._frame(int(i)) for i in idx]
 
     def __iter__(self) -> Iterator[tuple[np.ndarray, float]]:
         for k, t in enumerate(self.times):
-            yield np.asarray(self._frames[k]), t
+            yield self._frame(k), t
 
     def close(self) -> None:
-        self._frames = np.zeros((0, self.info.height, self.info.width), self.dtype)
-        self._fh.close()
+        self._held = []
+        self._file_frames = None
+        if self._fh is not None:
+            self._fh.close()
 
 
 def spools(info: VideoInfo) -> bool:
