@@ -57,6 +57,10 @@ class _Blob:
     origin: tuple[int, int] = (0, 0)
     contrast: float = float("nan")   # (tray - robot) / tray, measured inside the body
     masked: bool = False             # its band reaches a never-search region (static dust, the rim)
+    # the centroid without the static scene's brightness model (flat field and texture): how much
+    # the lighting model moves the position (the illumination part of the speed's error budget)
+    u_alt: float = float("nan")
+    v_alt: float = float("nan")
 
 
 def smooth_background(win: np.ndarray, cell_px: int, kernel_cells: int) -> np.ndarray:
@@ -141,11 +145,12 @@ class _Finder:
 
     def find(self, img: np.ndarray, x0: int, y0: int, x1: int, y1: int, *, pred: tuple[float, float] | None,
              area_ref: float | None, keep_weights: bool = False, gate_px: float | None = None,
-             area_tol: tuple[float, float] = (0.45, 1.7)) -> tuple[_Blob | None, bool]:
+             area_tol: tuple[float, float] = (0.45, 1.7), alt: bool = True) -> tuple[_Blob | None, bool]:
         """Search the window [x0:x1, y0:y1]; returns (blob or None, touched the window's edge).
 
         ``gate_px``: a candidate farther than this from ``pred`` is not the robot
-        (a jump no robot makes between two frames)."""
+        (a jump no robot makes between two frames). ``alt``: also measure it without the flat
+        field (``u_alt``, ``v_alt``; NaN otherwise)."""
         import cv2
 
         flat = None if self.flat is None else self.flat[y0:y1, x0:x1]
@@ -216,14 +221,23 @@ class _Finder:
         cx1, cy1 = min(bx + bw + g, w), min(by + bh + g, h)
         comp = np.zeros((cy1 - cy0, cx1 - cx0), np.uint8)
         cv2.drawContours(comp, [contour], -1, 1, thickness=-1, offset=(-cx0, -cy0))
-        blob = self._measure(ratio[cy0:cy1, cx0:cx1], comp, binary[cy0:cy1, cx0:cx1],
-                             None if vmask is None else vmask[cy0:cy1, cx0:cx1], keep_weights,
+        sub_v = None if vmask is None else vmask[cy0:cy1, cx0:cx1]
+        blob = self._measure(ratio[cy0:cy1, cx0:cx1], comp, binary[cy0:cy1, cx0:cx1], sub_v, keep_weights,
                              None if self.tex is None else self.tex[y0 + cy0:y0 + cy1, x0 + cx0:x0 + cx1])
         if blob is None:
             return None, bool(touched)
         ox, oy = x0 + cx0, y0 + cy0
+        blob.u_alt, blob.v_alt = (blob.u, blob.v) if alt else (np.nan, np.nan)
+        if flat is not None and alt:
+            # the same robot measured without the flat field (its division undone, no texture)
+            other = self._measure(ratio[cy0:cy1, cx0:cx1] * flat[cy0:cy1, cx0:cx1], comp,
+                                  binary[cy0:cy1, cx0:cx1], sub_v, False, None)
+            if other is not None:
+                blob.u_alt, blob.v_alt = other.u, other.v
         blob.u += ox
         blob.v += oy
+        blob.u_alt += ox
+        blob.v_alt += oy
         blob.origin = (ox, oy)
         blob.area = float(area)
         blob.border = bool(border)

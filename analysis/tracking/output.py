@@ -49,6 +49,10 @@ def summary(track: Track, speed: SpeedResult | None) -> dict[str, Any]:
         if out["outliers_dropped"]:
             out["warnings"].append(f"{out['outliers_dropped']} position(s) far off the smoothed path (> 8 robust "
                                    f"sigmas) left out of the speed")
+        out["change_points_s"] = list(speed.meta.get("change_points_s", []))
+        if "budget" in speed.meta:
+            out["error_budget"] = speed.meta["budget"]
+            out["warnings"].extend(speed.meta.get("budget_warnings", []))
         unc = speed.meta.get("uncertainty", {})
         out["speed_uncertainty"] = {k: unc[k] for k in ("speed_std_mm_s", "noise_part_mm_s", "timestamp_part_mm_s",
                                                          "scale_part_mm_s", "noise_bias_mm_s", "position_noise_mm",
@@ -199,7 +203,7 @@ def plot_path(path: str | Path, track: Track, speed: SpeedResult | None = None) 
 
 def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
                   speed: SpeedResult | None = None, *, fps: float | None = None,
-                  timestamps: str | Path | None = None) -> Path:
+                  timestamps: str | Path | None = None, bayer: str = "auto") -> Path:
     """Re-read the video and draw the trajectory so far, the centroid and the heading on each frame.
 
     Written as Motion-JPEG (``.avi`` recommended) at the video's nominal rate.
@@ -210,7 +214,7 @@ def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
     from labkit.analysis.tracking.video_io import iter_frames, open_source
     from labkit.video import write_video
 
-    cap, info = open_source(video_path, fps=fps, timestamps=timestamps)
+    cap, info = open_source(video_path, fps=fps, timestamps=timestamps, bayer=bayer)
     out_path = Path(out_path)
     px_per_mm = 1.0 / track.mm_per_px if track.mm_per_px > 0 else 1.0
     arrow = 0.45 * (track.length_px if np.isfinite(track.length_px) else 60.0)
@@ -227,7 +231,7 @@ def write_overlay(video_path: str | Path, track: Track, out_path: str | Path,
         for k, (gray, _t) in enumerate(iter_frames(cap, info)):
             if k >= track.frames:
                 break
-            img = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
+            img = cv2.cvtColor(np.clip(gray, 0, 255).astype(np.uint8), cv2.COLOR_GRAY2BGR)
             x, y, w, h = track.roi
             cv2.rectangle(img, (x, y), (x + w - 1, y + h - 1), (128, 128, 128), 1)
             if trail is None:

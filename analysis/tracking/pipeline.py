@@ -36,15 +36,17 @@ def output_paths(out: str | Path | None) -> list[Path]:
     if out is None:
         return []
     out = Path(out)
-    if out.suffix.lower() in (".csv", ".png"):
-        raise InputError("the track file would clash with its own .csv/.png sidecar", file=out,
-                         key="--out", expected="a .h5 file name")
+    if out.suffix.lower() not in (".h5", ".hdf5"):
+        # the track is HDF5: a .txt or .csv name would hold something other than it says
+        raise InputError(f"the track file is HDF5, not {out.suffix or 'suffix-less'}", file=out,
+                         key="--out", expected="a .h5 file name (the .csv and .png are written beside it)")
     return [out, out.with_suffix(".csv"), out.with_suffix(".png")]
 
 
 def track_file(source: str | Path, *, out: str | Path | None = None, overlay: str | Path | None = None,
                force: bool = False, scale: Scale | None = None, mm_per_px: float | None = None,
-               window_s: float | None = None, quiet: bool = True, **track_kw: Any) -> TrackResult:
+               window_s: float | None = None, quiet: bool = True, line_time_s: float | None = None,
+               line_time_std_s: float = 0.0, timestamp_std_s: float | None = None, **track_kw: Any) -> TrackResult:
     """Track ``source`` (a video, an image folder or a ``frame_%05d.png`` pattern) and write the results.
 
     Parameters
@@ -60,6 +62,9 @@ def track_file(source: str | Path, *, out: str | Path | None = None, overlay: st
         Passed to :func:`~labkit.analysis.tracking.tracker.track_video` (``roi``,
         ``mask``, ``robot_length_mm``, ``min_contrast``, ``fps``, ``timestamps``,
         ...) and :func:`~labkit.analysis.tracking.speed.track_speed`.
+    line_time_s, line_time_std_s, timestamp_std_s:
+        Declared camera properties for the error budget (see
+        :func:`~labkit.analysis.tracking.speed.track_speed`).
 
     Returns
     -------
@@ -81,7 +86,8 @@ def track_file(source: str | Path, *, out: str | Path | None = None, overlay: st
     if overlay is not None and outs:
         check_outputs([*outs, overlay], force=True, key="--overlay")      # not the same file twice
     track = track_video(source, scale=scale, mm_per_px=mm_per_px, quiet=quiet, **track_kw)
-    speed = track_speed(track, window_s=window_s)
+    speed = track_speed(track, window_s=window_s, line_time_s=line_time_s, line_time_std_s=line_time_std_s,
+                        timestamp_std_s=timestamp_std_s)
     result = summary(track, speed)
     jobs: list[tuple[str, Path, Callable[[Path], Any]]] = []
     if outs:
@@ -91,7 +97,8 @@ def track_file(source: str | Path, *, out: str | Path | None = None, overlay: st
     if overlay is not None:
         jobs.append(("overlay", Path(overlay),
                      lambda p: write_overlay(source, track, p, speed, fps=track_kw.get("fps"),
-                                             timestamps=track_kw.get("timestamps"))))
+                                             timestamps=track_kw.get("timestamps"),
+                                             bayer=track_kw.get("bayer", "auto"))))
     # all written to temporary names first, renamed together: every old file survives any failed write
     with atomic_outputs([target for _, target, _ in jobs]) as temps:
         for (_, _, write), tmp in zip(jobs, temps):

@@ -16,14 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from labkit.analysis.tracking.tracker import CHIP_AREA_MM2, Scale, prepare_scene, scale_given
+from labkit.analysis.tracking.tracker import Scale, prepare_scene, robot_size, scale_given
 from labkit.errors import InputError
 
 
 def preview_frame(source: str | Path, frame: int, out_png: str | Path, *, scale: Scale | None = None,
                   mm_per_px: float | None = None, roi: Any = None, mask: Any = None,
                   min_contrast: float | None = None, fps: float | None = None,
-                  timestamps: str | Path | None = None) -> dict[str, Any]:
+                  timestamps: str | Path | None = None, bayer: str = "auto",
+                  robot_size_mm: Any = None) -> dict[str, Any]:
     """Write the preview PNG of frame ``frame`` (0-based); returns what it shows (JSON-ready)."""
     import cv2
 
@@ -31,11 +32,12 @@ def preview_frame(source: str | Path, frame: int, out_png: str | Path, *, scale:
 
     if frame < 0:
         raise InputError(f"bad frame {frame}", key="--preview", expected="a frame number >= 0")
-    cap, info = open_source(source, fps=fps, timestamps=timestamps)
+    cap, info = open_source(source, fps=fps, timestamps=timestamps, bayer=bayer)
+    size = robot_size(robot_size_mm)
     try:
         if scale is None and mm_per_px is not None:
             scale = scale_given(mm_per_px)
-        scene = prepare_scene(cap, info, roi=roi, mask=mask, scale=scale, min_contrast=min_contrast)
+        scene = prepare_scene(cap, info, roi=roi, mask=mask, scale=scale, min_contrast=min_contrast, size=size)
         img = None
         t_s = float("nan")
         for k, (g, t) in enumerate(iter_frames(cap, info)):
@@ -54,13 +56,13 @@ def preview_frame(source: str | Path, frame: int, out_png: str | Path, *, scale:
     thr = scene.seg.min_contrast
     valid = np.ones((h, w), bool) if scene.valid is None else scene.valid[y:y + h, x:x + w]
     dark = (ratio < 1 - thr) & valid
-    out = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR).astype(np.float32)
+    out = cv2.cvtColor(np.clip(img, 0, 255).astype(np.uint8), cv2.COLOR_GRAY2BGR).astype(np.float32)
     sub = out[y:y + h, x:x + w]
     sub[~valid] = 0.55 * sub[~valid] + 0.45 * np.array([255, 120, 0], np.float32)
     sub[dark] = 0.5 * sub[dark] + 0.5 * np.array([0, 0, 255], np.float32)
     out = np.clip(out, 0, 255).astype(np.uint8)
     cv2.rectangle(out, (x, y), (x + w - 1, y + h - 1), (128, 128, 128), 1)
-    expected = CHIP_AREA_MM2 / scale.mm_per_px ** 2 if scale is not None else None
+    expected = size.area_mm2 / scale.mm_per_px ** 2 if scale is not None and size.area_mm2 else None
     contours, _ = cv2.findContours(dark.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     objects = []
     for c in contours:

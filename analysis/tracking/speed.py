@@ -18,6 +18,19 @@ reported:
   window averages the jitter down (the derivative's noise falls as
   ``window^-1.5``) while a quadratic follows the curvature of a turning path.
 
+Motion that changes
+-------------------
+A start, a stop, a pause or a collision is a kink in the path that a window
+straddling it would round off (the speed there misjudged, and the kink's
+frames taken for outliers). :func:`change_points` finds them (one quadratic
+against two lines either side, in noise sigmas) and no smoothing window
+crosses them. Outliers are judged against the motion on each side
+(:func:`one_sided_scores`): a position is left out only if it fits neither
+the frames before it nor those after it. Two speeds are reported, both
+labelled: ``mean_speed_mm_s`` over the whole clip (pauses included) and
+``moving_speed_mm_s`` over its moving part (:func:`moving_part`, the
+stretches in ``moving_stretches_s``, total ``moving_s``).
+
 The smoother's own bias on a turning path (a quadratic through an arc) is
 removed sample by sample, exactly for a circular arc, from the measured course
 rate.
@@ -44,6 +57,10 @@ quadrature:
    position by ``v dt`` along the path: ``sigma_t^2 sum_j (g_j . v_j)^2``. (That
    scatter also shows in the residuals, so it is counted on the safe side.)
 4. **Scale** -- the image scale's relative uncertainty times the speed.
+
+:func:`track_speed` adds the systematic parts a track shows or its user declares (scale across
+the field, illumination, rolling shutter, the clock's accuracy), each by name:
+:mod:`~labkit.analysis.tracking.budget`.
 
 The noise's bias on ``|v|`` (``E|v + e| > |v|``) is subtracted; where the
 speed is within three noise sigmas of zero (a robot vibrating in place) the
@@ -93,6 +110,11 @@ class SpeedResult:
     ci_level: float
     block_len: int
     meta: dict = field(default_factory=dict)
+    # over the moving part only (see :func:`moving_part`): the clip's figures above count the pauses
+    moving_speed_mm_s: float = float("nan")
+    moving_speed_ci_mm_s: tuple[float, float] = (float("nan"), float("nan"))
+    moving_s: float = float("nan")
+    moving_stretches_s: list = field(default_factory=list)
 
     def summary(self) -> dict[str, Any]:
         """The scalar figures, JSON-ready."""
@@ -101,24 +123,36 @@ class SpeedResult:
         return d
 
 
-def poly_fit_weights(t: np.ndarray, window_s: float, order: int = 2) -> list[tuple[int, np.ndarray, np.ndarray]]:
+def poly_fit_weights(t: np.ndarray, window_s: float, order: int = 2, breaks: list[int] | None = None,
+                     shared: bool = True) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """The local polynomial fit as a linear operator: per sample ``(a, value_weights, slope_weights)``.
 
     The smoothed value at ``t_i`` is ``value_weights @ z[a:a + m]`` and its slope
     ``slope_weights @ z[a:a + m]`` (``m`` = the weights' length); see
     :func:`local_poly_fit` for the window. Having the weights lets the speed's
-    uncertainty be propagated exactly from the position noise.
+    uncertainty be propagated exactly from the position noise. ``breaks``
+    (sample indices, from :func:`change_points`) cut the data into stretches
+    no window crosses: a break's sample ends one stretch and starts the next
+    (``shared``: a position is continuous there) or only ends it (a velocity's
+    direction is not).
     """
     t = np.asarray(t, float)
     n = t.size
     need = order + 2
     if n < need:
         raise ValueError(f"need at least {need} samples for an order-{order} fit")
-    # window [t_i - w/2, t_i + w/2], shifted to stay inside the data near the ends
-    a_t = np.clip(t - window_s / 2, t[0], max(t[-1] - window_s, t[0]))
+    edges = [0, *sorted(b for b in (breaks or []) if 0 < b < n - 1), n - 1]
+    seg_lo = np.zeros(n, int)
+    seg_hi = np.full(n, n - 1)
+    for a_i, b_i in zip(edges[:-1], edges[1:]):
+        seg_lo[a_i + (a_i > 0):b_i + 1] = a_i + (a_i > 0 and not shared)
+        seg_hi[a_i + (a_i > 0):b_i + 1] = b_i
+    lo_t, hi_t = t[seg_lo], t[seg_hi]
+    # window [t_i - w/2, t_i + w/2], shifted to stay inside the stretch near its ends
+    a_t = np.clip(t - window_s / 2, lo_t, np.maximum(hi_t - window_s, lo_t))
     eps = 1e-9 * max(window_s, 1.0)
-    lo = np.searchsorted(t, a_t - eps, side="left")
-    hi = np.searchsorted(t, a_t + window_s + eps, side="right")
+    lo = np.maximum(np.searchsorted(t, a_t - eps, side="left"), seg_lo)
+    hi = np.minimum(np.searchsorted(t, a_t + window_s + eps, side="right"), seg_hi + 1)
     out = []
     for i in range(n):
         a, b = int(lo[i]), int(hi[i])
@@ -132,9 +166,55 @@ def poly_fit_weights(t: np.ndarray, window_s: float, order: int = 2) -> list[tup
     return out
 
 
+def change_points(t: np.ndarray, z: np.ndarray, window_s: float, sigma: np.ndarray, min_frames: int = 4,
+                  threshold: float = 30.0) -> list[int]:
+    """Samples where the velocity changes abruptly (a start, a stop, a collision): the smoother's breaks.
+
+    At each sample ``k`` one quadratic through the frames either side (``window_s
+    / 2`` or 8 frames, the shorter, each) is compared with two separate lines, one per side
+    (``k`` in both): ``score = (RSS_quadratic - RSS_lines) /
+    sigma^2`` summed over both axes, ``sigma`` the position noise per axis
+    (robust, from the residuals about the smoothed path: correlated noise is
+    not mistaken for kinks as it would be from frame-to-frame differences). A smooth turn fits a quadratic as
+    well as two lines (score ~ 0 or below); a kink does not. The highest score
+    above ``threshold`` is a break, its neighbourhood (one side's length) is
+    cleared, and so on.
+    """
+    n = t.size
+    if n < 2 * min_frames + 1:
+        return []
+    zn = z / np.maximum(sigma, 1e-12 * max(float(np.abs(z).max()), 1.0))
+    # short sides (at most 8 frames): two changes a pause apart are then seen one by one
+    half = min(window_s / 2, 8 * float(np.median(np.diff(t))))
+    score = np.full(n, -np.inf)
+
+    def rss(idx: np.ndarray, deg: int) -> float:
+        dt = t[idx] - t[idx].mean()
+        A = np.vander(dt / max(float(np.abs(dt).max()), 1e-12), deg + 1)
+        r = zn[idx] - A @ np.linalg.lstsq(A, zn[idx], rcond=None)[0]
+        return float(np.sum(r * r))
+
+    lo = np.searchsorted(t, t - half, side="left")
+    hi = np.searchsorted(t, t + half, side="right")
+    for k in range(n):
+        left, right = np.arange(lo[k], k + 1), np.arange(k, hi[k])
+        if left.size < min_frames or right.size < min_frames:
+            continue
+        both = np.arange(lo[k], hi[k])
+        score[k] = rss(both, 2) - rss(left, 1) - rss(right, 1)
+    breaks: list[int] = []
+    while True:
+        k = int(np.argmax(score))
+        if not score[k] > threshold:
+            break
+        breaks.append(k)
+        score[np.abs(t - t[k]) < half] = -np.inf
+    return sorted(breaks)
+
+
 def local_poly_fit(t: np.ndarray, z: np.ndarray, window_s: float, order: int = 2,
-                   weights: list[tuple[int, np.ndarray, np.ndarray]] | None = None
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   weights: list[tuple[int, np.ndarray, np.ndarray]] | None = None,
+                   breaks: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Savitzky-Golay smoothing and first derivative on uneven sample times.
 
     At each sample a polynomial of ``order`` in ``(t - t_i)`` is fitted by least
@@ -154,7 +234,7 @@ def local_poly_fit(t: np.ndarray, z: np.ndarray, window_s: float, order: int = 2
     t = np.asarray(t, float)
     z = np.asarray(z, float)
     zz = z.reshape(t.size, -1)
-    ops = weights if weights is not None else poly_fit_weights(t, window_s, order)
+    ops = weights if weights is not None else poly_fit_weights(t, window_s, order, breaks)
     out = np.empty_like(zz)
     der = np.empty_like(zz)
     for i, (a, c0, c1) in enumerate(ops):
@@ -162,6 +242,53 @@ def local_poly_fit(t: np.ndarray, z: np.ndarray, window_s: float, order: int = 2
         out[i] = c0 @ seg
         der[i] = c1 @ seg
     return out.reshape(z.shape), der.reshape(z.shape)
+
+
+def one_sided_scores(t: np.ndarray, z: np.ndarray, sigma: np.ndarray, half_s: float, frames: int = 4) -> np.ndarray:
+    """How far each sample lies from its neighbours' motion, in ``sigma`` units, allowing the motion to change.
+
+    Two lines are fitted by least squares, one to the ``frames`` samples before
+    ``t_i`` and one to those after it (within ``half_s``; the sample itself
+    left out), and each predicts ``z_i``. The score is the smaller of the two
+    misfits (the larger axis, per ``sigma``): a start, a stop, a pause or a
+    turn leaves one side's line through the sample, a lone wrong position
+    neither. A side with fewer than 2 samples predicts nothing (score 0 when
+    neither does).
+    """
+    n = t.size
+    out = np.zeros(n)
+    for i in range(n):
+        best = np.inf
+        for idx in (np.arange(max(i - frames, 0), i), np.arange(i + 1, min(i + 1 + frames, n))):
+            idx = idx[np.abs(t[idx] - t[i]) <= half_s]
+            if idx.size < 2:
+                continue
+            dt = t[idx] - t[i]
+            A = np.column_stack([np.ones(idx.size), dt])
+            coef = np.linalg.lstsq(A, z[idx], rcond=None)[0]
+            best = min(best, float(np.max(np.abs(z[i] - coef[0]) / sigma)))
+        out[i] = 0.0 if not np.isfinite(best) else best
+    return out
+
+
+def moving_part(t: np.ndarray, speed: np.ndarray, speed_std: np.ndarray) -> np.ndarray:
+    """Which samples belong to the moving part: the smoothed speed above 3 of its noise sigmas and above
+    half the typical moving speed.
+
+    A start or a stop is smeared by the smoother symmetrically over its window,
+    so the half-speed crossing falls on the change itself (a threshold near
+    zero would count half a window of standing still as moving).
+    """
+    clear = speed > 3 * speed_std
+    if not clear.any():
+        return clear
+    return clear & (speed > 0.5 * float(np.median(speed[clear])))
+
+
+def _stretches(t: np.ndarray, mask: np.ndarray) -> list[list[float]]:
+    """``[first, last]`` times of each run of True in ``mask``."""
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return [[float(t[a]), float(t[b - 1])] for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1))]
 
 
 def _time_weights(t: np.ndarray) -> np.ndarray:
@@ -305,6 +432,8 @@ def speed_uncertainty(t: np.ndarray, z: np.ndarray, z_s: np.ndarray, v: np.ndarr
             "scale_part_mm_s": float(np.sqrt(var_scale)), "noise_bias_mm_s": bias,
             "position_noise_mm": [float(np.sqrt(sig2[0])), float(np.sqrt(sig2[1]))],
             "timestamp_jitter_s": sig_t, "residual_lag1_corr": rho1, "noise_ar1": phi,
+            "sample_speed_std_mm_s": np.sqrt(var_tot),
+            "timestamp_sensitivity_mm_s2": float(np.sqrt(np.sum((g * v).sum(axis=1) ** 2))),
             "max_lag": max_lag, "residual_dof": dof}
 
 
@@ -343,16 +472,17 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
     window_s = float(max(window_s, (order + 1) * frame_dt))
     ops = poly_fit_weights(t, window_s, order)
     xy_s, v = local_poly_fit(t, np.column_stack([x, y]), window_s, order, weights=ops)
-    # a safety net behind the tracker's gates: a position far off the smoothed path (more than 8
-    # robust sigmas of the residuals) is an outlier; the worst one is left out and the path fitted
-    # again (one at a time: a spike also pulls its neighbours' fits), at most 20 times
+    # a safety net behind the tracker's gates, judged against a motion that may change: a
+    # position is an outlier only if it is far (> 8 robust sigmas) from BOTH short lines fitted
+    # to the frames just before it and just after it -- a start, a stop or a turn fits one side,
+    # a spike neither. The worst is left out and the test repeated (at most 20 times).
     outliers = 0
     while outliers < 20 and t.size > 8:
-        r = np.column_stack([x, y]) - xy_s
-        mad = 1.4826 * np.median(np.abs(r - np.median(r, axis=0)), axis=0)
-        score = np.max(np.abs(r) / np.maximum(mad, 1e-12), axis=1)
+        z = np.column_stack([x, y])
+        mad = 1.4826 * np.median(np.abs(z - xy_s - np.median(z - xy_s, axis=0)), axis=0)
+        score = one_sided_scores(t, z, np.maximum(mad, 1e-12), window_s / 2)
         worst = int(np.argmax(score))
-        if score[worst] <= 8 or np.hypot(*r[worst]) < 1e-6:
+        if score[worst] <= 8:
             break
         idx = np.flatnonzero(ok)
         ok[idx[worst]] = False
@@ -361,6 +491,13 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
         ops = poly_fit_weights(t, window_s, order)
         xy_s, v = local_poly_fit(t, np.column_stack([x, y]), window_s, order, weights=ops)
         outliers += 1
+    # starts, stops and collisions: the smoother's windows do not cross them (a window across a
+    # kink rounds it off and misjudges the path's length there)
+    z = np.column_stack([x, y])
+    breaks = change_points(t, z, window_s, 1.4826 * np.median(np.abs(z - xy_s - np.median(z - xy_s, axis=0)), axis=0))
+    if breaks:
+        ops = poly_fit_weights(t, window_s, order, breaks)
+        xy_s, v = local_poly_fit(t, np.column_stack([x, y]), window_s, order, weights=ops)
     speed = np.hypot(v[:, 0], v[:, 1])
     # a polynomial through a stretch of an arc misjudges the speed there (a quadratic at the
     # window's centre shortens it by ~ (w omega)^2 / 40, near a shifted window's edge it
@@ -368,15 +505,29 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
     # R |sum_j c1_ij exp(i omega (t_j - t_i))| instead of R omega, so each sample's speed is
     # divided by that ratio at the measured course rate omega (exact for a circular arc)
     course = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
-    _, course_rate = local_poly_fit(t, course, window_s, order, weights=ops)
+    # (a break's sample carries the velocity before it: the course after it starts at the next one)
+    _, course_rate = local_poly_fit(t, course, window_s, order,
+                                    weights=poly_fit_weights(t, window_s, order, breaks, shared=False)
+                                    if breaks else ops)
     om = np.maximum(np.abs(course_rate), 1e-4)
-    shrink = np.empty(t.size)
+    shrink = np.ones(t.size)
+    # where the robot stands still the course is the noise's and its rate means nothing: no correction
+    resid = np.column_stack([x, y]) - xy_s
+    sig_v = np.array([np.sqrt(float(c1 @ c1)) for _a, _c0, c1 in ops]) * float(np.sqrt(np.sum(
+        (1.4826 * np.median(np.abs(resid - np.median(resid, axis=0)), axis=0)) ** 2)))
     for i, (a, _c0, c1) in enumerate(ops):
-        shrink[i] = abs(np.sum(c1 * np.exp(1j * om[i] * (t[a:a + c1.size] - t[i])))) / om[i]
+        if speed[i] > 5 * sig_v[i]:
+            shrink[i] = abs(np.sum(c1 * np.exp(1j * om[i] * (t[a:a + c1.size] - t[i])))) / om[i]
     shrink = np.clip(shrink, 0.5, 2.0)
     speed = speed / shrink
     v = v / shrink[:, None]
     wts = _time_weights(t)
+    for k in breaks:
+        # a break's sample carries the speed before it; the half interval after it goes to the
+        # next sample (which carries the speed after it)
+        half = (t[k + 1] - t[k]) / 2
+        wts[k] -= half
+        wts[k + 1] += half
     mean_speed = float(np.sum(speed * wts) / np.sum(wts))
     mean_vel = (float(np.sum(v[:, 0] * wts) / wts.sum()), float(np.sum(v[:, 1] * wts) / wts.sum()))
     steps = np.hypot(np.diff(x), np.diff(y))
@@ -400,12 +551,17 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
     unc = speed_uncertainty(t, np.column_stack([x, y]), xy_s, v, wts, ops, window_s,
                             mm_per_px_rel_std=mm_per_px_rel_std)
     mean_speed -= unc["noise_bias_mm_s"]
-    z = NormalDist().inv_cdf(0.5 + ci_level / 2)
+    zq = NormalDist().inv_cdf(0.5 + ci_level / 2)
     sd, sdv = unc["speed_std_mm_s"], unc["velocity_std_mm_s"]
-    q = np.array([[max(mean_speed - z * sd, 0.0), mean_vel[0] - z * sdv[0], mean_vel[1] - z * sdv[1]],
-                  [mean_speed + z * sd, mean_vel[0] + z * sdv[0], mean_vel[1] + z * sdv[1]]])
+    q = np.array([[max(mean_speed - zq * sd, 0.0), mean_vel[0] - zq * sdv[0], mean_vel[1] - zq * sdv[1]],
+                  [mean_speed + zq * sd, mean_vel[0] + zq * sdv[0], mean_vel[1] + zq * sdv[1]]])
     block = int(unc["max_lag"]) + 1
     del seed, n_boot      # kept in the signature for callers of the bootstrap version
+    sample_sd = unc.pop("sample_speed_std_mm_s")
+    moving = moving_part(t, speed, sample_sd)
+    moving_s = float(np.sum(wts[moving]))
+    # the same path over the time spent moving (its interval scaled alike)
+    k_mov = duration / moving_s if moving_s > 0 else float("nan")
     return SpeedResult(
         t_s=t, x_mm=xy_s[:, 0], y_mm=xy_s[:, 1], vx_mm_s=v[:, 0], vy_mm_s=v[:, 1], speed_mm_s=speed,
         heading_rad=head_s, turn_rate_rad_s=turn, mean_speed_mm_s=mean_speed,
@@ -417,16 +573,62 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
         mean_turn_rate_rad_s=mean_turn, duration_s=duration, window_s=window_s, frames_used=int(t.size),
         ci_level=ci_level, block_len=block,
         meta={"order": order, "mm_per_px_rel_std": mm_per_px_rel_std, "uncertainty": unc,
-              "outliers_dropped": outliers})
+              "outliers_dropped": outliers, "change_points_s": [float(t[b]) for b in breaks]},
+        moving_speed_mm_s=mean_speed * k_mov, moving_speed_ci_mm_s=(float(q[0, 0]) * k_mov, float(q[1, 0]) * k_mov),
+        moving_s=moving_s, moving_stretches_s=_stretches(t, moving))
 
 
-def track_speed(track, **kw) -> SpeedResult:
-    """:func:`speed_analysis` of a :class:`labkit.analysis.tracking.tracker.Track`.
+def _track_xy(track, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Image positions -> world mm (as :attr:`Track.x_mm`, :attr:`Track.y_mm`)."""
+    return (u + 0.5) * track.mm_per_px, (track.frame_size[1] - 0.5 - v) * track.mm_per_px
 
-    The track's scale uncertainty is included.
+
+def track_speed(track, *, line_time_s: float | None = None, line_time_std_s: float = 0.0,
+                timestamp_std_s: float | None = None, budget: bool = True, **kw) -> SpeedResult:
+    """:func:`speed_analysis` of a :class:`labkit.analysis.tracking.tracker.Track`, with its error budget.
+
+    The interval holds the random part and every systematic part of
+    :mod:`~labkit.analysis.tracking.budget` (scale, scale across the field,
+    illumination, rolling shutter, timestamps), each in ``meta["budget"]``.
+    ``line_time_s``: a rolling shutter's delay per row (the frame times are
+    corrected at the robot's row), uncertain by ``line_time_std_s``;
+    ``timestamp_std_s``: the clock's declared accuracy per frame.
+    ``budget=False``: the random part and the scale only.
     """
+    from labkit.analysis.tracking.budget import error_budget
+
     rel = 0.0
     if track.scale is not None and track.scale.mm_per_px > 0:
         rel = track.scale.mm_per_px_std / track.scale.mm_per_px
-    return speed_analysis(track.t_s, track.x_mm, track.y_mm, track.heading_rad, track.quality,
-                          mm_per_px_rel_std=rel, **kw)
+    if line_time_s is not None and not (line_time_s >= 0 and line_time_std_s >= 0):
+        raise InputError(f"bad line time {line_time_s}", key="--line-time-us", expected="a delay per row >= 0")
+
+    def run(lt: float | None, u: np.ndarray, v: np.ndarray, heading: Any = None, **extra: Any) -> SpeedResult:
+        t = track.t_s + track.v_px * lt if lt else track.t_s
+        x, y = _track_xy(track, u, v)
+        return speed_analysis(t, x, y, heading, track.quality, mm_per_px_rel_std=rel, **{**kw, **extra})
+
+    sp = run(line_time_s, track.u_px, track.v_px, track.heading_rad)
+    if not budget:
+        return sp
+    same = {"window_s": sp.window_s}
+    alt = float("nan")
+    if track.u_alt_px is not None:
+        alt = run(line_time_s, track.u_alt_px, track.v_alt_px, **same).mean_speed_mm_s
+    rs_part = rs_bound = 0.0
+    if line_time_s is not None and line_time_std_s > 0:
+        rs_part = abs(run(line_time_s + line_time_std_s, track.u_px, track.v_px, **same).mean_speed_mm_s
+                      - sp.mean_speed_mm_s)
+    if line_time_s is None and track.frames > 2:
+        longest = float(np.median(np.diff(track.t_s))) / max(track.frame_size[1], 1)
+        rs_bound = abs(run(longest, track.u_px, track.v_px, **same).mean_speed_mm_s - sp.mean_speed_mm_s)
+    eb = error_budget(track, sp, alt_speed_mm_s=alt, rs_bound_mm_s=rs_bound, line_time_s=line_time_s,
+                      rs_part_mm_s=rs_part, timestamp_std_s=timestamp_std_s)
+    zq = NormalDist().inv_cdf(0.5 + sp.ci_level / 2)
+    s = sp.mean_speed_mm_s
+    sp.speed_ci_mm_s = (max(s - zq * eb.total_std_mm_s, 0.0), s + zq * eb.total_std_mm_s)
+    k = sp.moving_speed_mm_s / s if s > 0 else float("nan")
+    sp.moving_speed_ci_mm_s = (sp.speed_ci_mm_s[0] * k, sp.speed_ci_mm_s[1] * k)
+    sp.meta["budget"] = eb.as_dict()
+    sp.meta["budget_warnings"] = eb.warnings
+    return sp

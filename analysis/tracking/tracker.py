@@ -16,7 +16,8 @@ Method, per frame (the functions' docstrings say why):
    light by Otsu's threshold on that window; a window whose dark/light contrast
    is below the threshold holds no robot.
 3. Identity: the dark component of the robot's expected area (from the scale
-   and the 5 x 2 mm body, then from the first confident frames) and, at
+   and the declared body, by default the 5 x 2 mm chip, then from the first
+   confident frames) and, at
    acquisition, elongated shape, nearest the constant-velocity prediction, is
    the robot. A candidate beyond what the robot can walk since the last good
    frame (``max_speed_mm_s`` plus jitter) is an occlusion: the frame is lost
@@ -89,6 +90,11 @@ class Track:
     length_px: float = float("nan")
     length_px_std: float = float("nan")
     meta: dict = field(default_factory=dict)
+    # per frame: the position without the flat-field model, and the outline's length (moments, px):
+    # what the error budget (:mod:`~labkit.analysis.tracking.budget`) measures lighting and scale from
+    u_alt_px: np.ndarray | None = None
+    v_alt_px: np.ndarray | None = None
+    major_px: np.ndarray | None = None
 
     @property
     def frames(self) -> int:
@@ -169,14 +175,15 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                  flat: np.ndarray | None = None, seg: Segmentation | None = None,
                  margin_px: int = 4, min_area_px: int = 20,
                  expected_area_px: float | None = None, max_speed_px_s: float | None = None,
-                 max_speed_body_s: float = 5.0, reacquire_s: float = 1.0,
+                 max_speed_body_s: float | None = None, reacquire_s: float = 1.0,
                  progress: Any = None) -> dict:
     """Track over ``(grey frame, t_s)`` pairs (full frames); returns raw per-frame arrays.
 
     ``valid`` (bool, full frame) marks where the robot may be. The motion model
     (constant velocity) predicts the next position; a candidate farther from it
     than the robot can go (``max_speed_px_s``, or ``max_speed_body_s`` body
-    lengths per second while the scale is unknown, plus the vibration jitter)
+    lengths per second, by default one body length per frame interval, plus the
+    vibration jitter)
     is not the robot: the frame is lost (an occlusion), and the gate grows with
     the time since the last good frame until, after ``reacquire_s``, the robot
     may be found anywhere. See :func:`track_video` for the public entry point.
@@ -191,6 +198,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     us: list[float] = []
     vs: list[float] = []
     ths: list[float] = []
+    alts: list[tuple[float, float, float]] = []
     qs: list[int] = []
     areas: list[float] = []
     lengths: list[float] = []
@@ -198,9 +206,11 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     cov_hist: list[float] = []      # the robot's weighted area in clear frames (what a whole robot shows)
     shapes: list[tuple[float, float]] = []
     shape_ref: tuple[float, float] | None = None
+    shape_spread: tuple[float, ...] = (0.0, 0.0)
     unlike = 0
     area_hist: list[float] = []
     area_ref = expected_area_px
+    area_lo, area_hi = 0.8, 1.25     # a whole robot's area relative to its reference (widened for a soft body)
     # with only the expected area (from the scale) the tolerance is wide: blur and legs vary it
     tol_first = (0.5, 2.0)
     major = None
@@ -209,14 +219,26 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     jumps = 0
     raw_area: list[float] = []     # each found component's area (px), for re-checking the first frames
 
+    frame_dts: list[float] = []
+    frame_dt = [0.0]          # their median (updated as they come)
+
     def gate(dt: float) -> float | None:
         if major is None or dt > reacquire_s:
             return None
-        vmax = max_speed_px_s if max_speed_px_s else max_speed_body_s * major
+        if max_speed_px_s:
+            vmax = max_speed_px_s
+        elif max_speed_body_s:
+            vmax = max_speed_body_s * major
+        else:
+            # one body length per frame interval: the physical limit of frame-to-frame identity
+            vmax = major / (frame_dt[0] if frame_dts else max(dt, 1e-6))
         # jitter of a vibrating robot (a tenth of its length) + what it can walk in dt
         return 3.0 + 0.1 * major + vmax * dt
 
     for k, (frame, t) in enumerate(frames):
+        if ts and len(frame_dts) < 15 and t > ts[-1]:
+            frame_dts.append(t - ts[-1])
+            frame_dt[0] = float(np.median(frame_dts))
         img = frame[ry:ry + rh, rx:rx + rw] if roi else frame
         blob = None
         pred = None
@@ -235,7 +257,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                     break
                 blob, touched = finder.find(img, x0, y0, x1, y1, pred=pred, area_ref=area_ref,
                                             keep_weights=len(lengths) < 100 and k % 3 == 0, gate_px=g,
-                                            area_tol=tol)
+                                            area_tol=tol, alt=k % 4 == 0)
                 if blob is None or not touched:
                     break
         if blob is None:
@@ -249,9 +271,9 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 jumps += int(finder.find(img, 0, 0, rw, rh, pred=None, area_ref=area_ref, area_tol=tol)[0]
                              is not None)
         if (blob is not None and not blob.border and shape_ref is not None
-                and not (0.8 < blob.major_px / shape_ref[0] < 1.25 and 0.7 < blob.minor_px / shape_ref[1] < 1.45)):
-            # robot-sized but not robot-shaped (a tweezer's prong, the robot merged with something):
-            # not a position
+                and not _shaped_like(blob, shape_ref, shape_spread, pred, major)):
+            # robot-sized but not robot-shaped (a tweezer's prong, the robot merged with something)
+            # and off the motion's prediction: not a position
             blob = None
             unlike += 1
         ts.append(t)
@@ -259,20 +281,23 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
         if blob is None:
             for column in (us, vs, ths, areas):
                 column.append(np.nan)
+            alts.append((np.nan, np.nan, np.nan))
             qs.append(QUALITY_LOST)
             if last is not None and t - last[2] > 1.0:
                 vel = (0.0, 0.0)
         else:
             q = QUALITY_OK
-            if blob.border or (area_ref and not 0.8 < blob.area / area_ref < 1.25):
+            if blob.border or (area_ref and not area_lo < blob.area / area_ref < area_hi):
                 q = QUALITY_DEGRADED
-            elif blob.masked and cov_hist and abs(blob.coverage / float(np.median(cov_hist[-25:])) - 1) > 0.01:
+            elif blob.masked and cov_hist and abs(blob.coverage / float(np.median(cov_hist[-25:])) - 1) > \
+                    max(0.01, 5 * _log_spread(cov_hist[-25:])):
                 # touching static dust (or the rim) and missing part of its darkness: partly hidden by it
                 q = QUALITY_DEGRADED
             if q == QUALITY_OK and not blob.masked:
                 cov_hist.append(blob.coverage)
             us.append(blob.u + rx)
             vs.append(blob.v + ry)
+            alts.append((blob.u_alt + rx, blob.v_alt + ry, blob.major_px))
             ths.append(blob.theta)
             areas.append(blob.coverage)
             qs.append(q)
@@ -289,19 +314,31 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 area_hist.append(blob.area)
                 if len(area_hist) <= 25 or len(area_hist) % 10 == 0:
                     area_ref = float(np.median(area_hist[-25:]))
+                    if len(area_hist) >= 5:
+                        # the area's own variation (a soft body curls and stretches) widens the tolerance
+                        spread = _log_spread(area_hist[-25:])
+                        area_lo, area_hi = min(0.8, np.exp(-5 * spread)), max(1.25, np.exp(5 * spread))
                     if len(area_hist) == 5:
                         # the first confident frames now define the robot: re-check them
                         qs_a = np.asarray(qs)
                         for j in np.flatnonzero(qs_a == QUALITY_OK):
-                            if not 0.8 < raw_area[j] / area_ref < 1.25:
+                            if not area_lo < raw_area[j] / area_ref < area_hi:
                                 qs[j] = QUALITY_DEGRADED
                 major = blob.major_px if major is None else 0.9 * major + 0.1 * blob.major_px
                 if q == QUALITY_OK:
                     shapes.append((blob.major_px, blob.minor_px))
                     if len(shapes) >= 5 and (len(shapes) <= 25 or len(shapes) % 10 == 0):
-                        # the robot's outline (length, width) from its first confident frames
-                        arr = np.asarray(shapes[-25:])
-                        shape_ref = (float(np.median(arr[:, 0])), float(np.median(arr[:, 1])))
+                        # the robot's outline (length, width) from its recent confident frames, and how
+                        # much it varies by itself (a soft body, blur that changes with the speed)
+                        arr = np.log(np.asarray(shapes[-25:]))
+                        med = np.median(arr, axis=0)
+                        shape_ref = (float(np.exp(med[0])), float(np.exp(med[1])))
+                        shape_spread = tuple(1.4826 * np.median(np.abs(arr - med), axis=0))
+                        if seg.body_width_px < 1.1 * shape_ref[1]:
+                            # the robot is wider than the background filter was sized for (no size known
+                            # before): resized to the width just learned, so the filter never eats it
+                            seg = _resized(seg, rw, rh, shape_ref[1])
+                            finder.seg = seg
                 if blob.weights is not None:
                     lengths.append(body_length_px(blob.weights, blob.u - blob.origin[0], blob.v - blob.origin[1],
                                                   blob.theta))
@@ -312,7 +349,18 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
             progress.update(1)
     lengths_a = np.asarray(lengths, float)
     lengths_a = lengths_a[np.isfinite(lengths_a)]
+    alt = np.asarray(alts, float).reshape(-1, 3)
+    # the lighting model's shift of the position is smooth along the path: measured every 4th frame
+    # (a second measurement costs as much as the first), interpolated in time between
+    t_a = np.asarray(ts, float)
+    for col, pos in ((0, us), (1, vs)):
+        p = np.asarray(pos, float)
+        shift = alt[:, col] - p
+        known = np.isfinite(shift)
+        if known.sum() >= 1:
+            alt[:, col] = p + np.interp(t_a, t_a[known], shift[known])
     return dict(t_s=np.asarray(ts, float), u_px=np.asarray(us, float), v_px=np.asarray(vs, float),
+                u_alt=alt[:, 0], v_alt=alt[:, 1], major_px=alt[:, 2],
                 theta=np.asarray(ths, float), quality=np.asarray(qs, np.int8), area_px=np.asarray(areas, float),
                 length_px=float(np.median(lengths_a)) if lengths_a.size else float("nan"),
                 length_px_std=(float(1.2533 * np.std(lengths_a) / np.sqrt(lengths_a.size))
@@ -320,6 +368,39 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 n_length=int(lengths_a.size), best_contrast=finder.best_contrast,
                 robot_contrast=float(np.median(contrasts)) if contrasts else float("nan"),
                 ambiguous=finder.ambiguous, jumps=jumps, unlike=unlike, min_contrast=seg.min_contrast, noise=seg.noise)
+
+
+def _log_spread(values: list[float]) -> float:
+    """Robust sigma of the logarithms (a relative spread); 0 for fewer than 5 values."""
+    if len(values) < 5:
+        return 0.0
+    la = np.log(np.maximum(np.asarray(values, float), 1e-12))
+    return 1.4826 * float(np.median(np.abs(la - np.median(la))))
+
+
+def _resized(seg: Segmentation, width: int, height: int, body_width_px: float) -> Segmentation:
+    """``seg`` with its background filter sized for a body ``body_width_px`` wide (threshold kept)."""
+    new = Segmentation.for_frame(width, height, body_width_px, seg.min_contrast, seg.noise)
+    new.auto = seg.auto
+    return new
+
+
+def _shaped_like(blob: Any, ref: tuple[float, float], spread: tuple[float, ...],
+                 pred: tuple[float, float] | None, major: float | None) -> bool:
+    """Whether a candidate may be the robot by its outline.
+
+    Its length and width must be within the fixed tolerance of the robot's recent
+    outline (0.8-1.25 x length, 0.7-1.45 x width) widened to 5 of the outline's own
+    robust sigmas (a soft body or a blur that changes with the speed varies by
+    itself); a candidate outside that but where the motion predicted the robot
+    (within 2 px + 5 % of its length) is the robot changing shape, not something else.
+    """
+    lo_l, hi_l = min(0.8, np.exp(-5 * spread[0])), max(1.25, np.exp(5 * spread[0]))
+    lo_w, hi_w = min(0.7, np.exp(-5 * spread[1])), max(1.45, np.exp(5 * spread[1]))
+    if lo_l < blob.major_px / ref[0] < hi_l and lo_w < blob.minor_px / ref[1] < hi_w:
+        return True
+    return (pred is not None and major is not None
+            and bool(np.hypot(blob.u - pred[0], blob.v - pred[1]) < 2.0 + 0.05 * major))
 
 
 def resolve_heading(t_s: np.ndarray, u_px: np.ndarray, v_px: np.ndarray, theta: np.ndarray,
@@ -385,6 +466,41 @@ ROBOT_WIDTH_MM = 2.0
 
 
 @dataclass
+class RobotSize:
+    """What the tracker expects of the robot's outline (``None`` parts are learned from the first confident frames)."""
+
+    length_mm: float | None
+    width_mm: float | None
+    area_mm2: float | None
+
+    @property
+    def declared(self) -> bool:
+        return self.area_mm2 is not None
+
+
+def robot_size(size_mm: tuple[float, float] | str | None) -> RobotSize:
+    """``None``: the lab's 5 x 2 mm chip (with its leg stubs); ``(length, width)`` mm: any robot, a
+    rectangle's area; ``"learn"``: nothing assumed, the outline learned from the first confident frames."""
+    if size_mm is None:
+        return RobotSize(ROBOT_LENGTH_MM, ROBOT_WIDTH_MM, CHIP_AREA_MM2)
+    vals: list[float] = []
+    if isinstance(size_mm, str):
+        if size_mm.strip().lower() == "learn":
+            return RobotSize(None, None, None)
+        try:
+            vals = [float(v) for v in size_mm.split(",")]
+        except ValueError:
+            vals = []
+    else:
+        vals = [float(v) for v in size_mm]
+    if len(vals) != 2 or not all(np.isfinite(v) and v > 0 for v in vals):
+        raise InputError(f"bad robot size {size_mm!r}", key="--robot-size-mm",
+                         expected="LENGTH,WIDTH in mm (both > 0), or 'learn'")
+    length, width = max(vals), min(vals)
+    return RobotSize(length, width, length * width)
+
+
+@dataclass
 class PreparedScene:
     """What is known before tracking: the search region, the static scene, the segmentation."""
 
@@ -399,10 +515,12 @@ class PreparedScene:
 
 def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str | None = None, mask: Any = None,
                   scale: Scale | None = None, min_contrast: float | None = None,
-                  static_mask: bool = True) -> PreparedScene:
+                  static_mask: bool = True, size: RobotSize | None = None,
+                  samples: list[np.ndarray] | None = None) -> PreparedScene:
     """Region of interest, mask, static scene (rim, dust, flat field, noise) and contrast threshold.
 
-    Reads sample frames from ``cap`` and rewinds it (see :func:`track_video`)."""
+    Reads sample frames from ``cap`` and rewinds it (see :func:`track_video`), unless ``samples``
+    are given (frames spread over the clip, already decoded)."""
     from labkit.analysis.tracking.video_io import load_mask, parse_roi, read_sample_frames
 
     W, H = info.width, info.height
@@ -410,14 +528,15 @@ def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str |
     valid = load_mask(mask, W, H)
     if min_contrast is not None and not 0 < min_contrast < 1:
         raise InputError(f"bad contrast {min_contrast}", key="--min-contrast", expected="a share between 0 and 1")
-    body_w = ROBOT_WIDTH_MM / scale.mm_per_px if scale is not None else None
+    size = size or robot_size(None)
+    body_w = size.width_mm / scale.mm_per_px if scale is not None and size.width_mm else None
     seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast)
     static = None
     flat = None
     with_objects = valid
     warnings: list[str] = []
     if static_mask:
-        static = background_model(read_sample_frames(cap, info, 15), seg)
+        static = background_model(samples if samples is not None else read_sample_frames(cap, info, 15), seg)
         seg = Segmentation.for_frame(roi_t[2], roi_t[3], body_w, min_contrast, noise=static.noise)
         flat = static.flat
         if static.rim is not None:
@@ -433,14 +552,16 @@ def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str |
                          valid_with_objects=with_objects if static_mask else valid)
 
 
-def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path | None, size: tuple[int, int],
+def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path | None, bayer: str,
+                  size: tuple[int, int],
                   roi: tuple[int, int, int, int] | None, valid: np.ndarray | None, seg: Segmentation,
-                  margin_px: int, expected: float | None, vmax: float | None, scale: Scale | None) -> dict | None:
+                  margin_px: int, expected: float | None, vmax: float | None, scale: Scale | None,
+                  length_mm: float | None) -> dict | None:
     """Track again with static objects searchable (and no flat field, which holds them); the result
     only if a robot-sized, robot-long object was found in most frames."""
     from labkit.analysis.tracking.video_io import iter_frames, open_source
 
-    cap, info = open_source(source, fps=fps, timestamps=timestamps)
+    cap, info = open_source(source, fps=fps, timestamps=timestamps, bayer=bayer)
     try:
         raw = track_frames(iter_frames(cap, info), size, roi=roi, valid=valid, flat=None, seg=seg,
                            margin_px=margin_px, expected_area_px=expected, max_speed_px_s=vmax)
@@ -452,18 +573,19 @@ def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path 
     area = float(np.median(raw["area_px"][found]))
     length = float(raw["length_px"])
     # the size and the length at the known scale (the shape alone does not tell a chip from a speck)
-    if scale is None or expected is None:
+    if scale is None or expected is None or length_mm is None:
         return None
-    ok = 0.75 < area / expected < 1.33 and abs(length * scale.mm_per_px / ROBOT_LENGTH_MM - 1) < 0.12
+    ok = 0.75 < area / expected < 1.33 and abs(length * scale.mm_per_px / length_mm - 1) < 0.12
     return raw if ok else None
 
 
 def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | None = None,
                 mask: Any = None, scale: Scale | None = None, mm_per_px: float | None = None,
-                robot_length_mm: float = ROBOT_LENGTH_MM, robot_length_std_mm: float = 0.05,
+                robot_length_mm: float | None = None, robot_length_std_mm: float = 0.05,
+                robot_size_mm: tuple[float, float] | str | None = None,
                 margin_px: int = 4, min_contrast: float | None = None, static_mask: bool = True,
-                max_speed_mm_s: float = 25.0, fps: float | None = None,
-                timestamps: str | Path | None = None, quiet: bool = True) -> Track:
+                max_speed_mm_s: float | None = None, fps: float | None = None,
+                timestamps: str | Path | None = None, bayer: str = "auto", quiet: bool = True) -> Track:
     """Track the robot through a video file or an image sequence.
 
     Parameters
@@ -479,6 +601,12 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         The image scale; without either, it is measured from the robot's known
         ``robot_length_mm`` (uncertain by ``robot_length_std_mm``). A known scale
         also gives the robot's expected size in pixels (its identity).
+    robot_size_mm:
+        The robot's outline: ``None`` the lab's 5 x 2 mm chip, ``(length, width)``
+        in mm any other robot, ``"learn"`` nothing assumed (learned from the first
+        confident frames). With a known scale it gives the robot's expected area and
+        width in pixels (its identity at acquisition); its length is the default
+        ``robot_length_mm``.
     margin_px:
         Width of the band around the dark component whose pixels weigh in the
         moments: at least the blur's half-length.
@@ -491,7 +619,14 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         (:func:`~labkit.analysis.tracking.measure.background_model`).
     max_speed_mm_s:
         What the robot can walk: a candidate beyond it (plus jitter) from the
-        predicted position is an occlusion, not the robot.
+        predicted position is an occlusion, not the robot. Default (None): one
+        body length per frame interval (beyond that no tracker can tell which
+        object is which from frame to frame), i.e. the robot's length times the
+        frame rate -- 150 mm/s for the 5 mm chip at 30 fps.
+    bayer:
+        Raw Bayer frames (a sensor's mosaic, one colour per pixel): ``"auto"``
+        (detected from the 2 x 2 pattern of the first frame), ``"none"``, or the
+        pattern ``"RGGB"``, ``"BGGR"``, ``"GRBG"``, ``"GBRG"``; demosaiced to grey.
     fps, timestamps:
         Frame times of an image sequence (a rate, or a CSV with a ``t_s`` column).
 
@@ -503,36 +638,54 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         Raises :class:`InputError` if the source is missing, unreadable, empty,
         or no robot is found (the message gives the contrast found).
     """
-    from labkit.analysis.tracking.video_io import check_timestamps, iter_frames, open_source
+    from labkit.analysis.tracking.video_io import SpooledFrames, check_timestamps, iter_frames, open_source, spools
     from labkit.progress import progress as bar
 
-    cap, info = open_source(source, fps=fps, timestamps=timestamps)
+    cap, info = open_source(source, fps=fps, timestamps=timestamps, bayer=bayer)
     warnings: list[str] = []
+    spool = None
+    if info.bayer:
+        warnings.append(f"raw Bayer frames ({info.bayer}{', detected' if bayer == 'auto' else ''}): demosaiced "
+                        f"to grey")
     try:
         if info.width <= 0 or info.height <= 0:
             raise InputError("the video holds no frames", file=source)
         W, H = info.width, info.height
         if scale is None and mm_per_px is not None:
             scale = scale_given(mm_per_px)
+        size = robot_size(robot_size_mm)
+        if robot_length_mm is None:
+            robot_length_mm = size.length_mm or ROBOT_LENGTH_MM
+        if max_speed_mm_s is not None and not max_speed_mm_s > 0:
+            raise InputError(f"bad speed limit {max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
+        # a decoded video is decoded once, into a spool: samples and tracking read it (no seeking)
+        spool = SpooledFrames(cap, info) if spools(info) else None
+        frames = spool if spool is not None else iter_frames(cap, info)
         scene = prepare_scene(cap, info, roi=roi, mask=mask, scale=scale, min_contrast=min_contrast,
-                              static_mask=static_mask)
+                              static_mask=static_mask, size=size,
+                              samples=spool.samples(15) if spool is not None else None)
         roi_t, valid, seg, static, flat = scene.roi, scene.valid, scene.seg, scene.static, scene.flat
         warnings.extend(scene.warnings)
-        expected = CHIP_AREA_MM2 / scale.mm_per_px ** 2 if scale is not None else None
-        vmax = max_speed_mm_s / scale.mm_per_px if scale is not None else None
+        expected = size.area_mm2 / scale.mm_per_px ** 2 if scale is not None and size.area_mm2 else None
+        vmax = max_speed_mm_s / scale.mm_per_px if scale is not None and max_speed_mm_s else None
+        # without a scale a declared limit is counted in body lengths
+        body_s = max_speed_mm_s / robot_length_mm if max_speed_mm_s and vmax is None else None
         with bar(info.frame_count or None, "track", quiet=quiet, unit="frame") as pb:
-            raw = track_frames(iter_frames(cap, info), (W, H), roi=roi_t if roi is not None else None,
+            raw = track_frames(frames, (W, H), roi=roi_t if roi is not None else None,
                                valid=valid, flat=flat, seg=seg, margin_px=margin_px,
-                               expected_area_px=expected, max_speed_px_s=vmax, progress=pb)
+                               expected_area_px=expected, max_speed_px_s=vmax, max_speed_body_s=body_s,
+                               progress=pb)
             finish_progress(pb, int(raw["t_s"].size), info.frame_count)
     finally:
         cap.release()
+        if spool is not None:
+            spool.close()
     if (np.all(raw["quality"] == QUALITY_LOST) and static is not None and static.object_boxes
             and scale is not None and raw["t_s"].size):
         # nothing moved: a static object may still be the robot vibrating in place (a drive that
         # does not make it walk). Only an object of the robot's size and length counts, never dust.
-        still = _static_robot(source, fps, timestamps, (W, H), roi_t if roi is not None else None,
-                              scene.valid_with_objects, seg, margin_px, expected, vmax, scale)
+        still = _static_robot(source, fps, timestamps, bayer, (W, H), roi_t if roi is not None else None,
+                              scene.valid_with_objects, seg, margin_px, expected, vmax, scale, size.length_mm)
         if still is not None:
             raw = still
             warnings.append("the robot did not move: the only robot-like object is static (its size and length "
@@ -541,6 +694,9 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         if info.undecodable:
             raise InputError(f"none of the {info.undecodable} frames could be decoded", file=source)
         raise InputError("the video holds no frames", file=source)
+    if info.times is not None and raw["t_s"].size + info.undecodable != info.times.size:
+        raise InputError(f"{info.times.size} declared times for {raw['t_s'].size + info.undecodable} frames",
+                         file=timestamps, key="--timestamps", expected="one time per frame of the video")
     if info.undecodable:
         warnings.insert(0, f"{info.undecodable} frame(s) could not be decoded and were skipped "
                            f"(damaged or truncated file); {raw['t_s'].size} kept")
@@ -548,7 +704,7 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
     if info.timestamps_from != "container":
         ts_source = info.timestamps_from
     if faulty.any():
-        for key in ("u_px", "v_px", "theta", "area_px"):
+        for key in ("u_px", "v_px", "theta", "area_px", "u_alt", "v_alt", "major_px"):
             raw[key][faulty] = np.nan
         raw["quality"][faulty] = QUALITY_LOST
     if np.all(raw["quality"] == QUALITY_LOST):
@@ -584,7 +740,8 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
     track = Track(t_s=t_s, u_px=raw["u_px"], v_px=raw["v_px"], heading_rad=heading, quality=raw["quality"],
                   area_px=raw["area_px"], frame_size=(W, H), roi=roi_t, source=str(source),
                   timestamps_source=ts_source, heading_sense=sense, length_px=raw["length_px"],
-                  length_px_std=raw["length_px_std"],
+                  length_px_std=raw["length_px_std"], u_alt_px=raw["u_alt"], v_alt_px=raw["v_alt"],
+                  major_px=raw["major_px"],
                   meta={"fps_nominal": info.fps_nominal, "fourcc": info.fourcc,
                         "timestamp_faults": int(faulty.sum()), "undecodable_frames": info.undecodable,
                         "static_mask_px": int(static.rim.sum()) if static is not None and static.rim is not None

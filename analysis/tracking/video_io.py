@@ -30,7 +30,12 @@ class VideoInfo:
     raw_jpeg: bool = False   # Motion-JPEG read as packets and decoded straight to grey
     undecodable: int = 0     # frames skipped because they did not decode
     count_exact: bool = False  # frame_count counted from the packets (not the container's estimate)
-    timestamps_from: str = "container"   # "container", or for an image sequence "csv" / "fps"
+    timestamps_from: str = "container"   # "container", or (declared) "csv" / "fps"
+    bayer: str | None = None   # raw Bayer pattern (RGGB, BGGR, GRBG, GBRG) demosaiced to grey
+    gain: float | None = None  # deeper than 8 bits: frames scaled by this to float32 (the tray ~200), not cut
+    luma: bool = False         # FFmpeg hands over the decoded luma plane (no colour conversion at all)
+    times: np.ndarray | None = None   # declared frame times (a CSV) that replace a video's own
+    fps_declared: float | None = None  # a declared rate that replaces a video's own times (frame k at k / rate)
 
 
 def open_video(path: str | Path, *, grey: bool = True):
@@ -66,12 +71,45 @@ def open_video(path: str | Path, *, grey: bool = True):
         # 3x faster than FFmpeg's decode + BGR conversion + grey conversion, and the container
         # still gives each packet's timestamp
         info.raw_jpeg = bool(cap.set(cv2.CAP_PROP_FORMAT, -1))
+    elif grey:
+        _try_luma(cap, info)
     if path.suffix.lower() in (".mkv", ".webm", ".mka") or info.frame_count <= 0:
         # Matroska stores no frame count: OpenCV estimates it from the duration and the time
         # base (1967 "frames" for a 60-frame file with a 1 ms base); count the packets instead
         info.frame_count = count_packets(path)
         info.count_exact = True
     return cap, info
+
+
+def _read(cap, info: VideoInfo):
+    """``cap.read()``; OpenCV's per-frame note that it passes a YUV frame's luma plane on is silenced."""
+    if not info.luma:
+        return cap.read()
+    import cv2
+
+    log = cv2.utils.logging
+    level = log.getLogLevel()
+    log.setLogLevel(log.LOG_LEVEL_ERROR)
+    try:
+        return cap.read()
+    finally:
+        log.setLogLevel(level)
+
+
+def _try_luma(cap, info: VideoInfo) -> None:
+    """Ask FFmpeg for frames without colour conversion: a planar YUV frame then arrives as its luma
+    plane (H x W), the grey image itself, without the BGR conversion and back. Kept only if the first
+    frame comes out so; the capture is rewound either way."""
+    import cv2
+
+    if not cap.set(cv2.CAP_PROP_CONVERT_RGB, 0):
+        return
+    info.luma = True
+    ok, frame = _read(cap, info)
+    if not (ok and frame is not None and frame.ndim == 2 and frame.shape == (info.height, info.width)):
+        info.luma = False
+        cap.set(cv2.CAP_PROP_CONVERT_RGB, 1)
+    cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
 
 
 def count_packets(path: str | Path) -> int:
@@ -89,12 +127,90 @@ def count_packets(path: str | Path) -> int:
         cap.release()
 
 
+BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
+# OpenCV's older names for the same mosaics (named by the second row's second and third pixels)
+_BAYER_ALIAS = {"RGGB": "BG", "BGGR": "RG", "GRBG": "GB", "GBRG": "GR"}
+
+
+def _bayer_code(pattern: str) -> int:
+    import cv2
+
+    return int(getattr(cv2, f"COLOR_Bayer{pattern}2GRAY", getattr(cv2, f"COLOR_Bayer{_BAYER_ALIAS[pattern]}2GRAY")))
+
+
+def detect_bayer(raw: np.ndarray, min_share: float = 0.03) -> str | None:
+    """The Bayer pattern of a raw sensor frame, or None when the frame is not a colour mosaic.
+
+    A mosaic shows a 2 x 2 pattern over the whole frame: the four phases' means
+    differ by the light's colour (no real scene does that at the pixel pitch).
+    The two greens are the diagonal pair closest to each other; red is taken as
+    the brighter of the other two (a warm light; for a grey image the choice of
+    red or blue moves nothing).
+    """
+    if raw.ndim != 2 or min(raw.shape) < 8:
+        return None
+    f = raw[: raw.shape[0] // 2 * 2, : raw.shape[1] // 2 * 2].astype(np.float64)
+    p = np.array([f[0::2, 0::2].mean(), f[0::2, 1::2].mean(), f[1::2, 0::2].mean(), f[1::2, 1::2].mean()])
+    spread = float(p.max() - p.min())
+    if spread < min_share * max(float(p.mean()), 1e-9):
+        return None
+    if abs(p[1] - p[2]) <= abs(p[0] - p[3]):          # greens at (0,1), (1,0)
+        if abs(p[1] - p[2]) > 0.3 * spread:
+            return None
+        return "RGGB" if p[0] >= p[3] else "BGGR"
+    if abs(p[0] - p[3]) > 0.3 * spread:
+        return None
+    return "GRBG" if p[1] >= p[2] else "GBRG"
+
+
 def _grey(frame: np.ndarray, info: VideoInfo) -> np.ndarray | None:
+    """One decoded frame -> grey at its own depth: 8-bit as uint8, deeper as float32 x ``info.gain``."""
     import cv2
 
     if info.raw_jpeg:
         return cv2.imdecode(frame.reshape(-1), cv2.IMREAD_GRAYSCALE)
-    return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
+    if info.bayer is not None:
+        mosaic = frame[..., 0] if frame.ndim == 3 else frame     # a grey video decodes to 3 equal channels
+        g = cv2.cvtColor(np.ascontiguousarray(mosaic), _bayer_code(info.bayer))
+    elif frame.ndim == 3:
+        g = cv2.cvtColor(frame, cv2.COLOR_BGRA2GRAY if frame.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
+    else:
+        g = frame
+    if g.dtype != np.uint8 or info.gain is not None:
+        return np.asarray(g, np.float32) * np.float32(info.gain or 1.0)
+    return g
+
+
+def inspect_first_frame(cap, info: VideoInfo, bayer: str = "auto") -> None:
+    """Bayer pattern and bit depth from the first frame; the capture is rewound.
+
+    ``bayer``: ``"auto"`` (:func:`detect_bayer`), ``"none"``, or a pattern. A
+    frame deeper than 8 bits sets ``info.gain`` so the tray's bright level maps
+    to ~200 in float32: a dim 12-bit frame keeps its fractions instead of
+    becoming grey levels 0-3.
+    """
+    key = (bayer or "auto").strip().upper()
+    if key not in ("AUTO", "NONE", *BAYER_PATTERNS):
+        raise InputError(f"bad Bayer pattern {bayer!r}", key="--bayer",
+                         expected="auto, none, " + ", ".join(BAYER_PATTERNS))
+    if info.raw_jpeg:
+        if key not in ("AUTO", "NONE"):
+            raise InputError("a Motion-JPEG video holds no raw Bayer frames", file=info.path, key="--bayer")
+        return
+    ok, frame = _read(cap, info)
+    _rewind(cap, info)
+    if not ok or frame is None or frame.size == 0:
+        return
+    mono = frame.ndim == 2 or (frame.shape[2] >= 3 and np.array_equal(frame[..., 0], frame[..., 1])
+                               and np.array_equal(frame[..., 1], frame[..., 2]))
+    if key == "AUTO":
+        info.bayer = detect_bayer(frame if frame.ndim == 2 else frame[..., 0]) if mono else None
+    elif key != "NONE":
+        info.bayer = key
+    if frame.dtype != np.uint8:
+        g = _grey(frame, info)
+        if g is not None:
+            info.gain = 200.0 / max(float(np.percentile(g, 99)), 1e-9)
 
 
 def iter_frames(cap, info: VideoInfo) -> Iterator[tuple[np.ndarray, float]]:
@@ -105,11 +221,20 @@ def iter_frames(cap, info: VideoInfo) -> Iterator[tuple[np.ndarray, float]]:
     (Frames from a capture opened with ``grey=False`` are converted to grey too.)"""
     import cv2
 
+    k = 0
     while True:
-        ok, frame = cap.read()
+        ok, frame = _read(cap, info)
         if not ok or frame is None:
             return
         t_ms = cap.get(cv2.CAP_PROP_POS_MSEC)
+        if info.times is not None:
+            if k >= info.times.size:
+                raise InputError(f"the video holds more frames than the {info.times.size} declared times",
+                                 file=info.path, key="--timestamps", expected="one time per frame")
+            t_ms = 1000.0 * float(info.times[k])
+        elif info.fps_declared:
+            t_ms = 1000.0 * k / info.fps_declared
+        k += 1
         try:
             grey = _grey(frame, info)
         except cv2.error:
@@ -138,6 +263,79 @@ def check_timestamps(t_s: np.ndarray, fps_nominal: float, path: str) -> tuple[np
     if faulty.sum() > t_s.size // 2:
         raise InputError(f"{int(faulty.sum())} of {t_s.size} frame timestamps do not increase", file=path)
     return t_s, "container", faulty
+
+
+class SpooledFrames:
+    """Every frame decoded once, in order, kept to be read as often as needed.
+
+    An inter-frame codec (H.264, MPEG-4) cannot seek without decoding from the
+    last key frame, so sampling 15 frames spread over a clip by seeking costs
+    several decodings of the whole clip. Spooling decodes each frame once: the
+    static scene's samples and the tracking pass then read the spool. Frames
+    stay in memory up to ``memory_bytes``; beyond, they go on to a temporary
+    file (the operating system's page cache; removed on :meth:`close`).
+    """
+
+    def __init__(self, cap, info: VideoInfo, memory_bytes: int = 1 << 30):
+        import tempfile
+
+        self.info = info
+        self.times: list[float] = []
+        self._held: list[np.ndarray] = []
+        self._fh = None
+        self._on_file = 0
+        self.dtype: np.dtype = np.dtype(np.uint8)
+        size = 0
+        for grey, t in iter_frames(cap, info):
+            if not self.times:
+                self.dtype = grey.dtype
+            self.times.append(t)
+            size += grey.nbytes
+            if size <= memory_bytes:
+                self._held.append(grey)
+                continue
+            if self._fh is None:
+                self._fh = tempfile.TemporaryFile(prefix="labkit-spool-")
+            self._fh.write(np.ascontiguousarray(grey, self.dtype).tobytes())
+            self._on_file += 1
+        self._file_frames: np.ndarray | None = None
+        if self._fh is not None:
+            self._fh.flush()
+            self._file_frames = np.memmap(self._fh, dtype=self.dtype, mode="r",
+                                          shape=(self._on_file, info.height, info.width))
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def _frame(self, k: int) -> np.ndarray:
+        if k < len(self._held):
+            return self._held[k]
+        assert self._file_frames is not None
+        return np.asarray(self._file_frames[k - len(self._held)])
+
+    def samples(self, count: int) -> list[np.ndarray]:
+        """Up to ``count`` frames spread evenly over the clip."""
+        n = len(self)
+        if n == 0:
+            return []
+        idx = np.unique(np.linspace(0, n - 1, min(count, n)).round().astype(int))
+        return [self._frame(int(i)) for i in idx]
+
+    def __iter__(self) -> Iterator[tuple[np.ndarray, float]]:
+        for k, t in enumerate(self.times):
+            yield self._frame(k), t
+
+    def close(self) -> None:
+        self._held = []
+        self._file_frames = None
+        if self._fh is not None:
+            self._fh.close()
+
+
+def spools(info: VideoInfo) -> bool:
+    """Whether a source is read through :class:`SpooledFrames`: a decoded video (Motion-JPEG's own
+    packets and image files are read where they lie, cheaply)."""
+    return not info.raw_jpeg and not info.fourcc.startswith("images/")
 
 
 def read_sample_frames(cap, info: VideoInfo, count: int) -> list[np.ndarray]:
@@ -170,7 +368,7 @@ def read_sample_frames(cap, info: VideoInfo, count: int) -> list[np.ndarray]:
         return out
     for idx in want:
         cap.set(cv2.CAP_PROP_POS_FRAMES, int(idx))
-        ok, frame = cap.read()
+        ok, frame = _read(cap, info)
         if ok and frame is not None:
             g = _grey(frame, info)
             if g is not None:
@@ -189,6 +387,8 @@ def _rewind(cap, info: VideoInfo) -> None:
         cap.open(info.path, cv2.CAP_FFMPEG)
         if info.raw_jpeg:
             cap.set(cv2.CAP_PROP_FORMAT, -1)
+        if info.luma:
+            cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
     else:
         cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
 
@@ -260,8 +460,10 @@ def sequence_files(source: str | Path) -> list[Path] | None:
     return None
 
 
-def read_timestamps_csv(path: str | Path, files: list[Path]) -> np.ndarray:
-    """Frame times from a CSV: a ``t_s`` column, matched by a ``file`` column if there is one, else in order."""
+def read_timestamps_csv(path: str | Path, files: list[Path] | None) -> np.ndarray:
+    """Frame times from a CSV: a ``t_s`` column, matched by a ``file`` column if there is one, else in order.
+
+    ``files`` None (a video): the times in order, their count checked against the frames later."""
     import csv
 
     path = Path(path)
@@ -287,6 +489,8 @@ def read_timestamps_csv(path: str | Path, files: list[Path]) -> np.ndarray:
         order.append(t)
         if fi is not None and fi < len(r):
             times[Path(r[fi].strip()).name] = t
+    if files is None:
+        return np.asarray(order, float)
     if fi is not None:
         missing = [f.name for f in files if f.name not in times]
         if missing:
@@ -322,7 +526,8 @@ class ImageSequence:
 
         if self._cur is None:
             return False, None
-        img = cv2.imread(str(self.files[self._cur]), cv2.IMREAD_GRAYSCALE)
+        # as stored: 16-bit and colour kept (converted to grey at depth by iter_frames)
+        img = cv2.imread(str(self.files[self._cur]), cv2.IMREAD_UNCHANGED)
         return img is not None, img
 
     def read(self):
@@ -355,21 +560,43 @@ class ImageSequence:
         pass
 
 
-def open_source(source: str | Path, *, fps: float | None = None, timestamps: str | Path | None = None):
+def open_source(source: str | Path, *, fps: float | None = None, timestamps: str | Path | None = None,
+                bayer: str = "auto"):
     """A video file or an image sequence -> ``(capture, VideoInfo)``; frames via :func:`iter_frames`.
 
     An image sequence (a folder, or a pattern such as ``frame_%05d.png``) takes
     its frame times from ``timestamps`` (a CSV with a ``t_s`` column), else
     from a ``timestamps.csv`` beside the images, else from ``fps``; without
-    any it is refused (a sequence carries no times of its own).
+    any it is refused (a sequence carries no times of its own). A video file
+    takes ``timestamps`` (one ``t_s`` per frame, in order) or ``fps`` in place
+    of its container's times when given (a high-speed camera that wrote a
+    playback rate); the first frame sets the Bayer pattern and the bit depth
+    (:func:`inspect_first_frame`).
     """
-    import cv2
-
     files = sequence_files(source)
     if files is None:
         if not Path(source).exists() and "%" not in str(source):
             raise InputError("no such video file or image folder", file=source)
-        return open_video(source)
+        cap, info = open_video(source)
+        if timestamps is not None:
+            info.times = read_timestamps_csv(timestamps, None)
+            info.timestamps_from = "csv"
+        elif fps is not None:
+            if not fps > 0:
+                raise InputError(f"bad frame rate {fps}", key="--fps", expected="frames per second > 0")
+            info.fps_declared = float(fps)
+            info.timestamps_from = "fps"
+        inspect_first_frame(cap, info, bayer)
+        return cap, info
+    cap, info = _open_sequence(source, files, fps, timestamps)
+    inspect_first_frame(cap, info, bayer)
+    return cap, info
+
+
+def _open_sequence(source: str | Path, files: list[Path], fps: float | None, timestamps: str | Path | None):
+    """An image sequence and its frame times (see :func:`open_source`)."""
+    import cv2
+
     side = Path(timestamps) if timestamps is not None else files[0].parent / "timestamps.csv"
     if timestamps is not None or side.is_file():
         t_s = read_timestamps_csv(side, files)
@@ -380,10 +607,10 @@ def open_source(source: str | Path, *, fps: float | None = None, timestamps: str
     else:
         raise InputError("an image sequence carries no frame times", file=source,
                          expected="--fps RATE, or a timestamps.csv (file,t_s) beside the images, or --timestamps CSV")
-    first = cv2.imread(str(files[0]), cv2.IMREAD_GRAYSCALE)
+    first = cv2.imread(str(files[0]), cv2.IMREAD_UNCHANGED)
     if first is None:
         raise InputError("cannot read the first image", file=files[0])
-    h, w = first.shape
+    h, w = first.shape[:2]
     info = VideoInfo(str(source), w, h, len(files), float(fps or 0.0), f"images/{files[0].suffix[1:].lower()}",
                      count_exact=True)
     info.timestamps_from = how

@@ -33,9 +33,26 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--min-contrast", type=float, metavar="C",
                         help="darkness (tray - robot) / tray a robot must have (default: from the pixel noise)")
     parser.add_argument("--fps", type=float, metavar="RATE",
-                        help="frame rate of an image sequence without a timestamps.csv")
+                        help="frame rate: of an image sequence without a timestamps.csv, or replacing a video's "
+                             "own frame times (a high-speed camera that wrote its playback rate)")
     parser.add_argument("--timestamps", metavar="CSV",
-                        help="frame times of an image sequence (a CSV with a t_s column, optionally file)")
+                        help="frame times (a CSV with a t_s column, optionally file): of an image sequence, or "
+                             "one per frame replacing a video's own")
+    parser.add_argument("--robot-size-mm", metavar="L,W",
+                        help="the robot's length and width (mm; default the 5 x 2 mm chip), or 'learn' to assume "
+                             "nothing and learn its outline from the first clear frames")
+    parser.add_argument("--max-speed-mm-s", type=float, metavar="V",
+                        help="fastest the robot can go (a farther candidate is an occlusion); default one body "
+                             "length per frame interval")
+    parser.add_argument("--line-time-us", type=float, metavar="US",
+                        help="rolling shutter: the delay between rows (us; 0 = global shutter); frame times are "
+                             "corrected at the robot's row. Undeclared, the error budget allows for any shutter")
+    parser.add_argument("--line-time-std-us", type=float, default=0.0, metavar="US",
+                        help="standard uncertainty of --line-time-us (default 0)")
+    parser.add_argument("--timestamp-std-ms", type=float, metavar="MS",
+                        help="the camera clock's accuracy per frame (ms), if worse than the frame times' own scatter")
+    parser.add_argument("--bayer", default="auto", metavar="PATTERN",
+                        help="raw Bayer frames: auto (detected), none, RGGB, BGGR, GRBG or GBRG (demosaiced to grey)")
     parser.add_argument("--preview", type=int, metavar="FRAME",
                         help="only draw frame FRAME (0-based) with the segmentation and the ROI into a PNG "
                              "(--preview-png), to see why a video fails")
@@ -61,7 +78,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     import numpy as np
 
     from labkit.analysis.tracking.pipeline import track_file
-    from labkit.analysis.tracking.tracker import ROBOT_LENGTH_MM, scale_given
+    from labkit.analysis.tracking.tracker import ROBOT_LENGTH_MM, robot_size, scale_given
 
     scale = None
     if args.mm_per_px is not None:
@@ -70,7 +87,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         scale = scale_given(args.mm_per_px, args.mm_per_px_std)
     elif args.scale_bar is not None:
         scale = _scale_bar(args.scale_bar)
-    length = args.robot_length_mm if args.robot_length_mm is not None else ROBOT_LENGTH_MM
+    length = args.robot_length_mm
+    if length is None:
+        length = robot_size(args.robot_size_mm).length_mm or ROBOT_LENGTH_MM
     if not length > 0:
         raise InputError(f"bad robot length {length}", key="--robot-length-mm", expected="a length > 0 mm")
     if args.fps is not None and not args.fps > 0:
@@ -78,14 +97,24 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.min_contrast is not None and not 0 < args.min_contrast < 1:
         raise InputError(f"bad contrast {args.min_contrast}", key="--min-contrast",
                          expected="a share between 0 and 1, e.g. 0.1")
+    if args.max_speed_mm_s is not None and not args.max_speed_mm_s > 0:
+        raise InputError(f"bad speed limit {args.max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
     common = dict(roi=args.roi, mask=args.mask, min_contrast=args.min_contrast, fps=args.fps,
-                  timestamps=args.timestamps)
+                  timestamps=args.timestamps, bayer=args.bayer, robot_size_mm=args.robot_size_mm)
     if args.preview is not None:
         return _preview(args, scale, common)
     if args.preview_png is not None:
         raise InputError("--preview-png needs --preview FRAME", key="--preview-png")
-    res = track_file(args.video, out=args.out, overlay=args.overlay, force=args.force, scale=scale,
-                     robot_length_mm=length, window_s=args.window_s, quiet=args.quiet, **common)
+    for key, val in (("--line-time-us", args.line_time_us), ("--line-time-std-us", args.line_time_std_us),
+                     ("--timestamp-std-ms", args.timestamp_std_ms)):
+        if val is not None and not val >= 0:
+            raise InputError(f"bad {key} {val}", key=key, expected="a time >= 0")
+    declared = dict(line_time_s=None if args.line_time_us is None else 1e-6 * args.line_time_us,
+                    line_time_std_s=1e-6 * args.line_time_std_us,
+                    timestamp_std_s=None if args.timestamp_std_ms is None else 1e-3 * args.timestamp_std_ms)
+    res = track_file(args.video, out=args.out, overlay=args.overlay, force=args.force, scale=scale, **declared,
+                     robot_length_mm=length, max_speed_mm_s=args.max_speed_mm_s, window_s=args.window_s,
+                     quiet=args.quiet, **common)
     track, speed, result = res.track, res.speed, res.summary
     if not args.json:
         lo, hi = speed.speed_ci_mm_s
@@ -94,11 +123,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
               f"scale {track.mm_per_px:.5g} +- {track.scale.mm_per_px_std:.2g} mm/px ({track.scale.method})")
         print(f"  mean speed {speed.mean_speed_mm_s:.4g} mm/s, {int(100 * speed.ci_level)}% CI "
               f"[{lo:.4g}, {hi:.4g}] (smoothed path, window {speed.window_s:.3g} s)")
+        if np.isfinite(speed.moving_speed_mm_s) and speed.moving_s < 0.98 * speed.duration_s:
+            mlo, mhi = speed.moving_speed_ci_mm_s
+            print(f"  while moving ({speed.moving_s:.3g} of {speed.duration_s:.3g} s): "
+                  f"{speed.moving_speed_mm_s:.4g} mm/s [{mlo:.4g}, {mhi:.4g}]; "
+                  f"the mean above is over the whole clip, pauses included")
         print(f"  frame-to-frame {speed.frame_to_frame_speed_mm_s:.4g} mm/s (overstates under jitter), "
               f"net displacement {speed.net_speed_mm_s:.4g} mm/s (understates on curves)")
         vx, vy = speed.mean_velocity_mm_s
         print(f"  mean velocity ({vx:.4g}, {vy:.4g}) mm/s, path {speed.path_length_mm:.4g} mm, "
               f"turning {np.degrees(speed.mean_turn_rate_rad_s):.3g} deg/s")
+        for part in speed.meta.get("budget", {}).get("parts", []):
+            print(f"  +- {part['std_mm_s']:.2g} mm/s {part['name']} ({part['kind']}, {part['source']})")
         c, thr, nz = (track.meta.get(k, float("nan")) for k in ("robot_contrast", "min_contrast", "noise"))
         print(f"  contrast: robot {100 * c:.1f} % darker than the tray; threshold {100 * thr:.1f} % "
               f"(pixel noise {100 * nz:.2f} %)")
