@@ -188,8 +188,11 @@ def run_demo(out: str | Path = "labkit-demo", *, quick: bool = False, seed: int 
     replaced only when the new one is complete (a failed demo puts the old folder back)."""
     out = Path(out)
     backup = prepare_out(out, force)
+    from labkit.experiments.live import no_console_rows
+
     try:
-        summary = _run_demo(out, quick=quick, seed=seed, quiet=quiet, settings=settings, stream=stream)
+        with no_console_rows():         # the demo prints its own stages, not every run's points
+            summary = _run_demo(out, quick=quick, seed=seed, quiet=quiet, settings=settings, stream=stream)
     except BaseException:
         if backup is not None:
             shutil.rmtree(out, ignore_errors=True)

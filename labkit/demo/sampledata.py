@@ -99,7 +99,10 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
     # Written into a staging folder inside `out`, moved over the old files only once all of them
     # exist and passed the checks: a failure anywhere leaves the old sample files untouched.
     with staged_dir(out, OUTPUTS) as stage:
-        summary = _generate(stage, inchip_cfg, shaker_cfg, inchip_table, shaker_table, seed, quiet, say)
+        from labkit.experiments.live import no_console_rows
+
+        with no_console_rows():         # the stages are printed here, not every run's points
+            summary = _generate(stage, inchip_cfg, shaker_cfg, inchip_table, shaker_table, seed, quiet, say)
         relocate(stage, out)
     sizes = {name: (out / name).stat().st_size for name in OUTPUTS if (out / name).exists()}
     total = sum(p.stat().st_size for p in out.iterdir() if p.is_file())

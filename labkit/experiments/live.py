@@ -36,6 +36,8 @@ A stop request (``labkit view``'s Stop "after this point") is a file
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import json
 import math
 import os
@@ -395,9 +397,23 @@ def format_record(rec: dict[str, Any]) -> str | None:
     return "  ".join(parts + flags)
 
 
+#: False inside :func:`no_console_rows` (the demo and the sample data print their own stages)
+_ROWS: contextvars.ContextVar[bool] = contextvars.ContextVar("labkit_console_rows", default=True)
+
+
+@contextlib.contextmanager
+def no_console_rows() -> Iterator[None]:
+    """Runs started inside this block print no row per point (their live stream is written as ever)."""
+    token = _ROWS.set(False)
+    try:
+        yield
+    finally:
+        _ROWS.reset(token)
+
+
 def console_for_run(quiet: bool) -> IO[str] | None:
     """Standard output when it is not a terminal (a row per point there) and not ``quiet``; else None."""
-    if quiet:
+    if quiet or not _ROWS.get():
         return None
     try:
         return None if sys.stdout.isatty() else sys.stdout

@@ -118,13 +118,14 @@ class LabControl:
         if not path.parent.is_dir():
             raise InstrumentError(f"camera: no such directory: {path.parent}", instrument=self.name,
                                   command="CAM:REC")
-        cmd = f'CAM:REC "{path.name}",{float(duration_s):g}'
+        name = path.name.lstrip(".") or "clip.mkv"      # the lab takes a plain name (no leading dot)
+        cmd = f'CAM:REC "{name}",{float(duration_s):g}'
         reply = self.query(cmd, timeout_s=self.timeout_s + 10 * float(duration_s))
         if not reply.strip().lstrip("+").isdigit() or int(reply) == 0:
             self.check(cmd)
             raise InstrumentError(f"unexpected reply {reply[:40]!r}", instrument=self.name, command=cmd)
         folder = Path(self.query("CAM:DIR?").strip().strip('"'))
-        shutil.move(str(folder / path.name), str(path))
+        shutil.move(str(folder / name), str(path))
         stamps = self.query("CAM:TIMESTAMPS?")
         times = [float(v) for v in stamps.split(",") if v.strip()]
         return {"path": str(path), "frames": int(reply), "timestamps_s": times}
