@@ -236,7 +236,9 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
         from labkit.sim.core import align_dt
 
         dt_s = align_dt(number(args.dt_s, "--dt-s", positive=True), scenario)
-    r = simulate(params, scenario, duration_s=duration_s, seed=seed, start_height_um=height_um, dt_s=dt_s)
+    with _StepProgress(args.quiet) as bar:
+        r = simulate(params, scenario, duration_s=duration_s, seed=seed, start_height_um=height_um, dt_s=dt_s,
+                     progress=bar.update, keys=OPTION_KEYS)
     summary: dict[str, Any] = {"kind": kind, **values, "duration_s": duration_s, "ablate": args.ablate,
                                "seed": seed, "start_height_um": height_um}
     for key, value in _result_summary(r).items():
@@ -252,6 +254,35 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     if not args.json:
         _print_single(summary)
     return summary
+
+
+#: The options that set a run's fields (for the bounds' messages, labkit.sim.core.check_run).
+OPTION_KEYS = {"freq_hz": "--freq-hz", "amp_um": "--amp-um", "voltage_v": "--voltage-v", "duration_s": "--duration-s"}
+
+
+class _StepProgress:
+    """A progress bar over a run's steps (on a terminal; a run of several pieces reports its start
+    and each piece, labkit.sim.core.run_model)."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.bar: Any = None
+
+    def __enter__(self) -> _StepProgress:
+        return self
+
+    def update(self, done: int, total: int) -> None:
+        if self.bar is None:
+            if done >= total:
+                return          # one piece: done before a bar would be worth showing
+            from labkit.progress import progress
+
+            self.bar = progress(total, "simulating", quiet=self.quiet, unit="step")
+        self.bar.update(done - self.bar.n)
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def _result_summary(r: Any) -> dict[str, Any]:
@@ -308,7 +339,7 @@ def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
               workers=workers, seed=integer(args.seed, "--seed"), quiet=args.quiet,
               accel_limit_g=None if accel is None else number(accel, "--accel-limit-g", positive=True),
               dt_check=bool(getattr(args, "dt_check", False)),
-              step_fraction=_fraction(args.step_fraction))
+              step_fraction=_fraction(args.step_fraction), keys=OPTION_KEYS)
     summary = s.summary()
     summary["ablate"] = args.ablate
     if args.out:

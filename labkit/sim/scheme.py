@@ -1401,9 +1401,12 @@ def new_scratch():
 
 
 @jit
-def integrate(P_, A_, S_, mode_, n_steps, dt, every, n_skip, rec, rec_contact, frac, max_air, max_h, count,
+def integrate(P_, A_, S_, mode_, n0, n_steps, dt, every, n_skip, rec, rec_contact, frac, max_air, max_h, count,
               events, W_, I_, T_, air_run):
-    """Run n_steps steps of dt; fill the outputs (statistics after n_skip steps).
+    """Run steps n0 .. n0 + n_steps - 1 of dt (time n dt); fill the outputs (statistics from step
+    n_skip on). A long run is integrated in pieces (:class:`labkit.sim.kernel.Integration`): the
+    state, the scratch and every accumulated output carry over, ``rec`` is the piece's own
+    (a row every ``every`` steps from the piece's first step, its last step included).
 
     ``W_, I_`` (:func:`new_scratch`), ``T_`` (S_SIZE) and ``air_run`` (6, zeros) are scratch,
     allocated by the caller, which keeps every array alive for the call.
@@ -1421,14 +1424,14 @@ def integrate(P_, A_, S_, mode_, n_steps, dt, every, n_skip, rec, rec_contact, f
     count, events, air_run = unmanaged(count), unmanaged(events), unmanaged(air_run)
     row = 0
     for n in range(n_steps + 1):
-        t = n * dt
+        t = (n0 + n) * dt
         if n % every == 0 and row < rec.shape[0]:
             record(P, A, S, mode, t, rec, rec_contact, row)
             row += 1
         if n == n_steps:
             break
         substeps(P, A, S, T, mode, t, dt, W, I, events, count)
-        if n >= n_skip:
+        if n0 + n >= n_skip:
             zg, _, _ = ground(P, W, t + dt)
             for j in range(6):
                 frac[j, mode[j]] += dt

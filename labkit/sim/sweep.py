@@ -251,6 +251,18 @@ def limit_acceleration(scenario: Any, accel_limit_g: float | None) -> Any:
     return dataclasses.replace(scenario, amp_um=float(amp_max_um))
 
 
+def check_points(params: RobotParams, scenario: Shaker | PZT, quantity: str, grid: np.ndarray, duration_s: float,
+                 accel_limit_g: float | None, fraction: float, *, keys: dict[str, str] | None = None) -> None:
+    """Every point of a sweep (the nominal robot) within :func:`labkit.sim.core.check_run`'s
+    bounds, before any process starts (InputError naming the bound)."""
+    from labkit.sim.core import check_run, default_dt
+
+    for v in grid:
+        p, sc = apply_value(params, scenario, quantity, float(v))
+        sc = limit_acceleration(sc, accel_limit_g)
+        check_run(p, sc, duration_s, default_dt(p, sc) * fraction, keys=keys)
+
+
 def _task_seed(seed: int, draw: int) -> int:
     """One integer seed per draw, the same at every point (common random numbers)."""
     return int(np.random.SeedSequence([int(seed), int(draw)]).generate_state(1)[0])
@@ -303,7 +315,7 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
           scheduler: str | None = None, workers: int | None = None, seed: int = 0,
           quiet: bool = False, table: dict[str, float] | None = None,
           accel_limit_g: float | None = None, dt_check: bool = False,
-          step_fraction: float = 1.0) -> SweepResult:
+          step_fraction: float = 1.0, keys: dict[str, str] | None = None) -> SweepResult:
     """Simulate ``base_scenario`` at every value of ``quantity``, with Monte Carlo draws.
 
     Parameters
@@ -349,6 +361,8 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
         rounded down to whole steps per half drive period), for the runs the
         default step does not converge (docs/model.md, "Numerics"); the dt
         check then compares with a quarter of that. ``meta["step_fraction"]``.
+    keys:
+        Names of the fields in the bounds' messages (:func:`labkit.sim.core.check_run`).
 
     Returns
     -------
@@ -377,6 +391,7 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
         raise InputError(f"acceleration limit must be > 0 g, got {accel_limit_g}", key="accel_limit_g",
                          expected="a peak acceleration in g, > 0")
     fraction = float(step_fraction)
+    check_points(params, base_scenario, quantity, grid, duration_s, accel_limit_g, fraction, keys=keys)
     tasks: list[tuple] = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table,
                            accel_limit_g, False, fraction) for v in grid for d in range(n_draws)]
     n_main = len(tasks)
