@@ -239,14 +239,19 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     with _StepProgress(args.quiet) as bar:
         r = simulate(params, scenario, duration_s=duration_s, seed=seed, start_height_um=height_um, dt_s=dt_s,
                      progress=bar.update, keys=OPTION_KEYS)
+    check = None
+    if getattr(args, "dt_check", False):
+        from labkit.sim.core import dt_check
+
+        check = dt_check(params, scenario, duration_s, seed=seed, start_height_um=height_um)
+        if r.validity is not None:
+            r.validity.chaotic = bool(check["chaotic"])
     summary: dict[str, Any] = {"kind": kind, **values, "duration_s": duration_s, "ablate": args.ablate,
                                "seed": seed, "start_height_um": height_um}
     for key, value in _result_summary(r).items():
         summary.setdefault(key, value)
-    if getattr(args, "dt_check", False):
-        from labkit.sim.core import dt_check
-
-        summary["dt_check"] = dt_check(params, scenario, duration_s, seed=seed, start_height_um=height_um)
+    if check is not None:
+        summary["dt_check"] = check
     if args.out:
         with atomic_output(args.out) as tmp:
             r.to_h5(tmp)
@@ -382,6 +387,12 @@ def _print_single(s: dict[str, Any]) -> None:
     print(f"{s['kind']} run, {s['duration_s']:g} s: mean speed {s['mean_speed_mm_s']:.3f} mm/s")
     print("  patterns: " + ", ".join(s["patterns"]))
     print("  impacts:  " + ", ".join(str(i) for i in s["impacts"]))
+    v = s.get("validity")
+    if v is not None:
+        print("  validity: " + ("within the model's assumptions" if not v["flags"] else
+                                "LEFT the model's assumptions: " + ", ".join(v["flags"]))
+              + f" (tilt {v['max_tilt_rad']:.3g} rad, bound {v['small_angle_bound_rad']:g}; "
+                f"highest body gap {v['max_jump_um']:.4g} um)")
     if "dt_check" in s:
         c = s["dt_check"]
         d, q = c["default"], c["quarter"]
@@ -402,6 +413,7 @@ def _print_sweep(s: dict[str, Any]) -> None:
         print(f"  {p[q]:12.4g}  {p['mean_speed_mm_s']:9.3f}  {p['std_speed_mm_s']:9.3f}  {p['dominant_pattern']:<15}"
               + (f"  {p['amp_um']:7.3g}" if amp else "")
               + (f"  quarter step {p['quarter_step_speed_mm_s']:.3f} mm/s"
-                 f" ({'converged' if p['dt_converged'] else 'NOT converged'})" if "dt_converged" in p else ""))
+                 f" ({'converged' if p['dt_converged'] else 'NOT converged'})" if "dt_converged" in p else "")
+              + ("  flags: " + ", ".join(f"{k} x{n}" for k, n in p["flags"].items()) if p.get("flags") else ""))
     if "out" in s:
         print(f"  wrote {s['out']}")

@@ -29,7 +29,7 @@ from labkit.errors import InputError
 from labkit.sim import model as M
 from labkit.sim.excitation import PZT, Shaker
 from labkit.sim.params import RobotParams
-from labkit.sim.result import SimResult, classify_pattern, foot_period
+from labkit.sim.result import SimResult, classify_pattern, foot_period, validity
 
 #: Default step: this many steps per period of the fastest of (highest mode, drive) ...
 STEPS_PER_PERIOD = 32
@@ -244,7 +244,8 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
             state[M.S_Q + M.NB + k] += jitter_um * 1e-6 * rng.standard_normal()
 
     t0 = time.perf_counter()
-    out = run_model(mdl, state, mode, n_steps, dt, every, n_skip, engine=engine, tail_steps=tail_steps,
+    out = run_model(mdl, state, mode, n_steps, dt, every, n_skip, engine=engine, ev_cap=EVENT_LOG_CAP,
+                    tail_steps=tail_steps,
                     tail_every=tail_every, progress=progress)
     wall = time.perf_counter() - t0
     return _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engine, wall, seed, ablation)
@@ -349,6 +350,10 @@ def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engin
     height = (rec[:, M.REC_FZ:M.REC_FZ + 6] - rec[:, [M.REC_ZG]]) * 1e6
     periods = [foot_period(t, height[:, j], period, t_skip) for j in range(6)]
     n_ev = int(cnt[M.CNT_EVENTS])
+    counters = {"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED]),
+                "steps_halved": int(cnt[M.CNT_HALVED]), "trial_steps": int(cnt[M.CNT_ADV])}
+    valid = validity(p, (rec[:, M.REC_Z] - rec[:, M.REC_ZG]) * 1e6, rec[:, M.REC_PH:M.REC_PH + 3],
+                     out["rec_contact"], counters)
     return SimResult(
         params=p, scenario=scenario, duration_s=float(duration_s), dt_s=float(dt), record_dt_s=float(dt * every),
         transient_s=float(t_skip), engine=engine, t_s=t.copy(), body_y_um=y * 1e6, body_z_um=rec[:, M.REC_Z] * 1e6,
@@ -358,9 +363,7 @@ def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engin
         mean_speed_mm_s=speed, contact_fraction=cf, impacts=cnt[:6].astype(int).copy(),
         body_impacts=int(cnt[M.CNT_BODY]), patterns=patterns, max_flight_s=out["max_air"].copy(),
         events=out["events"][:n_ev].copy(), n_steps=n_steps, wall_s=wall, seed=seed, ablation=ablation,
-        counters={"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED]),
-                  "steps_halved": int(cnt[M.CNT_HALVED]), "trial_steps": int(cnt[M.CNT_ADV])},
-        max_height_um=max_h_um.copy(), foot_periods=periods)
+        counters=counters, max_height_um=max_h_um.copy(), foot_periods=periods, validity=valid)
 
 
 #: dt_check: the default step and the quarter step agree when the mean speeds differ by
