@@ -26,6 +26,11 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
+    if not args.quiet:      # at once, before the imports and the virtual lab's start (seconds)
+        import sys
+
+        print(f"labkit demo: 7 stages into {args.out}; the first start loads the simulator's compiled kernel "
+              "(compiles it on a fresh install, once)", file=sys.stderr, flush=True)
     from labkit.demo.results import format_summary
     from labkit.demo.run import run_demo
 

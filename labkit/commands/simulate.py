@@ -236,15 +236,22 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
         from labkit.sim.core import align_dt
 
         dt_s = align_dt(number(args.dt_s, "--dt-s", positive=True), scenario)
-    r = simulate(params, scenario, duration_s=duration_s, seed=seed, start_height_um=height_um, dt_s=dt_s)
+    with _StepProgress(args.quiet) as bar:
+        r = simulate(params, scenario, duration_s=duration_s, seed=seed, start_height_um=height_um, dt_s=dt_s,
+                     progress=bar.update, keys=OPTION_KEYS)
+    check = None
+    if getattr(args, "dt_check", False):
+        from labkit.sim.core import dt_check
+
+        check = dt_check(params, scenario, duration_s, seed=seed, start_height_um=height_um)
+        if r.validity is not None:
+            r.validity.chaotic = bool(check["chaotic"])
     summary: dict[str, Any] = {"kind": kind, **values, "duration_s": duration_s, "ablate": args.ablate,
                                "seed": seed, "start_height_um": height_um}
     for key, value in _result_summary(r).items():
         summary.setdefault(key, value)
-    if getattr(args, "dt_check", False):
-        from labkit.sim.core import dt_check
-
-        summary["dt_check"] = dt_check(params, scenario, duration_s, seed=seed, start_height_um=height_um)
+    if check is not None:
+        summary["dt_check"] = check
     if args.out:
         with atomic_output(args.out) as tmp:
             r.to_h5(tmp)
@@ -252,6 +259,35 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     if not args.json:
         _print_single(summary)
     return summary
+
+
+#: The options that set a run's fields (for the bounds' messages, labkit.sim.core.check_run).
+OPTION_KEYS = {"freq_hz": "--freq-hz", "amp_um": "--amp-um", "voltage_v": "--voltage-v", "duration_s": "--duration-s"}
+
+
+class _StepProgress:
+    """A progress bar over a run's steps (on a terminal; a run of several pieces reports its start
+    and each piece, labkit.sim.core.run_model)."""
+
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+        self.bar: Any = None
+
+    def __enter__(self) -> _StepProgress:
+        return self
+
+    def update(self, done: int, total: int) -> None:
+        if self.bar is None:
+            if done >= total:
+                return          # one piece: done before a bar would be worth showing
+            from labkit.progress import progress
+
+            self.bar = progress(total, "simulating", quiet=self.quiet, unit="step")
+        self.bar.update(done - self.bar.n)
+
+    def __exit__(self, *exc: object) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def _result_summary(r: Any) -> dict[str, Any]:
@@ -308,7 +344,7 @@ def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
               workers=workers, seed=integer(args.seed, "--seed"), quiet=args.quiet,
               accel_limit_g=None if accel is None else number(accel, "--accel-limit-g", positive=True),
               dt_check=bool(getattr(args, "dt_check", False)),
-              step_fraction=_fraction(args.step_fraction))
+              step_fraction=_fraction(args.step_fraction), keys=OPTION_KEYS)
     summary = s.summary()
     summary["ablate"] = args.ablate
     if args.out:
@@ -351,6 +387,12 @@ def _print_single(s: dict[str, Any]) -> None:
     print(f"{s['kind']} run, {s['duration_s']:g} s: mean speed {s['mean_speed_mm_s']:.3f} mm/s")
     print("  patterns: " + ", ".join(s["patterns"]))
     print("  impacts:  " + ", ".join(str(i) for i in s["impacts"]))
+    v = s.get("validity")
+    if v is not None:
+        print("  validity: " + ("within the model's assumptions" if not v["flags"] else
+                                "LEFT the model's assumptions: " + ", ".join(v["flags"]))
+              + f" (tilt {v['max_tilt_rad']:.3g} rad, bound {v['small_angle_bound_rad']:g}; "
+                f"highest body gap {v['max_jump_um']:.4g} um)")
     if "dt_check" in s:
         c = s["dt_check"]
         d, q = c["default"], c["quarter"]
@@ -371,6 +413,7 @@ def _print_sweep(s: dict[str, Any]) -> None:
         print(f"  {p[q]:12.4g}  {p['mean_speed_mm_s']:9.3f}  {p['std_speed_mm_s']:9.3f}  {p['dominant_pattern']:<15}"
               + (f"  {p['amp_um']:7.3g}" if amp else "")
               + (f"  quarter step {p['quarter_step_speed_mm_s']:.3f} mm/s"
-                 f" ({'converged' if p['dt_converged'] else 'NOT converged'})" if "dt_converged" in p else ""))
+                 f" ({'converged' if p['dt_converged'] else 'NOT converged'})" if "dt_converged" in p else "")
+              + ("  flags: " + ", ".join(f"{k} x{n}" for k, n in p["flags"].items()) if p.get("flags") else ""))
     if "out" in s:
         print(f"  wrote {s['out']}")

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -28,7 +29,7 @@ from labkit.errors import InputError
 from labkit.sim import model as M
 from labkit.sim.excitation import PZT, Shaker
 from labkit.sim.params import RobotParams
-from labkit.sim.result import SimResult, classify_pattern, foot_period
+from labkit.sim.result import SimResult, classify_pattern, foot_period, validity
 
 #: Default step: this many steps per period of the fastest of (highest mode, drive) ...
 STEPS_PER_PERIOD = 32
@@ -45,6 +46,28 @@ TRANSIENT_FRACTION = 0.25
 JITTER_UM = 0.05
 #: Capacity of the impact log (further impacts are counted, not logged).
 EVENT_LOG_CAP = 200_000
+#: A run is integrated in pieces of this many steps (progress; 1-4 s of a 2-core machine).
+PIECE_STEPS = 1 << 17
+#: A run keeps at most this many samples at the default recording interval (5 MB per
+#: 25 columns x 25,000 samples: ~40 MB in the result) ...
+MAX_SAMPLES = 200_000
+#: ... and its last this many drive periods at the default interval.
+TAIL_PERIODS = 20
+
+#: Bounds of a run (:func:`check_run`). The drive: the tray's amplitude (a vibration table's
+#: stroke; the paper's shaker moves 25 um) ...
+MAX_AMP_UM = 1000.0
+#: ... its peak acceleration (g): the random cases of the convergence checks reach 1300 g
+#: (100 um at 1.8 kHz); beyond 5000 g an impact's speed is m/s on a 5-um-scale film ...
+MAX_ACCEL_G = 5000.0
+#: ... the drive frequency, as a multiple of the robot's highest mode (the model's modes are
+#: the legs' lowest three; far above them, modes the model does not have would answer) ...
+MAX_FREQ_FACTOR = 10.0
+#: ... the PZT's voltage amplitude (V): the actuator law is linear, thin-film PZT depoles
+#: or breaks down well before (the paper drives 20 V) ...
+MAX_VOLTAGE_V = 100.0
+#: ... and the work: at most this many steps (~3 h at 10 us a step).
+MAX_STEPS = 1_000_000_000
 
 #: Ablations by name (paper Fig. 12): the RobotParams fields they zero.
 ABLATIONS: dict[str, dict[str, float]] = {
@@ -78,6 +101,38 @@ def default_dt(params: RobotParams, scenario: Shaker | PZT) -> float:
     return align_dt(dt, scenario)
 
 
+def check_run(params: RobotParams, scenario: Shaker | PZT, duration_s: float, dt: float | None = None, *,
+              keys: dict[str, str] | None = None) -> None:
+    """Refuse a run the model or the machine cannot do, naming the bound (InputError).
+
+    Bounds: :data:`MAX_AMP_UM`, :data:`MAX_ACCEL_G`, the drive frequency up to
+    :data:`MAX_FREQ_FACTOR` times the highest mode, :data:`MAX_VOLTAGE_V`, and
+    :data:`MAX_STEPS` steps of ``dt`` (default :func:`default_dt`). ``keys`` renames the
+    fields in the message (``freq_hz``, ``amp_um``, ``voltage_v``, ``duration_s``)."""
+    def bad(field: str, value: float, unit: str, bound: str) -> InputError:
+        key = (keys or {}).get(field, field)
+        return InputError(f"{value:g} {unit} is outside what the simulator can do", key=key, expected=bound)
+
+    f_max = MAX_FREQ_FACTOR * max(params.modal_freq_hz)
+    if scenario.freq_hz > f_max:
+        raise bad("freq_hz", scenario.freq_hz, "Hz", f"<= {f_max:.4g} Hz ({MAX_FREQ_FACTOR:g} x the robot's "
+                                                       f"highest mode, {max(params.modal_freq_hz):.4g} Hz)")
+    if isinstance(scenario, Shaker):
+        accel_g = scenario.amp_um * 1e-6 * (2 * math.pi * scenario.freq_hz) ** 2 / 9.81
+        if scenario.amp_um > MAX_AMP_UM:
+            raise bad("amp_um", scenario.amp_um, "um", f"<= {MAX_AMP_UM:g} um (a vibration table's stroke)")
+        if accel_g > MAX_ACCEL_G:
+            a_max = MAX_ACCEL_G * 9.81 / (2 * math.pi * scenario.freq_hz) ** 2 * 1e6
+            raise bad("amp_um", scenario.amp_um, "um", f"<= {a_max:.4g} um at {scenario.freq_hz:g} Hz (peak tray "
+                                                       f"acceleration <= {MAX_ACCEL_G:g} g; this is {accel_g:.3g} g)")
+    elif scenario.voltage_v > MAX_VOLTAGE_V:
+        raise bad("voltage_v", scenario.voltage_v, "V", f"<= {MAX_VOLTAGE_V:g} V (thin-film PZT)")
+    step = default_dt(params, scenario) if dt is None else dt
+    if duration_s / step > MAX_STEPS:
+        raise bad("duration_s", duration_s, "s", f"<= {MAX_STEPS * step:.4g} s ({MAX_STEPS:.0e} steps of "
+                                                 f"{step:.3g} s, ~3 h of computing)")
+
+
 def align_dt(dt: float, scenario: Shaker | PZT) -> float:
     """The largest step <= dt that puts the PZT square wave's edges on step boundaries."""
     if isinstance(scenario, PZT):
@@ -89,7 +144,8 @@ def align_dt(dt: float, scenario: Shaker | PZT) -> float:
 def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.0, dt_s: float | None = None,
              record_dt_s: float | None = None, seed: int | None = None, *, engine: str = "numba",
              ablation: str | None = None, transient_s: float | None = None,
-             jitter_um: float = JITTER_UM, start_height_um: float | None = None) -> SimResult:
+             jitter_um: float = JITTER_UM, start_height_um: float | None = None,
+             progress: Callable[[int, int], None] | None = None, keys: dict[str, str] | None = None) -> SimResult:
     """Simulate the robot under one excitation.
 
     Parameters
@@ -104,7 +160,10 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
         Step (default :func:`default_dt`); for the PZT it is shortened so the
         square wave's edges fall on step boundaries (:func:`align_dt`).
     record_dt_s:
-        Sampling interval of the recorded arrays (rounded to a multiple of the step).
+        Sampling interval of the recorded arrays (rounded to a multiple of the step). Default:
+        ``min(RECORD_DT_MAX_S, 1 / (RECORD_PER_PERIOD f))``; a run that would keep more than
+        :data:`MAX_SAMPLES` samples keeps that many, evenly spaced, and the last
+        :data:`TAIL_PERIODS` drive periods at the default interval (memory stays bounded).
     seed:
         ``None``: start exactly at rest. An integer: every leg mode starts with a
         small random deviation (RMS ``jitter_um``), reproducibly.
@@ -119,6 +178,15 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
         ``None``: start resting on the six feet, riding the tray. A number H:
         start at rest in the air, the body's underside H um above its resting
         gap, the legs at their in-air equilibrium (drop tests, free flight).
+    progress:
+        Called as ``progress(steps_done, n_steps)`` after each piece of :data:`PIECE_STEPS` steps.
+    keys:
+        Names for the bounds' messages (e.g. ``{"amp_um": "--amp-um"}``), see :func:`check_run`.
+
+    Raises
+    ------
+    InputError
+        A drive, duration or step outside :func:`check_run`'s bounds, before anything runs.
     """
     if not isinstance(params, RobotParams):
         raise InputError(f"params must be a RobotParams, not {type(params).__name__}", key="params")
@@ -133,6 +201,8 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     if not (dt > 0 and dt <= duration_s):
         raise InputError(f"out of range: {dt_s!r}", key="dt_s", expected=f"a number in s, > 0, <= {duration_s}")
     dt = align_dt(dt, scenario)
+    check_run(p, scenario, duration_s, dt, keys=keys)
+    decimate = record_dt_s is None
     if record_dt_s is None:
         record_dt_s = min(RECORD_DT_MAX_S, 1.0 / (RECORD_PER_PERIOD * scenario.freq_hz))
     if not (record_dt_s > 0 and record_dt_s <= duration_s / 2):
@@ -140,6 +210,12 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
                          expected=f"a number in s, > 0, <= duration_s / 2 ({duration_s / 2:g})")
     every = max(1, int(round(record_dt_s / dt)))
     n_steps = int(round(duration_s / dt))
+    tail_steps, tail_every = 0, every
+    if decimate and n_steps // every > MAX_SAMPLES:
+        # a long run: MAX_SAMPLES samples over the run, the last TAIL_PERIODS drive periods at
+        # the full rate (the foot patterns and periodicity read them)
+        tail_steps = min(n_steps, int(math.ceil(TAIL_PERIODS / scenario.freq_hz / dt)))
+        every = int(math.ceil(n_steps / MAX_SAMPLES))
     if transient_s is None:
         transient_s = min(TRANSIENT_MAX_S, TRANSIENT_FRACTION * duration_s)
     n_skip = min(int(round(transient_s / dt)), n_steps - 1)
@@ -168,13 +244,17 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
             state[M.S_Q + M.NB + k] += jitter_um * 1e-6 * rng.standard_normal()
 
     t0 = time.perf_counter()
-    out = run_model(mdl, state, mode, n_steps, dt, every, n_skip, engine=engine)
+    out = run_model(mdl, state, mode, n_steps, dt, every, n_skip, engine=engine, ev_cap=EVENT_LOG_CAP,
+                    tail_steps=tail_steps,
+                    tail_every=tail_every, progress=progress)
     wall = time.perf_counter() - t0
     return _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engine, wall, seed, ablation)
 
 
 def run_model(mdl: M.Model, state: np.ndarray, mode: np.ndarray, n_steps: int, dt: float, every: int = 1,
-              n_skip: int = 0, *, engine: str = "numba", ev_cap: int = EVENT_LOG_CAP) -> dict[str, np.ndarray]:
+              n_skip: int = 0, *, engine: str = "numba", ev_cap: int = EVENT_LOG_CAP, tail_steps: int = 0,
+              tail_every: int | None = None, piece_steps: int | None = None,
+              progress: Callable[[int, int], None] | None = None) -> dict[str, np.ndarray]:
     """Low level: integrate a built model from any state (layouts in :mod:`labkit.sim.scheme`).
 
     ``mode``: contact mode of the 6 feet and (7th, optional) the body. Returns
@@ -182,18 +262,54 @@ def run_model(mdl: M.Model, state: np.ndarray, mode: np.ndarray, n_steps: int, d
     ``rec_contact``, ``frac`` (time per foot and contact mode after ``n_skip``
     steps), ``max_air``, ``max_h`` (highest flight per foot), ``count``,
     ``events``, and the final ``state`` and ``mode``.
+
+    The run is integrated in pieces of ``piece_steps`` (default :data:`PIECE_STEPS`),
+    the same to the bit as one piece; ``progress(done, n_steps)`` is called after each.
+    A sample is kept every ``every`` steps, and every ``tail_every`` steps over the
+    last ``tail_steps`` steps (a long run's output decimated, its end at full rate).
     """
-    n_rec = n_steps // every + 1
+    from labkit.sim.kernel import Integration
+
     P, A = mdl.pack(dt)
     mode7 = np.full(7, M.AIR, np.int8)
     mode7[:min(7, len(mode))] = np.asarray(mode)[:7]
     if engine == "numba":
-        from labkit.sim.kernel import run as kernel_run
+        from labkit.sim import scheme as mod
+    else:
+        from labkit.sim.reference import scheme_python
 
-        return kernel_run(P, A, state, mode7, n_steps, dt, every, n_skip, n_rec, ev_cap)
-    from labkit.sim.reference import run as reference_run
+        mod = scheme_python()
+    run = Integration(mod, P, A, state, mode7, dt, n_skip, ev_cap)
+    recs, contacts = [], []
+    pieces = _pieces(n_steps, every, tail_steps, tail_every or every, piece_steps or PIECE_STEPS)
+    if progress is not None and len(pieces) > 1:
+        progress(0, n_steps)
+    for k, (n, ev) in enumerate(pieces):
+        rec, rc = run.advance(n, ev)
+        last = k == len(pieces) - 1
+        if not last and n % ev == 0:     # its last sample is the next piece's first
+            rec, rc = rec[:-1], rc[:-1]
+        recs.append(rec)
+        contacts.append(rc)
+        if progress is not None:
+            progress(run.n0, n_steps)
+    one = len(recs) == 1
+    return {"rec": recs[0] if one else np.concatenate(recs), "rec_contact": contacts[0] if one else
+            np.concatenate(contacts), **run.outputs()}
 
-    return reference_run(P, A, state, mode7, n_steps, dt, every, n_skip, n_rec, ev_cap)
+
+def _pieces(n_steps: int, every: int, tail_steps: int, tail_every: int, piece: int) -> list[tuple[int, int]]:
+    """(steps, sampling interval) of each piece: the head (a whole number of ``every``) in
+    pieces of about ``piece`` steps, then the tail at ``tail_every``."""
+    head = max(0, n_steps - tail_steps) // every * every
+    out: list[tuple[int, int]] = []
+    for n_part, ev in ((head, every), (n_steps - head, tail_every)):
+        size = max(ev, piece // ev * ev)
+        while n_part > 0:
+            n = min(size, n_part)
+            out.append((n, ev))
+            n_part -= n
+    return out or [(0, every)]
 
 
 def mean_speed_mm_s(t: np.ndarray, y: np.ndarray, t_from: float) -> float:
@@ -234,6 +350,10 @@ def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engin
     height = (rec[:, M.REC_FZ:M.REC_FZ + 6] - rec[:, [M.REC_ZG]]) * 1e6
     periods = [foot_period(t, height[:, j], period, t_skip) for j in range(6)]
     n_ev = int(cnt[M.CNT_EVENTS])
+    counters = {"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED]),
+                "steps_halved": int(cnt[M.CNT_HALVED]), "trial_steps": int(cnt[M.CNT_ADV])}
+    valid = validity(p, (rec[:, M.REC_Z] - rec[:, M.REC_ZG]) * 1e6, rec[:, M.REC_PH:M.REC_PH + 3],
+                     out["rec_contact"], counters)
     return SimResult(
         params=p, scenario=scenario, duration_s=float(duration_s), dt_s=float(dt), record_dt_s=float(dt * every),
         transient_s=float(t_skip), engine=engine, t_s=t.copy(), body_y_um=y * 1e6, body_z_um=rec[:, M.REC_Z] * 1e6,
@@ -243,9 +363,7 @@ def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engin
         mean_speed_mm_s=speed, contact_fraction=cf, impacts=cnt[:6].astype(int).copy(),
         body_impacts=int(cnt[M.CNT_BODY]), patterns=patterns, max_flight_s=out["max_air"].copy(),
         events=out["events"][:n_ev].copy(), n_steps=n_steps, wall_s=wall, seed=seed, ablation=ablation,
-        counters={"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED]),
-                  "steps_halved": int(cnt[M.CNT_HALVED]), "trial_steps": int(cnt[M.CNT_ADV])},
-        max_height_um=max_h_um.copy(), foot_periods=periods)
+        counters=counters, max_height_um=max_h_um.copy(), foot_periods=periods, validity=valid)
 
 
 #: dt_check: the default step and the quarter step agree when the mean speeds differ by

@@ -277,11 +277,14 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
         for i in range(3):
             # M2: the modal mass is a point at the attachment displaced by C_i x_ij:
             # velocity U q' with U's rows y and z (2 x NQ)
-            U = np.zeros((2, NQ))
+            U = np.zeros((3, NQ))
             U[0, :NB] = att_y[j]
             U[1, :NB] = att_z[j]
             U[0, xi(j, i)] = cy[i]
             U[1, xi(j, i)] = cz[i]
+            # ... and along x: x_att = z_j phy - y_j phz (the leg masses' share of the yaw and
+            # roll inertia; x itself is no coordinate, M1)
+            U[2, :NB] = (0.0, 0.0, 0.0, zj[j], -yj[j])
             mass += m_modal[i] * U.T @ U
             f_grav += -g * m_modal[i] * U[1]                  # M4: its weight, vertical
     mass = 0.5 * (mass + mass.T)

@@ -25,6 +25,94 @@ JUMP_PERIODS = 1.0
 PERIODIC_TOL = 0.05
 PERIODIC_CYCLES = 5
 
+#: Validity (:class:`Validity`): the model is written for small body angles (sin phi = phi,
+#: cos phi = 1: 0.17 % and 0.5 % off at this bound, rad) ...
+SMALL_ANGLE_RAD = 0.1
+#: ... a body "on its film" is closer to the ground than this fraction of its resting gap ...
+ON_FILM_FRACTION = 0.1
+#: ... and a jump is "beyond the legs' reach" when the body's underside rises more than this
+#: many body lengths above the ground (the robot tumbles; nothing in the model can land it).
+JUMP_BODY_LENGTHS = 1.0
+
+
+@dataclass
+class Validity:
+    """Where a run left what the model assumes (docs/model.md, "Error control and validity").
+
+    ``max_tilt_rad``: the largest |phi_x| or |phi_y| (flag ``small_angle`` beyond
+    :data:`SMALL_ANGLE_RAD`); ``body_edge_gap_um``: the lowest gap under the body's edge
+    (centre gap minus half the width times |phi_y| and half the length times |phi_x|; the
+    body's film and impacts act at its centre only: flag ``body_edge_contact`` below minus
+    ``edge_tolerance_um``, the film's floor h_min, under which the film law does not resolve gaps);
+    ``body_on_film_feet_up_fraction``: the time the body lies on its film (gap below
+    :data:`ON_FILM_FRACTION` of its resting gap) with all six feet in the air (flag
+    ``body_on_film_feet_up``); ``max_jump_um``: the body's highest gap (flag ``high_jump`` above
+    :data:`JUMP_BODY_LENGTHS` body lengths); ``events_lost``: impacts beyond the event log's
+    capacity (counted, not logged; flag ``event_log_full``); ``steps_event_capped``: steps
+    that met more events than a step may locate (flag ``event_cap``); ``chaotic``: runs from
+    slightly different starts spread beyond the agreement tolerance (``None``: not probed;
+    :func:`labkit.sim.core.dt_check`, sweeps' checks)."""
+
+    max_tilt_rad: float
+    body_edge_gap_um: float
+    body_on_film_feet_up_fraction: float
+    max_jump_um: float
+    jump_limit_um: float
+    edge_tolerance_um: float = 0.0
+    events_lost: int = 0
+    steps_event_capped: int = 0
+    chaotic: bool | None = None
+
+    @property
+    def flags(self) -> list[str]:
+        """The names of the assumptions the run left (empty: none)."""
+        out = []
+        if self.max_tilt_rad > SMALL_ANGLE_RAD:
+            out.append("small_angle")
+        if self.body_edge_gap_um < -self.edge_tolerance_um:
+            out.append("body_edge_contact")
+        if self.body_on_film_feet_up_fraction > 0:
+            out.append("body_on_film_feet_up")
+        if self.max_jump_um > self.jump_limit_um:
+            out.append("high_jump")
+        if self.events_lost:
+            out.append("event_log_full")
+        if self.steps_event_capped:
+            out.append("event_cap")
+        if self.chaotic:
+            out.append("chaotic")
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able: every figure and ``flags``."""
+        return {"flags": self.flags, "max_tilt_rad": float(self.max_tilt_rad),
+                "small_angle_bound_rad": SMALL_ANGLE_RAD, "body_edge_gap_um": float(self.body_edge_gap_um),
+                "edge_tolerance_um": float(self.edge_tolerance_um),
+                "body_on_film_feet_up_fraction": float(self.body_on_film_feet_up_fraction),
+                "max_jump_um": float(self.max_jump_um), "jump_limit_um": float(self.jump_limit_um),
+                "events_lost": int(self.events_lost), "steps_event_capped": int(self.steps_event_capped),
+                "chaotic": self.chaotic}
+
+
+def validity(params: RobotParams, body_gap_um: np.ndarray, angles_rad: np.ndarray, contact: np.ndarray,
+             counters: dict) -> Validity:
+    """:class:`Validity` of a run from its samples (gap under the body's centre, um; angles
+    phi_x, phi_y, phi_z; contact modes, 0 = air) and the kernel's counters."""
+    tilt_x = np.abs(angles_rad[:, 0])
+    tilt_y = np.abs(angles_rad[:, 1])
+    edge = body_gap_um - 0.5e3 * (params.body_width_mm * tilt_y + params.body_length_mm * tilt_x)
+    feet_up = np.all(contact == 0, axis=1)
+    on_film = body_gap_um < ON_FILM_FRACTION * params.body_gap_um
+    n = max(1, len(body_gap_um))
+    return Validity(
+        max_tilt_rad=float(max(tilt_x.max(initial=0.0), tilt_y.max(initial=0.0))),
+        body_edge_gap_um=float(edge.min(initial=np.inf)),
+        body_on_film_feet_up_fraction=float(np.count_nonzero(feet_up & on_film) / n),
+        max_jump_um=float(body_gap_um.max(initial=0.0)), jump_limit_um=JUMP_BODY_LENGTHS * params.body_length_mm * 1e3,
+        edge_tolerance_um=float(params.h_min_um),
+        events_lost=int(counters.get("events_lost", 0)), steps_event_capped=int(counters.get("steps_event_capped", 0)))
+
+
 if TYPE_CHECKING:
     from labkit.sim.excitation import PZT, Shaker
     from labkit.sim.params import RobotParams
@@ -84,7 +172,7 @@ class SimResult:
     after that many drive periods; 0: it does not, :func:`foot_period`); ``patterns``
     (6 labels); ``events`` (impact log: t_s, leg (0-5, -1 body), relative
     vertical velocity before/after the map in m/s, lateral velocity after,
-    stuck flag).
+    stuck flag); ``validity`` (:class:`Validity`: where the run left the model's assumptions).
     """
 
     params: RobotParams
@@ -117,6 +205,7 @@ class SimResult:
     counters: dict = field(default_factory=dict)
     max_height_um: np.ndarray | None = None
     foot_periods: list | None = None
+    validity: Validity | None = None
 
     def summary(self) -> dict[str, Any]:
         """JSON-able key figures."""
@@ -140,6 +229,7 @@ class SimResult:
             "foot_periods": None if self.foot_periods is None else [int(k) for k in self.foot_periods],
             "seed": self.seed,
             "ablation": self.ablation,
+            "validity": None if self.validity is None else self.validity.summary(),
         }
 
     def to_h5(self, path: str | Path) -> Path:

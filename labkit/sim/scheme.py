@@ -82,6 +82,10 @@ V_TOUCH = 1e-9
 #: convergence tables, and 1e-2 takes 10 % fewer trial steps at 1-2 kHz (docs/model.md M10).
 EVENT_ITERS = 12
 EVENT_TIME_TOL = 1e-2
+#: Releases whose crossings a trial step puts within this fraction of the default step of the
+#: located one are applied together with it (:func:`step`): events simultaneous within the
+#: location's tolerance, e.g. the mirrored feet of a symmetric robot.
+SIMULTANEOUS = EVENT_TIME_TOL
 
 # ---- scalars P
 (P_H0, P_HMIN, P_BGF, P_BGB, P_AD, P_CAD, P_CADT, P_CR, P_CRB, P_VSTICK, P_MU, P_BNS, P_KIND, P_AMP,
@@ -1243,6 +1247,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
         rel = False
         best = 2.0
         for j in range(7):
+            W[W_VREL + j] = 2.0     # here: where in the trial point j's release crosses (linearly)
             pinned = (j < 6 and mode[j] != AIR) or (j == 6 and mode[6] == REST)
             if pinned:
                 g1 = release_margin(P, S, mode, W, W_LI1, j, rem)
@@ -1250,6 +1255,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
                     continue
                 g0 = W[W_G0 + j]
                 frac = g0 / (g0 - g1) if g0 < 0.0 else 0.0
+                W[W_VREL + j] = frac
                 if frac < best:
                     best = frac
                     who = j
@@ -1309,11 +1315,17 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
             now += tau
             rem -= tau
         if rel:
-            # the pull now exceeds the hold: the foot (body) leaves the ground (M10)
-            mode[who] = AIR
-            if who < 6:
-                S[S_SLIP + who] = 0.0
-                count[CNT_RELEASES] += 1
+            # the pull now exceeds the hold: the foot (body) leaves the ground (M10); so does
+            # every pinned point whose release the trial puts within EVENT_TIME_TOL of the step
+            # of this one's (the location's own tolerance: mirrored feet cross together, to
+            # round-off, and released one at a time a symmetric robot turned)
+            for j in range(7):
+                if j == who or (W[W_VREL + j] <= 1.0 and (W[W_VREL + j] - best) * (rem + tau)
+                                <= SIMULTANEOUS * P[P_DT]):
+                    mode[j] = AIR
+                    if j < 6:
+                        S[S_SLIP + j] = 0.0
+                        count[CNT_RELEASES] += 1
             if rem <= 0.0:
                 return False
             continue
@@ -1401,9 +1413,12 @@ def new_scratch():
 
 
 @jit
-def integrate(P_, A_, S_, mode_, n_steps, dt, every, n_skip, rec, rec_contact, frac, max_air, max_h, count,
+def integrate(P_, A_, S_, mode_, n0, n_steps, dt, every, n_skip, rec, rec_contact, frac, max_air, max_h, count,
               events, W_, I_, T_, air_run):
-    """Run n_steps steps of dt; fill the outputs (statistics after n_skip steps).
+    """Run steps n0 .. n0 + n_steps - 1 of dt (time n dt); fill the outputs (statistics from step
+    n_skip on). A long run is integrated in pieces (:class:`labkit.sim.kernel.Integration`): the
+    state, the scratch and every accumulated output carry over, ``rec`` is the piece's own
+    (a row every ``every`` steps from the piece's first step, its last step included).
 
     ``W_, I_`` (:func:`new_scratch`), ``T_`` (S_SIZE) and ``air_run`` (6, zeros) are scratch,
     allocated by the caller, which keeps every array alive for the call.
@@ -1421,14 +1436,14 @@ def integrate(P_, A_, S_, mode_, n_steps, dt, every, n_skip, rec, rec_contact, f
     count, events, air_run = unmanaged(count), unmanaged(events), unmanaged(air_run)
     row = 0
     for n in range(n_steps + 1):
-        t = n * dt
+        t = (n0 + n) * dt
         if n % every == 0 and row < rec.shape[0]:
             record(P, A, S, mode, t, rec, rec_contact, row)
             row += 1
         if n == n_steps:
             break
         substeps(P, A, S, T, mode, t, dt, W, I, events, count)
-        if n >= n_skip:
+        if n0 + n >= n_skip:
             zg, _, _ = ground(P, W, t + dt)
             for j in range(6):
                 frac[j, mode[j]] += dt

@@ -78,6 +78,9 @@ class SweepResult:
         The nominal robot's parameter file text.
     meta:
         Seed, duration, the uncertainty table used, the scheduler.
+    flags:
+        Per run, the validity flags of :class:`labkit.sim.result.Validity` joined by commas
+        ("" for none), shape ``(points, draws)``; the summary counts them per point.
     """
 
     quantity: str
@@ -89,6 +92,16 @@ class SweepResult:
     scenario: dict[str, Any] = field(default_factory=dict)
     params_toml: str = ""
     meta: dict[str, Any] = field(default_factory=dict)
+    flags: np.ndarray | None = None
+
+    def flag_counts(self, point: int) -> dict[str, int]:
+        """How many runs (draws) at one point left each of the model's assumptions."""
+        out: dict[str, int] = {}
+        if self.flags is not None:
+            for text in self.flags[point]:
+                for name in filter(None, str(text).split(",")):
+                    out[name] = out.get(name, 0) + 1
+        return out
 
     @property
     def draws(self) -> int:
@@ -137,6 +150,7 @@ class SweepResult:
                 "contact_fraction": {m: float(f) for m, f in zip(CONTACT_MODES, frac)},
                 "patterns": self.pattern_counts(i),
                 "dominant_pattern": self.dominant_pattern(i),
+                "flags": self.flag_counts(i),
             })
             if "amp_um" in self.meta and self.quantity != "amp_um":
                 points[-1]["amp_um"] = float(self.meta["amp_um"][i])
@@ -184,6 +198,9 @@ class SweepResult:
         put(g, "impacts", self.impacts, "1", axes="point, draw, foot")
         put(g, "patterns", self.patterns.astype("S16"), "label", axes="point, draw, foot",
             labels=",".join(PATTERNS))
+        if self.flags is not None:
+            put(g, "flags", self.flags.astype("S128"), "label", axes="point, draw",
+                description="validity flags per run, comma-separated (docs/model.md, Error control and validity)")
 
     @classmethod
     def from_h5(cls, path: str | Path) -> SweepResult:
@@ -195,7 +212,8 @@ class SweepResult:
                        speeds_mm_s=f["speeds_mm_s"][()], contact_fraction=f["contact_fraction"][()],
                        patterns=f["patterns"][()].astype(str), impacts=f["impacts"][()],
                        scenario=get_json(f, "scenario_json", {}), params_toml=str(f.attrs["params_toml"]),
-                       meta=get_json(f, "meta_json", {}))
+                       meta=get_json(f, "meta_json", {}),
+                       flags=f["flags"][()].astype(str) if "flags" in f else None)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -251,6 +269,18 @@ def limit_acceleration(scenario: Any, accel_limit_g: float | None) -> Any:
     return dataclasses.replace(scenario, amp_um=float(amp_max_um))
 
 
+def check_points(params: RobotParams, scenario: Shaker | PZT, quantity: str, grid: np.ndarray, duration_s: float,
+                 accel_limit_g: float | None, fraction: float, *, keys: dict[str, str] | None = None) -> None:
+    """Every point of a sweep (the nominal robot) within :func:`labkit.sim.core.check_run`'s
+    bounds, before any process starts (InputError naming the bound)."""
+    from labkit.sim.core import check_run, default_dt
+
+    for v in grid:
+        p, sc = apply_value(params, scenario, quantity, float(v))
+        sc = limit_acceleration(sc, accel_limit_g)
+        check_run(p, sc, duration_s, default_dt(p, sc) * fraction, keys=keys)
+
+
 def _task_seed(seed: int, draw: int) -> int:
     """One integer seed per draw, the same at every point (common random numbers)."""
     return int(np.random.SeedSequence([int(seed), int(draw)]).generate_state(1)[0])
@@ -288,7 +318,8 @@ def result_row(r: Any) -> dict[str, Any]:
         for m, name in enumerate(CONTACT_MODES):
             frac[j, m] = float(modes.get(name, modes.get(name.upper(), 0.0)))
     return {"speed_mm_s": float(r.mean_speed_mm_s), "contact_fraction": frac,
-            "patterns": [str(p) for p in r.patterns], "impacts": np.asarray(r.impacts, dtype=int)}
+            "patterns": [str(p) for p in r.patterns], "impacts": np.asarray(r.impacts, dtype=int),
+            "flags": ",".join(r.validity.flags) if getattr(r, "validity", None) is not None else ""}
 
 
 def _feet(cf: Any) -> list:
@@ -303,7 +334,7 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
           scheduler: str | None = None, workers: int | None = None, seed: int = 0,
           quiet: bool = False, table: dict[str, float] | None = None,
           accel_limit_g: float | None = None, dt_check: bool = False,
-          step_fraction: float = 1.0) -> SweepResult:
+          step_fraction: float = 1.0, keys: dict[str, str] | None = None) -> SweepResult:
     """Simulate ``base_scenario`` at every value of ``quantity``, with Monte Carlo draws.
 
     Parameters
@@ -349,6 +380,8 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
         rounded down to whole steps per half drive period), for the runs the
         default step does not converge (docs/model.md, "Numerics"); the dt
         check then compares with a quarter of that. ``meta["step_fraction"]``.
+    keys:
+        Names of the fields in the bounds' messages (:func:`labkit.sim.core.check_run`).
 
     Returns
     -------
@@ -377,6 +410,7 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
         raise InputError(f"acceleration limit must be > 0 g, got {accel_limit_g}", key="accel_limit_g",
                          expected="a peak acceleration in g, > 0")
     fraction = float(step_fraction)
+    check_points(params, base_scenario, quantity, grid, duration_s, accel_limit_g, fraction, keys=keys)
     tasks: list[tuple] = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table,
                            accel_limit_g, False, fraction) for v in grid for d in range(n_draws)]
     n_main = len(tasks)
@@ -391,6 +425,7 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
     frac = np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, len(CONTACT_MODES)))
     patterns = np.array([r["patterns"] for r in rows], dtype=object).reshape(shape + (6,)).astype(str)
     impacts = np.array([r["impacts"] for r in rows]).reshape(shape + (6,))
+    flags = np.array([r.get("flags", "") for r in rows], dtype=object).reshape(shape).astype(str)
     meta = {"seed": int(seed), "draws": n_draws, "duration_s": float(duration_s),
             "uncertainty_table": table, "scheduler": scheduler or "local",
             "draw_0": "nominal", "seeding": "SeedSequence([seed, draw]) per draw, same at every point",
@@ -411,4 +446,4 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
                                                    accel_limit_g).amp_um) for v in grid]
     return SweepResult(quantity=quantity, values=grid, speeds_mm_s=speeds, contact_fraction=frac,
                        patterns=patterns, impacts=impacts, scenario=scenario_dict(base_scenario),
-                       params_toml=params.to_toml_text(), meta=meta)
+                       params_toml=params.to_toml_text(), meta=meta, flags=flags)

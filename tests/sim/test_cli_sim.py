@@ -65,12 +65,34 @@ def test_sweep_pzt_mass_text_output():
     (["shaker", "--dt-s", "1"], "dt_s"),
     (["sweep", "shaker", "--freq-hz", "100:200:3", "--step-fraction", "2"], "--step-fraction"),
     (["sweep", "shaker", "--freq-hz", "100:200:3", "--step-fraction", "0"], "--step-fraction"),
+    # outside what the model or the machine can do (labkit.sim.core.check_run): the bound is named
+    (["shaker", "--amp-um", "1e6"], "<= 1000 um"),
+    (["shaker", "--freq-hz", "2000", "--amp-um", "400"], "5000 g"),
+    (["shaker", "--freq-hz", "1e9"], "x the robot's highest mode"),
+    (["pzt", "--voltage-v", "1e6"], "<= 100 V"),
+    (["sweep", "shaker", "--freq-hz", "100:1e6:3"], "--freq-hz"),
+    (["sweep", "shaker", "--amp-um", "10:2000:3"], "--amp-um"),
 ])
 def test_bad_input_exits_2_with_one_line(args, needle):
     proc = run_cli("simulate", *args, "--duration-s", "0.01", check=2)
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1, proc.stderr
     assert needle in lines[0]
+
+
+@pytest.mark.parametrize("kind", ["shaker", "pzt", "sweep"])
+def test_a_run_beyond_the_step_budget_is_refused_before_it_starts(kind):
+    """--duration-s 1e12 asked for ~6e16 steps (an ArrayMemoryError of 1.67 EiB); now one line
+    naming the longest duration, MAX_STEPS steps of the run's default step."""
+    from labkit.sim import PZT, RobotParams, Shaker
+    from labkit.sim.core import MAX_STEPS, default_dt
+
+    drive = PZT() if kind == "pzt" else Shaker()
+    args = ["sweep", "shaker", "--freq-hz", "240,300"] if kind == "sweep" else [kind]
+    proc = run_cli("simulate", *args, "--duration-s", "1e12", check=2, timeout=60)
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "--duration-s" in lines[0], proc.stderr
+    assert f"<= {MAX_STEPS * default_dt(RobotParams(), drive):.4g} s" in lines[0]
 
 
 def test_start_height_and_dt_check():
