@@ -56,3 +56,13 @@ def test_docs_cited_by_the_code_exist():
                 cites.setdefault(doc, []).append(str(src.relative_to(REPO)))
     missing = {d: where for d, where in cites.items() if d.startswith(("../", "shared/")) or not (REPO / d).exists()}
     assert not missing, f"the code cites docs that are not in the repository: {missing}"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
+def test_pages_carry_no_issue_numbers_or_dated_history(page):
+    """The docs describe labkit as it is; what changed when is CHANGELOG.md's."""
+    text = page.read_text(encoding="utf-8")
+    months = "January|February|March|April|May|June|July|August|September|October|November|December"
+    found = re.findall(rf"\bissue \d+\b|\b\d{{1,2}} (?:{months})\b|\b(?:{months}) 20\d\d\b|\b20\d\d-\d\d-\d\d\b",
+                       text)
+    assert not found, f"{page.relative_to(REPO)}: {found}"
