@@ -144,10 +144,11 @@ def save_track_csv(path: str | Path, track: Track, speed: SpeedResult | None = N
     header = ",".join(cols)
     data = np.column_stack(list(cols.values()))
     with open(path, "w") as fh:
-        fh.write(f"# labkit track of {track.source}; mm_per_px={track.mm_per_px:.6g}; quality: {QUALITY_LABELS}\n")
+        head = f"# labkit track of {track.source}; mm_per_px={track.mm_per_px:.6g}; "
         if speed is not None:
             lo, hi = speed.speed_ci_mm_s
-            fh.write(f"# mean_speed_mm_s={speed.mean_speed_mm_s:.6g}; speed_ci_mm_s={lo:.6g},{hi:.6g}\n")
+            head += f"mean_speed_mm_s={speed.mean_speed_mm_s:.6g}; speed_ci_mm_s={lo:.6g},{hi:.6g}; "
+        fh.write(f"{head}quality: {QUALITY_LABELS}\n")
         fh.write(header + "\n")
         for row in data:
             fh.write(",".join("" if not np.isfinite(v) else (f"{int(v)}" if k == "quality" else f"{v:.6f}")

@@ -46,8 +46,8 @@ def test_track_csv_and_video_summaries_read_what_the_files_say(tmp_path):
     c = summarise(REPO / "sample_data" / "shaker_240hz_track.csv")["content"]
     assert 0.04 < c["mm_per_px"] < 0.06 and c["source_video"].endswith("shaker_240hz.mkv")
     p = tmp_path / "t.csv"
-    p.write_text("# labkit track of v.mkv; mm_per_px=0.05; quality: 0 ok\n"
-                 "# mean_speed_mm_s=18.7; speed_ci_mm_s=18.5,18.9\nt_s,x_mm,y_mm\n0,1,2\n0.1,1,3.87\n")
+    p.write_text("# labkit track of v.mkv; mm_per_px=0.05; mean_speed_mm_s=18.7; speed_ci_mm_s=18.5,18.9; "
+                 "quality: 0 ok, 1 degraded\nt_s,x_mm,y_mm\n0,1,2\n0.1,1,3.87\n")
     c = summarise(p)["content"]
     assert (c["mean_speed_mm_s"], c["speed_ci_mm_s"], c["mm_per_px"]) == (18.7, [18.5, 18.9], 0.05)
     v = summarise(REPO / "sample_data" / "shaker_240hz.mkv")["content"]
