@@ -234,15 +234,9 @@ def withdraw_lab() -> None:
 
 
 def _alive(pid: Any) -> bool:
-    if not isinstance(pid, int) or pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+    from labkit.outputs import process_alive
+
+    return isinstance(pid, int) and pid > 0 and process_alive(pid)
 
 
 def served_labs() -> list[dict[str, Any]]:
