@@ -39,6 +39,7 @@ from typing import Any
 
 from labkit.errors import InputError
 from labkit.lockfiles import describe, file_key, lock_path, read_record, runtime_dir
+from labkit.outputs import process_alive
 
 
 def resource_key(resource: str) -> str:
@@ -234,8 +235,6 @@ def withdraw_lab() -> None:
 
 
 def _alive(pid: Any) -> bool:
-    from labkit.outputs import process_alive
-
     return isinstance(pid, int) and pid > 0 and process_alive(pid)
 
 
