@@ -20,8 +20,8 @@ Switches for ablations and checks (all plain RobotParams fields or
 ``simulate`` options, so they pickle and sweep):
 
 * ``simulate(..., ablation="no_adhesion")`` zeroes ``c_ad_n`` and ``c_ad_t_n_s``;
-  ``ablation="no_squeeze_film"`` zeroes ``b_g_body_n_m2_s`` and
-  ``b_g_foot_n_m2_s`` (:data:`labkit.sim.core.ABLATIONS`; the same as
+  ``ablation="no_squeeze_film"`` zeroes ``b_g_body_n_m2_s``,
+  ``b_g_foot_n_m2_s`` and ``foot_pad_um`` (:data:`labkit.sim.core.ABLATIONS`; the same as
   ``params.replace(...)`` with those fields at 0);
 * ``cy_sign=(s1, s2, s3)``: the sign of each mode's lateral coupling (flip
   to reverse the walk; 0 removes lateral coupling);

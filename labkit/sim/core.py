@@ -73,7 +73,7 @@ MAX_STEPS = 1_000_000_000
 ABLATIONS: dict[str, dict[str, float]] = {
     "none": {},
     "no_adhesion": {"c_ad_n": 0.0, "c_ad_t_n_s": 0.0},
-    "no_squeeze_film": {"b_g_body_n_m2_s": 0.0, "b_g_foot_n_m2_s": 0.0},
+    "no_squeeze_film": {"b_g_body_n_m2_s": 0.0, "b_g_foot_n_m2_s": 0.0, "foot_pad_um": 0.0},
 }
 
 ENGINES = ("numba", "reference")

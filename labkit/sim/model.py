@@ -204,6 +204,41 @@ class Model:
         return self.rows[:, :6].T @ state[S_Q:S_Q + NQ]
 
 
+#: Viscosity of air at 25 C (Pa s): 1.85e-5 (the value of Bao and Yang 2007, the paper's ref. 22).
+AIR_VISCOSITY_PA_S = 1.85e-5
+
+
+def plate_beta(aspect: float, terms: int = 50) -> float:
+    """The squeeze-film shape factor of a rectangular plate, width : length = ``aspect`` <= 1:
+    ``beta = 1 - (192 / pi^5) aspect sum_{n odd} tanh(n pi / (2 aspect)) / n^5`` (Reynolds'
+    equation with the edges at ambient pressure; Bao and Yang 2007, eq. 13). 0.4217 for a square."""
+    s = sum(math.tanh(n * math.pi / (2 * aspect)) / n ** 5 for n in range(1, 2 * terms, 2))
+    return 1.0 - 192.0 / math.pi ** 5 * aspect * s
+
+
+def pad_film_coefficient(side_um: float) -> float:
+    """The squeeze-film coefficient (N m^2 s) of a square foot pad of this side:
+    ``b = beta(1) mu_air a^4`` so that ``F = -b v / h^3`` in the continuum limit (docs/model.md M7)."""
+    a = side_um * 1e-6
+    return plate_beta(1.0) * AIR_VISCOSITY_PA_S * a ** 4
+
+
+#: Density of silicon (kg/m^3) and the chassis thickness of the paper (Sec. 2: 30 um silicon).
+SILICON_KG_M3 = 2329.0
+CHASSIS_THICKNESS_UM = 30.0
+
+
+def chassis_film_coefficient(params: RobotParams) -> float:
+    """The body's squeeze-film coefficient (N m^2 s) from the chassis itself: a solid silicon plate
+    of the body's mass, ``CHASSIS_THICKNESS_UM`` thick, with the footprint's aspect
+    (``body_width_mm : body_length_mm``): ``b = beta(W / L) mu W^3 L`` (docs/model.md M7).
+    8.8e-17 for the paper's 0.28 mg body (a 1.26 x 3.16 mm plate), 590 times Table 1's value."""
+    area = params.body_mass_mg * 1e-6 / (SILICON_KG_M3 * CHASSIS_THICKNESS_UM * 1e-6)
+    aspect = min(params.body_width_mm, params.body_length_mm) / max(params.body_width_mm, params.body_length_mm)
+    w = math.sqrt(area * aspect)
+    return plate_beta(aspect) * AIR_VISCOSITY_PA_S * w ** 3 * (area / w)
+
+
 def _check_single_mass(params: RobotParams) -> None:
     for key in ("m_imp_factor", "m_dis_factor"):
         if getattr(params, key) != 1.0:
@@ -336,7 +371,9 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
         kind, amp, freq, volt = 0, scenario.amp_um * 1e-6, scenario.freq_hz, 0.0
     else:
         kind, amp, freq, volt = 1, 0.0, scenario.freq_hz, scenario.voltage_v
-    scal = dict(H0=params.body_gap_um * 1e-6, HMIN=params.h_min_um * 1e-6, BGF=params.b_g_foot_n_m2_s,
+    scal = dict(H0=params.body_gap_um * 1e-6, HR=params.film_gap_nm * 1e-9, BGF=params.b_g_foot_n_m2_s,
+                BGP=pad_film_coefficient(params.foot_pad_um), HL=params.body_gap_um * 1e-6,
+                LAM=params.mean_free_path_nm * 1e-9,
                 BGB=params.b_g_body_n_m2_s, AD=params.a_drag_n_s2_m2, CAD=params.c_ad_n, CADT=params.c_ad_t_n_s,
                 CR=params.c_r, CRB=params.c_r_body, VSTICK=params.v_stick_mm_s * 1e-3,
                 MU=params.mu if math.isfinite(params.mu) else 1e308, BNS=1.0 if params.body_no_slip else 0.0,

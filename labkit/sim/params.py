@@ -74,7 +74,14 @@ _SPECS: dict[str, _Spec] = {
     "body_length_mm": _Spec("mm", 0, True, doc="body length along y (thin-plate inertia)"),
     "body_width_mm": _Spec("mm", 0, True, doc="body width along x (thin-plate inertia)"),
     "body_gap_um": _Spec("um", 0, True, doc="gap under the body at rest on still ground"),
-    "h_min_um": _Spec("um", 0, True, doc="minimum gap in the squeeze-film law"),
+    "h_min_um": _Spec("um", 0, True, doc="kept for old parameter files; does not enter: the squeeze films are "
+                      "finite at contact through film_gap_nm and mean_free_path_nm (docs/model.md M7)"),
+    "foot_pad_um": _Spec("um", 0, False, doc="side of a foot's square pad: its own squeeze film, "
+                         "beta(1) mu_air a^4 / h^3 (0 = no pad film; docs/model.md M7)"),
+    "film_gap_nm": _Spec("nm", 0, True, doc="mean-plane gap of a foot pad or the body at asperity contact "
+                         "(about 3 combined RMS roughnesses; docs/model.md M7)"),
+    "mean_free_path_nm": _Spec("nm", 0, False, doc="mean free path of the air: rarefied effective viscosity "
+                               "mu / (1 + 9.638 Kn^1.159) in the films (0 = continuum; docs/model.md M7)"),
     "mu": _Spec("1", 0, False, doc="Coulomb friction of a pinned foot; inf = no slip (paper)"),
     "v_stick_mm_s": _Spec("mm/s", 0, False, doc="sticking threshold: an impact whose rebound (c_r times the "
                           "approach speed) is slower than this pins the foot (body) instead; ends chattering "
@@ -127,6 +134,9 @@ class RobotParams:
     body_width_mm: float = 2.0
     body_gap_um: float = 50.0
     h_min_um: float = 1.0
+    foot_pad_um: float = 30.0
+    film_gap_nm: float = 50.0
+    mean_free_path_nm: float = 68.0
     mu: float = math.inf
     v_stick_mm_s: float = 0.01
     impact_modes: tuple[float, float, float] = (1.0, 1.0, 1.0)

@@ -88,9 +88,18 @@ EVENT_TIME_TOL = 1e-2
 SIMULTANEOUS = EVENT_TIME_TOL
 
 # ---- scalars P
-(P_H0, P_HMIN, P_BGF, P_BGB, P_AD, P_CAD, P_CADT, P_CR, P_CRB, P_VSTICK, P_MU, P_BNS, P_KIND, P_AMP,
+(P_H0, P_HR, P_BGF, P_BGB, P_AD, P_CAD, P_CADT, P_CR, P_CRB, P_VSTICK, P_MU, P_BNS, P_KIND, P_AMP,
  P_OMEGA, P_FREQ, P_VOLT, P_DT, P_GAPTOL, P_MAXEV, P_NHELD, P_POSTOL) = range(22)
-P_SIZE = 22
+# the squeeze films' law (M7): the foot pad's coefficient, the leg film's gap at contact,
+# the mean free path of the gas (P_HR above: the asperity gap at contact)
+P_BGP, P_HL, P_LAM = 22, 23, 24
+P_SIZE = 25
+
+#: Veijola's fit of a squeezed gas film's effective viscosity, mu_eff = mu / (1 + RAR_A Kn^RAR_N),
+#: Kn = mean free path / gap (Veijola et al. 1995, Sensors and Actuators A 48: 239-248; valid
+#: for Kn < 880; docs/model.md M7).
+RAR_A = 9.638
+RAR_N = 1.159
 
 # ---- matrices A (row-major blocks)
 OFF_M = 0
@@ -412,25 +421,73 @@ def forces(P, A, S, mode, t_mid, q, qo, v, vo, F, fo):
 
 
 @jit
-def film_mean(b, hmin, g0, g1):
-    """The film's coefficient over a step whose gap goes from g0 to g1: the mean of
-    b / max(h, h_min)^3 over [g1, g0], so that the film's impulse, -c (g1 - g0), is the
-    integral of its force along the gap, exact for any step (M7).
+def film_law(b, lam, u):
+    """The film's coefficient (N s/m) at the mean-plane gap u (m): b / (u^3 (1 + RAR_A (lam / u)^RAR_N)),
+    the squeeze film of Reynolds' equation with the gas's effective viscosity (M7)."""
+    q = 1.0 + RAR_A * (lam / u) ** RAR_N if lam > 0.0 else 1.0
+    return b / (u * u * u * q)
 
-    The midpoint's b / h_mid^3 underestimates it by 8 % over a gap ratio of 1.5 (what the
-    sub-steps allowed, FILM_RATIO); a hard landing on a film loses most of its velocity above
-    h_min and stops below it, so the depth depends on the small rest: at 240 Hz, 100 um the
-    body came down to 0.80 um at the default step against 0.86 at a quarter step, took off
-    late, and the walk differed by 10-20 % (issue 10)."""
-    lo = g0 if g0 < g1 else g1
-    hi = g1 if g0 < g1 else g0
-    if hi <= hmin:
-        return b / (hmin * hmin * hmin)
-    if lo >= hmin:
-        return b * (lo + hi) / (2.0 * lo * lo * hi * hi)
-    # lo < h_min < hi: the floored part, then b/2 (1/h_min^2 - 1/hi^2)
-    return (b / (hmin * hmin * hmin) * (hmin - lo)
-            + 0.5 * b * (hi - hmin) * (hi + hmin) / (hmin * hmin * hi * hi)) / (hi - lo)
+
+@jit
+def film_law_mean(b, lam, u0, u1):
+    """The mean of :func:`film_law` over the gaps from u0 to u1 (m), so that the film's impulse,
+    -c (u1 - u0), is the integral of its force along the gap (M7).
+
+    In s = 1 / u the integrand is smooth, ``c du = -b s / (1 + RAR_A (lam s)^RAR_N) ds``, and the
+    mean is ``(s0 s1 / 2) sum_k w_k b s_k / q(s_k)`` by 3-point Gauss-Legendre on [s0, s1]: exact
+    for the continuum law b / u^3 (linear in s) at any step, free of cancellation when u0 = u1
+    (it is then the law itself), and within 1e-4 of the integral for the rarefied law over the
+    gap ratios the sub-steps allow (FILM_RATIO)."""
+    s0 = 1.0 / u0
+    s1 = 1.0 / u1
+    sm = 0.5 * (s0 + s1)
+    sh = 0.5 * (s1 - s0)
+    x = 0.7745966692414834            # sqrt(3/5)
+    acc = 0.0
+    for k in range(3):
+        sk = sm + (-x if k == 0 else (0.0 if k == 1 else x)) * sh
+        wk = 0.8888888888888888 if k == 1 else 0.5555555555555556
+        q = 1.0 + RAR_A * (lam * sk) ** RAR_N if lam > 0.0 else 1.0
+        acc += wk * sk / q
+    return b * s0 * s1 * 0.5 * acc
+
+
+@jit
+def film_on(P, j):
+    """True when foot j (0-5) or the body (j = 6) has a squeeze film."""
+    if j < 6:
+        return P[P_BGP] > 0.0 or P[P_BGF] > 0.0
+    return P[P_BGB] > 0.0
+
+
+@jit
+def film_gap0(P, j):
+    """The smallest mean-plane gap of row j's films at contact (m): the asperity gap, or for a
+    foot without a pad film the leg film's."""
+    if j < 6 and P[P_BGP] <= 0.0:
+        return P[P_HL]
+    return P[P_HR]
+
+
+@jit
+def film_coef(P, j, g0, g1):
+    """The film coefficient (N s/m) of foot j (0-5) or the body (6) over a step whose contact gap
+    goes from g0 to g1 (m; equal: at that gap), M7. The gap is the distance above contact
+    (negative values, within the event tolerance, count as contact). A foot has two films: its
+    pad's at the pad's gap plus the asperity gap, and the leg's at the gap plus the leg's height
+    above the foot tip; the body has one, at its gap plus the asperity gap."""
+    a = g0 if g0 > 0.0 else 0.0
+    b = g1 if g1 > 0.0 else 0.0
+    lam = P[P_LAM]
+    c = 0.0
+    if j < 6:
+        if P[P_BGP] > 0.0:
+            c += film_law_mean(P[P_BGP], lam, a + P[P_HR], b + P[P_HR])
+        if P[P_BGF] > 0.0:
+            c += film_law_mean(P[P_BGF], lam, a + P[P_HL], b + P[P_HL])
+    elif P[P_BGB] > 0.0:
+        c = film_law_mean(P[P_BGB], lam, a + P[P_HR], b + P[P_HR])
+    return c
 
 
 @jit
@@ -442,16 +499,14 @@ def active_rows(P, A, S, mode, t, h, I, W):
     pass when that changes a film's effect).
     """
     zg, vg, _ = ground(P, W, t)
-    hmin = P[P_HMIN]
     n = 0
     for j in range(6):
         if mode[j] == AIR:
-            if P[P_BGF] > 0.0:
+            if film_on(P, j):
                 gap = row_dot(A, j, S, S_Q) - zg + 0.5 * h * (row_dot(A, j, S, S_V) - vg)
-                g = gap if gap > hmin else hmin
                 I[I_ROWS + n] = j
                 I[I_KIND + n] = 0
-                W[W_C + n] = P[P_BGF] / (g * g * g)
+                W[W_C + n] = film_coef(P, j, gap, gap)
                 n += 1
         else:
             I[I_ROWS + n] = j
@@ -465,12 +520,11 @@ def active_rows(P, A, S, mode, t, h, I, W):
         I[I_ROWS + n] = ROW_BZ
         I[I_KIND + n] = 1
         n += 1
-    elif P[P_BGB] > 0.0:
+    elif film_on(P, 6):
         gap = P[P_H0] + S[S_Q + 1] - zg + 0.5 * h * (S[S_V + 1] - vg)
-        g = gap if gap > hmin else hmin
         I[I_ROWS + n] = ROW_BZ
         I[I_KIND + n] = 0
-        W[W_C + n] = P[P_BGB] / (g * g * g)
+        W[W_C + n] = film_coef(P, 6, gap, gap)
         n += 1
     return n
 
@@ -681,7 +735,7 @@ def advance(P, A, S, mode, t, h, W, I, out):
                     off = P[P_H0] if ra == ROW_BZ else 0.0
                     g0 = W[W_T + a] + off - zg0
                     g1 = W[W_T + a] + off - zg1 + h * row_dot(A, ra, W, W_VB)
-                    c = film_mean(P[P_BGB] if ra == ROW_BZ else P[P_BGF], P[P_HMIN], g0, g1)
+                    c = film_coef(P, 6 if ra == ROW_BZ else ra, g0, g1)
                     d = abs(c - W[W_C + a]) * h * A[OFF_WI + ra * NI + ra]
                     if d > change:
                         change = d
@@ -930,13 +984,11 @@ def impact(P, A, S, mode, t, W, I, events, count):
             vpre = W[W_VREL + j]
             rebound = -cr * vpre
             # M11: a rebound slower than v_stick ends the bouncing; so does one that the squeeze
-            # film stops within the position tolerance (rebound m_row / c, c at the gap floor
-            # h_min): the foot would be back at once and bounce again, a Zeno sequence whose limit
+            # film stops within the position tolerance (rebound m_row / c, c the film's at contact,
+            # M7): the foot would be back at once and bounce again, a Zeno sequence whose limit
             # is contact (unresolved, the feet chattered once per step at a step-dependent rate)
             r = j if j < 6 else ROW_BZ
-            b = P[P_BGF] if j < 6 else P[P_BGB]
-            hm = P[P_HMIN]
-            stuck = rebound < vstick or rebound * hm * hm * hm < P[P_POSTOL] * b * A[OFF_WI + r * NI + r]
+            stuck = rebound < vstick or rebound < P[P_POSTOL] * film_coef(P, j, 0.0, 0.0) * A[OFF_WI + r * NI + r]
             if j < 6:
                 I[I_ROWS + m] = j
                 W[W_T + m] = vg + (0.0 if stuck else rebound)
@@ -1022,20 +1074,16 @@ def contact_force(P, A, S, mode, t, tv, W, I, o):
         return
     forces(P, A, S, mode, tv, S, S_Q, S, S_V, W, W_FI)
     zg, vg, ag = ground(P, W, t)
-    hmin = P[P_HMIN]
     for i in range(NQ):
         W[W_FI + i] -= A[OFF_K + i] * S[S_Q + i] + A[OFF_D + i] * S[S_V + i]
-    if P[P_BGF] > 0.0:
-        for j in range(6):
-            if mode[j] == AIR:
-                gap = row_dot(A, j, S, S_Q) - zg
-                h = gap if gap > hmin else hmin
-                fz = -P[P_BGF] / (h * h * h) * (row_dot(A, j, S, S_V) - vg)
-                row_axpy(A, j, W, W_FI, fz)
-    if mode[6] != REST and P[P_BGB] > 0.0:
+    for j in range(6):
+        if mode[j] == AIR and film_on(P, j):
+            gap = row_dot(A, j, S, S_Q) - zg
+            fz = -film_coef(P, j, gap, gap) * (row_dot(A, j, S, S_V) - vg)
+            row_axpy(A, j, W, W_FI, fz)
+    if mode[6] != REST and film_on(P, 6):
         gap = P[P_H0] + S[S_Q + 1] - zg
-        h = gap if gap > hmin else hmin
-        W[W_FI + 1] -= P[P_BGB] / (h * h * h) * (S[S_V + 1] - vg)
+        W[W_FI + 1] -= film_coef(P, 6, gap, gap) * (S[S_V + 1] - vg)
     mask = 0
     for a in range(m):
         mask |= 1 << I[I_ROWS + a]
@@ -1137,8 +1185,8 @@ def event_value(P, A, S, T, mode, now, tau, tv, W, I, who, rel):
 def film_too_coarse(P, A, mode, h, W):
     """True when a squeeze film changes too much over a trial step of length h (M7).
 
-    The film's coefficient goes as gap^-3; the step resolves it when the gap (floored
-    at h_min) changes by less than the factor FILM_RATIO over the step, or when the film
+    The film's coefficient goes as gap^-3; the step resolves it when the gap (from the film's
+    plane: the asperity gap added) changes by less than the factor FILM_RATIO over the step, or when the film
     is too weak to matter: it would take less than FILM_WEAK of the row's relative
     velocity in one step (h c / m_row, with 1 / m_row = R^T M^-1 R). Uses the gaps at the
     trial's start and end in W_GAP0, W_GAP1.
@@ -1149,25 +1197,26 @@ def film_too_coarse(P, A, mode, h, W):
     a body landing on its film at 300 Hz bounced off it at 32 steps per mode period
     (W_FX, W_FR: x and that fraction per film row, from the trial's :func:`advance`).
     """
-    hmin = P[P_HMIN]
     for j in range(7):
         if mode[j] != AIR:
             continue
         # a film transient the step does not resolve, but the finest sub-step would (a film
-        # too stiff even for that, e.g. a foot's at h_min, is left to the stiff limit, M7)
+        # too stiff even for that, e.g. a body's at contact, is left to the stiff limit, M7)
         x = W[W_FX + j]
         if x > FILM_X_MAX and W[W_FR + j] > FILM_TRANSIENT and x * P[P_DT] <= FILM_X_MAX * h * (1 << (NLEV - 1)):
             return True
-        b = P[P_BGF] if j < 6 else P[P_BGB]
-        if b <= 0.0:
+        if not film_on(P, j):
             continue
-        g0 = W[W_GAP0 + j] if W[W_GAP0 + j] > hmin else hmin
-        g1 = W[W_GAP1 + j] if W[W_GAP1 + j] > hmin else hmin
+        # the gaps measured from the film's own plane (the asperity gap added), where the law
+        # goes as u^-3 (u^-1.84 in the rarefied limit)
+        u0 = film_gap0(P, j)
+        g0 = (W[W_GAP0 + j] if W[W_GAP0 + j] > 0.0 else 0.0) + u0
+        g1 = (W[W_GAP1 + j] if W[W_GAP1 + j] > 0.0 else 0.0) + u0
         lo = g0 if g0 < g1 else g1
         hi = g1 if g0 < g1 else g0
         if hi > FILM_RATIO * lo:
             r = j if j < 6 else ROW_BZ
-            if h * b / (lo * lo * lo) * A[OFF_WI + r * NI + r] > FILM_WEAK:
+            if h * film_coef(P, j, lo - u0, lo - u0) * A[OFF_WI + r * NI + r] > FILM_WEAK:
                 return True
     return False
 

@@ -26,6 +26,10 @@ key                                sigma  why
 ``a_drag_n_s2_m2``                 0.20   identified from out-of-chip ring-down
 ``body_mass_mg``                   0.05   fabrication tolerance, 30 um chassis
 ``leg_mass_mg`` (derived)          0.10   parylene feet vary more than silicon
+``foot_pad_um``                    0.20   pad side not given by the paper (model.md
+                                          M7); its film goes as side^4
+``film_gap_nm``                    0.50   asperity gap from typical roughness,
+                                          not measured on the robot or its tray
 =================================  =====  =======================================
 
 The total mass follows as body + 6 legs. Draws are independent between
@@ -60,6 +64,8 @@ DEFAULT_TABLE: dict[str, float] = {
     "a_drag_n_s2_m2": 0.20,
     "body_mass_mg": 0.05,
     "leg_mass_mg": 0.10,
+    "foot_pad_um": 0.20,
+    "film_gap_nm": 0.50,
 }
 
 #: Fields whose value must stay inside (0, 1).

@@ -16,8 +16,11 @@ import pytest
 from labkit.sim import PZT, RobotParams, Shaker, simulate
 from labkit.sim.core import DT_CHECK_ABS_MM_S, DT_CHECK_REL, default_dt, dt_check
 
-PUBLISHED = RobotParams()
-ALTERNATIVE = RobotParams(c_ad_n=2e-6)
+# A 100 um foot pad (docs/model.md M7): its film holds a lifted foot within ~0.1 um of the tray,
+# the film-dominated regime these integrator checks were written for (the default 30 um pad lets
+# the feet fly and the walk become chaotic: test_the_default_pads_walk_converges_as_an_ensemble).
+PUBLISHED = RobotParams(foot_pad_um=100.0)
+ALTERNATIVE = RobotParams(c_ad_n=2e-6, foot_pad_um=100.0)
 CASES = [(PUBLISHED, PZT(1800, 20.0))] + [(PUBLISHED, Shaker(f, 25.0)) for f in (150, 240, 300, 700, 1500)] \
     + [(ALTERNATIVE, PZT(1800, 20.0))] + [(ALTERNATIVE, Shaker(f, 25.0)) for f in (150, 240, 300, 700, 1500)]
 
@@ -75,7 +78,7 @@ def test_body_landing_on_its_film_converges_at_twice_the_default_step():
     assert abs(a.mean_speed_mm_s - b.mean_speed_mm_s) <= tol
 
 
-HIGH_G = [(ALTERNATIVE, Shaker(240, 100.0)), (RobotParams(c_ad_n=5e-8), Shaker(240, 100.0)),
+HIGH_G = [(ALTERNATIVE, Shaker(240, 100.0)), (RobotParams(c_ad_n=5e-8, foot_pad_um=100.0), Shaker(240, 100.0)),
           (ALTERNATIVE, Shaker(300, 100.0))]
 
 
@@ -103,20 +106,13 @@ def test_high_g_runs_converge_at_the_default_step(params, scenario):
         assert abs(a.contact_fraction[leg]["air"] - b.contact_fraction[leg]["air"]) < 0.01
 
 
-@pytest.mark.parametrize("g0, g1", [(3.0, 2.0), (2.0, 3.0), (1.5, 0.2), (0.3, 0.9), (0.2, 0.2), (2.0, 2.0),
-                                    (2.0, 2.0 + 1e-9), (1.0 - 1e-9, 1.0 + 1e-9), (-0.5, 4.0)])
-def test_film_coefficient_is_the_mean_of_the_film_law_over_the_gaps(g0, g1):
-    """The film's coefficient over a step (scheme.film_mean) is the mean of b / max(h, h_min)^3
-    over the gaps from g0 to g1 (um here, h_min = 1): its impulse is the law's integral along
-    the gap. Checked against a fine quadrature, and against the law itself for g0 = g1."""
-    from labkit.sim import scheme
-
-    b, hmin = 2.5e-19, 1.0
-    lo, hi = min(g0, g1), max(g0, g1)
-    if hi - lo < 1e-6:
-        want = b / max(0.5 * (lo + hi), hmin) ** 3
-    else:
-        h = np.linspace(lo, hi, 200_001)
-        f = b / np.maximum(h, hmin) ** 3
-        want = float(np.sum((f[1:] + f[:-1]) * np.diff(h)) / 2 / (hi - lo))
-    assert scheme.film_mean(b, hmin, g0, g1) == pytest.approx(want, rel=1e-8)
+def test_the_default_pads_walk_converges_as_an_ensemble():
+    """With the default 30 um pads the feet leave the tray and land with c_r (docs/model.md M7):
+    at 240 Hz, 25 um the walk is chaotic (seeds 0.05 um apart spread by ~1 mm/s in 0.3 s), and
+    the ensemble means at the default and a quarter step agree within their standard errors."""
+    c = dt_check(RobotParams(c_ad_n=5e-8), Shaker(240, 25.0), 0.3, seeds=6)
+    assert c["chaotic"]
+    a, b = c["default"], c["quarter"]
+    assert c["converged"]
+    assert abs(a["mean_mm_s"] - b["mean_mm_s"]) <= 2.5 * np.hypot(a["sem_mm_s"], b["sem_mm_s"]) + c["tolerance_mm_s"]
+    assert abs(b["mean_mm_s"]) > 1.0

@@ -22,8 +22,8 @@ from labkit.sim import scheme as K
 from labkit.sim.core import default_dt, run_model
 
 #: No gravity, no air, no adhesion: a robot floating in vacuum.
-FLOAT = RobotParams(g_m_s2=0.0, a_drag_n_s2_m2=0.0, b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, c_ad_n=0.0,
-                    c_ad_t_n_s=0.0)
+FLOAT = RobotParams(g_m_s2=0.0, a_drag_n_s2_m2=0.0, b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, foot_pad_um=0.0,
+                    c_ad_n=0.0, c_ad_t_n_s=0.0)
 AIR7 = np.full(7, M.AIR, np.int8)
 
 
@@ -107,7 +107,7 @@ def test_undamped_free_vibration_energy_error_is_bounded():
 def _stiff(**kw):
     fs = 20000.0
     return RobotParams().with_modes(freq_hz=(fs, 1.3 * fs, 1.6 * fs), damping_ratio=(0.3, 0.3, 0.3)).replace(
-        b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, a_drag_n_s2_m2=0.0, c_ad_n=0.0, c_ad_t_n_s=0.0,
+        b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, foot_pad_um=0.0, a_drag_n_s2_m2=0.0, c_ad_n=0.0, c_ad_t_n_s=0.0,
         impact_modes=(0, 0, 0), v_stick_mm_s=1.0, **kw)
 
 
@@ -155,28 +155,25 @@ def test_restitution_changes_the_shaker_walk():
     assert runs[0].impacts.sum() != runs[1].impacts.sum()
 
 
-def test_squeeze_film_stops_a_falling_foot_before_it_touches():
-    """The film's law, F = -b (v - v_g) / max(h, h_min)^3, takes from a foot of modal mass m
-    falling from far above the velocity b / (2 m h^2) by the time it reaches the gap h (the
-    integral of b / (m h^3) dh): ~30 m/s at h_min for the published feet, far more than any
-    foot ever has. So with the films on, feet land at the film's creep speed (force / c),
-    if at all, the film stops their rebound within picometres (M11: every such landing
-    sticks), and c_r does not change the walk.
+def test_restitution_acts_with_the_films_on():
+    """The film's law is finite at contact (docs/model.md M7): it takes from a foot falling from far
+    above at most its integral to contact over the row's mass (0.12 m/s for the published feet's
+    30 um pads on 50 nm asperities; the old law, floored at h_min = 1 um with the whole leg's
+    coefficient, took 30 m/s), and it stops a rebound within the position tolerance only below
+    ~0.3 mm/s. So feet touch the tray and rebound with c_r: most landings rebound, and c_r
+    changes the walk (the old law made every landing plastic and c_r inert).
 
-    At the default step (converged at this 23 g since issue 10: 8.83 against 8.79 mm/s at a
-    quarter step, docs/model.md "Numerics")."""
+    At the default step (240 Hz, 100 um, 0.3 s; the feet land at ~1.5 mm/s)."""
     sc = Shaker(240, 100)
     runs = [simulate(RobotParams(c_r=c_r, c_ad_n=2e-6), sc, duration_s=0.3, seed=0) for c_r in (0.2, 0.8)]
     for r in runs:
         ev = r.events[r.events[:, M.EV_LEG] >= 0]
-        assert np.all(np.abs(ev[:, M.EV_VPRE]) < 5e-5)                          # m/s: < 0.05 mm/s
-        assert np.all(ev[:, M.EV_STUCK] == 1)
-        # released by the 2 uN adhesion, the feet ride the tray on their films within h_min
-        assert r.contact_fraction["leg1"]["air"] > 0.5 and r.max_height_um.max() < r.params.h_min_um
-        # the tray moves at 150 mm/s; the feet follow it on their films
-        assert np.abs(np.diff(r.foot_z_um[:, 0])).max() / r.record_dt_s * 1e-3 > 50.0
+        assert len(ev) > 50 and np.median(np.abs(ev[:, M.EV_VPRE])) > 5e-4          # m/s
+        assert (ev[:, M.EV_STUCK] == 0).mean() > 0.5                              # most rebound
+        assert r.max_height_um.max() > 100.0                                       # feet fly
     v = [r.mean_speed_mm_s for r in runs]
-    assert abs(v[0] - v[1]) < 0.02 * max(abs(v[0]), abs(v[1]))
+    assert abs(v[0] - v[1]) > 0.1 * max(abs(v[0]), abs(v[1]))
+    assert runs[0].impacts.sum() < runs[1].impacts.sum()
 
 
 def _same(a, b, rtol):
@@ -234,6 +231,7 @@ def test_adhesion_contact_time_restarts_at_every_landing():
     robot under a 2 mg payload). A PZT-driven robot with the paper set's values (issue 11)."""
     p = RobotParams(c_ad_n=5.4e-6, c_ad_t_n_s=3.3e-6, c_r=0.63, c_r_body=0.63, b_g_body_n_m2_s=1.8e-20,
                     b_g_foot_n_m2_s=3.0e-20, modal_participation=0.307, act_um_per_v=(2.657, 1.328, 1.328),
+                    foot_pad_um=100.0,
                     cy_sign=(1.0, 1.0, -1.0))
     sc = PZT(1800.0, 20.0, mass_mg=2.0)
     mdl = M.build_model(p, sc)

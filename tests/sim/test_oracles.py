@@ -19,7 +19,7 @@ from labkit.sim.core import run_model
 
 # A robot whose legs are free oscillators: no gravity, no air, body 1 kg.
 FREE = RobotParams(mass_mg=1e6 + 0.05, body_mass_mg=1e6, g_m_s2=0.0, a_drag_n_s2_m2=0.0,
-                   b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0)
+                   b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, foot_pad_um=0.0)
 LIFT_M = 1e-3   # held 1 mm above the ground
 
 
@@ -92,7 +92,7 @@ def test_pzt_tripod_gait_in_the_air():
 def _stiff(**kw):
     fs = 20000.0
     return RobotParams().with_modes(freq_hz=(fs, 1.3 * fs, 1.6 * fs), damping_ratio=(0.3, 0.3, 0.3)).replace(
-        b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, a_drag_n_s2_m2=0.0, **kw)
+        b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, foot_pad_um=0.0, a_drag_n_s2_m2=0.0, **kw)
 
 
 def _supported_mass_kg(p):
@@ -141,13 +141,16 @@ def test_release_time_under_adhesion_matches_formula():
 
 
 def test_squeeze_film_settling_matches_closed_form():
-    """A foot pushed to the ground by its spring through the film: h^-3 = h0^-3 + 3 K t / b."""
-    b_g = 2.5e-19
+    """A foot pushed to the ground by its spring through the film: h^-3 = h0^-3 + 3 K t / b
+    (the continuum law: the pad's film without rarefaction, on a negligible asperity gap; the
+    rarefied law: tests/sim/test_film_law.py)."""
     p = RobotParams(mass_mg=1e6 + 0.05, body_mass_mg=1e6, g_m_s2=0.0, a_drag_n_s2_m2=0.0,
-                    b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=b_g, h_min_um=0.01, cy_sign=(0, 0, 0),
+                    b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, foot_pad_um=423.0, mean_free_path_nm=0.0,
+                    film_gap_nm=1e-3, cy_sign=(0, 0, 0),
                     k_per_s2=((2 * math.pi * 2e4) ** 2, (2 * math.pi * 1000) ** 2, (2 * math.pi * 3e4) ** 2),
                     b_per_s=(1e-3, 1e-3, 1e-3))
     mdl = M.build_model(p, Shaker(240, 0.0))
+    b_g = M.pad_film_coefficient(p.foot_pad_um)          # 2.5e-19 N m^2 s, the paper's leg value
     h0 = 5e-6
     s = M.rest_state()
     for j in range(6):
@@ -166,7 +169,7 @@ def test_air_drag_terminal_velocity():
     """A robot falling in still air reaches v^2 = (m_b + 18 M) g / (7 a), M the modal mass:
     gravity acts on the body and the modal masses (M4), drag on the body and the six feet,
     which fall with it (the legs keep their free-fall shape)."""
-    p = RobotParams(b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, cy_sign=(0, 0, 0))
+    p = RobotParams(b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, foot_pad_um=0.0, cy_sign=(0, 0, 0))
     mdl = M.build_model(p, Shaker(240, 0.0))
     s = M.air_state(mdl, 0.5)
     dt = 2e-5

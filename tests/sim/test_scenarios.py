@@ -34,7 +34,9 @@ def test_ablate_zeroes_the_forces():
     assert getattr(p, ADHESION_FIELD) > 0
     nosq = ablate(p, "no-squeeze-film")
     zeroed = [f for f in vars(p) if getattr(nosq, f) != getattr(p, f)]
-    assert len(zeroed) == 2 and all(getattr(nosq, f) == 0.0 for f in zeroed)
+    # the body's film, the leg's and the foot pad's (docs/model.md M7)
+    assert sorted(zeroed) == ["b_g_body_n_m2_s", "b_g_foot_n_m2_s", "foot_pad_um"]
+    assert all(getattr(nosq, f) == 0.0 for f in zeroed)
     assert ablate(p, "none") is p
     with pytest.raises(InputError, match="ablation"):
         ablate(p, "no_gravity")

@@ -164,7 +164,7 @@ def test_sweep_dt_check_reruns_the_nominal_robot_at_a_quarter_step():
     from labkit.sim import PZT, simulate
     from labkit.sim.core import default_dt
 
-    p = RobotParams(c_ad_n=2e-6)
+    p = RobotParams(c_ad_n=2e-6, foot_pad_um=100.0)       # the film-held, non-chaotic regime (model.md M7)
     s = sweep(p, PZT(1800, 20.0), "voltage_v", [10.0, 20.0], draws=0, duration_s=0.05, scheduler="serial",
               quiet=True, dt_check=True)
     c = s.meta["dt_check"]
