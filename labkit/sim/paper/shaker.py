@@ -150,3 +150,90 @@ class ShakerLaw:
 
 #: The paper's shaker: 25 um at 240 Hz and 8 V p-p, 4809 suspension and envelope.
 PAPER_SHAKER = ShakerLaw()
+
+
+@dataclass(frozen=True)
+class TableLaw:
+    """A tray amplitude law from data: a measured amplitude per frequency at one drive (e.g. a
+    ``labkit shaker`` transmissibility run, or the paper's Fig. 6 tray velocity read off), linear
+    in the drive, interpolated log-log between the table's frequencies (none outside them)."""
+
+    freqs_hz: tuple[float, ...]
+    amps_um: tuple[float, ...]
+    ref_drive_vpp: float = 8.0
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        f, a = self.freqs_hz, self.amps_um
+        if len(f) < 2 or len(f) != len(a):
+            raise InputError(f"tray law {self.source}: {len(f)} frequencies, {len(a)} amplitudes", key="freq_hz",
+                             expected="two or more (frequency, amplitude) pairs")
+        if any(not (math.isfinite(x) and x > 0) for x in (*f, *a)) or any(y <= x for x, y in zip(f, f[1:])):
+            raise InputError(f"tray law {self.source}: frequencies must increase and all values be > 0",
+                             key="freq_hz/amp_um", expected="increasing frequencies (Hz) and amplitudes (um) > 0")
+        if not (math.isfinite(self.ref_drive_vpp) and self.ref_drive_vpp > 0):
+            raise InputError(f"tray law {self.source}: drive {self.ref_drive_vpp!r}", key="drive_vpp",
+                             expected="the table's drive in V p-p, > 0")
+
+    def amp_um(self, freq_hz: float, drive_vpp: float | None = None) -> float:
+        """Tray amplitude (um) at ``freq_hz`` for the drive ``drive_vpp`` (default: the table's)."""
+        f = float(freq_hz)
+        if not (self.freqs_hz[0] <= f <= self.freqs_hz[-1]):
+            raise InputError(f"tray law {self.source}: {f:g} Hz is outside the table "
+                             f"({self.freqs_hz[0]:g}-{self.freqs_hz[-1]:g} Hz)", key="freq_hz",
+                             expected=f"a frequency in {self.freqs_hz[0]:g}-{self.freqs_hz[-1]:g} Hz")
+        lf = [math.log(x) for x in self.freqs_hz]
+        la = [math.log(x) for x in self.amps_um]
+        k = max(i for i in range(len(lf) - 1) if lf[i] <= math.log(f)) if f < self.freqs_hz[-1] else len(lf) - 2
+        t = (math.log(f) - lf[k]) / (lf[k + 1] - lf[k])
+        v = self.ref_drive_vpp if drive_vpp is None else float(drive_vpp)
+        return math.exp(la[k] + t * (la[k + 1] - la[k])) * v / self.ref_drive_vpp
+
+    def describe(self) -> dict[str, Any]:
+        return {"law": "table", "source": self.source, "ref_drive_vpp": self.ref_drive_vpp,
+                "freq_hz": list(self.freqs_hz), "amp_um": list(self.amps_um)}
+
+
+def load_tray_law(path: str) -> TableLaw:
+    """A :class:`TableLaw` from a CSV file (columns ``freq_hz,amp_um``, ``#`` comments, one optional
+    header line; the drive in a ``# drive_vpp = X`` comment, default 8) or a TOML file
+    (``freq_hz = [...]``, ``amp_um = [...]``, optional ``drive_vpp``). Errors name the file."""
+    from pathlib import Path
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"no such file: {p}", key="tray law", expected="a CSV or TOML file of freq_hz, amp_um")
+    if p.suffix.lower() == ".toml":
+        from labkit.tomlio import load_toml
+
+        table, _ = load_toml(p)
+        try:
+            return TableLaw(tuple(float(x) for x in table["freq_hz"]), tuple(float(x) for x in table["amp_um"]),
+                            float(table.get("drive_vpp", 8.0)), str(p))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"{p}: {exc!r}", key="freq_hz/amp_um",
+                             expected="freq_hz = [...] and amp_um = [...] (numbers)") from None
+    freqs: list[float] = []
+    amps: list[float] = []
+    drive = 8.0
+    for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1):
+        text = line.strip()
+        if text.startswith("#") and "drive_vpp" in text and "=" in text:
+            drive = _number(text.split("=", 1)[1], p, n)
+        if not text or text.startswith("#") or (not freqs and text.lower().startswith("freq")):
+            continue
+        cells = [c.strip() for c in text.split(",")]
+        if len(cells) < 2:
+            raise InputError(f"{p}: line {n} has {len(cells)} column(s)", key=f"line {n}",
+                             expected="freq_hz,amp_um")
+        freqs.append(_number(cells[0], p, n))
+        amps.append(_number(cells[1], p, n))
+    return TableLaw(tuple(freqs), tuple(amps), drive, str(p))
+
+
+def _number(text: str, path: Any, line: int) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise InputError(f"{path}: line {line}: not a number: {text.strip()!r}", key=f"line {line}",
+                         expected="a number") from None

@@ -27,6 +27,8 @@ class RunOptions:
     scheduler: str | None = None
     workers: int | None = None
     quiet: bool = False
+    #: The tray amplitude law of the shaker scenarios (``ShakerLaw`` or ``TableLaw``); None: the paper's.
+    tray_law: Any = None
 
     @property
     def quick(self) -> bool:
@@ -137,7 +139,8 @@ def register(name: str, title: str, expectation: str) -> Callable[[ScenarioFn], 
 def run_scenario(name: str, params: RobotParams | None = None, out_dir: str | Path | None = ".", *,
                  quick: bool = False, size: str | None = None, draws: int | None = None,
                  duration_s: float | None = None, seed: int = 0, scheduler: str | None = None,
-                 workers: int | None = None, quiet: bool = False, figure: bool = True) -> ScenarioResult:
+                 workers: int | None = None, quiet: bool = False, figure: bool = True,
+                 tray_law: Any = None) -> ScenarioResult:
     """Run the named scenario; write ``sim_<name>.png`` and ``sim_<name>.h5`` in ``out_dir``.
 
     Parameters
@@ -157,6 +160,10 @@ def run_scenario(name: str, params: RobotParams | None = None, out_dir: str | Pa
         As for :func:`labkit.sim.sweep`.
     figure:
         Make the figure (needs ``out_dir``).
+    tray_law:
+        The paper scenarios' tray amplitude law: a :class:`labkit.sim.paper.shaker.TableLaw`
+        (``load_tray_law(file)``) or ``ShakerLaw``; default the paper's shaker law. The result
+        records which (``numbers["tray_law"]``).
     """
     from labkit.outputs import atomic_output
 
@@ -169,7 +176,7 @@ def run_scenario(name: str, params: RobotParams | None = None, out_dir: str | Pa
     sc = SCENARIOS[key]
     params = RobotParams() if params is None else params
     opts = RunOptions(size=size, draws=draws, duration_s=duration_s, seed=seed, scheduler=scheduler,
-                      workers=workers, quiet=quiet)
+                      workers=workers, quiet=quiet, tray_law=tray_law)
     o = sc.fn(params, opts)
     result = ScenarioResult(name=key, title=sc.title, expectation=sc.expectation, size=size, finding=o.finding,
                             checks=o.checks, numbers=o.numbers, observations=o.observations)

@@ -186,11 +186,16 @@ PAPER: dict[str, PaperScenario] = {
 }
 
 
+def tray_law(opts: RunOptions) -> ShakerLaw:
+    """The scenario's tray amplitude law: the options' (a table from a file) or the paper's shaker."""
+    return PAPER_SHAKER if opts.tray_law is None else opts.tray_law
+
+
 def evaluate(name: str, params: RobotParams, opts: RunOptions,
-             law: ShakerLaw = PAPER_SHAKER) -> tuple[PointSet, dict[str, float]]:
-    """Run one paper scenario's simulations and measure them."""
+             law: ShakerLaw | None = None) -> tuple[PointSet, dict[str, float]]:
+    """Run one paper scenario's simulations and measure them (``law``: default :func:`tray_law`)."""
     sc = PAPER[name]
-    plan = sc.plan(params, opts, law)
+    plan = sc.plan(params, opts, tray_law(opts) if law is None else law)
     ps = run_points(plan.points, draws=plan.draws, duration_s=plan.duration_s, seed=opts.seed,
                     scheduler=opts.scheduler, workers=opts.workers, quiet=opts.quiet, desc=name, quantity=AXIS[name])
     return ps, sc.measure(ps)
@@ -251,7 +256,7 @@ def paper_fig8(params: RobotParams, opts: RunOptions) -> Outcome:
         fig.tight_layout()
 
     return _outcome("paper-fig8", ps, metrics, "freq_hz", plot,
-                    {"drive_vpp": FIG8_DRIVE_VPP, "shaker_law": PAPER_SHAKER.describe()})
+                    {"drive_vpp": FIG8_DRIVE_VPP, "tray_law": tray_law(opts).describe()})
 
 
 def _trace_runs(params: RobotParams, drives: Sequence[tuple[str, Shaker, str | None]], duration_s: float,
@@ -268,8 +273,8 @@ def paper_patterns(params: RobotParams, opts: RunOptions) -> Outcome:
     plan = patterns_plan(params, opts)
 
     def plot(fig: Any) -> None:
-        drives = [(f"{v:g} V ({PAPER_SHAKER.amp_um(PATTERN_FREQ_HZ, v):.3g} um)",
-                   Shaker(freq_hz=PATTERN_FREQ_HZ, amp_um=PAPER_SHAKER.amp_um(PATTERN_FREQ_HZ, v)), None)
+        drives = [(f"{v:g} V ({tray_law(opts).amp_um(PATTERN_FREQ_HZ, v):.3g} um)",
+                   Shaker(freq_hz=PATTERN_FREQ_HZ, amp_um=tray_law(opts).amp_um(PATTERN_FREQ_HZ, v)), None)
                   for v in PATTERN_DRIVES_QUICK_VPP]
         runs = _trace_runs(params, drives, plan.duration_s, opts.seed)
         for i, (label, r) in enumerate(runs):
@@ -281,7 +286,8 @@ def paper_patterns(params: RobotParams, opts: RunOptions) -> Outcome:
 
     dom = [ps.dominant_pattern(i) for i in range(len(ps.values))]
     return _outcome("paper-patterns", ps, metrics, "drive_vpp", plot,
-                    {"freq_hz": PATTERN_FREQ_HZ, "dominant_pattern": dict(zip((f"{v:g}" for v in ps.values), dom))},
+                    {"freq_hz": PATTERN_FREQ_HZ, "dominant_pattern": dict(zip((f"{v:g}" for v in ps.values), dom)),
+                     "tray_law": tray_law(opts).describe()},
                     size_in=(7.0, 5.2))
 
 
@@ -290,7 +296,7 @@ def paper_patterns(params: RobotParams, opts: RunOptions) -> Outcome:
           "legs move more and the robot is faster")
 def paper_ablations(params: RobotParams, opts: RunOptions) -> Outcome:
     ps, metrics = evaluate("paper-ablations", params, opts)
-    plan = ablations_plan(params, opts)
+    plan = ablations_plan(params, opts, tray_law(opts))
     drive = plan.points[0].drive
 
     def plot(fig: Any) -> None:
@@ -312,7 +318,7 @@ def paper_ablations(params: RobotParams, opts: RunOptions) -> Outcome:
             for k, (label, _) in enumerate(ABLATIONS_RUN)}
     return _outcome("paper-ablations", ps, metrics, "run", plot,
                     {"freq_hz": ABLATION_FREQ_HZ, "amp_um": drive.amp_um if isinstance(drive, Shaker) else None,
-                     "runs": runs}, size_in=(9.0, 3.4))
+                     "runs": runs, "tray_law": tray_law(opts).describe()}, size_in=(9.0, 3.4))
 
 
 @register("paper-payload", "speed vs total mass, on-board PZT 1.8 kHz tripod at 20 V (paper Fig. 13)",
