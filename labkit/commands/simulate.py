@@ -9,6 +9,7 @@ Examples
     labkit simulate sweep shaker --freq-hz 150:2000:40 --amp-um 25 --draws 10 --out f8.h5
     labkit simulate sweep pzt --mass-mg 0.33:2.5:10 --freq-hz 1800 --voltage-v 20
     labkit simulate scenario shaker-speed --out results/
+    labkit simulate modes --params paper --json
 
 A range is ``start:stop:count`` (``count`` evenly spaced values, both ends
 included) or a comma list ``a,b,c``; exactly one option of a sweep is a range.
@@ -115,6 +116,12 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                            help=f"{field} in {unit}: a value or a range start:stop:count"
                                 + (f" (default {default:g})" if default is not None else ""))
 
+    md = sub.add_parser("modes", parents=[common],
+                        help="modes of the robot standing on pinned feet, beside the paper's Fig. 6 spectrum")
+    md.add_argument("--params", metavar="NAME|FILE",
+                    help="robot parameters: a preset (published, paper) or a TOML file; default: published")
+    md.add_argument("--max-hz", default="5000", metavar="HZ", help="highest frequency listed (default 5000)")
+
     sc = sub.add_parser("scenario", parents=[common], help="run a named scenario of the paper (makes a figure)")
     sc.add_argument("name", choices=list(SCENARIO_NAMES),
                     help="; ".join(f"{k}: {v}" for k, v in SCENARIO_NAMES.items()))
@@ -201,7 +208,25 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         return _run_single(args)
     if args.sim_command == "sweep":
         return _run_sweep(args)
+    if args.sim_command == "modes":
+        return _run_modes(args)
     return _run_scenario(args)
+
+
+def _run_modes(args: argparse.Namespace) -> dict[str, Any]:
+    from labkit.sim.modes import pinned_modes
+
+    max_hz = number(args.max_hz, "--max-hz", positive=True)
+    pm = pinned_modes(load_params(args.params), max_hz=max_hz)
+    summary = {"params": args.params or "published", **pm.to_dict()}
+    if not args.json:
+        print(f"modes on pinned feet ({summary['params']}); legs clamped at "
+              + ", ".join(f"{f:.0f}" for f in pm.leg_modes_hz) + " Hz")
+        for m in pm.modes:
+            print(f"  {m.freq_hz:8.1f} Hz  zeta {m.damping_ratio:.3f}  body {m.body_share:4.2f}  {m.kind}")
+        print("  paper Fig. 6 (out-of-chip): " + "; ".join(f"{f:.0f} Hz {w}" for f, w in
+                                                           ((x["freq_hz"], x["what"]) for x in summary["paper_fig6"])))
+    return summary
 
 
 def _scenario_from(kind: str, values: dict[str, float]):
