@@ -438,6 +438,8 @@ def film_law_mean(b, lam, u0, u1):
     for the continuum law b / u^3 (linear in s) at any step, free of cancellation when u0 = u1
     (it is then the law itself), and within 1e-4 of the integral for the rarefied law over the
     gap ratios the sub-steps allow (FILM_RATIO)."""
+    if u0 == u1:
+        return film_law(b, lam, u0)
     s0 = 1.0 / u0
     s1 = 1.0 / u1
     sm = 0.5 * (s0 + s1)
