@@ -41,15 +41,8 @@ class SpeedTable:
     pattern: list[str] | None = None
 
 
-def read_speed_table(path: str | Path) -> SpeedTable:
-    """A table of measured speeds: CSV with header ``freq_hz,speed_mm_s[,speed_std_mm_s][,pattern]``
-    or an HDF5 file with those datasets (any ``kind``).
-
-    ``speed_std`` is accepted as an alias of ``speed_std_mm_s``.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file", file=path)
+def _columns(path: Path) -> dict[str, list]:
+    """The table's columns as lists of text (CSV) or values (HDF5), by name."""
     cols: dict[str, list] = {}
     if path.suffix.lower() in (".csv", ".txt"):
         try:
@@ -60,17 +53,30 @@ def read_speed_table(path: str | Path) -> SpeedTable:
                         cols.setdefault((k or "").strip(), []).append((v or "").strip())
         except (OSError, UnicodeDecodeError, csv.Error) as exc:
             raise InputError(f"cannot read CSV: {exc}", file=path) from None
-    else:
-        import h5py
+        return cols
+    import h5py
 
-        try:
-            with h5py.File(path, "r") as f:
-                for k in COLUMNS:
-                    ds = _find(f, k)
-                    if ds is not None:
-                        cols[k] = [_s(v) if isinstance(v, bytes) else v for v in ds[()]]
-        except OSError as exc:
-            raise InputError(f"not a readable HDF5 or CSV file ({exc})", file=path) from None
+    try:
+        with h5py.File(path, "r") as f:
+            for k in COLUMNS:
+                ds = _find(f, k)
+                if ds is not None:
+                    cols[k] = [_s(v) if isinstance(v, bytes) else v for v in ds[()]]
+    except OSError as exc:
+        raise InputError(f"not a readable HDF5 or CSV file ({exc})", file=path) from None
+    return cols
+
+
+def read_speed_table(path: str | Path) -> SpeedTable:
+    """A table of measured speeds: CSV with header ``freq_hz,speed_mm_s[,speed_std_mm_s][,pattern]``
+    or an HDF5 file with those datasets (any ``kind``).
+
+    ``speed_std`` is accepted as an alias of ``speed_std_mm_s``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such file", file=path)
+    cols = _columns(path)
     if "speed_std" in cols and "speed_std_mm_s" not in cols:
         cols["speed_std_mm_s"] = cols.pop("speed_std")
     nums: dict[str, np.ndarray] = {}
