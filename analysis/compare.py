@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Pattern labels, as the simulator writes them (SimResult.patterns); re-exported, with the
 #: knee-record classifier shared with the simulator's calibration.
@@ -48,10 +49,10 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
 
 # --------------------------------------------------------------------------- speed vs frequency
 
-def speed_agreement(meas_freq_hz: Sequence[float], meas_speed_mm_s: Sequence[float],
-                    meas_lo_mm_s: Sequence[float] | None, meas_hi_mm_s: Sequence[float] | None,
-                    sim_freq_hz: Sequence[float], sim_mean_mm_s: Sequence[float],
-                    sim_lo_mm_s: Sequence[float], sim_hi_mm_s: Sequence[float], *,
+def speed_agreement(meas_freq_hz: ArrayLike, meas_speed_mm_s: ArrayLike,
+                    meas_lo_mm_s: ArrayLike | None, meas_hi_mm_s: ArrayLike | None,
+                    sim_freq_hz: ArrayLike, sim_mean_mm_s: ArrayLike,
+                    sim_lo_mm_s: ArrayLike, sim_hi_mm_s: ArrayLike, *,
                     min_speed_mm_s: float = 0.1,
                     provenance: dict[str, Any] | None = None) -> dict[str, Any]:
     """Error metrics of simulated against measured speed over frequency.
@@ -159,7 +160,7 @@ def percentile_band(speeds_mm_s: np.ndarray, percentiles: tuple[float, float] = 
     return lo, hi
 
 
-def draw_percentiles(meas_freq_hz: Sequence[float], meas_value: Sequence[float], sim_freq_hz: Sequence[float],
+def draw_percentiles(meas_freq_hz: ArrayLike, meas_value: ArrayLike, sim_freq_hz: ArrayLike,
                      sim_draws: np.ndarray) -> np.ndarray:
     """Each observed value's percentile (0-100) within the Monte Carlo draws at its frequency.
 

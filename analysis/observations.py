@@ -13,6 +13,7 @@ import numpy as np
 
 from labkit.analysis.report import inputs as ri
 from labkit.errors import InputError
+from labkit.files import read_speed_table
 from labkit.sim.calibrate import Observations
 from labkit.sim.knee_patterns import PATTERNS
 
@@ -40,12 +41,11 @@ def observations_from_files(paths: Sequence[str], *, amp_um: float | None = None
         elif kind == "track":
             tracks.append(ri.load_track(p))
         else:
-            tables.append(ri.load_speed_table(p))
+            tables.append(read_speed_table(p))
     freq, amp, speed, sd, pats, src = [], [], [], [], [], []
     if runs or tracks:
         m = ri.measured_speeds(runs, tracks)
-        for f, a, s, d, pat, source in zip(m["freq_hz"], m["amp_um"], m["speed_mm_s"], m["std_mm_s"],
-                                           m["patterns"], m["sources"]):
+        for f, a, s, d, pat, source in zip(m.freq_hz, m.amp_um, m.speed_mm_s, m.std_mm_s, m.patterns, m.sources):
             if not math.isfinite(a):
                 if amp_um is None:
                     raise InputError("tray amplitude unknown for a track with its own frequency", file=source,
@@ -59,15 +59,15 @@ def observations_from_files(paths: Sequence[str], *, amp_um: float | None = None
             src.append(source)
     for t in tables:
         if amp_um is None:
-            raise InputError("a speed table holds no tray amplitude", file=t["file"], key="--amp-um",
+            raise InputError("a speed table holds no tray amplitude", file=t.file, key="--amp-um",
                              expected="--amp-um AMP (um)")
-        n = t["freq_hz"].size
-        freq += list(t["freq_hz"])
+        n = t.freq_hz.size
+        freq += list(t.freq_hz)
         amp += [amp_um] * n
-        speed += list(t["speed_mm_s"])
-        sd += list(t.get("speed_std_mm_s", np.full(n, np.nan)))
-        pats += list(t.get("pattern", [""] * n))
-        src += [t["file"]] * n
+        speed += list(t.speed_mm_s)
+        sd += list(t.speed_std_mm_s if t.speed_std_mm_s is not None else np.full(n, np.nan))
+        pats += list(t.pattern or [""] * n)
+        src += [t.file] * n
     if not freq:
         raise InputError("no measured speeds in the given files", key="--measured",
                          expected="shaker run files with tracks, track files or a freq_hz,speed_mm_s table")

@@ -10,8 +10,8 @@ Matplotlib's object API only (no pyplot state), so safe in any process.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
 __all__ = ["PNG_DPI", "LOC_COLOURS", "loc_colour", "log_freq_axis", "wrapped_phase_deg", "wrap_x",
-           "mode_label", "mode_marks", "style_frf_axes"]
+           "ModeLike", "mode_label", "mode_marks", "style_frf_axes"]
 
 #: PNG resolution (slides, print).
 PNG_DPI = 200
@@ -118,17 +118,30 @@ def wrap_x(x: np.ndarray, h: np.ndarray) -> np.ndarray:
     return np.insert(np.asarray(x, float), jumps, np.nan)
 
 
-def mode_label(m: Mapping[str, Any]) -> str:
-    """``452.0 ± 0.04 Hz, ζ 0.2200 ± 0.0001`` for a mode dict (``Mode.to_dict`` / the fit file's)."""
+class ModeLike(Protocol):
+    """What a mode mark needs: frequency and damping ratio with their standard uncertainties."""
+
+    @property
+    def freq_hz(self) -> float: ...
+    @property
+    def freq_hz_std(self) -> float | None: ...
+    @property
+    def damping_ratio(self) -> float | None: ...
+    @property
+    def damping_ratio_std(self) -> float | None: ...
+
+
+def mode_label(m: ModeLike) -> str:
+    """``452.0 ± 0.04 Hz, ζ 0.2200 ± 0.0001`` for a fitted mode (``analysis.modal.fit.Mode`` or a fit file's)."""
     from labkit.analysis.report.numbers import format_uncertain
 
-    text = format_uncertain(m["freq_hz"], m.get("freq_hz_std"), "Hz")
-    if m.get("damping_ratio") is not None:
-        text += ", \u03b6 " + format_uncertain(m["damping_ratio"], m.get("damping_ratio_std"))
+    text = format_uncertain(m.freq_hz, m.freq_hz_std, "Hz")
+    if m.damping_ratio is not None:
+        text += ", \u03b6 " + format_uncertain(m.damping_ratio, m.damping_ratio_std)
     return text
 
 
-def mode_marks(am: Axes, ap: Axes | None, modes: Sequence[Mapping[str, Any]], *, fontsize: float = 7.0) -> None:
+def mode_marks(am: Axes, ap: Axes | None, modes: Sequence[ModeLike], *, fontsize: float = 7.0) -> None:
     """Dotted lines at the modes on both axes; labels ``n: f ± sf Hz, ζ ...`` in the margin above
     the magnitude axes ``am`` (never on a peak).
 
@@ -145,8 +158,8 @@ def mode_marks(am: Axes, ap: Axes | None, modes: Sequence[Mapping[str, Any]], *,
     width = axes_width_pt(am)
     pad = 0.6 * fontsize / width                     # between two labels, in axes fractions
     rows: list[float] = []                           # per row: right end of its last label (axes fraction)
-    for i, m in enumerate(sorted(modes, key=lambda m: m["freq_hz"])):
-        fx = float(m["freq_hz"])
+    for i, m in enumerate(sorted(modes, key=lambda m: m.freq_hz)):
+        fx = float(m.freq_hz)
         for ax in (am, ap):
             if ax is not None:
                 ax.axvline(fx, color="0.45", lw=0.8, ls=":", zorder=1)

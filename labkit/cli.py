@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import logging
 import pkgutil
 import sys
 from collections.abc import Sequence
@@ -36,7 +37,30 @@ def common_parser() -> argparse.ArgumentParser:
     common.add_argument("--json", action="store_true",
                         help="print one JSON summary object as the last line of stdout")
     common.add_argument("--quiet", action="store_true", help="no progress bar")
+    common.add_argument("-v", "--verbose", action="count", default=0,
+                        help="log what labkit does on stderr, the shutdown path included (-vv: more)")
     return common
+
+
+class _StderrHandler(logging.Handler):
+    """Writes to whatever ``sys.stderr`` is at the time (a test's captured stream, a redirected one)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            sys.stderr.write(self.format(record) + "\n")
+        except Exception:       # a closed stderr must not break a shutdown
+            pass
+
+
+def _configure_logging(verbose: int) -> None:
+    """``-v``: INFO lines of labkit's loggers on stderr; ``-vv``: DEBUG; none: warnings only (stderr)."""
+    level = logging.WARNING if not verbose else logging.INFO if verbose == 1 else logging.DEBUG
+    root = logging.getLogger("labkit")
+    root.setLevel(level)
+    if not any(isinstance(h, _StderrHandler) for h in root.handlers):
+        handler = _StderrHandler()
+        handler.setFormatter(logging.Formatter("labkit %(name)s: %(message)s"))
+        root.addHandler(handler)
 
 
 def _command_modules() -> list[ModuleType]:
@@ -111,6 +135,7 @@ def _main(argv: Sequence[str] | None, previous: dict[int, Any], late: list[int])
         check_stop()            # one that arrived while labkit was imported (labkit.early_signals)
         parser = build_parser()
         args = parser.parse_args(argv)
+        _configure_logging(getattr(args, "verbose", 0))
         summary = args._run(args)
         _hold(late)             # the command is done: a stop from here on does not undo it
         check_stop()            # a stop signal whose exception was dropped still stops (exit 130)

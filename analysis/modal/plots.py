@@ -107,7 +107,7 @@ def frf_fit_figure(fit: Any, *, title: str = "", units: str = "") -> Figure:
 
         handles.append(Line2D([], [], ls="none", label=f"... {len(fit.locations) - LEGEND_LOCATIONS} more locations"))
     if fit.modes:
-        mode_marks(am, ap, [m.to_dict(fit.locations) for m in fit.modes])
+        mode_marks(am, ap, fit.modes)
     style_frf_axes(am, ap, f"|H| ({units})" if units and units != "1" else "|H|")
     _legend_outside(am, handles)
     if title:

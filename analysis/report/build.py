@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 
@@ -31,6 +31,30 @@ from labkit.analysis.report.numbers import format_uncertain, format_value
 from labkit.errors import InputError
 
 
+class Row(TypedDict):
+    """One judged comparison (a row of the agreement table and of ``agreement.json``)."""
+
+    comparison: str
+    metric: str
+    value: float | None
+    units: str
+    value_text: str
+    tolerance: str
+    verdict: str                # "pass", "fail" or "not judged"
+    band_statistic: str
+    n: int
+    section: NotRequired[str]
+
+
+class Verdict(TypedDict):
+    """A section's verdict (in ``agreement.json`` and on the page)."""
+
+    result: str                 # "pass", "fail", "not judged" or "missing"
+    text: str
+    passed: NotRequired[int]
+    judged: NotRequired[int]
+
+
 @dataclass
 class Section:
     """One section of the page, as data (rendered by :func:`labkit.analysis.report.html.render`)."""
@@ -41,14 +65,14 @@ class Section:
     message: str = ""
     figures: list[tuple[figs.FigureFiles, str, str]] = field(default_factory=list)   # files, caption, key
     html: list[str] = field(default_factory=list)
-    rows: list[dict[str, Any]] = field(default_factory=list)                        # judged comparisons
+    rows: list[Row] = field(default_factory=list)                                   # judged comparisons
     files: list[str] = field(default_factory=list)                                  # inputs, for provenance
     notes: dict[str, Any] = field(default_factory=dict)
-    verdict: dict[str, Any] = field(default_factory=dict)
+    verdict: Verdict = field(default_factory=lambda: Verdict(result="n/a", text=""))
     provenance: dict[str, Any] = field(default_factory=dict)
-    summarises: list[dict[str, Any]] | None = None    # the agreement section judges other sections' rows
+    summarises: list[Row] | None = None    # the agreement section judges other sections' rows
     details: dict[str, Any] = field(default_factory=dict)       # this section's numbers, for agreement.json
-    pairs: list[dict[str, Any]] = field(default_factory=list)   # leg patterns it observed and simulated
+    pairs: list[ri.PatternPair] = field(default_factory=list)   # leg patterns it observed and simulated
 
     def figure(self, files: figs.FigureFiles, caption: str) -> None:
         self.figures.append((files, caption, files.png.stem))
@@ -72,14 +96,14 @@ class ReportInputs:
     """Everything the sections read, read once before any is drawn (figures go to ``out``)."""
 
     out: Path
-    inchip: list[dict[str, Any]]
-    shaker: list[dict[str, Any]]
-    tracks: list[dict[str, Any]]
-    fit: dict[str, Any] | None
+    inchip: list[ri.InchipData]
+    shaker: list[ri.ShakerData]
+    tracks: list[ri.TrackData]
+    fit: ri.FitData | None
     fit_file: str | None
     params: str | None
-    sweeps: list[dict[str, Any]]
-    results: list[dict[str, Any]]
+    sweeps: list[ri.SweepData]
+    results: list[ri.SimRunData]
     tol: Tolerances
     knee: KneeOptions
 
@@ -94,11 +118,11 @@ def _fixed(x: float | None, decimals: int) -> str:
 
 
 def _row(comparison: str, metric: str, value: float | None, units: str, tolerance: str, result: str, *,
-         band: str = "", n: int = 1, text: str | None = None) -> dict[str, Any]:
+         band: str = "", n: int = 1, text: str | None = None) -> Row:
     """One judged comparison: the metric's value, the tolerance it is judged against, the verdict."""
-    return {"comparison": comparison, "metric": metric, "value": value, "units": units,
-            "value_text": text if text is not None else format_value(value),
-            "tolerance": tolerance, "verdict": result, "band_statistic": band, "n": n}
+    return Row(comparison=comparison, metric=metric, value=value, units=units,
+               value_text=text if text is not None else format_value(value),
+               tolerance=tolerance, verdict=result, band_statistic=band, n=n)
 
 
 def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Sequence[str] = (),
@@ -164,7 +188,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     # every file goes to a staging folder first: a failure anywhere leaves an old report whole
     with staged_dir(out, names) as stage:
         sections = run_sections(replace(read, out=stage))
-        rows = [dict(r, section=s.id) for s in sections for r in s.rows]
+        rows = [Row(**r, section=s.id) for s in sections for r in s.rows]
         sections.append(_agreement_section(rows, tol, sections))
         details = {k: v for s in sections for k, v in s.details.items()}
         inputs = prov.file_records(f for s in sections if s.status == "ok" for f in s.files)
@@ -217,11 +241,12 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
 
 
 def _read_inputs(runs: Sequence[str], tracks: Sequence[str], fit: str | None, sims: Sequence[str]) -> tuple[
-        list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]], dict[str, Any] | None,
-        list[dict[str, Any]], list[dict[str, Any]]]:
+        list[ri.InchipData], list[ri.ShakerData], list[ri.TrackData], ri.FitData | None,
+        list[ri.SweepData], list[ri.SimRunData]]:
     """In-chip runs, shaker runs, tracks, the fit, sweeps and single simulations, read (InputError
     naming the first file that cannot be)."""
-    inchip, shaker = [], []
+    inchip: list[ri.InchipData] = []
+    shaker: list[ri.ShakerData] = []
     for path in runs:
         kind = ri.file_kind(path)
         if kind == "run_inchip":
@@ -233,7 +258,7 @@ def _read_inputs(runs: Sequence[str], tracks: Sequence[str], fit: str | None, si
                              expected="a 'run_inchip' or 'run_shaker' run file")
     sim_data = [ri.load_sim(p) for p in sims]
     return (inchip, shaker, [ri.load_track(p) for p in tracks], ri.load_fit(fit) if fit else None,
-            [s for s in sim_data if s["kind"] == "sim_sweep"], [s for s in sim_data if s["kind"] == "sim_result"])
+            [s for s in sim_data if isinstance(s, ri.SweepData)], [s for s in sim_data if isinstance(s, ri.SimRunData)])
 
 
 def _jsonable(x: Any) -> Any:
@@ -255,24 +280,25 @@ def _jsonable(x: Any) -> Any:
     return x
 
 
-def _section_verdict(s: Section) -> dict[str, Any]:
+def _section_verdict(s: Section) -> Verdict:
     if s.status != "ok":
-        return {"result": "missing", "text": f"Verdict: not judged (missing input). {s.message}"}
+        return Verdict(result="missing", text=f"Verdict: not judged (missing input). {s.message}")
     judged = [r for r in (s.rows if s.summarises is None else s.summarises) if r["verdict"] in ("pass", "fail")]
     if not judged:
         why = s.notes.get("verdict_note", "nothing in this section is judged against a tolerance; shown for "
                                           "inspection")
-        return {"result": "not judged", "text": f"Verdict: not judged ({why})."}
+        return Verdict(result="not judged", text=f"Verdict: not judged ({why}).")
     failed = [r for r in judged if r["verdict"] == "fail"]
     if failed:
         names = "; ".join(f"{r['comparison']}: {r['metric']} {r['value_text']} (tolerance {r['tolerance']})"
                           for r in failed[:4])
         more = f"; and {len(failed) - 4} more" if len(failed) > 4 else ""
-        return {"result": "fail", "passed": len(judged) - len(failed), "judged": len(judged),
-                "text": f"Verdict: FAIL: {len(failed)} of {len(judged)} comparisons outside tolerance ({names}{more})."}
-    return {"result": "pass", "passed": len(judged), "judged": len(judged),
-            "text": "Verdict: PASS: " + ("its one comparison is within tolerance." if len(judged) == 1 else
-                                         f"all {len(judged)} comparisons within tolerance.")}
+        return Verdict(result="fail", passed=len(judged) - len(failed), judged=len(judged),
+                       text=f"Verdict: FAIL: {len(failed)} of {len(judged)} comparisons outside tolerance "
+                            f"({names}{more}).")
+    return Verdict(result="pass", passed=len(judged), judged=len(judged),
+                   text="Verdict: PASS: " + ("its one comparison is within tolerance." if len(judged) == 1 else
+                                             f"all {len(judged)} comparisons within tolerance."))
 
 
 # --------------------------------------------------------------------------- FRF and stabilisation
@@ -292,7 +318,7 @@ def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
 
     out, inchip, fit, tol = inp.out, inp.inchip, inp.fit, inp.tol
     title = "Frequency responses with the fitted model (paper Fig. 5/6)"
-    groups = {k: g for k, g in (fit["groups"].items() if fit else []) if g["locations"]}
+    groups = {k: g for k, g in (fit.groups.items() if fit else []) if g.locations}
     if not groups and not inchip:
         return _missing("frf", title, "No in-chip run file (--runs RUN.h5) or fit (--fit robot.fit.h5) given.")
     sec = Section("frf", title)
@@ -300,41 +326,41 @@ def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
         sec.message = "No fit given (--fit robot.fit.h5): measured FRFs only, no model curve."
         sec.notes["verdict_note"] = "no fit to judge"
         for k, run in enumerate(inchip):
-            sec.files.append(run["file"])
-            ff = figs.frf_figure(run["locations"], [], out / f"fig_frf_run{k + 1}", units="(mm/s)/V",
+            sec.files.append(run.file)
+            ff = figs.frf_figure(run.locations, [], out / f"fig_frf_run{k + 1}", units="(mm/s)/V",
                                  title=GROUP_TITLES["inchip"])
-            sec.figure(ff, f"Measured FRF per location (markers) from {run['file']}.")
+            sec.figure(ff, f"Measured FRF per location (markers) from {run.file}.")
         return sec
     assert fit is not None
-    sec.files.append(fit["file"])
-    sec.files += [r["file"] for r in inchip]
+    sec.files.append(fit.file)
+    sec.files += [r.file for r in inchip]
     for name, g in groups.items():
-        modes = g["modes"]
-        fine: dict[str, Any] = {}
+        modes = g.modes
+        fine: dict[str, ri.Frf] = {}
         lines_only = []
-        for loc, d in g["locations"].items():
-            fm = (rebuild_model(d["freq_hz"], d["model_frf"], [m["freq_hz"] for m in modes],
-                                [m.get("damping_ratio", np.nan) for m in modes])
-                  if d.get("model_frf") is not None and modes else None)
+        for loc, d in g.locations.items():
+            fm = (rebuild_model(d.freq_hz, d.model_frf, [m.freq_hz for m in modes],
+                                [np.nan if m.damping_ratio is None else m.damping_ratio for m in modes])
+                  if d.model_frf is not None and modes else None)
             if fm is None:
                 lines_only.append(loc)
                 continue
-            fine[loc] = {"freq_hz": fm.freq_hz, "frf": fm.frf}
+            fine[loc] = ri.Frf(fm.freq_hz, fm.frf)
             sec.notes[f"model {name}/{loc}"] = (f"pole-residue model rebuilt on {fm.freq_hz.size} log-spaced lines "
                                                 f"(residual powers {list(fm.residual_powers)}, reproduces the stored "
                                                 f"model to {fm.rebuild_error:.1e})")
-        ff = figs.frf_figure(g["locations"], modes, out / f"fig_frf_{name}", fine=fine, units=g["units"],
+        ff = figs.frf_figure(g.locations, modes, out / f"fig_frf_{name}", fine=fine, units=g.units,
                              title=GROUP_TITLES.get(name, name))
-        for loc, d in g["locations"].items():
+        for loc, d in g.locations.items():
             entry = ff.data["locations"][loc]
             if loc in fine:
-                mag = np.abs(fine[loc]["frf"])
-                entry["fit_minima"] = _minima(fine[loc]["freq_hz"], mag)
-                entry["fit_maxima"] = [[a, -b] for a, b in _minima(fine[loc]["freq_hz"], -mag)]
-            if d.get("model_frf") is not None:
-                entry["lines_model_minima"] = _minima(np.asarray(d["freq_hz"]), np.abs(d["model_frf"]))
+                mag = np.abs(fine[loc].frf)
+                entry["fit_minima"] = _minima(fine[loc].freq_hz, mag)
+                entry["fit_maxima"] = [[a, -b] for a, b in _minima(fine[loc].freq_hz, -mag)]
+            if d.model_frf is not None:
+                entry["lines_model_minima"] = _minima(np.asarray(d.freq_hz), np.abs(d.model_frf))
         caption = (f"{GROUP_TITLES.get(name, name)}: measured lines (markers, one colour per location) and the "
-                   f"fitted model ({g['method']}) on a fine grid (lines); modes marked with frequency and damping "
+                   f"fitted model ({g.method}) on a fine grid (lines); modes marked with frequency and damping "
                    f"ratio, ± one standard uncertainty.")
         if lines_only:
             caption += f" Model at the measured lines only for {', '.join(lines_only)} (could not be rebuilt)."
@@ -342,14 +368,14 @@ def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
         if modes:
             sec.html.append(f"<h3>Modes ({rh.e(name)})</h3>")
             sec.html.append(rh.table(["mode", "frequency", "damping ratio", "dominant location"],
-                                     [[i + 1, format_uncertain(m["freq_hz"], m.get("freq_hz_std"), "Hz"),
-                                       format_uncertain(m.get("damping_ratio"), m.get("damping_ratio_std")),
-                                       m.get("dominant_location", "")] for i, m in enumerate(modes)],
+                                     [[i + 1, format_uncertain(m.freq_hz, m.freq_hz_std, "Hz"),
+                                       format_uncertain(m.damping_ratio, m.damping_ratio_std),
+                                       m.dominant_location] for i, m in enumerate(modes)],
                                      num_cols={0, 1, 2}))
-        q = g.get("quality")
+        q = g.quality
         sec.rows.append(_row(f"fit quality ({name})", "1 - NRMSE² (worst location)", q, "1",
                              f"≥ {tol.fit_quality_min:g}", verdict(q, at_least=tol.fit_quality_min),
-                             n=len(g["locations"]), text=format_value(q, 6)))
+                             n=len(g.locations), text=format_value(q, 6)))
     return sec
 
 
@@ -358,13 +384,14 @@ def _stab_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     title = "Stabilisation diagram"
     if fit is None:
         return _missing("stabilisation", title, "No fit given (--fit robot.fit.h5).")
-    groups = {k: g for k, g in fit["groups"].items() if g.get("stabilisation")}
+    groups = {k: g for k, g in fit.groups.items() if g.stabilisation}
     if not groups:
-        return _missing("stabilisation", title, f"{fit['file']} holds no stabilisation data.")
-    sec = Section("stabilisation", title, files=[fit["file"]])
+        return _missing("stabilisation", title, f"{fit.file} holds no stabilisation data.")
+    sec = Section("stabilisation", title, files=[fit.file])
     sec.notes["verdict_note"] = "the diagram shows how the poles were chosen; the fit itself is judged above"
     for name, g in groups.items():
-        ff = figs.stabilisation_figure(g["stabilisation"], out / f"fig_stabilisation_{name}", g["locations"],
+        assert g.stabilisation is not None
+        ff = figs.stabilisation_figure(g.stabilisation, out / f"fig_stabilisation_{name}", g.locations,
                                        title=f"stabilisation diagram: {name}")
         sec.figure(ff, f"Poles by model order ({name}); the chosen poles marked (red), the measured |FRF| of "
                        f"each location behind them (right axis).")
@@ -388,10 +415,10 @@ def describe_sweep(sw: Any) -> str:
             + f", {sw.draws} draws" + (f" of {dur:g} s" if isinstance(dur, (int, float)) else ""))
 
 
-def _sim_curves(sweeps: list[dict], tol: Tolerances) -> list[dict[str, Any]]:
+def _sim_curves(sweeps: list[ri.SweepData], tol: Tolerances) -> list[ri.SimCurve]:
     curves = []
     for s in sweeps:
-        sw = s["sweep"]
+        sw = s.sweep
         if sw.quantity != "freq_hz":
             continue
         # measured speed is unsigned (the paper compares speed, not velocity: the robot turns),
@@ -400,12 +427,10 @@ def _sim_curves(sweeps: list[dict], tol: Tolerances) -> list[dict[str, Any]]:
         order = np.argsort(sw.values)
         p10, p90 = compare.percentile_band(draws, (tol.band_lo_pct, tol.band_hi_pct))
         mean, lo, hi = compare.band_from_draws(draws, k=2.0)
-        curves.append({"file": s["file"], "label": Path(s["file"]).name, "freq_hz": np.asarray(sw.values)[order],
-                       "draws_mm_s": draws[order], "draws": int(sw.draws), "p10_mm_s": p10[order],
-                       "p90_mm_s": p90[order], "mean_mm_s": mean[order], "lo_mm_s": lo[order],
-                       "hi_mm_s": hi[order], "nominal_mm_s": draws[order, 0],
-                       "patterns": [sw.dominant_pattern(int(i)) for i in order],
-                       "describe": describe_sweep(sw), "sweep": sw})
+        curves.append(ri.SimCurve(s.file, Path(s.file).name, np.asarray(sw.values)[order], draws[order],
+                                  int(sw.draws), p10[order], p90[order], mean[order], lo[order], hi[order],
+                                  draws[order, 0], [sw.dominant_pattern(int(i)) for i in order],
+                                  describe_sweep(sw), sw))
     return curves
 
 
@@ -414,23 +439,23 @@ def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     title = "Speed against shaker frequency (paper Fig. 8)"
     measured = ri.measured_speeds(shaker, tracks) if (shaker or tracks) else None
     curves = _sim_curves(sweeps, tol)
-    have_meas = measured is not None and measured["freq_hz"].size > 0
+    have_meas = measured is not None and measured.freq_hz.size > 0
     if not have_meas and not curves:
         return _missing("speed", title, "No measured speeds (--runs SHAKER_RUN.h5 / --tracks TRACK.h5) and no "
                         "simulated frequency sweep (--sim SWEEP.h5) given.")
     sec = Section("speed", title)
-    sec.files += [r["file"] for r in shaker] + [t["file"] for t in tracks] + [c["file"] for c in curves]
+    sec.files += [r.file for r in shaker] + [t.file for t in tracks] + [c.file for c in curves]
     band = f"{tol.band_lo_pct:g}\u2013{tol.band_hi_pct:g} %"
     for c in curves:
-        sec.notes[f"sweep {c['label']}"] = c["describe"]
+        sec.notes[f"sweep {c.label}"] = c.describe
     msgs = []
     if not have_meas:
         msgs.append("No measured speeds given: simulation only.")
         sec.notes["verdict_note"] = "no measured speed to judge the simulation against"
-    if measured is not None and measured["unmatched"]:
+    if measured is not None and measured.unmatched:
         msgs.append("Tracks with no known shaker frequency or no speed (left out): "
-                    f"{', '.join(measured['unmatched'])}.")
-    other = [f"{s['file']} (over {s['sweep'].quantity})" for s in sweeps if s["sweep"].quantity != "freq_hz"]
+                    f"{', '.join(measured.unmatched)}.")
+    other = [f"{s.file} (over {s.sweep.quantity})" for s in sweeps if s.sweep.quantity != "freq_hz"]
     if other:
         msgs.append(f"Sweeps not over freq_hz are not drawn here: {', '.join(other)}.")
     if not curves:
@@ -440,12 +465,12 @@ def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
         assert measured is not None
         for c in curves:
             # compare only points measured at the sweep's tray amplitude (or of unknown amplitude)
-            amp = float(c["sweep"].scenario.get("amp_um", np.nan))
-            mask = ~np.isfinite(measured["amp_um"]) | ~np.isfinite(amp) | \
-                (np.abs(measured["amp_um"] - amp) <= 0.1 * abs(amp))
-            m = ri.select(measured, mask)
-            if not m["freq_hz"].size:
-                msgs.append(f"No measured point at the tray amplitude of {c['file']} ({amp:.3g} um).")
+            amp = float(c.sweep.scenario.get("amp_um", np.nan))
+            mask = ~np.isfinite(measured.amp_um) | ~np.isfinite(amp) | \
+                (np.abs(measured.amp_um - amp) <= 0.1 * abs(amp))
+            m = measured.select(mask)
+            if not m.freq_hz.size:
+                msgs.append(f"No measured point at the tray amplitude of {c.file} ({amp:.3g} um).")
                 continue
             _judge_speed(sec, m, c, tol, band)
             sec.pairs += _sweep_pattern_pairs(m, c)
@@ -467,26 +492,26 @@ def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     return sec
 
 
-def _judge_speed(sec: Section, m: dict[str, Any], c: dict[str, Any], tol: Tolerances, band: str) -> None:
-    p = {"measured": sorted(set(m["sources"])), "simulated": c["file"], "sweep": c["describe"]}
-    a_nom = compare.speed_agreement(m["freq_hz"], m["speed_mm_s"], m["lo_mm_s"], m["hi_mm_s"], c["freq_hz"],
-                                    c["nominal_mm_s"], c["p10_mm_s"], c["p90_mm_s"], provenance=p)
-    a_mc = compare.speed_agreement(m["freq_hz"], m["speed_mm_s"], m["lo_mm_s"], m["hi_mm_s"], c["freq_hz"],
-                                   c["mean_mm_s"], c["p10_mm_s"], c["p90_mm_s"], provenance=p)
-    pct = compare.draw_percentiles(m["freq_hz"], m["speed_mm_s"], c["freq_hz"], c["draws_mm_s"])
+def _judge_speed(sec: Section, m: ri.MeasuredSpeeds, c: ri.SimCurve, tol: Tolerances, band: str) -> None:
+    p = {"measured": sorted(set(m.sources)), "simulated": c.file, "sweep": c.describe}
+    a_nom = compare.speed_agreement(m.freq_hz, m.speed_mm_s, m.lo_mm_s, m.hi_mm_s, c.freq_hz,
+                                    c.nominal_mm_s, c.p10_mm_s, c.p90_mm_s, provenance=p)
+    a_mc = compare.speed_agreement(m.freq_hz, m.speed_mm_s, m.lo_mm_s, m.hi_mm_s, c.freq_hz,
+                                   c.mean_mm_s, c.p10_mm_s, c.p90_mm_s, provenance=p)
+    pct = compare.draw_percentiles(m.freq_hz, m.speed_mm_s, c.freq_hz, c.draws_mm_s)
     cov = compare.coverage(pct.tolist(), [q["inside_band"] for q in a_nom["points"]],
                            (tol.band_lo_pct, tol.band_hi_pct))
     details = sec.details
-    details.setdefault("speed", {})[c["file"]] = {"nominal": a_nom, "monte_carlo_mean": a_mc, "coverage": cov,
+    details.setdefault("speed", {})[c.file] = {"nominal": a_nom, "monte_carlo_mean": a_mc, "coverage": cov,
                                                   "percentiles": pct.tolist()}
     details.setdefault("speed_mc_mean_rms_error_mm_s", a_mc["rms_error_mm_s"])
     details.setdefault("speed_nominal", a_nom)
     details.setdefault("speed_coverage", cov)
     rel = a_nom["relative_rms_error"]
-    tag = f" vs {c['label']}"
+    tag = f" vs {c.label}"
     med = cov["median_percentile"]
     band_text = (f"median percentile of the measured speeds within the draws: {format_value(med, 3)} "
-                 f"(50 if unbiased; {c['draws']} draws)")
+                 f"(50 if unbiased; {c.draws} draws)")
     sec.rows.append(_row(f"speed, nominal robot{tag}", "relative RMS error (RMS error / RMS measured)", rel, "1",
                          f"≤ {tol.speed_relative_rms_max:g}", verdict(rel, at_most=tol.speed_relative_rms_max),
                          band=band_text, n=a_nom["n_points"],
@@ -495,7 +520,7 @@ def _judge_speed(sec: Section, m: dict[str, Any], c: dict[str, Any], tol: Tolera
     sec.rows.append(_row(f"speed, Monte Carlo band{tag}", f"fraction of measured speeds inside the {band} band",
                          fr, "1", f"≥ {tol.speed_coverage_min:g} (expected {cov['expected_fraction']:g})",
                          verdict(fr, at_least=tol.speed_coverage_min), band=band_text, n=cov["n"]))
-    sec.html.append(f"<h3>Measured against {rh.e(c['label'])}: {rh.e(c['describe'])}</h3>")
+    sec.html.append(f"<h3>Measured against {rh.e(c.label)}: {rh.e(c.describe)}</h3>")
     table_rows = []
     for q, pc in zip(a_nom["points"], pct):
         std = None
@@ -509,38 +534,35 @@ def _judge_speed(sec: Section, m: dict[str, Any], c: dict[str, Any], tol: Tolera
                               "percentile in draws", "inside band"], table_rows, num_cols={0, 1, 2, 3, 4}))
 
 
-def _sweep_pattern_pairs(measured: dict[str, Any], c: dict[str, Any]) -> list[dict[str, Any]]:
+def _sweep_pattern_pairs(measured: ri.MeasuredSpeeds, c: ri.SimCurve) -> list[ri.PatternPair]:
     """Leg patterns of the measured points (labels in the run, or classified from knee records)
     against the sweep's dominant pattern at the nearest frequency (within 2 %)."""
     pairs = []
-    values = np.asarray(c["freq_hz"], float)
-    for fz, lab, by, src in zip(measured["freq_hz"], measured["patterns"], measured["pattern_by"],
-                                measured["sources"]):
+    values = np.asarray(c.freq_hz, float)
+    for fz, lab, by, src in zip(measured.freq_hz, measured.patterns, measured.pattern_by, measured.sources):
         if lab not in compare.PATTERNS:
             continue
         i = int(np.argmin(np.abs(values - fz)))
         if abs(values[i] - fz) > 0.02 * fz:
             continue
-        pairs.append({"source": "sweep", "drive": f"{fz:.4g} Hz", "measured": lab, "simulated": c["patterns"][i],
-                      "measured_by": by, "simulated_by": ri.FOOT_CONTACT,
-                      "measured_file": src, "simulated_file": c["file"]})
+        pairs.append(ri.PatternPair("sweep", f"{fz:.4g} Hz", lab, c.patterns[i], by, ri.FOOT_CONTACT, src, c.file))
     return pairs
 
 
 # --------------------------------------------------------------------------- knee motion
 
-def _sim_knee_task(task: tuple) -> dict[str, Any]:
+def _sim_knee_task(task: tuple) -> ri.SimRunData:
     """Simulate one shaker drive and keep what the knee figure needs (module-level: picklable)."""
     from labkit.sim import Shaker, simulate
 
     params, freq_hz, amp_um, duration_s, seed = task
     r = simulate(params, Shaker(freq_hz=freq_hz, amp_um=amp_um), duration_s=duration_s, seed=seed)
-    return {"t_s": np.asarray(r.t_s), "knee_vz_mm_s": np.asarray(r.knee_vz_mm_s),
-            "ground_z_um": np.asarray(r.ground_z_um), "contact": np.asarray(r.contact),
-            "patterns": [str(p) for p in r.patterns]}
+    return ri.SimRunData(f"simulated here ({freq_hz:.4g} Hz, {amp_um:.3g} um)", np.asarray(r.t_s),
+                         np.asarray(r.knee_vz_mm_s), np.asarray(r.ground_z_um), np.asarray(r.contact),
+                         {"freq_hz": freq_hz, "amp_um": amp_um}, [str(p) for p in r.patterns])
 
 
-def _knee_params(fit: str | None, params: str | None, sweeps: list[dict]) -> tuple[Any, str]:
+def _knee_params(fit: str | None, params: str | None, sweeps: list[ri.SweepData]) -> tuple[Any, str]:
     from labkit.sim import RobotParams
 
     if params:
@@ -549,13 +571,13 @@ def _knee_params(fit: str | None, params: str | None, sweeps: list[dict]) -> tup
         sibling = Path(fit).with_name(Path(fit).name.replace(".fit.h5", ".toml"))
         if sibling.is_file() and sibling != Path(fit):
             return RobotParams.from_toml(sibling), str(sibling)
-    if sweeps and sweeps[0]["sweep"].params_toml:
+    if sweeps and sweeps[0].sweep.params_toml:
         import tempfile
 
         with tempfile.TemporaryDirectory() as tmp:
             p = Path(tmp) / "robot.toml"
-            p.write_text(sweeps[0]["sweep"].params_toml)
-            return RobotParams.from_toml(p), f"parameters of {sweeps[0]['file']}"
+            p.write_text(sweeps[0].sweep.params_toml)
+            return RobotParams.from_toml(p), f"parameters of {sweeps[0].file}"
     return RobotParams(), "RobotParams() defaults (paper Tables 1-2)"
 
 
@@ -564,14 +586,17 @@ def _same(d: tuple[float, float], f: float, a: float) -> bool:
                                                     or abs(d[1] - a) <= 0.1 * abs(a) + 1e-9))
 
 
-def knee_drives_of(records: list[dict[str, Any]], results: list[dict[str, Any]],
+def _drive_of(run: ri.SimRunData) -> tuple[float, float]:
+    return float(run.scenario.get("freq_hz", np.nan)), float(run.scenario.get("amp_um", np.nan))
+
+
+def knee_drives_of(records: list[ri.KneeRecord], results: list[ri.SimRunData],
                    extra: Sequence[tuple[float, float]] | None) -> list[tuple[float, float]]:
     """Every drive to show: each measured knee record's, each sim_result's and the extra ones,
     once each (same frequency within 1 %, amplitude within 10 %), sorted by frequency."""
     drives: list[tuple[float, float]] = []
-    cands = [(float(r["freq_hz"]), float(r["tray_amp_um"])) for r in records]
-    cands += [(float(s["scenario"].get("freq_hz", np.nan)), float(s["scenario"].get("amp_um", np.nan)))
-              for s in results]
+    cands = [(float(r.freq_hz), float(r.tray_amp_um)) for r in records]
+    cands += [_drive_of(s) for s in results]
     cands += [(float(f), float(a)) for f, a in (extra or [])]
     for d in cands:
         if np.isfinite(d[0]) and not any(_same(x, *d) for x in drives):
@@ -579,93 +604,99 @@ def knee_drives_of(records: list[dict[str, Any]], results: list[dict[str, Any]],
     return sorted(drives)
 
 
-def _knee_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
-    out, shaker, results, tol, opt = inp.out, inp.shaker, inp.results, inp.tol, inp.knee
-    duration_s, leg = opt.duration_s, opt.leg
-    title = "Knee vertical motion, measured against simulated (paper Fig. 10/11)"
-    records = [dict(r, file=run["file"]) for run in shaker for r in run["knee"]]
-    drives = knee_drives_of(records, results, opt.drives)
-    if not drives:
-        return _missing("knee", title, "No measured knee records (shaker run files with waveforms), no "
-                        "sim_result files (--sim) and no --knee-drive given.")
-    sims: dict[int, dict[str, Any]] = {}
+def _knee_sims(inp: ReportInputs, drives: list[tuple[float, float]], sec: Section) -> dict[int, ri.SimRunData]:
+    """The simulated run of each drive: a given sim_result, else one simulated here (when allowed)."""
+    opt = inp.knee
+    sims: dict[int, ri.SimRunData] = {}
     for i, d in enumerate(drives):
-        hit = next((s for s in results if _same(d, float(s["scenario"].get("freq_hz", np.nan)),
-                                                float(s["scenario"].get("amp_um", np.nan)))), None)
+        hit = next((s for s in inp.results if _same(d, *_drive_of(s))), None)
         if hit is not None:
-            sims[i] = dict(hit, source=hit["file"])
+            sims[i] = hit
     todo = [i for i, d in enumerate(drives) if i not in sims and np.isfinite(d[1])]
-    sec = Section("knee", title)
-    sec.files += sorted({r["file"] for r in records}) + [s["file"] for s in results]
     if opt.simulate and todo:
         from labkit.executor import map_tasks
 
         p, param_src = _knee_params(inp.fit_file, inp.params, inp.sweeps)
         sec.files.append(param_src)
         sec.notes["simulated here"] = (f"simulate({Path(param_src).name}, Shaker(freq_hz, amp_um), "
-                                       f"duration_s={duration_s:g}, "
+                                       f"duration_s={opt.duration_s:g}, "
                                        f"seed=0) at {len(todo)} drive(s); the settled second half is compared")
-        outs = map_tasks(_sim_knee_task, [(p, drives[i][0], drives[i][1], duration_s, 0) for i in todo],
+        outs = map_tasks(_sim_knee_task, [(p, drives[i][0], drives[i][1], opt.duration_s, 0) for i in todo],
                          scheduler=opt.scheduler, workers=opt.workers, desc="knee sims", quiet=opt.quiet)
-        for i, o in zip(todo, outs):
-            sims[i] = dict(o, source=f"simulated here ({drives[i][0]:.4g} Hz, {drives[i][1]:.3g} um)")
+        sims.update(zip(todo, outs))
+    return sims
+
+
+def _settled_knee(sim: ri.SimRunData, freq: float, leg: int) -> ri.SimKnee:
+    """The settled second half of a simulated run, labelled with the measured records' classifier
+    (the same observable on both sides; the simulator's own per-foot label is kept beside it)."""
+    t = np.asarray(sim.t_s)
+    tray_v = np.gradient(np.asarray(sim.ground_z_um), t) * 1e-3        # um/s -> mm/s
+    knee = np.asarray(sim.knee_vz_mm_s)
+    knee = knee[:, leg] if knee.ndim == 2 else knee
+    pats = sim.patterns or []
+    settle = t >= t[0] + 0.5 * (t[-1] - t[0])
+    knee_label = compare.classify_knee_pattern(t[settle], knee[settle], tray_v[settle], freq)["pattern"]
+    return ri.SimKnee(t[settle], knee[settle], tray_v[settle], np.asarray(sim.contact)[settle], knee_label,
+                      pats[leg] if len(pats) > leg else "?", sim.file)
+
+
+def _knee_case(freq: float, amp: float, records: list[ri.KneeRecord], sim: ri.SimRunData | None,
+               leg: int) -> ri.KneeCase:
+    meas = next((r for r in records if _same((freq, amp), r.freq_hz, r.tray_amp_um)), None)
+    pattern = (compare.classify_knee_pattern(meas.t_s, meas.knee_vz_mm_s, meas.tray_vz_mm_s, freq)["pattern"]
+               if meas is not None else "?")
+    return ri.KneeCase(freq, amp, meas, pattern, _settled_knee(sim, freq, leg) if sim is not None else None)
+
+
+def _knee_rows(sec: Section, case: ri.KneeCase, tol: Tolerances, leg: int) -> list[Any]:
+    """Judge one drive with both records: rows, details, the pattern pair; the table's row."""
+    meas, s, freq, amp = case.measured, case.simulated, case.freq_hz, case.tray_amp_um
+    assert meas is not None and s is not None
+    pv = {"measured": meas.file, "measured_point": meas.point, "simulated": s.source, "leg": leg + 1}
+    a = compare.knee_motion_agreement(meas.t_s, meas.knee_vz_mm_s, s.t_s, s.knee_vz_mm_s, freq,
+                                      ref_meas=meas.tray_vz_mm_s, ref_sim=s.tray_vz_mm_s, provenance=pv)
+    sec.details.setdefault("knee", {})[f"{freq:.4g}Hz_{amp:.3g}um"] = a
+    drive = f"{freq:.4g} Hz, {amp:.3g} um"
+    r_lo, r_hi = 1.0 / tol.knee_amplitude_ratio_max, tol.knee_amplitude_ratio_max
+    ratio, phase, corr = a["amplitude_ratio"], a["phase_diff_deg"], a["correlation"]
+    sec.rows.append(_row(f"knee @ {drive}", "amplitude ratio (sim/meas)", ratio, "1",
+                         f"{r_lo:.2f}\u2013{r_hi:.2f}", verdict(ratio, at_least=r_lo, at_most=r_hi),
+                         text=_fixed(ratio, 2)))
+    sec.rows.append(_row(f"knee @ {drive}", "phase difference (sim - meas)", phase, "deg",
+                         f"|Δφ| ≤ {tol.knee_phase_deg_max:g} deg",
+                         verdict(abs(phase) if phase is not None else None, at_most=tol.knee_phase_deg_max),
+                         text=_fixed(phase, 1)))
+    sec.rows.append(_row(f"knee @ {drive}", "waveform correlation (one folded period)", corr, "1",
+                         f"≥ {tol.knee_correlation_min:g}", verdict(corr, at_least=tol.knee_correlation_min),
+                         text=_fixed(corr, 3)))
+    if case.measured_pattern in compare.PATTERNS:
+        sec.pairs.append(ri.PatternPair("knee record", drive, case.measured_pattern, s.knee_pattern, ri.KNEE,
+                                        ri.KNEE, meas.file, s.source))
+    return [freq, amp, format_value(a["amplitude_meas_mm_s"], 3), format_value(a["amplitude_sim_mm_s"], 3),
+            _fixed(ratio, 2), _fixed(phase, 1), _fixed(corr, 3), case.measured_pattern, s.knee_pattern,
+            s.foot_pattern]
+
+
+def _knee_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
+    out, tol, leg = inp.out, inp.tol, inp.knee.leg
+    title = "Knee vertical motion, measured against simulated (paper Fig. 10/11)"
+    records = [r for run in inp.shaker for r in run.knee]
+    drives = knee_drives_of(records, inp.results, inp.knee.drives)
+    if not drives:
+        return _missing("knee", title, "No measured knee records (shaker run files with waveforms), no "
+                        "sim_result files (--sim) and no --knee-drive given.")
+    sec = Section("knee", title)
+    sec.files += sorted({r.file for r in records}) + [s.file for s in inp.results]
+    sims = _knee_sims(inp, drives, sec)
     sec.notes["leg"] = f"simulated knee of leg {leg + 1}"
     cases, table_rows, msgs = [], [], []
     for i, (freq, amp) in enumerate(drives):
-        meas = next((r for r in records if _same((freq, amp), r["freq_hz"], r["tray_amp_um"])), None)
-        sim = sims.get(i)
-        case: dict[str, Any] = {"freq_hz": freq, "tray_amp_um": amp}
-        if meas is not None:
-            meas = dict(meas, **compare.classify_knee_pattern(meas["t_s"], meas["knee_vz_mm_s"],
-                                                              meas.get("tray_vz_mm_s"), freq))
-            case["measured"] = meas
-        if sim is not None:
-            t = np.asarray(sim["t_s"])
-            tray_v = np.gradient(np.asarray(sim["ground_z_um"]), t) * 1e-3        # um/s -> mm/s
-            knee = np.asarray(sim["knee_vz_mm_s"])
-            knee = knee[:, leg] if knee.ndim == 2 else knee
-            pats = sim.get("patterns") or []
-            # the settled second half of the run is what gets compared with the measured record
-            settle = t >= t[0] + 0.5 * (t[-1] - t[0])
-            # label the simulated knee record with the same classifier as the measured one: the
-            # same observable on both sides (the simulator's own per-foot label is shown beside it)
-            knee_label = compare.classify_knee_pattern(t[settle], knee[settle], tray_v[settle], freq)["pattern"]
-            case["simulated"] = {"t_s": t[settle], "knee_vz_mm_s": knee[settle], "tray_vz_mm_s": tray_v[settle],
-                                 "contact": np.asarray(sim["contact"])[settle], "knee_pattern": knee_label,
-                                 "foot_pattern": pats[leg] if len(pats) > leg else "?", "source": sim["source"]}
+        case = _knee_case(freq, amp, records, sims.get(i), leg)
         cases.append(case)
-        key = f"{freq:.4g}Hz_{amp:.3g}um"
-        if meas is not None and sim is not None:
-            s = case["simulated"]
-            pv = {"measured": meas["file"], "measured_point": meas["point"], "simulated": s["source"],
-                  "leg": leg + 1}
-            a = compare.knee_motion_agreement(meas["t_s"], meas["knee_vz_mm_s"], s["t_s"], s["knee_vz_mm_s"], freq,
-                                              ref_meas=meas.get("tray_vz_mm_s"), ref_sim=s["tray_vz_mm_s"],
-                                              provenance=pv)
-            sec.details.setdefault("knee", {})[key] = a
-            drive = f"{freq:.4g} Hz, {amp:.3g} um"
-            r_lo, r_hi = 1.0 / tol.knee_amplitude_ratio_max, tol.knee_amplitude_ratio_max
-            ratio, phase, corr = a["amplitude_ratio"], a["phase_diff_deg"], a["correlation"]
-            sec.rows.append(_row(f"knee @ {drive}", "amplitude ratio (sim/meas)", ratio, "1",
-                                 f"{r_lo:.2f}\u2013{r_hi:.2f}", verdict(ratio, at_least=r_lo, at_most=r_hi),
-                                 text=_fixed(ratio, 2)))
-            sec.rows.append(_row(f"knee @ {drive}", "phase difference (sim - meas)", phase, "deg",
-                                 f"|Δφ| ≤ {tol.knee_phase_deg_max:g} deg",
-                                 verdict(abs(phase) if phase is not None else None, at_most=tol.knee_phase_deg_max),
-                                 text=_fixed(phase, 1)))
-            sec.rows.append(_row(f"knee @ {drive}", "waveform correlation (one folded period)", corr, "1",
-                                 f"≥ {tol.knee_correlation_min:g}", verdict(corr, at_least=tol.knee_correlation_min),
-                                 text=_fixed(corr, 3)))
-            table_rows.append([freq, amp, format_value(a["amplitude_meas_mm_s"], 3),
-                               format_value(a["amplitude_sim_mm_s"], 3), _fixed(ratio, 2),
-                               _fixed(phase, 1), _fixed(corr, 3),
-                               meas.get("pattern", "?"), s["knee_pattern"], s["foot_pattern"]])
-            if meas.get("pattern") in compare.PATTERNS:
-                sec.pairs.append({"source": "knee record", "drive": drive, "measured": meas["pattern"],
-                                      "simulated": s["knee_pattern"], "measured_by": ri.KNEE,
-                                      "simulated_by": ri.KNEE, "measured_file": meas["file"],
-                                      "simulated_file": s["source"]})
-        elif meas is None:
+        if case.measured is not None and case.simulated is not None:
+            table_rows.append(_knee_rows(sec, case, tol, leg))
+        elif case.measured is None:
             msgs.append(f"No measured knee record at {freq:.4g} Hz, {amp:.3g} um.")
         else:
             msgs.append(f"No simulation at {freq:.4g} Hz, {amp:.3g} um (give --sim SIM_RESULT.h5 or allow simulation).")
@@ -689,13 +720,13 @@ def _knee_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
 def _pattern_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     tol = inp.tol
     # the observed and simulated patterns the speed and knee sections met, copied: theirs stay as they are
-    pairs = [dict(p) for sid in ("speed", "knee") if sid in done for p in done[sid].pairs]
+    pairs = [p for sid in ("speed", "knee") if sid in done for p in done[sid].pairs]
     title = "Leg-motion patterns, observed against simulated (paper Fig. 9-11)"
     if not pairs:
         return _missing("patterns", title, "No drive with both an observed leg pattern (a knee record or a "
                         "pattern label in the run file) and a simulated one.")
     sec = Section("patterns", title)
-    sources = sorted({p["measured_file"].split(" (")[0] for p in pairs} | {p["simulated_file"] for p in pairs})
+    sources = sorted({p.measured_file.split(" (")[0] for p in pairs} | {p.simulated_file for p in pairs})
     sec.files += [f for f in sources if Path(f).is_file()]
     here = [f for f in sources if not Path(f).is_file()]
     if here:
@@ -703,21 +734,19 @@ def _pattern_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     sec.notes["compared"] = ("a pattern is compared only with one classified the same way: knee record "
                              "against simulated knee record (classify_knee_pattern on both), run-file labels of "
                              "the feet against the simulated feet's dominant contact pattern")
-    for p in pairs:
-        p["comparable"] = ri.PATTERN_BY.get(p["measured_by"]) == ri.PATTERN_BY.get(p["simulated_by"])
     for source in ("knee record", "sweep"):
-        ps = [p for p in pairs if p["source"] == source and p["comparable"]]
+        ps = [p for p in pairs if p.source == source and p.comparable]
         if not ps:
             continue
-        a = compare.pattern_agreement([p["measured"] for p in ps], [p["simulated"] for p in ps],
-                                      keys=[p["drive"] for p in ps])
+        a = compare.pattern_agreement([p.measured for p in ps], [p.simulated for p in ps],
+                                      keys=[p.drive for p in ps])
         sec.details.setdefault("patterns", {})[source] = a
         fr = a["fraction_agree"]
         agree = sum(q["agree"] for q in a["pairs"])
         sec.rows.append(_row(f"leg pattern ({source}s)", "fraction of drives with the same pattern", fr, "1",
                              f"≥ {tol.pattern_agreement_min:g}", verdict(fr, at_least=tol.pattern_agreement_min),
                              n=a["n"], text=f"{format_value(fr, 3)} ({agree} of {a['n']})"))
-    apart = [p for p in pairs if not p["comparable"]]
+    apart = [p for p in pairs if not p.comparable]
     if apart:
         sec.message = (f"{len(apart)} pair(s) not compared: the observed pattern was classified from a knee "
                        "record, the simulated one from the feet's contact (different observables; see the "
@@ -726,16 +755,16 @@ def _pattern_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
         sec.notes["verdict_note"] = "no drive has an observed and a simulated pattern from the same classifier"
     sec.html.append(rh.table(["compared with", "drive", "observed", "observed by", "simulated", "simulated by",
                               "same"],
-                             [[p["source"], p["drive"], p["measured"].replace("_", " "), p["measured_by"],
-                               p["simulated"].replace("_", " "), p["simulated_by"], _same_text(p)]
+                             [[p.source, p.drive, p.measured.replace("_", " "), p.measured_by,
+                               p.simulated.replace("_", " "), p.simulated_by, _same_text(p)]
                               for p in pairs]))
     return sec
 
 
-def _same_text(pair: dict[str, Any]) -> str:
-    if not pair["comparable"]:
+def _same_text(pair: ri.PatternPair) -> str:
+    if not pair.comparable:
         return "not compared (different classifiers)"
-    return "yes" if pair["measured"] == pair["simulated"] else "no"
+    return "yes" if pair.measured == pair.simulated else "no"
 
 
 # --------------------------------------------------------------------------- tracks
@@ -747,34 +776,34 @@ def _tracks_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     title = "Tracked paths and a video frame"
     if not tracks:
         return _missing("tracks", title, "No track files (--tracks TRACK.h5) given.")
-    sec = Section("tracks", title, files=[t["file"] for t in tracks])
+    sec = Section("tracks", title, files=[t.file for t in tracks])
     sec.notes["verdict_note"] = "the tracked speeds are judged in the speed section"
-    paths, names = [], []
+    paths, labels, names = [], [], []
     for k, t in enumerate(tracks, 1):
-        p = load_track_path(t["file"])
-        lo, hi = t["speed_ci_mm_s"]
-        drive = f"{t['freq_hz']:.4g} Hz: " if "freq_hz" in t else ""
-        label = f"{drive}{format_value(t['mean_speed_mm_s'], 3)} mm/s"
-        names.append(f"{k}: {Path(t['file']).name} ({format_value(t['mean_speed_mm_s'], 3)} mm/s, interval "
+        paths.append(load_track_path(t.file))
+        lo, hi = t.speed_ci_mm_s
+        drive = f"{t.freq_hz:.4g} Hz: " if t.freq_hz is not None else ""
+        labels.append(f"{drive}{format_value(t.mean_speed_mm_s, 3)} mm/s")
+        names.append(f"{k}: {Path(t.file).name} ({format_value(t.mean_speed_mm_s, 3)} mm/s, interval "
                      f"{format_value(float(lo), 3)}\u2013{format_value(float(hi), 3)})")
-        paths.append(dict(p, label=label, videos=t.get("videos", [])))
-    ff = figs.tracks_figure(paths, out / "fig_tracks")
+    ff = figs.tracks_figure(paths, labels, out / "fig_tracks")
     sec.figure(ff, f"Paths of all {len(paths)} tracks (mm), each from its own start, side by side, labelled with "
                    f"its mean speed. Tracks: {'; '.join(names)}.")
     # the frame shows the track that moved furthest in the image (the most visible one)
-    cands = [(float(np.nansum(np.hypot(np.diff(p["u_px"]), np.diff(p["v_px"])))), k, p, v)
-             for k, p in enumerate(paths) if "u_px" in p and p["u_px"].size
-             for v in [next((x for x in p["videos"] if Path(x).is_file()), None)] if v]
+    cands = [(float(np.nansum(np.hypot(np.diff(p.u_px), np.diff(p.v_px)))), k, p, v)
+             for k, (p, t) in enumerate(zip(paths, tracks)) if p.u_px is not None and p.v_px is not None
+             and p.u_px.size for v in [next((x for x in t.videos if Path(x).is_file()), None)] if v]
     framed = max(cands, key=lambda c: (c[0], -c[1]))[2:] if cands else None
     if framed is None:
         sec.message = "No track's video was found (or no track holds pixel coordinates): no frame drawn."
         return sec
     p, video = framed
-    frame = read_frame_at(video, float(p["t_s"][-1]))
+    assert p.u_px is not None and p.v_px is not None
+    frame = read_frame_at(video, float(p.t_s[-1]))
     sec.files.append(video)
-    ff = figs.frame_figure(frame, p["u_px"], p["v_px"], out / "fig_frame",
-                           title=f"{Path(video).name} at t = {float(p['t_s'][-1]):.2f} s, with the track")
-    sec.figure(ff, f"The last tracked frame of {Path(video).name} with the track of {Path(p['file']).name} drawn on it "
+    ff = figs.frame_figure(frame, p.u_px, p.v_px, out / "fig_frame",
+                           title=f"{Path(video).name} at t = {float(p.t_s[-1]):.2f} s, with the track")
+    sec.figure(ff, f"The last tracked frame of {Path(video).name} with the track of {Path(p.file).name} drawn on it "
                    f"(of the tracks whose video was found, the one that moved furthest in the image).")
     return sec
 
@@ -808,7 +837,7 @@ def run_sections(inp: ReportInputs) -> list[Section]:
 
 # --------------------------------------------------------------------------- agreement table
 
-def _agreement_section(rows: list[dict[str, Any]], tol: Tolerances, sections: list[Section]) -> Section:
+def _agreement_section(rows: list[Row], tol: Tolerances, sections: list[Section]) -> Section:
     title = "Agreement between model and measurement"
     if not rows:
         return _missing("agreement", title, "Nothing to compare: needs measured and simulated data of the same "
@@ -837,7 +866,7 @@ def _agreement_section(rows: list[dict[str, Any]], tol: Tolerances, sections: li
 
 # --------------------------------------------------------------------------- headline numbers
 
-def _headline(fit: dict | None, details: dict[str, Any], sections: list[Section]) -> dict[str, Any]:
+def _headline(fit: ri.FitData | None, details: dict[str, Any], sections: list[Section]) -> dict[str, Any]:
     """The numbers two reports are compared by (``labkit report --compare``)."""
     h: dict[str, Any] = {}
 
@@ -845,13 +874,13 @@ def _headline(fit: dict | None, details: dict[str, Any], sections: list[Section]
         h[key] = {"label": label, "value": value, "units": units, **extra}
 
     if fit:
-        for name, g in fit["groups"].items():
-            for i, m in enumerate(g["modes"]):
-                put(f"{name}_mode{i + 1}_freq_hz", f"{name} mode {i + 1} frequency", m["freq_hz"], "Hz",
-                    std=m.get("freq_hz_std"))
+        for name, g in fit.groups.items():
+            for i, m in enumerate(g.modes):
+                put(f"{name}_mode{i + 1}_freq_hz", f"{name} mode {i + 1} frequency", m.freq_hz, "Hz",
+                    std=m.freq_hz_std)
                 put(f"{name}_mode{i + 1}_damping_ratio", f"{name} mode {i + 1} damping ratio",
-                    m.get("damping_ratio"), "1", std=m.get("damping_ratio_std"))
-            put(f"{name}_fit_quality", f"{name} fit quality (1 - NRMSE\u00b2)", g.get("quality"), "1", digits=6)
+                    m.damping_ratio, "1", std=m.damping_ratio_std)
+            put(f"{name}_fit_quality", f"{name} fit quality (1 - NRMSE\u00b2)", g.quality, "1", digits=6)
     nom, cov = details.get("speed_nominal"), details.get("speed_coverage")
     speed = [("speed_rms_error_nominal_mm_s", "speed RMS error, nominal robot", nom, "rms_error_mm_s", "mm/s"),
              ("speed_relative_rms_error_nominal", "speed relative RMS error, nominal robot", nom,

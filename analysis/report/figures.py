@@ -15,6 +15,7 @@ velocity measured and simulated overlaid on one time axis (Fig. 10/11).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -36,6 +37,9 @@ if TYPE_CHECKING:
     from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
+
+    from labkit.analysis.report.inputs import Frf, KneeCase, MeasuredSpeeds, Mode, SimCurve
+    from labkit.analysis.report.tracks import TrackPath
 
 #: Contact-mode codes of SimResult.contact and their colours in timelines.
 CONTACT_NAMES = ("air", "adhesion", "rest")
@@ -85,8 +89,8 @@ def _legend_outside(ax: Axes, **kw: Any) -> None:
 
 # --------------------------------------------------------------------------- FRF
 
-def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]], stem: Path, *,
-               fine: dict[str, Any] | None = None, title: str = "", units: str = "(mm/s)/V") -> FigureFiles:
+def frf_figure(locations: Mapping[str, Frf], modes: Sequence[Mode], stem: Path, *,
+               fine: Mapping[str, Frf] | None = None, title: str = "", units: str = "(mm/s)/V") -> FigureFiles:
     """FRF magnitude (log-log) and phase below, every location on the same axes (Fig. 5/6).
 
     ``fine`` maps a location to its model on a fine grid (``freq_hz``, ``frf``); a location
@@ -98,18 +102,18 @@ def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]]
     data: dict[str, Any] = {"locations": {}}
     for k, (loc, d) in enumerate(locations.items()):
         c = loc_colour(loc, k)
-        f = np.asarray(d["freq_hz"], float)
-        h = np.asarray(d["frf"], complex)
+        f = np.asarray(d.freq_hz, float)
+        h = np.asarray(d.frf, complex)
         entry: dict[str, Any] = {"n_lines": int(f.size)}
         fm = fine.get(loc)
         if fm is not None:
-            am.loglog(fm["freq_hz"], np.abs(fm["frf"]), "-", color=c, lw=1.1, zorder=2, label=f"{loc}: fit")
-            ap.semilogx(wrap_x(fm["freq_hz"], fm["frf"]), wrapped_phase_deg(fm["frf"]), "-", color=c, lw=0.9,
+            am.loglog(fm.freq_hz, np.abs(fm.frf), "-", color=c, lw=1.1, zorder=2, label=f"{loc}: fit")
+            ap.semilogx(wrap_x(fm.freq_hz, fm.frf), wrapped_phase_deg(fm.frf), "-", color=c, lw=0.9,
                         zorder=2)
-            entry["fit_grid_points"] = int(np.size(fm["freq_hz"]))
-            entry["fit_min_abs"] = float(np.min(np.abs(fm["frf"])))
-        elif d.get("model_frf") is not None:
-            hm = np.asarray(d["model_frf"], complex)
+            entry["fit_grid_points"] = int(np.size(fm.freq_hz))
+            entry["fit_min_abs"] = float(np.min(np.abs(fm.frf)))
+        elif d.model_frf is not None:
+            hm = np.asarray(d.model_frf, complex)
             am.loglog(f, np.abs(hm), "--", color=c, lw=1.0, zorder=2, label=f"{loc}: fit (at the lines only)")
             ap.semilogx(wrap_x(f, hm), wrapped_phase_deg(hm), "--", color=c, lw=0.8, zorder=2)
             entry["fit_grid_points"] = int(f.size)
@@ -127,7 +131,7 @@ def frf_figure(locations: dict[str, dict[str, Any]], modes: list[dict[str, Any]]
     return _save(fig, stem, data)
 
 
-def stabilisation_figure(stab: dict[str, np.ndarray], stem: Path, locations: dict[str, Any] | None = None,
+def stabilisation_figure(stab: Mapping[str, np.ndarray], stem: Path, locations: Mapping[str, Frf] | None = None,
                          title: str = "stabilisation diagram") -> FigureFiles:
     """Poles found at each model order (status codes of labkit.analysis.modal.io: 0 new,
     1 stable frequency, 2 stable frequency and damping), the chosen poles marked, and the
@@ -141,7 +145,7 @@ def stabilisation_figure(stab: dict[str, np.ndarray], stem: Path, locations: dic
     if locations:
         twin = ax.twinx()
         for k, (loc, d) in enumerate(locations.items()):
-            (ln,) = twin.semilogy(d["freq_hz"], np.abs(d["frf"]), "-", lw=0.9, alpha=0.55,
+            (ln,) = twin.semilogy(d.freq_hz, np.abs(d.frf), "-", lw=0.9, alpha=0.55,
                                   color=loc_colour(loc, k), label=f"|FRF| {loc} (right axis)")
             handles.append(ln)
         twin.set_ylabel("|FRF| measured")
@@ -201,7 +205,7 @@ def _pattern_strip(ax: Axes, rows: list[tuple[str, np.ndarray, list[str], bool]]
               title="leg pattern", title_fontsize=7.5)
 
 
-def speed_figure(measured: dict[str, Any] | None, sims: list[dict[str, Any]], stem: Path,
+def speed_figure(measured: MeasuredSpeeds | None, sims: Sequence[SimCurve], stem: Path,
                  note: str = "") -> FigureFiles:
     """Speed against shaker frequency (Fig. 8): measured points with their intervals, the
     nominal robot as a line, the Monte Carlo 10-90 % band (with its draws count), and the
@@ -209,13 +213,13 @@ def speed_figure(measured: dict[str, Any] | None, sims: list[dict[str, Any]], st
     ``note`` (e.g. the nominal robot's RMS error and the band coverage) is written in the plot."""
     rows: list[tuple[str, np.ndarray, list[str], bool]] = []
     for s in sims:
-        tag = f" ({s['label']})" if len(sims) > 1 else ""
-        rows.append((f"simulated{tag}", s["freq_hz"], list(s["patterns"]), True))
-    if measured is not None and measured["freq_hz"].size:
-        pats = list(measured.get("patterns", []))
+        tag = f" ({s.label})" if len(sims) > 1 else ""
+        rows.append((f"simulated{tag}", s.freq_hz, list(s.patterns), True))
+    if measured is not None and measured.freq_hz.size:
+        pats = list(measured.patterns)
         known = [i for i, p in enumerate(pats) if p in PATTERN_COLOURS]
         if known:
-            rows.append(("measured", measured["freq_hz"][known], [pats[i] for i in known], False))
+            rows.append(("measured", measured.freq_hz[known], [pats[i] for i in known], False))
     fig = _figure(8.0, 5.4 if rows else 4.4)
     if rows:
         ax, strip = fig.subplots(2, 1, sharex=True, height_ratios=[4, max(1, len(rows)) * 0.6])
@@ -226,34 +230,34 @@ def speed_figure(measured: dict[str, Any] | None, sims: list[dict[str, Any]], st
     top = 0.0
     for i, s in enumerate(sims):
         c = SIM_COLOUR if i == 0 else f"C{i + 1}"
-        tag = f" ({s['label']})" if len(sims) > 1 else ""
-        ax.fill_between(s["freq_hz"], s["p10_mm_s"], s["p90_mm_s"], color=c, alpha=0.18, lw=0,
-                        label=f"Monte Carlo 10\u201390 % ({s['draws']} draws){tag}")
-        ax.plot(s["freq_hz"], s["nominal_mm_s"], "-", color=c, lw=1.6, marker=".", ms=4,
+        tag = f" ({s.label})" if len(sims) > 1 else ""
+        ax.fill_between(s.freq_hz, s.p10_mm_s, s.p90_mm_s, color=c, alpha=0.18, lw=0,
+                        label=f"Monte Carlo 10\u201390 % ({s.draws} draws){tag}")
+        ax.plot(s.freq_hz, s.nominal_mm_s, "-", color=c, lw=1.6, marker=".", ms=4,
                 label=f"simulated, nominal robot{tag}")
-        data["sims"].append({"file": s["file"], "freq_hz": np.asarray(s["freq_hz"]).tolist(), "draws": s["draws"],
-                             "p10_mm_s": np.asarray(s["p10_mm_s"]).tolist(),
-                             "p90_mm_s": np.asarray(s["p90_mm_s"]).tolist(),
-                             "nominal_mm_s": np.asarray(s["nominal_mm_s"]).tolist(),
-                             "patterns": list(s["patterns"])})
-        xs += [float(np.min(s["freq_hz"])), float(np.max(s["freq_hz"]))]
-        top = max(top, float(np.nanmax(s["p90_mm_s"])), float(np.nanmax(s["nominal_mm_s"])))
-    if measured is not None and measured["freq_hz"].size:
+        data["sims"].append({"file": s.file, "freq_hz": np.asarray(s.freq_hz).tolist(), "draws": s.draws,
+                             "p10_mm_s": np.asarray(s.p10_mm_s).tolist(),
+                             "p90_mm_s": np.asarray(s.p90_mm_s).tolist(),
+                             "nominal_mm_s": np.asarray(s.nominal_mm_s).tolist(),
+                             "patterns": list(s.patterns)})
+        xs += [float(np.min(s.freq_hz)), float(np.max(s.freq_hz))]
+        top = max(top, float(np.nanmax(s.p90_mm_s)), float(np.nanmax(s.nominal_mm_s)))
+    if measured is not None and measured.freq_hz.size:
         m = measured
-        amps = np.asarray(m.get("amp_um", np.full(m["freq_hz"].size, np.nan)), float)
+        amps = np.asarray(m.amp_um, float)
         keys = np.where(np.isfinite(amps), np.round(amps, 0), -1.0)
         for k, (key, marker) in enumerate(zip(np.unique(keys), "osD^v<>")):
             sel = keys == key
-            yerr = np.vstack([m["speed_mm_s"][sel] - m["lo_mm_s"][sel], m["hi_mm_s"][sel] - m["speed_mm_s"][sel]])
+            yerr = np.vstack([m.speed_mm_s[sel] - m.lo_mm_s[sel], m.hi_mm_s[sel] - m.speed_mm_s[sel]])
             name = "measured (95 % CI)" + (f", tray {key:g} um" if key >= 0 else "")
-            ax.errorbar(m["freq_hz"][sel], m["speed_mm_s"][sel], yerr=np.clip(yerr, 0, None), fmt=marker,
+            ax.errorbar(m.freq_hz[sel], m.speed_mm_s[sel], yerr=np.clip(yerr, 0, None), fmt=marker,
                         color=(MEAS_COLOUR, "#8e44ad", "#16a085", "#7f8c8d")[k % 4], ms=5, capsize=3,
                         zorder=4, label=name)
-        data["measured_points"] = int(m["freq_hz"].size)
-        data["measured_freq_hz"] = np.asarray(m["freq_hz"], float).tolist()
-        data["measured_mm_s"] = np.asarray(m["speed_mm_s"], float).tolist()
-        xs += [float(np.min(m["freq_hz"])), float(np.max(m["freq_hz"]))]
-        top = max(top, float(np.nanmax(np.fmax(m["hi_mm_s"], m["speed_mm_s"]))))
+        data["measured_points"] = int(m.freq_hz.size)
+        data["measured_freq_hz"] = np.asarray(m.freq_hz, float).tolist()
+        data["measured_mm_s"] = np.asarray(m.speed_mm_s, float).tolist()
+        xs += [float(np.min(m.freq_hz)), float(np.max(m.freq_hz))]
+        top = max(top, float(np.nanmax(np.fmax(m.hi_mm_s, m.speed_mm_s))))
     if xs:
         lo, hi = min(xs), max(xs)
         pad = 0.04 * (hi - lo) if hi > lo else 0.1 * abs(lo) + 1.0
@@ -314,7 +318,7 @@ def _drawn_phase_deg(t_s: np.ndarray, x: np.ndarray, freq_hz: float) -> float | 
     return float(np.degrees(fundamental(np.asarray(t_s), np.asarray(x), freq_hz)["phase_rad"]))
 
 
-def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, ncols: int = 3) -> FigureFiles:
+def knee_figure(cases: Sequence[KneeCase], stem: Path, periods: float = 4.0, ncols: int = 3) -> FigureFiles:
     """Small multiples, one panel per drive: the knee's vertical velocity measured and simulated
     overlaid on one tray-aligned time axis, the tray's velocity behind them, and the simulated
     contact modes of the six feet as a timeline below (Fig. 10/11). One legend for all panels."""
@@ -336,31 +340,31 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
             sub.set_facecolor("none")
             continue
         case = cases[k]
-        f = float(case["freq_hz"])
+        f = float(case.freq_hz)
         ax, tl = sub.subplots(2, 1, sharex=True, height_ratios=[3, 1])
-        meas, sim = case.get("measured"), case.get("simulated")
-        drawn: dict[str, Any] = {"freq_hz": f, "tray_amp_um": case.get("tray_amp_um"), "measured": meas is not None,
+        meas, sim = case.measured, case.simulated
+        drawn: dict[str, Any] = {"freq_hz": f, "tray_amp_um": case.tray_amp_um, "measured": meas is not None,
                  "simulated": sim is not None}
         if meas is not None:
-            tray = meas.get("tray_vz_mm_s")
-            tm, xm, _ = tray_aligned_window(meas["t_s"], meas["knee_vz_mm_s"], tray, f, periods, settled_end=False)
+            tray = meas.tray_vz_mm_s
+            tm, xm, _ = tray_aligned_window(meas.t_s, meas.knee_vz_mm_s, tray, f, periods, settled_end=False)
             ax.plot(1e3 * tm, xm, "-", color=MEAS_COLOUR, lw=1.3, zorder=3)
             drawn["measured_phase_deg"] = _drawn_phase_deg(tm, xm, f)
             if tray is not None:
-                tt, xt, _ = tray_aligned_window(meas["t_s"], tray, tray, f, periods, settled_end=False)
+                tt, xt, _ = tray_aligned_window(meas.t_s, tray, tray, f, periods, settled_end=False)
                 ax.plot(1e3 * tt, xt, "-", color="0.6", lw=0.8, zorder=1)
         if sim is not None:
-            ts, xs, shift = tray_aligned_window(sim["t_s"], sim["knee_vz_mm_s"], sim["tray_vz_mm_s"], f, periods,
+            ts, xs, shift = tray_aligned_window(sim.t_s, sim.knee_vz_mm_s, sim.tray_vz_mm_s, f, periods,
                                                 settled_end=True)
             ax.plot(1e3 * ts, xs, "--", color=SIM_COLOUR, lw=1.3, zorder=4)
             drawn["simulated_phase_deg"] = _drawn_phase_deg(ts, xs, f)
-            if meas is None or meas.get("tray_vz_mm_s") is None:
-                tt, xt, _ = tray_aligned_window(sim["t_s"], sim["tray_vz_mm_s"], sim["tray_vz_mm_s"], f, periods,
+            if meas is None or meas.tray_vz_mm_s is None:
+                tt, xt, _ = tray_aligned_window(sim.t_s, sim.tray_vz_mm_s, sim.tray_vz_mm_s, f, periods,
                                                 settled_end=True)
                 ax.plot(1e3 * tt, xt, "-", color="0.6", lw=0.8, zorder=1)
-            t_all = np.asarray(sim["t_s"], float) + shift
+            t_all = np.asarray(sim.t_s, float) + shift
             sel = (t_all >= 0) & (t_all <= periods / f)
-            contact = np.asarray(sim["contact"])[sel]
+            contact = np.asarray(sim.contact)[sel]
             if contact.size:
                 if contact.ndim == 1:
                     contact = contact[:, None]
@@ -382,9 +386,9 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
         tl.set_ylabel("foot", fontsize=9)
         tl.set_xlabel("time from tray phase 0 (ms)", fontsize=9)
         ax.set_ylabel("v_z (mm/s)", fontsize=9)
-        pm = meas.get("pattern", "?") if meas is not None else "-"
-        ps = sim.get("knee_pattern", "?") if sim is not None else "-"
-        ax.set_title(f"{f:.4g} Hz, tray {case.get('tray_amp_um', float('nan')):.3g} um\n"
+        pm = case.measured_pattern if meas is not None else "-"
+        ps = sim.knee_pattern if sim is not None else "-"
+        ax.set_title(f"{f:.4g} Hz, tray {case.tray_amp_um:.3g} um\n"
                      f"meas. {pm.replace('_', ' ')} | sim. {ps.replace('_', ' ')}", fontsize=8.5)
         data["drives"].append(drawn)
     handles: list[Artist] = [Line2D([], [], color=MEAS_COLOUR, lw=1.3, label="knee, measured"),
@@ -398,20 +402,20 @@ def knee_figure(cases: list[dict[str, Any]], stem: Path, periods: float = 4.0, n
 
 # --------------------------------------------------------------------------- tracks and video
 
-def tracks_figure(paths: list[dict[str, Any]], stem: Path) -> FigureFiles:
+def tracks_figure(paths: Sequence[TrackPath], labels: Sequence[str], stem: Path) -> FigureFiles:
     """Tracked paths side by side: each drawn from its own start (displacement in mm), the paths
     spread along x so that none hides another, each labelled at its start with its speed."""
     fig = _figure(7.0, 5.0)
     ax = fig.subplots()
-    spans = [float(np.nanmax(np.abs(p["x_mm"] - p["x_mm"][0]))) if np.size(p["x_mm"]) else 0.0 for p in paths]
+    spans = [float(np.nanmax(np.abs(p.x_mm - p.x_mm[0]))) if np.size(p.x_mm) else 0.0 for p in paths]
     step = max(2.0 * max(spans, default=0.0) + 1.0, 2.0)
-    for k, p in enumerate(paths):
+    for k, (p, label) in enumerate(zip(paths, labels)):
         c = f"C{k % 10}"
-        x, y = p["x_mm"] - p["x_mm"][0] + k * step, p["y_mm"] - p["y_mm"][0]
+        x, y = p.x_mm - p.x_mm[0] + k * step, p.y_mm - p.y_mm[0]
         ax.plot(x, y, "-", color=c, lw=1.3)
         ax.plot(x[0], y[0], "o", color=c, ms=5)
         ax.plot(x[-1], y[-1], ">", color=c, ms=5)
-        ax.annotate(p["label"], (x[-1], y[-1]), textcoords="offset points", xytext=(0, 6), rotation=90,
+        ax.annotate(label, (x[-1], y[-1]), textcoords="offset points", xytext=(0, 6), rotation=90,
                     ha="center", va="bottom", fontsize=8, color=c)
     ax.margins(y=0.35)
     ax.set_xticks([k * step for k in range(len(paths))], [str(k + 1) for k in range(len(paths))])
@@ -419,7 +423,7 @@ def tracks_figure(paths: list[dict[str, Any]], stem: Path) -> FigureFiles:
     ax.set_ylabel("displacement along y (mm)")
     ax.grid(True, axis="y", alpha=0.3)
     ax.set_title("tracked paths (o start, > end)", fontsize=10)
-    return _save(fig, stem, {"tracks": [p["label"] for p in paths], "spacing_mm": step})
+    return _save(fig, stem, {"tracks": list(labels), "spacing_mm": step})
 
 
 def frame_figure(frame: np.ndarray, u_px: np.ndarray, v_px: np.ndarray, stem: Path, title: str) -> FigureFiles:

@@ -1,7 +1,10 @@
-"""Readers for everything a report or a calibration consumes, into plain dicts of arrays.
+"""Readers for everything a report or a calibration consumes, into frozen dataclasses.
 
 One reader per file kind (``run_inchip``, ``run_shaker``, ``track``,
-``modal_fit``, ``sim_sweep``, ``sim_result``) plus a CSV/HDF5 speed table.
+``modal_fit``, ``sim_sweep``, ``sim_result``) plus a CSV/HDF5 speed table; each
+returns a typed record (:class:`InchipData`, :class:`ShakerData`,
+:class:`TrackData`, :class:`FitData`, :class:`SweepData`, :class:`SimRunData`),
+built on the file kinds of :mod:`labkit.files`; speed tables are :mod:`labkit.files.speeds`.
 Each raises :class:`labkit.errors.InputError` naming the file (and key) when
 a file cannot be read or lacks what is needed, so the CLI exits 2 with one
 line. Layouts follow ``interfaces.md``; where a producer's layout allows
@@ -10,15 +13,16 @@ both, and they never guess a number that is not in the file.
 """
 from __future__ import annotations
 
-import csv
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from labkit.errors import InputError
+from labkit.files import file_kind as file_kind  # the reader of a file's kind lives in labkit.files
 
 LOCATIONS = ("body", "hip", "knee")
 
@@ -32,40 +36,166 @@ FOOT_CONTACT = "simulated foot contact (dominant over draws and feet)"
 PATTERN_BY = {LABEL: "feet", FOOT_CONTACT: "feet", KNEE: "knee"}
 
 
+@dataclass(frozen=True)
+class Frf:
+    """One location's measured FRF (and, in a fit, the model at the same lines)."""
+
+    freq_hz: np.ndarray
+    frf: np.ndarray
+    coherence: np.ndarray | None = None
+    model_frf: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class InchipData:
+    """A ``run_inchip`` file's FRFs per location (complete points only)."""
+
+    file: str
+    status: str
+    method: str
+    locations: dict[str, Frf]
+
+
+@dataclass(frozen=True)
+class KneeRecord:
+    """One vibrometer record of a knee-spot shaker point (mm/s against s)."""
+
+    file: str
+    point: int
+    t_s: np.ndarray
+    knee_vz_mm_s: np.ndarray
+    tray_vz_mm_s: np.ndarray | None
+    freq_hz: float
+    tray_amp_um: float
+
+
+@dataclass(frozen=True)
+class ShakerData:
+    """A ``run_shaker`` file's points with status ``ok``, in plan order.
+
+    ``videos`` are absolute paths ("" for a point without video); the speed columns
+    are present when the run file holds them; ``patterns`` when a producer labelled
+    the points; ``knee`` the knee records (``robot_spot == "knee"``).
+    """
+
+    file: str
+    status: str
+    robot_spot: str
+    freq_hz: np.ndarray
+    index: np.ndarray
+    tray_amp_um: np.ndarray
+    videos: list[str]
+    speed_mm_s: np.ndarray | None = None
+    speed_lo_mm_s: np.ndarray | None = None
+    speed_hi_mm_s: np.ndarray | None = None
+    speed_std_mm_s: np.ndarray | None = None
+    patterns: list[str] | None = None
+    knee: list[KneeRecord] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class TrackData:
+    """A ``track`` file's speed, its interval, its drive (when recorded) and its video."""
+
+    file: str
+    mean_speed_mm_s: float
+    speed_ci_mm_s: tuple[float, float]
+    ci_level: float
+    freq_hz: float | None
+    tray_amp_um: float
+    videos: list[str]
+
+
+@dataclass(frozen=True)
+class MeasuredSpeeds:
+    """Measured speed against frequency (and tray amplitude), sorted by frequency.
+
+    ``patterns`` is "" where unknown; ``pattern_by`` names the classifier (:data:`PATTERN_BY`);
+    ``sources`` the file (and point) of each row; ``unmatched`` the tracks left out.
+    """
+
+    freq_hz: np.ndarray
+    amp_um: np.ndarray
+    speed_mm_s: np.ndarray
+    lo_mm_s: np.ndarray
+    hi_mm_s: np.ndarray
+    std_mm_s: np.ndarray
+    patterns: list[str]
+    pattern_by: list[str]
+    sources: list[str]
+    unmatched: list[str] = field(default_factory=list)
+
+    def select(self, mask: np.ndarray) -> MeasuredSpeeds:
+        """The rows where ``mask`` holds."""
+        idx = np.flatnonzero(mask)
+        return MeasuredSpeeds(self.freq_hz[idx], self.amp_um[idx], self.speed_mm_s[idx], self.lo_mm_s[idx],
+                              self.hi_mm_s[idx], self.std_mm_s[idx], [self.patterns[i] for i in idx],
+                              [self.pattern_by[i] for i in idx], [self.sources[i] for i in idx],
+                              list(self.unmatched))
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One fitted mode as a fit file stores it (``None``: not in the file)."""
+
+    freq_hz: float
+    freq_hz_std: float | None = None
+    damping_ratio: float | None = None
+    damping_ratio_std: float | None = None
+    dominant_location: str = ""
+
+
+@dataclass(frozen=True)
+class FitGroup:
+    """One group of a ``modal_fit`` file: ``inchip`` (FRF, (mm/s)/V) or ``shaker`` (transmissibility)."""
+
+    locations: dict[str, Frf]
+    modes: list[Mode]
+    stabilisation: Mapping[str, np.ndarray] | None
+    units: str
+    method: str
+    quality: float
+
+
+@dataclass(frozen=True)
+class FitData:
+    """A ``modal_fit`` file, one :class:`FitGroup` per fit group; ``summary`` as the file stores it."""
+
+    file: str
+    groups: dict[str, FitGroup]
+    summary: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class SweepData:
+    """A ``sim_sweep`` file (:class:`labkit.sim.sweep.SweepResult`)."""
+
+    file: str
+    sweep: Any
+
+
+@dataclass(frozen=True)
+class SimRunData:
+    """The series the knee section needs from a ``sim_result`` file (one run at one drive)."""
+
+    file: str
+    t_s: np.ndarray
+    knee_vz_mm_s: np.ndarray
+    ground_z_um: np.ndarray
+    contact: np.ndarray
+    scenario: Mapping[str, Any]
+    patterns: list[str] | None = None
+    summary: Mapping[str, Any] | None = None
+
+
 def _s(v: Any) -> str:
     return v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
 
 
-def file_kind(path: str | Path) -> str:
-    """The ``kind`` root attribute of a labkit HDF5 file (InputError if unreadable)."""
-    from labkit.h5io import open_h5
-
-    with open_h5(path) as f:
-        kind = f.attrs.get("kind")
-    if kind is None:
-        raise InputError("not a labkit file: no 'kind' attribute", file=path, key="kind")
-    return _s(kind)
-
-
-def _find(f: Any, name: str, groups: tuple[str, ...] = ("", "points", "data")) -> Any:
-    for g in groups:
-        key = f"{g}/{name}" if g else name
-        if key in f:
-            return f[key]
-    return None
-
-
-def _need(f: Any, name: str, path: Path, groups: tuple[str, ...] = ("", "points", "data")) -> np.ndarray:
-    ds = _find(f, name, groups)
-    if ds is None:
-        raise InputError("missing dataset", file=path, key=name, expected=f"a '{name}' dataset")
-    return ds[()]
-
-
 # --------------------------------------------------------------------------- in-chip runs
 
-def load_inchip_run(path: str | Path) -> dict[str, Any]:
-    """FRFs per location of a ``run_inchip`` file: ``{"file", "status", "locations": {loc: {...}}}``.
+def load_inchip_run(path: str | Path) -> InchipData:
+    """FRFs per location of a ``run_inchip`` file.
 
     Read through :func:`labkit.files.runs.read_run_file` (complete points only).
     """
@@ -75,34 +205,25 @@ def load_inchip_run(path: str | Path) -> dict[str, Any]:
     run = read_run_file(path)
     if not isinstance(run, InchipRun):
         raise InputError(f"this file holds {run.kind!r}", file=path, key="kind", expected="a 'run_inchip' file")
-    out: dict[str, Any] = {"file": str(path), "kind": "run_inchip", "locations": {}, "status": run.status,
-                           "method": run.method}
     if not run.locations:
         raise InputError("no measured locations", file=path, key="locations",
                          expected="groups /locations/<body|hip|knee>")
+    locations = {}
     for loc, lg in run.locations.items():
         if "freq_hz" not in lg.columns or "frf" not in lg.columns:
             raise InputError("missing freq_hz or frf", file=path, key=f"locations/{loc}")
-        entry = {"freq_hz": lg.freq_hz.astype(float), "frf": lg.frf.astype(complex)}
-        if "coherence" in lg.columns:
-            entry["coherence"] = lg.columns["coherence"]
-        out["locations"][loc] = entry
-    return out
+        locations[loc] = Frf(lg.freq_hz.astype(float), lg.frf.astype(complex), lg.columns.get("coherence"))
+    return InchipData(str(path), run.status, run.method, locations)
 
 
 # --------------------------------------------------------------------------- shaker runs and tracks
 
-def load_shaker_run(path: str | Path) -> dict[str, Any]:
+def load_shaker_run(path: str | Path) -> ShakerData:
     """Per-point data of a ``run_shaker`` file (layout: :mod:`labkit.experiments.runfile`).
 
     Only complete points with status ``ok`` are kept (read through
-    :func:`labkit.files.runs.read_run_file`). Returns ``freq_hz``,
-    ``tray_amp_um`` (measured), ``videos`` (absolute paths; "" without video),
-    ``index`` (plan indices), optional ``patterns`` (a ``pattern`` label per
-    point, if a producer adds one) and ``knee``: the vibrometer records of
-    points taken with the laser on the knee (root attribute ``robot_spot``),
-    as dicts with ``t_s``, ``knee_vz_mm_s``, ``tray_vz_mm_s``, ``freq_hz``,
-    ``tray_amp_um``, ``point``.
+    :func:`labkit.files.runs.read_run_file`); the knee records are those of points
+    taken with the laser on the knee (root attribute ``robot_spot``).
     """
     from labkit.files.runs import ShakerRun, read_run_file
 
@@ -114,37 +235,40 @@ def load_shaker_run(path: str | Path) -> dict[str, Any]:
     if "freq_hz" not in pts:
         raise InputError("missing dataset", file=path, key="freq_hz", expected="a 'freq_hz' dataset")
     ok = run.ok
-    out: dict[str, Any] = {"file": str(path), "kind": "run_shaker", "status": run.status,
-                           "robot_spot": run.robot_spot}
-    out["freq_hz"] = np.asarray(pts["freq_hz"], float)[ok]
-    out["index"] = np.asarray(pts.get("index", np.arange(1, ok.size + 1)))[ok].astype(int)
+    n = int(ok.sum())
     amp = pts.get("tray_amp_um")
-    out["tray_amp_um"] = np.asarray(amp, float)[ok] if amp is not None else np.full(int(ok.sum()), np.nan)
     videos = pts.get("video")
-    out["videos"] = ([str((path.parent / str(v)).resolve()) if v else "" for v in np.asarray(videos)[ok]]
-                     if videos is not None else [""] * int(ok.sum()))
-    for name in ("speed_mm_s", "speed_lo_mm_s", "speed_hi_mm_s", "speed_std_mm_s"):
-        if name in pts:
-            out[name] = np.asarray(pts[name], float)[ok]
-    if "pattern" in pts:
-        out["patterns"] = [str(v) for v in np.asarray(pts["pattern"])[ok]]
-    out["knee"] = _knee_records(run, out) if out["robot_spot"] == "knee" else []
-    return out
+
+    def column(name: str) -> np.ndarray | None:
+        return np.asarray(pts[name], float)[ok] if name in pts else None
+
+    data = ShakerData(
+        file=str(path), status=run.status, robot_spot=run.robot_spot,
+        freq_hz=np.asarray(pts["freq_hz"], float)[ok],
+        index=np.asarray(pts.get("index", np.arange(1, ok.size + 1)))[ok].astype(int),
+        tray_amp_um=np.asarray(amp, float)[ok] if amp is not None else np.full(n, np.nan),
+        videos=([str((path.parent / str(v)).resolve()) if v else "" for v in np.asarray(videos)[ok]]
+                if videos is not None else [""] * n),
+        speed_mm_s=column("speed_mm_s"), speed_lo_mm_s=column("speed_lo_mm_s"),
+        speed_hi_mm_s=column("speed_hi_mm_s"), speed_std_mm_s=column("speed_std_mm_s"),
+        patterns=[str(v) for v in np.asarray(pts["pattern"])[ok]] if "pattern" in pts else None)
+    if data.robot_spot != "knee":
+        return data
+    return ShakerData(**{**data.__dict__, "knee": _knee_records(run, data)})
 
 
-def _knee_records(run: Any, data: dict[str, Any]) -> list[dict[str, Any]]:
+def _knee_records(run: Any, data: ShakerData) -> list[KneeRecord]:
     """Velocity records of a knee-spot shaker run (``/records/p<index>/``, complete points only)."""
     records = []
-    row_of = {int(i): k for k, i in enumerate(data["index"])}
+    row_of = {int(i): k for k, i in enumerate(data.index)}
     for index, rec in sorted(run.records().items()):
         if index not in row_of or "robot_velocity_mm_s" not in rec.signals:
             continue
         k = row_of[index]
         knee = rec.signals["robot_velocity_mm_s"]
-        records.append({"point": index, "t_s": np.arange(knee.size) * rec.dt_s,
-                        "knee_vz_mm_s": knee, "tray_vz_mm_s": rec.signals.get("tray_velocity_mm_s"),
-                        "freq_hz": float(data["freq_hz"][k]), "tray_amp_um": float(data["tray_amp_um"][k]),
-                        "spot": "knee"})
+        records.append(KneeRecord(data.file, index, np.arange(knee.size) * rec.dt_s, knee,
+                                  rec.signals.get("tray_velocity_mm_s"), float(data.freq_hz[k]),
+                                  float(data.tray_amp_um[k])))
     return records
 
 
@@ -158,12 +282,11 @@ def open_kind(path: str | Path, kinds: tuple[str, ...], expected: str) -> Any:
     return obj
 
 
-def load_track(path: str | Path) -> dict[str, Any]:
+def load_track(path: str | Path) -> TrackData:
     """Speed of a ``track`` file (read by ``labkit.open``; layout: :mod:`labkit.analysis.tracking.output`).
 
-    Returns ``mean_speed_mm_s`` (NaN when the track has no speed), ``speed_ci_mm_s``
-    (lo, hi), ``ci_level``, ``freq_hz`` if the track records one, ``path`` (the
-    ``labkit.files.Track``) and ``videos``: candidate absolute paths of the tracked video
+    ``mean_speed_mm_s`` is NaN when the track has no speed; ``freq_hz`` is the drive the
+    track records, if any; ``videos`` are candidate absolute paths of the tracked video
     (``source_video`` as written, resolved against the working folder and the track's folder).
     """
     path = Path(path)
@@ -176,22 +299,53 @@ def load_track(path: str | Path) -> dict[str, Any]:
     if not np.all(np.isfinite(ci)):
         ci = np.array([speed, speed])
     summ = a.get("summary") if isinstance(a.get("summary"), dict) else {}
-    out: dict[str, Any] = {"file": str(path), "kind": "track", "mean_speed_mm_s": speed, "speed_ci_mm_s": ci,
-                           "ci_level": float(a.get("speed_ci_level", summ.get("ci_level", 0.95))), "track": t}
-    for key in ("freq_hz", "shaker_freq_hz"):
-        if key in a:
-            out["freq_hz"] = float(a[key])
-    out["videos"] = []
+    freq = next((float(a[k]) for k in ("freq_hz", "shaker_freq_hz") if k in a), None)
+    videos: list[str] = []
     for key in ("source_video", "video", "source"):
         if key in a and _s(a[key]):
             v = Path(_s(a[key]))
             cands = [v] if v.is_absolute() else [Path.cwd() / v, path.parent / v]
-            out["videos"] = [str(c.resolve()) for c in cands]
+            videos = [str(c.resolve()) for c in cands]
             break
-    return out
+    return TrackData(str(path), speed, (float(ci[0]), float(ci[1])),
+                     float(a.get("speed_ci_level", summ.get("ci_level", 0.95))), freq,
+                     float(a.get("tray_amp_um", np.nan)), videos)
 
 
-def measured_speeds(shaker_runs: list[dict[str, Any]], tracks: list[dict[str, Any]]) -> dict[str, Any]:
+def _pattern_of(run: ShakerData, k: int) -> tuple[str, str]:
+    """A shaker point's leg pattern and what classified it (see :data:`PATTERN_BY`)."""
+    from labkit.analysis.compare import classify_knee_pattern
+
+    if run.patterns:
+        return run.patterns[k], LABEL
+    rec = next((r for r in run.knee if r.point == int(run.index[k])), None)
+    if rec is None:
+        return "", ""
+    return classify_knee_pattern(rec.t_s, rec.knee_vz_mm_s, rec.tray_vz_mm_s, rec.freq_hz)["pattern"], KNEE
+
+
+def _run_speed_rows(run: ShakerData, covered: set[tuple[str, int]]) -> list[tuple]:
+    """Rows of the speeds a run file stores itself, for points no track covers."""
+    if run.speed_mm_s is None:
+        return []
+    rows = []
+    for k, fz in enumerate(run.freq_hz):
+        s = float(run.speed_mm_s[k])
+        if (run.file, k) in covered or not np.isfinite(s):
+            continue
+        if run.speed_std_mm_s is not None:
+            std = float(run.speed_std_mm_s[k])
+            lo, hi = s - 1.96 * std, s + 1.96 * std
+        else:
+            lo = float(run.speed_lo_mm_s[k]) if run.speed_lo_mm_s is not None else s
+            hi = float(run.speed_hi_mm_s[k]) if run.speed_hi_mm_s is not None else s
+            std = (hi - lo) / (2 * 1.96)
+        rows.append((float(fz), float(run.tray_amp_um[k]), s, lo, hi, std, *_pattern_of(run, k),
+                     f"{run.file} (point {int(run.index[k])})"))
+    return rows
+
+
+def measured_speeds(shaker_runs: Sequence[ShakerData], tracks: Sequence[TrackData]) -> MeasuredSpeeds:
     """Measured speed against frequency (and tray amplitude) from shaker runs and tracks.
 
     A track gets its drive from the shaker run point whose video it tracked
@@ -201,193 +355,89 @@ def measured_speeds(shaker_runs: list[dict[str, Any]], tracks: list[dict[str, An
     The standard deviation is recovered from the confidence interval assuming
     a normal spread. A knee record of the same run point gives the point's
     leg pattern (:func:`labkit.analysis.compare.classify_knee_pattern`).
-
-    Returns
-    -------
-    dict
-        Arrays sorted by frequency: ``freq_hz``, ``amp_um``, ``speed_mm_s``,
-        ``lo_mm_s``, ``hi_mm_s``, ``std_mm_s``; lists ``patterns`` ("" when
-        unknown) and ``sources`` (file per point); ``unmatched`` (tracks with
-        no frequency or no speed).
     """
     from scipy.stats import norm
 
-    from labkit.analysis.compare import classify_knee_pattern
-
-    by_video: dict[str, tuple[dict[str, Any], int]] = {}
+    by_video: dict[str, tuple[ShakerData, int]] = {}
     for run in shaker_runs:
-        for k, video in enumerate(run["videos"]):
+        for k, video in enumerate(run.videos):
             if video:
                 by_video[str(Path(video).resolve())] = (run, k)
-
-    def pattern_of(run: dict[str, Any], k: int) -> tuple[str, str]:
-        """The point's leg pattern and what classified it (see :data:`PATTERN_BY`)."""
-        if run.get("patterns"):
-            return run["patterns"][k], LABEL
-        rec = next((r for r in run.get("knee", []) if r["point"] == int(run["index"][k])), None)
-        if rec is None:
-            return "", ""
-        pattern = classify_knee_pattern(rec["t_s"], rec["knee_vz_mm_s"], rec["tray_vz_mm_s"], rec["freq_hz"])
-        return pattern["pattern"], KNEE
-
     rows: list[tuple] = []
     covered: set[tuple[str, int]] = set()
     unmatched = []
     for tr in tracks:
-        freq, amp, pattern, src = tr.get("freq_hz"), tr.get("tray_amp_um", np.nan), ("", ""), tr["file"]
-        if not np.isfinite(tr["mean_speed_mm_s"]):
-            unmatched.append(f"{tr['file']} (no speed)")
+        freq, amp, pattern, src = tr.freq_hz, tr.tray_amp_um, ("", ""), tr.file
+        if not np.isfinite(tr.mean_speed_mm_s):
+            unmatched.append(f"{tr.file} (no speed)")
             continue
         if freq is None:
-            hit = next((by_video[v] for v in tr.get("videos", []) if v in by_video), None)
+            hit = next((by_video[v] for v in tr.videos if v in by_video), None)
             if hit:
                 run, k = hit
-                freq, amp, pattern = float(run["freq_hz"][k]), float(run["tray_amp_um"][k]), pattern_of(run, k)
-                src = f"{tr['file']} (video of {run['file']} point {int(run['index'][k])})"
-                covered.add((run["file"], k))
+                freq, amp, pattern = float(run.freq_hz[k]), float(run.tray_amp_um[k]), _pattern_of(run, k)
+                src = f"{tr.file} (video of {run.file} point {int(run.index[k])})"
+                covered.add((run.file, k))
         if freq is None:
-            unmatched.append(tr["file"])
+            unmatched.append(tr.file)
             continue
-        lo, hi = tr["speed_ci_mm_s"]
-        z = norm.ppf(0.5 + tr.get("ci_level", 0.95) / 2)
-        rows.append((float(freq), float(amp), tr["mean_speed_mm_s"], lo, hi, (hi - lo) / (2 * z), *pattern, src))
+        lo, hi = tr.speed_ci_mm_s
+        z = norm.ppf(0.5 + tr.ci_level / 2)
+        rows.append((float(freq), float(amp), tr.mean_speed_mm_s, lo, hi, (hi - lo) / (2 * z), *pattern, src))
     for run in shaker_runs:
-        if "speed_mm_s" not in run:
-            continue
-        for k, fz in enumerate(run["freq_hz"]):
-            s = float(run["speed_mm_s"][k])
-            if (run["file"], k) in covered or not np.isfinite(s):
-                continue
-            if "speed_std_mm_s" in run:
-                std = float(run["speed_std_mm_s"][k])
-                lo, hi = s - 1.96 * std, s + 1.96 * std
-            else:
-                lo = float(run["speed_lo_mm_s"][k]) if "speed_lo_mm_s" in run else s
-                hi = float(run["speed_hi_mm_s"][k]) if "speed_hi_mm_s" in run else s
-                std = (hi - lo) / (2 * 1.96)
-            rows.append((float(fz), float(run["tray_amp_um"][k]), s, lo, hi, std, *pattern_of(run, k),
-                         f"{run['file']} (point {int(run['index'][k])})"))
+        rows += _run_speed_rows(run, covered)
     rows.sort(key=lambda r: (r[0], r[1]))
     cols: list[Sequence[Any]] = list(zip(*rows)) if rows else [[]] * 9
-    return {"freq_hz": np.asarray(cols[0], float), "amp_um": np.asarray(cols[1], float),
-            "speed_mm_s": np.asarray(cols[2], float), "lo_mm_s": np.asarray(cols[3], float),
-            "hi_mm_s": np.asarray(cols[4], float), "std_mm_s": np.asarray(cols[5], float),
-            "patterns": list(cols[6]), "pattern_by": list(cols[7]), "sources": list(cols[8]),
-            "unmatched": unmatched}
-
-
-def select(measured: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
-    """The rows of :func:`measured_speeds` where ``mask`` holds."""
-    idx = np.flatnonzero(mask)
-    lists = ("patterns", "pattern_by", "sources")
-    return {k: (v[idx] if isinstance(v, np.ndarray) else [v[i] for i in idx] if k in lists else v)
-            for k, v in measured.items()}
-
-
-def load_speed_table(path: str | Path) -> dict[str, Any]:
-    """A table of measured speeds: CSV with header ``freq_hz,speed_mm_s[,speed_std_mm_s][,pattern]``
-    or an HDF5 file with those datasets (any ``kind``).
-
-    ``speed_std`` is accepted as an alias of ``speed_std_mm_s``.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such file", file=path)
-    cols: dict[str, list] = {}
-    if path.suffix.lower() in (".csv", ".txt"):
-        try:
-            with path.open(newline="", encoding="utf-8") as fh:
-                reader = csv.DictReader(line for line in fh if not line.lstrip().startswith("#"))
-                for row in reader:
-                    for k, v in row.items():
-                        cols.setdefault((k or "").strip(), []).append((v or "").strip())
-        except (OSError, UnicodeDecodeError, csv.Error) as exc:
-            raise InputError(f"cannot read CSV: {exc}", file=path) from None
-    else:
-        import h5py
-
-        try:
-            with h5py.File(path, "r") as f:
-                for k in ("freq_hz", "speed_mm_s", "speed_std_mm_s", "speed_std", "pattern"):
-                    ds = _find(f, k)
-                    if ds is not None:
-                        cols[k] = [_s(v) if isinstance(v, bytes) else v for v in ds[()]]
-        except OSError as exc:
-            raise InputError(f"not a readable HDF5 or CSV file ({exc})", file=path) from None
-    if "speed_std" in cols and "speed_std_mm_s" not in cols:
-        cols["speed_std_mm_s"] = cols.pop("speed_std")
-    out: dict[str, Any] = {"file": str(path)}
-    for key in ("freq_hz", "speed_mm_s", "speed_std_mm_s"):
-        if key not in cols:
-            if key == "speed_std_mm_s":
-                continue
-            raise InputError("missing column", file=path, key=key,
-                             expected="columns freq_hz, speed_mm_s[, speed_std_mm_s][, pattern]")
-        try:
-            out[key] = np.asarray([float(v) for v in cols[key]], float)
-        except ValueError as exc:
-            raise InputError(f"not a number: {exc}", file=path, key=key) from None
-    if out["freq_hz"].size == 0:
-        raise InputError("no rows", file=path, expected="at least one measured speed")
-    if "pattern" in cols and any(cols["pattern"]):
-        out["pattern"] = [str(v) for v in cols["pattern"]]
-    return out
+    num = [np.asarray(c, float) for c in cols[:6]]
+    return MeasuredSpeeds(num[0], num[1], num[2], num[3], num[4], num[5], [str(x) for x in cols[6]],
+                          [str(x) for x in cols[7]], [str(x) for x in cols[8]], unmatched)
 
 
 # --------------------------------------------------------------------------- fits and simulations
 
-def load_fit(path: str | Path) -> dict[str, Any]:
+def load_fit(path: str | Path) -> FitData:
     """A ``modal_fit`` file (read by ``labkit.open``; layout: :mod:`labkit.analysis.modal.io`),
-    one entry per fit group.
-
-    Returns ``{"file", "groups": {group: {"locations": {loc: {"freq_hz", "frf", "model_frf"}},
-    "modes": [{"freq_hz", "freq_hz_std", "damping_ratio", ...}], "stabilisation": {...} | None,
-    "units", "method", "quality"}}, "summary": {...}}``; group is ``inchip`` (tethered robot,
-    FRF in (mm/s)/V) or ``shaker`` (released robot, transmissibility).
+    one :class:`FitGroup` per fit group: ``inchip`` (tethered robot, FRF in (mm/s)/V) or
+    ``shaker`` (released robot, transmissibility).
     """
     path = Path(path)
     fit = open_kind(path, ("modal_fit",), "a 'modal_fit' file (labkit fit ... --out ROBOT.toml writes ROBOT.fit.h5)")
     if not fit.groups:
         raise InputError("no fit groups", file=path, key="groups", expected="/groups/<inchip|shaker>")
-    out: dict[str, Any] = {"file": str(path), "kind": "modal_fit", "groups": {},
-                           "summary": fit.attrs.get("summary") or {}}
+    groups = {}
     for name, g in fit.groups.items():
-        entry: dict[str, Any] = {"locations": {}, "method": g.method, "quality": float(g.quality),
-                                 "units": g.units.get("frf", "(mm/s)/V" if name == "inchip" else "1")}
+        locations = {}
         for loc, cols in g.locations.items():
             if "freq_hz" not in cols or "frf" not in cols:
                 raise InputError("missing freq_hz or frf", file=path, key=f"groups/{name}/locations/{loc}")
-            d = {"freq_hz": np.asarray(cols["freq_hz"], float), "frf": np.asarray(cols["frf"], complex)}
-            if "model" in cols:
-                d["model_frf"] = np.asarray(cols["model"], complex)
-            entry["locations"][loc] = d
-        entry["modes"] = _modes_of(g.modes)
+            locations[loc] = Frf(np.asarray(cols["freq_hz"], float), np.asarray(cols["frf"], complex),
+                                 model_frf=np.asarray(cols["model"], complex) if "model" in cols else None)
         st = g.stabilisation
-        entry["stabilisation"] = st if st is not None and "freq_hz" in st and "order" in st else None
-        out["groups"][name] = entry
-    return out
+        groups[name] = FitGroup(locations, _modes_of(g.modes),
+                                st if st is not None and "freq_hz" in st and "order" in st else None,
+                                g.units.get("frf", "(mm/s)/V" if name == "inchip" else "1"), g.method,
+                                float(g.quality))
+    return FitData(str(path), groups, fit.attrs.get("summary") or {})
 
 
-def _modes_of(cols: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-    """One dict per mode from the 1-D mode columns (2-D per-location arrays are left out)."""
+def _modes_of(cols: Mapping[str, np.ndarray]) -> list[Mode]:
+    """One :class:`Mode` per entry of the 1-D mode columns (absent columns: ``None``)."""
     if "freq_hz" not in cols:
         return []
     freq = np.asarray(cols["freq_hz"], float).ravel()
-    modes: list[dict[str, Any]] = [{"freq_hz": float(x)} for x in freq]
-    for k, v in cols.items():
-        v = np.asarray(v)
-        if k == "freq_hz" or v.ndim != 1 or v.size != freq.size:
-            continue
-        for i, x in enumerate(v):
-            if isinstance(x, (bytes, str, np.str_)):
-                modes[i][k] = _s(x)
-            elif np.isrealobj(x):
-                modes[i][k] = float(x)
-    return modes
+
+    def column(key: str) -> list[float | None]:
+        v = np.asarray(cols[key]).ravel() if key in cols else np.array([])
+        return [float(x) for x in v] if v.size == freq.size and np.isrealobj(v) else [None] * freq.size
+
+    where = np.asarray(cols.get("dominant_location", [""] * freq.size)).ravel()
+    where = where if where.size == freq.size else np.array([""] * freq.size)
+    return [Mode(float(f), fs, d, ds, _s(w)) for f, fs, d, ds, w in
+            zip(freq, column("freq_hz_std"), column("damping_ratio"), column("damping_ratio_std"), where)]
 
 
-def load_sim(path: str | Path) -> dict[str, Any]:
-    """A simulation file: ``sim_sweep`` (SweepResult) or ``sim_result`` (one run's time series)."""
+def load_sim(path: str | Path) -> SweepData | SimRunData:
+    """A simulation file: ``sim_sweep`` (:class:`SweepData`) or ``sim_result`` (:class:`SimRunData`)."""
     path = Path(path)
     kind = file_kind(path)
     if kind == "sim_sweep":
@@ -397,33 +447,30 @@ def load_sim(path: str | Path) -> dict[str, Any]:
             s = SweepResult.from_h5(path)
         except KeyError as exc:
             raise InputError(f"incomplete sweep file: {exc}", file=path) from None
-        return {"file": str(path), "kind": kind, "sweep": s}
+        return SweepData(str(path), s)
     if kind == "sim_result":
-        return {"file": str(path), "kind": kind, **_load_sim_result(path)}
+        return _load_sim_result(path)
     raise InputError(f"this file holds {kind!r}", file=path, key="kind",
                      expected="a 'sim_sweep' or 'sim_result' file")
 
 
-def _load_sim_result(path: Path) -> dict[str, Any]:
+def _load_sim_result(path: Path) -> SimRunData:
     """The series the knee section needs from a ``sim_result`` file (read by ``labkit.open``)."""
     run = open_kind(path, ("sim_result",), "a 'sim_result' file (labkit simulate shaker --out RUN.h5)")
     cols = run.columns
-    out: dict[str, Any] = {}
     for key in ("t_s", "knee_vz_mm_s", "ground_z_um", "contact"):
         if key not in cols:
             raise InputError("missing dataset", file=path, key=key, expected="a simulated run's time series")
-        out[key] = np.asarray(cols[key]) if key == "contact" else np.asarray(cols[key], float)
-    out["scenario"] = dict(run.scenario)
     pats = cols.get("patterns")
     if pats is None:
         pats = run.attrs.get("patterns")       # SimResult.to_h5 stores the six labels as a JSON list
         if isinstance(pats, str):
             pats = json.loads(pats) if pats.startswith("[") else [pats]
-    if pats is not None:
-        out["patterns"] = [_s(v) for v in np.atleast_1d(np.asarray(pats, dtype=object))]
-    if isinstance(run.attrs.get("summary"), dict):
-        out["summary"] = run.attrs["summary"]
-    return out
+    summary = run.attrs.get("summary")
+    return SimRunData(str(path), np.asarray(cols["t_s"], float), np.asarray(cols["knee_vz_mm_s"], float),
+                      np.asarray(cols["ground_z_um"], float), np.asarray(cols["contact"]), dict(run.scenario),
+                      [_s(v) for v in np.atleast_1d(np.asarray(pats, dtype=object))] if pats is not None else None,
+                      summary if isinstance(summary, dict) else None)
 
 
 def classify_inputs(paths: list[str]) -> dict[str, list[str]]:
@@ -433,3 +480,68 @@ def classify_inputs(paths: list[str]) -> dict[str, list[str]]:
         kind = file_kind(p)
         groups.setdefault(kind, []).append(p)
     return groups
+
+
+# --------------------------------------------------------------------------- what the sections derive
+
+@dataclass(frozen=True)
+class SimCurve:
+    """A frequency sweep as the speed section draws it: magnitudes, sorted by frequency."""
+
+    file: str
+    label: str
+    freq_hz: np.ndarray
+    draws_mm_s: np.ndarray          # (points, draws); draw 0 is the nominal robot
+    draws: int
+    p10_mm_s: np.ndarray
+    p90_mm_s: np.ndarray
+    mean_mm_s: np.ndarray
+    lo_mm_s: np.ndarray
+    hi_mm_s: np.ndarray
+    nominal_mm_s: np.ndarray
+    patterns: list[str]
+    describe: str
+    sweep: Any
+
+
+@dataclass(frozen=True)
+class SimKnee:
+    """The settled part of a simulated knee record at one drive, tray velocity derived."""
+
+    t_s: np.ndarray
+    knee_vz_mm_s: np.ndarray
+    tray_vz_mm_s: np.ndarray
+    contact: np.ndarray
+    knee_pattern: str
+    foot_pattern: str
+    source: str
+
+
+@dataclass(frozen=True)
+class KneeCase:
+    """One drive of the knee section: the measured record (and its pattern) and the simulated one."""
+
+    freq_hz: float
+    tray_amp_um: float
+    measured: KneeRecord | None = None
+    measured_pattern: str = "?"
+    simulated: SimKnee | None = None
+
+
+@dataclass(frozen=True)
+class PatternPair:
+    """An observed leg pattern and a simulated one at the same drive, and what classified each."""
+
+    source: str                # "knee record" or "sweep"
+    drive: str
+    measured: str
+    simulated: str
+    measured_by: str
+    simulated_by: str
+    measured_file: str
+    simulated_file: str
+
+    @property
+    def comparable(self) -> bool:
+        """Both classified from the same observable (:data:`PATTERN_BY`)."""
+        return PATTERN_BY.get(self.measured_by) == PATTERN_BY.get(self.simulated_by)

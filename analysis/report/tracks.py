@@ -7,33 +7,42 @@ reader (:mod:`labkit.analysis.tracking.video_io`).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from labkit.errors import InputError
 
 
-def load_track_path(path: str | Path) -> dict[str, Any]:
-    """``t_s``, ``x_mm``, ``y_mm`` and, if present, ``u_px``, ``v_px`` of a track file (``labkit.open``)."""
+@dataclass(frozen=True)
+class TrackPath:
+    """A track's path in world millimetres (finite points only) and, if it holds them, in image pixels."""
+
+    file: str
+    t_s: np.ndarray
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    u_px: np.ndarray | None = None
+    v_px: np.ndarray | None = None
+
+
+def load_track_path(path: str | Path) -> TrackPath:
+    """The path of a track file (``labkit.open``: HDF5 or CSV)."""
     from labkit.analysis.report.inputs import open_kind
 
     path = Path(path)
     cols = open_kind(path, ("track", "track_csv"), "a track file (labkit track --out TRACK.h5)").columns
-    out: dict[str, Any] = {"file": str(path)}
     for key in ("t_s", "x_mm", "y_mm"):
         if key not in cols:
             raise InputError("missing dataset", file=path, key=key, expected="a track path (t_s, x_mm, y_mm)")
-        out[key] = np.asarray(cols[key], float)
-    for key in ("u_px", "v_px"):
-        if key in cols:
-            out[key] = np.asarray(cols[key], float)
-    ok = np.isfinite(out["x_mm"]) & np.isfinite(out["y_mm"])
-    for key in ("t_s", "x_mm", "y_mm", "u_px", "v_px"):
-        if key in out:
-            out[key] = out[key][ok]
-    return out
+    x, y = np.asarray(cols["x_mm"], float), np.asarray(cols["y_mm"], float)
+    ok = np.isfinite(x) & np.isfinite(y)
+
+    def px(key: str) -> np.ndarray | None:
+        return np.asarray(cols[key], float)[ok] if key in cols else None
+
+    return TrackPath(str(path), np.asarray(cols["t_s"], float)[ok], x[ok], y[ok], px("u_px"), px("v_px"))
 
 
 def read_frame_at(video: str | Path, t_s: float) -> np.ndarray:

@@ -442,16 +442,12 @@ def _record_track(p: dict[str, Any], track_path: Path, summ: dict[str, Any]) -> 
 
 def shaker_points(path: Path) -> list[dict[str, Any]]:
     """The shaker run's ok points: frequency, measured tray amplitude, video (relative to the run file)."""
-    from labkit.h5io import open_h5
+    from labkit.files.runs import ShakerRun, read_run_file
 
-    with open_h5(path, kind="run_shaker") as f:
-        g = f["points"]
-        status = g["status"].asstr()[...]
-        video = g["video"].asstr()[...] if "video" in g else [""] * len(status)
-        rows = []
-        for k in range(len(status)):
-            if status[k] != "ok":
-                continue
-            rows.append({"index": int(g["index"][k]), "freq_hz": float(g["freq_hz"][k]),
-                         "tray_amp_um": float(g["tray_amp_um"][k]), "video": str(video[k])})
-    return rows
+    run = read_run_file(path)
+    if not isinstance(run, ShakerRun):
+        raise InputError(f"this file holds {run.kind!r}", file=path, key="kind", expected="a 'run_shaker' file")
+    pts, ok = run.points, run.ok
+    video = pts["video"] if "video" in pts else [""] * ok.size
+    return [{"index": int(pts["index"][k]), "freq_hz": float(pts["freq_hz"][k]),
+             "tray_amp_um": float(pts["tray_amp_um"][k]), "video": str(video[k])} for k in np.flatnonzero(ok)]

@@ -29,6 +29,7 @@ Guarantees
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import os
 import sys
@@ -57,6 +58,9 @@ from labkit.experiments.safety import (
     stop_handled,
 )
 from labkit.progress import progress
+
+#: the run's shutdown path (``labkit -v`` shows it on stderr)
+_log = logging.getLogger(__name__)
 
 #: how long past twice the record an acquisition may take before the scope counts as lost
 #: (a missing trigger; generous because a simulated robot may be computed meanwhile)
@@ -209,6 +213,7 @@ class Runner:
         finish_error: Exception | None = None
         drive_error: DriveNotOff | None = None
         ending = sys.exc_info()[1]          # what ended the run (None: it completed)
+        _log.info("shutdown: %s", status)
         with shielded() as arrived:
             try:
                 self.guard.final_off(status)
@@ -216,6 +221,7 @@ class Runner:
                 drive_error = exc
                 status = f"{status}; DRIVE OFF NOT CONFIRMED"
             if arrived:
+                _log.info("shutdown: signal(s) %s held until the drive was off", arrived)
                 self._event(f"signal(s) {arrived} arrived during shutdown")
             self._event(f"run ended: {status}")
             try:
@@ -224,7 +230,9 @@ class Runner:
                     mark_completed(str(self.file.path))
             except Exception as exc:   # another error may be in flight: never mask it
                 finish_error = exc
+                _log.warning("shutdown: the final status could not be written: %s", exc)
             self.live.end(status, drive_error or ending or finish_error)
+            _log.info("shutdown: run file and live stream finished (%s)", self.file.path)
         if drive_error is not None:
             raise drive_error
         return finish_error

@@ -12,6 +12,7 @@ the signal), as ``labkit.cli`` does, for library use.
 from __future__ import annotations
 
 import contextlib
+import logging
 import signal
 import threading
 import time
@@ -20,6 +21,9 @@ from typing import Any
 
 from labkit.errors import DriveNotOff, InstrumentError, Interrupted
 from labkit.experiments.protocols import FunctionGenerator
+
+#: the shutdown path's log (``labkit -v``: INFO, ``-vv``: DEBUG, on stderr)
+_log = logging.getLogger(__name__)
 
 
 class Interlock(Exception):
@@ -77,6 +81,7 @@ class DriveGuard:
         self.is_on = False
         self.maybe_on = False
         self.log(f"drive off ({reason})")
+        _log.debug("%s: drive off (%s)", self.where, reason)
 
     def final_off(self, reason: str, attempts: int = 3) -> bool:
         """Every output of the generator off, whatever the state; reconnect if the link is lost.
@@ -88,6 +93,7 @@ class DriveGuard:
         last: InstrumentError | None = None
         t0 = time.monotonic()
         attempt = 0
+        _log.info("%s: final OFF (%s)", self.where, reason)
         # at least ``attempts`` tries, and for RECONNECT_WINDOW_S: a link that drops for a moment
         # (a switch, a cable nudged) is back before the run gives up on its OFF
         while attempt < attempts or time.monotonic() - t0 < RECONNECT_WINDOW_S:
@@ -95,9 +101,12 @@ class DriveGuard:
                 self.funcgen.safe_off()
                 self.is_on = self.maybe_on = False
                 self.log(f"drive off ({reason})" + (f" after {attempt} reconnect(s)" if attempt else ""))
+                _log.info("%s: OFF confirmed after %d reconnect(s), %.2f s", self.where, attempt,
+                          time.monotonic() - t0)
                 return True
             except InstrumentError as exc:
                 last = exc
+                _log.info("%s: OFF attempt %d failed: %s", self.where, attempt + 1, exc)
                 if self.reopen is None:
                     break
                 try:
@@ -108,8 +117,12 @@ class DriveGuard:
                 time.sleep(min(0.05 * attempt, 0.3))
                 try:
                     self.funcgen = self.reopen()
+                    _log.info("%s: reconnected (attempt %d)", self.where, attempt)
                 except InstrumentError as exc2:
                     last = exc2
+                    _log.info("%s: reconnect %d failed: %s", self.where, attempt, exc2)
+        _log.warning("%s: OFF NOT CONFIRMED after %d reconnect(s), %.2f s: %s", self.where, attempt,
+                     time.monotonic() - t0, last)
         self.log(f"DRIVE OFF NOT CONFIRMED ({reason}): {last}; turn the generator output off by hand")
         raise DriveNotOff("funcgen", self.where, str(last), original=reason, config=self.config) from last
 
@@ -144,6 +157,7 @@ def raise_stop_signal(signum: int, frame: Any) -> None:
     :class:`Interrupted`. The signal is also remembered until it is
     handled (:func:`check_stop`, :func:`stop_handled`), in case the exception was dropped."""
     _PENDING.append(signum)
+    _log.debug("signal %s received", signal.Signals(signum).name)
     raise _stop_exception(signum)
 
 
@@ -313,13 +327,16 @@ def turn_off(config: str | None = None, *, model: str | None = None, resource: s
                                    "attempts": attempt + 1}
             if busy:
                 out["in_use_by"] = describe(busy)
+            _log.info("%s: every output read back off (attempt %d)", where, attempt + 1)
             return out
         except InputError:
             raise
         except InstrumentError as exc:
             last = exc
+            _log.info("%s: OFF attempt %d failed: %s", where, attempt + 1, exc)
         except OSError as exc:
             last = exc
+            _log.info("%s: OFF attempt %d failed: %s", where, attempt + 1, exc)
         finally:
             if fg is not None:
                 try:

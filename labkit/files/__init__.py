@@ -22,6 +22,9 @@ experiment config (``.toml``) ``config_inchip``,  :class:`~labkit.files.kinds.Ex
 video (``.mkv``, ``.avi``)   ``video``            :class:`~labkit.files.kinds.Video`
 ===========================  ===================  ==========================================
 
+A table of measured speeds (CSV, or HDF5 datasets of any kind) is read by
+:func:`~labkit.files.speeds.read_speed_table`; :func:`file_kind` reads only an HDF5 file's ``kind``.
+
 Each has ``path``, ``kind``, ``schema_version``, ``attrs`` (root attributes, ``*_json`` decoded),
 ``units`` (name -> units of its arrays), ``summary()`` and ``to_xarray()``.
 """
@@ -44,15 +47,28 @@ from labkit.files.kinds import (
     Video,
 )
 from labkit.files.runs import InchipRun, RunFile, ShakerRun, read_run_file
+from labkit.files.speeds import SpeedTable, read_speed_table
 
 __all__ = ["open_file", "LabFile", "RunFile", "InchipRun", "ShakerRun", "Track", "ModalFit", "SimRun",
            "SimSweep", "SimSweepSet", "SimRunSet", "RobotParameters", "ExperimentConfig", "Video",
-           "read_run_file", "VIDEO_SUFFIXES", "H5_KINDS"]
+           "read_run_file", "SpeedTable", "read_speed_table", "file_kind", "VIDEO_SUFFIXES", "H5_KINDS"]
 
 VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4")
 #: the ``kind`` attributes of the HDF5 files labkit writes
 H5_KINDS = ("run_inchip", "run_shaker", "track", "modal_fit", "sim_result", "sim_sweep", "sim_points",
             "sim_sweep_set", "sim_ablations")
+
+
+def file_kind(path: str | os.PathLike[str]) -> str:
+    """The ``kind`` root attribute of a labkit HDF5 file (InputError naming the file if unreadable or absent)."""
+    from labkit.h5io import open_h5
+
+    p = Path(path)
+    with open_h5(p) as f:
+        kind = f.attrs.get("kind")
+    if kind is None:
+        raise InputError("not a labkit file: no 'kind' attribute", file=p, key="kind")
+    return kind.decode("utf-8", "replace") if isinstance(kind, bytes) else str(kind)
 
 
 def open_file(path: str | os.PathLike[str]) -> LabFile:

@@ -330,10 +330,16 @@ def test_unconfirmed_off_is_loud_then_labkit_off_recovers(tmp_path, lab):
     cfg, out = sweep_cfg(tmp_path, lab, timeout_s=0.4), tmp_path / "run.h5"
     try:
         proc, _, stderr, _ = act_mid_run(cfg, out, 2, lambda proc: lab.inject_fault(
-            "funcgen", "drop", count=100_000))                 # every link dropped at its next reply
+            "funcgen", "drop", count=100_000), "-v")           # every link dropped at its next reply
     finally:
         lab.clear_faults()
     assert proc.returncode == 4, stderr
+    # -v: the shutdown path's log on stderr, each attempt and its end
+    log = [line for line in stderr.splitlines() if line.startswith("labkit labkit.experiments.")]
+    assert any("shutdown: aborted: InstrumentError" in line for line in log), stderr
+    assert any("OFF attempt 1 failed" in line for line in log), stderr
+    assert any("OFF NOT CONFIRMED after" in line for line in log), stderr
+    assert any("run file and live stream finished" in line for line in log), stderr
     assert "DRIVE MAY STILL BE ON: funcgen" in stderr and lab.resources["funcgen"] in stderr
     assert "TURN THE GENERATOR OUTPUT OFF BY HAND" in stderr and f"labkit off {cfg}" in stderr
     # the original fault: the run stopped because the generator timed out
@@ -347,6 +353,7 @@ def test_unconfirmed_off_is_loud_then_labkit_off_recovers(tmp_path, lab):
                           text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert "off (confirmed)" in done.stdout and lab.output_state("funcgen", 1) is False
+    assert "labkit labkit." not in done.stderr          # without -v: no log lines
 
 
 @pytest.mark.parametrize("kind, old, new, key", [
