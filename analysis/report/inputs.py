@@ -423,6 +423,10 @@ def _load_sim_result(path: Path) -> dict[str, Any]:
         out["patterns"] = [_s(v) for v in np.atleast_1d(np.asarray(pats, dtype=object))]
     if isinstance(run.attrs.get("summary"), dict):
         out["summary"] = run.attrs["summary"]
+    if isinstance(run.attrs.get("edges"), dict):         # labkit simulate ... --edges --out RUN.h5
+        out["edges"] = run.attrs["edges"]
+    if "body_z_um" in cols:                              # the regime's body motion (labkit.sim.regime)
+        out["body_z_um"] = np.asarray(cols["body_z_um"], float)
     return out
 
 
