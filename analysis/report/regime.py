@@ -10,8 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-#: Edge lines shown per run (nearest first).
-MAX_EDGE_LINES = 4
+#: Lines shown per run: the seeds' spread, then the edges nearest first.
+MAX_EDGE_LINES = 5
 
 
 def regime_rows(results: list[dict[str, Any]]) -> tuple[list[list[Any]], list[str]]:

@@ -438,11 +438,22 @@ class EdgeReport:
             out.setdefault(e.key, e)
         return out
 
+    def seed_line(self) -> str:
+        """``seeds: 2 others give -2.21, -2.51 mm/s (base -1.95; spread 28 % of it)``: how far the run's
+        own random start moves it, to weigh the speed edges against."""
+        speeds = [r.speed_mm_s for r in self.seed_runs]
+        spread = max(abs(v - self.base.speed_mm_s) for v in speeds)
+        v0 = abs(self.base.speed_mm_s)
+        rel = f"{100 * spread / v0:.2g} % of it" if v0 else f"{spread:.2g} mm/s"
+        return (f"seeds: {len(speeds)} others give " + ", ".join(f"{v:.3g}" for v in speeds)
+                + f" mm/s (base {self.base.speed_mm_s:.3g}; spread {rel})")
+
     def lines(self) -> list[str]:
         """``edge: 3 % in adhesion (down: jumping, 7.5 mm/s)`` per parameter with an edge, nearest first,
         then the parameters with none within the largest step."""
         near = self.nearest()
-        out = [] if self.resolved else [
+        out = [self.seed_line()] if self.seed_runs else []
+        out += [] if self.resolved else [
             "base run NOT resolved: other seeds give " + ", ".join(f"{r.regime} {r.speed_mm_s:.3g} mm/s"
                                                                    for r in self.seed_runs)
             + f" (base {self.base.speed_mm_s:.3g} mm/s): edges below may be its own spread; run longer"]

@@ -100,7 +100,8 @@ def test_edges_find_planted_boundaries():
     for e in (by[(DRIVE_KEY, -1)], by[("g_m_s2", 1)]):
         assert e.within is None and e.clear == 0.20
     assert by[("c_ad_n", 1)].note == "bound" and by[("c_ad_n", 1)].within is None
-    lines = rep.lines()
+    lines = rep.lines()[1:]                    # after the seeds' line
+    assert rep.lines()[0].startswith("seeds: 2 others give")
     assert lines[0].startswith("edge: ") and ("up:" in lines[0] or "down:" in lines[0])
     assert lines[-1].startswith("no edge within 20 %") and "adhesion" in lines[-1]
 
@@ -150,8 +151,9 @@ def test_cli_edges_stored_and_reported(tmp_path):
     assert js["regime"]["regime"] == "jumping"
     e = js["edges"]
     assert e["base"]["regime"] == "jumping" and [x["key"] for x in e["edges"]] == ["drive"] * 2 + ["c_ad_n"] * 2
-    assert all(line.startswith(("edge: ", "no edge within 20 %", "base run NOT resolved")) for line in e["lines"])
-    assert len(e["seed_runs"]) == 2 and e["resolved"] == (not e["lines"][0].startswith("base run NOT"))
+    assert e["lines"][0].startswith("seeds: 2 others give")
+    assert all(line.startswith(("edge: ", "no edge within 20 %", "base run NOT resolved")) for line in e["lines"][1:])
+    assert len(e["seed_runs"]) == 2 and e["resolved"] == (not e["lines"][1].startswith("base run NOT"))
     from labkit.files import open_file
 
     run = open_file(out)
@@ -162,7 +164,7 @@ def test_cli_edges_stored_and_reported(tmp_path):
     build_report(tmp_path / "report", sims=[str(out)], simulate_knee=False)
     html = (tmp_path / "report" / "report.html").read_text()
     assert "Gait regime of each simulated run" in html and "jumping" in html
-    assert e["lines"][0].split(" (")[0] in html          # the nearest edge, as the run stored it
+    assert e["lines"][1].split(" (")[0] in html          # the nearest edge, as the run stored it
 
 
 @pytest.mark.parametrize("args, named", [
