@@ -444,7 +444,7 @@ class EdgeReport:
         speeds = [r.speed_mm_s for r in self.seed_runs]
         spread = max(abs(v - self.base.speed_mm_s) for v in speeds)
         v0 = abs(self.base.speed_mm_s)
-        rel = f"{100 * spread / v0:.2g} % of it" if v0 else f"{spread:.2g} mm/s"
+        rel = f"{100 * spread / v0:.2g} % of it" if v0 >= SPEED_CHANGE_ABS_MM_S else f"{spread:.2g} mm/s"
         return (f"seeds: {len(speeds)} others give " + ", ".join(f"{v:.3g}" for v in speeds)
                 + f" mm/s (base {self.base.speed_mm_s:.3g}; spread {rel})")
 

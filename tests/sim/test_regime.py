@@ -64,6 +64,19 @@ def test_changed_needs_thirty_percent_or_another_regime():
     assert not changed(rest, classify_regime(RunFeatures(0.05, ("firm_contact",) * 6, body_motion_um=0.0)))
 
 
+def test_seed_line_relative_only_for_a_moving_robot():
+    from labkit.sim.regime import EdgeReport
+
+    def reg(v):
+        return classify_regime(RunFeatures(v, ("jumping",) * 6))
+
+    moving = EdgeReport(reg(2.0), [], (0.02,), seed_runs=[reg(2.2), reg(1.5)])
+    assert moving.seed_line().endswith("spread 25 % of it)") and moving.resolved
+    assert not EdgeReport(reg(2.0), [], (0.02,), seed_runs=[reg(2.7)]).resolved
+    resting = EdgeReport(reg(3e-5), [], (0.02,), seed_runs=[reg(1e-5)])
+    assert resting.seed_line().endswith("spread 2e-05 mm/s)")
+
+
 def test_map_boundary_is_the_lift_off_line():
     """Stiff legs, no adhesion: the feet leave where (2 pi f)^2 A = g and nowhere else on the grid."""
     p = _stiff(c_ad_n=0.0, c_ad_t_n_s=0.0)
