@@ -711,6 +711,9 @@ def _knee_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
                                  table_rows, num_cols={0, 1, 2, 3, 4, 5, 6}))
     if not table_rows:
         sec.notes["verdict_note"] = "no drive has both a measured and a simulated knee record"
+    from labkit.analysis.report.regime import regime_html
+
+    sec.html += regime_html(inp.results, msgs)       # each sim_result's gait regime and edges
     sec.message = " ".join(msgs)
     return sec
 

@@ -186,6 +186,8 @@ class SimRunData:
     scenario: Mapping[str, Any]
     patterns: list[str] | None = None
     summary: Mapping[str, Any] | None = None
+    edges: Mapping[str, Any] | None = None      # the run's edge search (labkit.sim.regime), when written
+    body_z_um: np.ndarray | None = None         # the body's height: the regime's body motion
 
 
 def _s(v: Any) -> str:
@@ -466,11 +468,13 @@ def _load_sim_result(path: Path) -> SimRunData:
         pats = run.attrs.get("patterns")       # SimResult.to_h5 stores the six labels as a JSON list
         if isinstance(pats, str):
             pats = json.loads(pats) if pats.startswith("[") else [pats]
-    summary = run.attrs.get("summary")
+    summary, edges = run.attrs.get("summary"), run.attrs.get("edges")
     return SimRunData(str(path), np.asarray(cols["t_s"], float), np.asarray(cols["knee_vz_mm_s"], float),
                       np.asarray(cols["ground_z_um"], float), np.asarray(cols["contact"]), dict(run.scenario),
                       [_s(v) for v in np.atleast_1d(np.asarray(pats, dtype=object))] if pats is not None else None,
-                      summary if isinstance(summary, dict) else None)
+                      summary if isinstance(summary, dict) else None,
+                      edges if isinstance(edges, dict) else None,       # labkit simulate ... --edges --out RUN.h5
+                      np.asarray(cols["body_z_um"], float) if "body_z_um" in cols else None)
 
 
 def classify_inputs(paths: list[str]) -> dict[str, list[str]]:

@@ -10,6 +10,8 @@ Examples
     labkit simulate sweep pzt --mass-mg 0.33:2.5:10 --freq-hz 1800 --voltage-v 20
     labkit simulate scenario shaker-speed --out results/
     labkit simulate modes --params paper --json
+    labkit simulate shaker --freq-hz 240 --amp-um 25 --edges
+    labkit simulate regime-map shaker --freq-hz 100:400:7 --amp-um 5:40:8 --out map.h5 --figure map.png
 
 A range is ``start:stop:count`` (``count`` evenly spaced values, both ends
 included) or a comma list ``a,b,c``; exactly one option of a sweep is a range.
@@ -75,6 +77,13 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     single_opts.add_argument("--dt-check", action="store_true",
                              help="also run 4 seeds at the default step and at a quarter of it; report "
                                   "the difference of the mean speeds and whether the run is chaotic")
+    single_opts.add_argument("--edges", action="store_true",
+                             help="also find, per uncertain parameter, the smallest change (2-20 %%) that "
+                                  "changes the gait regime or the speed by > 30 %% (many more runs)")
+    single_opts.add_argument("--edge-params", default=None, metavar="LIST",
+                             help="with --edges: the parameters to perturb, comma-separated (drive = tray "
+                                  "amplitude or PZT voltage; default: drive, the Monte Carlo table's keys "
+                                  "and modal_participation)")
 
     shaker = sub.add_parser("shaker", parents=[common, run_opts, single_opts],
                             help="one run on a vertically vibrating tray")
@@ -121,6 +130,10 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     md.add_argument("--params", metavar="NAME|FILE",
                     help="robot parameters: a preset (published, paper) or a TOML file; default: published")
     md.add_argument("--max-hz", default="5000", metavar="HZ", help="highest frequency listed (default 5000)")
+
+    from labkit.commands.simulate_regime import add_regime_map
+
+    add_regime_map(sub, common, pclass)
 
     sc = sub.add_parser("scenario", parents=[common], help="run a named scenario of the paper (makes a figure)")
     sc.add_argument("name", choices=list(SCENARIO_NAMES),
@@ -210,6 +223,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         return _run_sweep(args)
     if args.sim_command == "modes":
         return _run_modes(args)
+    if args.sim_command == "regime-map":
+        from labkit.commands.simulate_regime import run_regime_map
+
+        return run_regime_map(args)
     return _run_scenario(args)
 
 
@@ -256,6 +273,9 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     height_um = None if height is None else number(height, "--start-height-um", positive=True)
     check_outputs([args.out], force=args.force, suffixes=H5_SUFFIXES)       # before simulating
     scenario = _scenario_from(kind, values)
+    from labkit.commands.simulate_regime import add_regime, edge_keys_of
+
+    edge_keys = edge_keys_of(args, params, scenario)                        # before simulating
     dt_s = None
     if getattr(args, "dt_s", None) is not None:
         from labkit.sim.core import align_dt
@@ -277,9 +297,11 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
         summary.setdefault(key, value)
     if check is not None:
         summary["dt_check"] = check
+    add_regime(summary, r, params, scenario, duration_s, seed, args, edge_keys)
     if args.out:
         with atomic_output(args.out) as tmp:
             r.to_h5(tmp)
+            _write_regime(tmp, summary)
         summary["out"] = str(args.out)
     if not args.json:
         _print_single(summary)
@@ -408,8 +430,24 @@ def _run_scenario(args: argparse.Namespace) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- text output
 
+def _write_regime(path: Any, summary: dict[str, Any]) -> None:
+    """The run's regime (and edges, when searched) as ``regime_json`` / ``edges_json`` in its file."""
+    import h5py
+
+    from labkit.h5io import put_json
+
+    with h5py.File(path, "a") as f:
+        for key in ("regime", "edges"):
+            if key in summary:
+                put_json(f, f"{key}_json", summary[key])
+
+
 def _print_single(s: dict[str, Any]) -> None:
     print(f"{s['kind']} run, {s['duration_s']:g} s: mean speed {s['mean_speed_mm_s']:.3f} mm/s")
+    if "regime" in s:
+        print(f"  regime: {s['regime']['text']}")
+        for line in (s.get("edges") or {}).get("lines", []):
+            print(f"  {line}")
     print("  patterns: " + ", ".join(s["patterns"]))
     print("  impacts:  " + ", ".join(str(i) for i in s["impacts"]))
     v = s.get("validity")
