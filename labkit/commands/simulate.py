@@ -274,6 +274,7 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     check_outputs([args.out], force=args.force, suffixes=H5_SUFFIXES)       # before simulating
     scenario = _scenario_from(kind, values)
     from labkit.commands.simulate_regime import add_regime, edge_keys_of
+    from labkit.sim.regime import RunTask
 
     edge_keys = edge_keys_of(args, params, scenario)                        # before simulating
     dt_s = None
@@ -297,7 +298,7 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
         summary.setdefault(key, value)
     if check is not None:
         summary["dt_check"] = check
-    add_regime(summary, r, params, scenario, duration_s, seed, args, edge_keys)
+    add_regime(summary, r, RunTask(params, scenario, duration_s, seed), args, edge_keys)
     if args.out:
         with atomic_output(args.out) as tmp:
             r.to_h5(tmp)

@@ -4,10 +4,13 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from labkit.errors import InputError
 from labkit.outputs import atomic_outputs, check_outputs
+
+if TYPE_CHECKING:
+    from labkit.sim.regime import RunTask
 
 MAP_SUFFIXES = (".h5", ".hdf5", ".csv")
 FIGURE_SUFFIXES = (".png", ".svg")
@@ -48,7 +51,7 @@ def _axis(text: str | None, default: str, option: str) -> list[float]:
 def run_regime_map(args: argparse.Namespace) -> dict[str, Any]:
     """Check every input, run the map, write its file and figure."""
     from labkit.commands.simulate import OPTION_KEYS, integer, load_params, number
-    from labkit.sim.regime import regime_map
+    from labkit.sim.regime import Grid, Runs, regime_map
 
     kind = args.kind
     other = "pzt" if kind == "shaker" else "shaker"
@@ -65,8 +68,8 @@ def run_regime_map(args: argparse.Namespace) -> dict[str, Any]:
     check_outputs([args.out], force=args.force, suffixes=MAP_SUFFIXES)
     check_outputs([args.figure], force=args.force, key="--figure", suffixes=FIGURE_SUFFIXES)
     params = load_params(args.params)
-    m = regime_map(params, kind, freqs, levels, duration_s=duration_s, seed=seed, mass_mg=mass,
-                   scheduler=args.scheduler, workers=workers, quiet=args.quiet, keys=OPTION_KEYS)
+    m = regime_map(params, Grid(kind, freqs, levels, mass),
+                   Runs(duration_s, seed, args.scheduler, workers, args.quiet, OPTION_KEYS))
     m.meta["params"] = args.params or "published"
     summary = m.summary()
     outs = [(p, w) for p, w in ((args.out, m.to_csv if str(args.out).lower().endswith(".csv") else m.to_h5),
@@ -111,10 +114,11 @@ def edge_keys_of(args: argparse.Namespace, params: Any, scenario: Any) -> list[s
     return keys
 
 
-def add_regime(summary: dict[str, Any], r: Any, params: Any, scenario: Any, duration_s: float, seed: int,
-               args: argparse.Namespace, keys: list[str] | None = None) -> None:
-    """The run's regime into its summary, and with ``--edges`` its distance to every edge in ``keys``."""
-    from labkit.sim.regime import classify_regime, find_edges
+def add_regime(summary: dict[str, Any], r: Any, task: RunTask, args: argparse.Namespace,
+               keys: list[str] | None = None) -> None:
+    """The run's regime into its summary, and with ``--edges`` its distance to every edge in ``keys``
+    (``task``: the run's robot, drive, duration and seed)."""
+    from labkit.sim.regime import EdgeSearch, Runs, classify_regime, find_edges
 
     reg = classify_regime(r)
     summary["regime"] = {**reg.to_dict(), "text": reg.text()}
@@ -123,6 +127,6 @@ def add_regime(summary: dict[str, Any], r: Any, params: Any, scenario: Any, dura
 
         # the edge runs start at rest at the default step: a run that did not is re-run that way first
         plain = getattr(args, "dt_s", None) is None and getattr(args, "start_height_um", None) is None
-        summary["edges"] = find_edges(params, scenario, duration_s=duration_s, seed=seed, keys=keys,
-                                      base=reg if plain else None, quiet=args.quiet,
-                                      bound_keys=OPTION_KEYS).to_dict()
+        runs = Runs(task.duration_s, task.seed, quiet=args.quiet, bound_keys=OPTION_KEYS)
+        summary["edges"] = find_edges(task.params, task.scenario, runs, EdgeSearch(keys=keys),
+                                      base=reg if plain else None).to_dict()

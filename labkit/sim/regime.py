@@ -179,6 +179,60 @@ class RunTask:
     seed: int
 
 
+@dataclass(frozen=True)
+class Runs:
+    """How every run of a map or an edge search is made, and where the runs go.
+
+    ``scheduler``, ``workers`` and ``quiet`` are passed to :func:`labkit.executor.map_tasks`
+    (local processes, ``"serial"`` or Dask); ``bound_keys`` names the fields in the bounds'
+    messages (:func:`labkit.sim.core.check_run`).
+    """
+
+    duration_s: float = 0.5
+    seed: int = 0
+    scheduler: str | None = None
+    workers: int | None = None
+    quiet: bool = True
+    bound_keys: dict[str, str] | None = None
+
+    def task(self, params: RobotParams, scenario: Shaker | PZT, seed_offset: int = 0) -> RunTask:
+        return RunTask(params, scenario, float(self.duration_s), int(self.seed) + seed_offset)
+
+    def check(self, params: RobotParams, scenario: Shaker | PZT) -> None:
+        """Refuse a run the simulator would refuse (InputError naming the bound), before any starts."""
+        from labkit.sim.core import check_run
+
+        check_run(params, scenario, self.duration_s, keys=self.bound_keys)
+
+    def run_all(self, tasks: list[RunTask], desc: str) -> list[Regime]:
+        from labkit.executor import map_tasks
+
+        feats = map_tasks(run_features, tasks, scheduler=self.scheduler, workers=self.workers, desc=desc,
+                          quiet=self.quiet)
+        return [classify_regime(f) for f in feats]
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A regime map's grid: ``kind`` ``"shaker"`` (level = tray amplitude, um) or ``"pzt"`` (level =
+    square-wave voltage, V; ``mass_mg`` the robot's total mass with payload, ``None``: its own)."""
+
+    kind: str
+    freq_hz: Sequence[float]
+    level: Sequence[float]
+    mass_mg: float | None = None
+
+
+@dataclass(frozen=True)
+class EdgeSearch:
+    """What an edge search perturbs and how finely (see :func:`find_edges`)."""
+
+    keys: Sequence[str] | None = None
+    steps: Sequence[float] = EDGE_STEPS
+    bisections: int = EDGE_BISECTIONS
+    seed_checks: int = SEED_CHECKS
+
+
 def run_features(task: RunTask) -> RunFeatures:
     """Simulate one task and keep its features (module level: the executor pickles it by reference)."""
     from labkit.sim import simulate
@@ -186,18 +240,6 @@ def run_features(task: RunTask) -> RunFeatures:
     return RunFeatures.of(simulate(task.params, task.scenario, duration_s=task.duration_s, seed=task.seed))
 
 
-def _run_all(tasks: list[RunTask], scheduler: str | None, workers: int | None, desc: str,
-             quiet: bool) -> list[Regime]:
-    from labkit.executor import map_tasks
-
-    feats = map_tasks(run_features, tasks, scheduler=scheduler, workers=workers, desc=desc, quiet=quiet)
-    return [classify_regime(f) for f in feats]
-
-
-def _check(params: RobotParams, scenario: Shaker | PZT, duration_s: float, keys: dict[str, str] | None) -> None:
-    from labkit.sim.core import check_run
-
-    check_run(params, scenario, duration_s, keys=keys)
 
 
 # --------------------------------------------------------------------------- regime map
@@ -299,30 +341,19 @@ class RegimeMap:
         ax.set_title("gait regime (cells: mean speed, mm/s)", fontsize=9, loc="left")
 
 
-def regime_map(params: RobotParams, kind: str, freq_hz: Sequence[float], level: Sequence[float], *,
-               duration_s: float = 0.5, seed: int = 0, mass_mg: float | None = None,
-               scheduler: str | None = None, workers: int | None = None, quiet: bool = True,
-               keys: dict[str, str] | None = None) -> RegimeMap:
-    """Classify a run at every (frequency, level) point.
+def regime_map(params: RobotParams, grid: Grid, runs: Runs = Runs()) -> RegimeMap:
+    """Classify a run at every (frequency, level) point of ``grid``, each made as ``runs`` says.
 
-    Parameters
-    ----------
-    params:
-        The robot.
-    kind:
-        ``"shaker"`` (level = tray amplitude, um) or ``"pzt"`` (level = square-wave voltage, V).
-    freq_hz, level:
-        The grid's axes.
-    duration_s, seed:
-        Of every run.
-    mass_mg:
-        PZT only: the robot's total mass with payload (``None``: its own).
-    scheduler, workers, quiet:
-        Passed to :func:`labkit.executor.map_tasks` (local processes, ``"serial"`` or Dask).
-    keys:
-        Names of the fields in the bounds' messages (:func:`labkit.sim.core.check_run`).
+    Examples
+    --------
+    >>> m = regime_map(RobotParams(), Grid("shaker", [200, 240], [5, 25]), Runs(duration_s=0.2))  # doctest: +SKIP
+    >>> m.regimes.shape                                                                              # doctest: +SKIP
+    (2, 2)
     """
     from labkit.sim.excitation import PZT, Shaker
+
+    kind, freq_hz, level, mass_mg = grid.kind, grid.freq_hz, grid.level, grid.mass_mg
+    duration_s, seed = runs.duration_s, runs.seed
 
     if kind not in ("shaker", "pzt"):
         raise InputError(f"unknown drive {kind!r}", key="kind", expected="shaker or pzt")
@@ -334,10 +365,10 @@ def regime_map(params: RobotParams, kind: str, freq_hz: Sequence[float], level: 
     def scenario(f: float, v: float) -> Shaker | PZT:
         return Shaker(freq_hz=f, amp_um=v) if kind == "shaker" else PZT(freq_hz=f, voltage_v=v, mass_mg=mass_mg)
 
-    tasks = [RunTask(params, scenario(float(f), float(v)), float(duration_s), int(seed)) for f in fs for v in ls]
+    tasks = [runs.task(params, scenario(float(f), float(v))) for f in fs for v in ls]
     for t in tasks:
-        _check(t.params, t.scenario, t.duration_s, keys)      # every point, before any process starts
-    regs = _run_all(tasks, scheduler, workers, "regime map", quiet)
+        runs.check(t.params, t.scenario)          # every point, before any process starts
+    regs = runs.run_all(tasks, "regime map")
     shape = (fs.size, ls.size)
     meta = {"duration_s": float(duration_s), "seed": int(seed), "mass_mg": mass_mg, "g_m_s2": float(params.g_m_s2),
             "still_speed_mm_s": STILL_SPEED_MM_S, "still_motion_um": STILL_MOTION_UM, "min_feet": MIN_FEET,
@@ -471,12 +502,8 @@ class EdgeReport:
                 "edges": [e.to_dict() for e in self.edges], "meta": self.meta}
 
 
-def find_edges(params: RobotParams, scenario: Shaker | PZT, *, duration_s: float = 2.0, seed: int = 0,
-               keys: Sequence[str] | None = None, steps: Sequence[float] = EDGE_STEPS,
-               bisections: int = EDGE_BISECTIONS, base: Regime | None = None, seed_checks: int = SEED_CHECKS,
-               scheduler: str | None = None,
-               workers: int | None = None, quiet: bool = True,
-               bound_keys: dict[str, str] | None = None) -> EdgeReport:
+def find_edges(params: RobotParams, scenario: Shaker | PZT, runs: Runs = Runs(duration_s=2.0),
+               search: EdgeSearch = EdgeSearch(), base: Regime | None = None) -> EdgeReport:
     """The smallest relative change of each parameter that changes the run's regime or moves its
     speed by more than :data:`SPEED_CHANGE_REL` (:func:`changed`).
 
@@ -488,66 +515,71 @@ def find_edges(params: RobotParams, scenario: Shaker | PZT, *, duration_s: float
     ----------
     params, scenario:
         The run.
-    duration_s, seed:
-        Of the base run and every perturbed one.
-    keys:
-        Parameters to perturb (default :func:`edge_keys`; :data:`DRIVE_KEY` is the tray amplitude
-        or the PZT voltage).
-    steps:
-        Increasing relative changes (0.02 = 2 %).
+    runs:
+        Duration and seed of the base run and of every perturbed one, and where they run.
+    search:
+        ``keys``: parameters to perturb (default :func:`edge_keys`; :data:`DRIVE_KEY` is the tray
+        amplitude or the PZT voltage); ``steps``: increasing relative changes (0.02 = 2 %);
+        ``bisections``; ``seed_checks``: the base run is repeated with this many other seeds
+        (``seed + 1``, ...): when one of them is across an edge from it,
+        :attr:`EdgeReport.resolved` is false (the run's own spread).
     base:
         The base run's regime if already known (else it is simulated first).
-    seed_checks:
-        The base run is repeated with this many other seeds (``seed + 1``, ...): when one of them is
-        across an edge from it, :attr:`EdgeReport.resolved` is false (the run's own spread).
-    scheduler, workers, quiet:
-        Passed to :func:`labkit.executor.map_tasks`.
-    bound_keys:
-        Names of the fields in the bounds' messages (:func:`labkit.sim.core.check_run`).
     """
-    steps = tuple(float(s) for s in steps)
+    duration_s, seed, keys, bisections = runs.duration_s, runs.seed, search.keys, search.bisections
+    steps = tuple(float(s) for s in search.steps)
     if not steps or any(not 0 < s < 1 for s in steps) or list(steps) != sorted(steps):
         raise InputError(f"bad steps {steps}", key="steps", expected="increasing relative changes in (0, 1)")
     keys = tuple(edge_keys(params) if keys is None else keys)
     for k in keys:
         if k != DRIVE_KEY:
             scaled(params, scenario, k, 1.0)        # ConfigError naming an unknown key, before any run
-    _check(params, scenario, duration_s, bound_keys)
+    runs.check(params, scenario)
     first = 0 if base is None else 1
-    runs = [RunTask(params, scenario, duration_s, seed + k) for k in range(first, 1 + int(seed_checks))]
-    regs = _run_all(runs, scheduler, workers, "base run", quiet)
+    regs = runs.run_all([runs.task(params, scenario, k) for k in range(first, 1 + int(search.seed_checks))],
+                        "base run")
     base = regs.pop(0) if base is None else base
     edges = [Edge(k, d) for k in keys for d in (1, -1)]
+    at = _Probe(params, scenario, runs, base)
     for step in steps:
-        _probe(edges, [(e, step) for e in edges if e.within is None and not e.note], params, scenario,
-               duration_s, seed, base, (scheduler, workers, quiet, bound_keys))
+        at.probe(edges, [(e, step) for e in edges if e.within is None and not e.note])
     for _ in range(int(bisections)):
-        _probe(edges, [(e, 0.5 * (e.clear + e.within)) for e in edges if e.within is not None], params, scenario,
-               duration_s, seed, base, (scheduler, workers, quiet, bound_keys))
+        at.probe(edges, [(e, 0.5 * (e.clear + e.within)) for e in edges if e.within is not None])
     meta = {"duration_s": float(duration_s), "seed": int(seed), "scenario": scenario.to_dict(),
             "speed_change_rel": SPEED_CHANGE_REL, "speed_change_abs_mm_s": SPEED_CHANGE_ABS_MM_S,
             "bisections": int(bisections)}
     return EdgeReport(base, edges, steps, meta, seed_runs=regs)
 
 
-def _probe(edges: list[Edge], todo: list[tuple[Edge, float]], params: RobotParams, scenario: Shaker | PZT,
-           duration_s: float, seed: int, base: Regime, run_opts: tuple) -> None:
-    """Run every (edge, relative change) of ``todo`` in one batch and move each bracket."""
-    scheduler, workers, quiet, bound_keys = run_opts
-    tasks, owners = [], []
-    for e, x in todo:
-        run = scaled(params, scenario, e.key, 1.0 + e.direction * x)
-        if run is None:
-            e.note = "bound"
-            continue
-        try:
-            _check(run[0], run[1], duration_s, bound_keys)
-        except InputError:
-            e.note = "bound"          # beyond what the simulator accepts (amplitude, acceleration)
-            continue
-        tasks.append(RunTask(run[0], run[1], duration_s, seed))
-        owners.append((e, x))
-    for (e, x), reg in zip(owners, _run_all(tasks, scheduler, workers, "edges", quiet)):
+@dataclass(frozen=True)
+class _Probe:
+    """The base run an edge search perturbs."""
+
+    params: RobotParams
+    scenario: Shaker | PZT
+    runs: Runs
+    base: Regime
+
+    def probe(self, edges: list[Edge], todo: list[tuple[Edge, float]]) -> None:
+        """Run every (edge, relative change) of ``todo`` in one batch and move each bracket."""
+        tasks, owners = [], []
+        for e, x in todo:
+            run = scaled(self.params, self.scenario, e.key, 1.0 + e.direction * x)
+            if run is None:
+                e.note = "bound"
+                continue
+            try:
+                self.runs.check(run[0], run[1])
+            except InputError:
+                e.note = "bound"          # beyond what the simulator accepts (amplitude, acceleration)
+                continue
+            tasks.append(self.runs.task(run[0], run[1]))
+            owners.append((e, x))
+        _move_brackets(owners, self.runs.run_all(tasks, "edges"), self.base)
+
+
+def _move_brackets(owners: list[tuple[Edge, float]], regs: list[Regime], base: Regime) -> None:
+    for (e, x), reg in zip(owners, regs):
         if changed(base, reg):
             e.within, e.regime, e.speed_mm_s = x, reg.regime, reg.speed_mm_s
         else:

@@ -19,7 +19,10 @@ from labkit.sim.presets import load
 from labkit.sim.regime import (
     DRIVE_KEY,
     STILL_MOTION_UM,
+    EdgeSearch,
+    Grid,
     RunFeatures,
+    Runs,
     changed,
     classify_regime,
     find_edges,
@@ -81,7 +84,7 @@ def test_map_boundary_is_the_lift_off_line():
     """Stiff legs, no adhesion: the feet leave where (2 pi f)^2 A = g and nowhere else on the grid."""
     p = _stiff(c_ad_n=0.0, c_ad_t_n_s=0.0)
     freqs, amps = [100.0, 141.4], [10.0, 20.0, 30.0]
-    m = regime_map(p, "shaker", freqs, amps, duration_s=0.1, workers=2)
+    m = regime_map(p, Grid("shaker", freqs, amps), Runs(duration_s=0.1, workers=2))
     for i, f in enumerate(freqs):
         for j, a in enumerate(amps):
             lifts = (2 * math.pi * f) ** 2 * a * 1e-6 > p.g_m_s2
@@ -100,8 +103,8 @@ def test_edges_find_planted_boundaries():
     way (a smaller tray or a stronger g keeps every foot down), none in an adhesion of 0."""
     f = 100.0
     p = _stiff(c_ad_n=0.0, c_ad_t_n_s=0.0)
-    rep = find_edges(p, Shaker(f, _lift_amp_um(p, f) / 1.03), duration_s=0.1,
-                     keys=(DRIVE_KEY, "g_m_s2", "c_ad_n"), workers=2)
+    rep = find_edges(p, Shaker(f, _lift_amp_um(p, f) / 1.03), Runs(duration_s=0.1, workers=2),
+                     EdgeSearch(keys=(DRIVE_KEY, "g_m_s2", "c_ad_n")))
     assert rep.base.regime == "still" and rep.resolved
     assert [r.regime for r in rep.seed_runs] == ["still", "still"]       # seeds 1 and 2: no spread
     by = {(e.key, e.direction): e for e in rep.edges}
