@@ -69,11 +69,25 @@ def _ri(a: np.ndarray) -> np.ndarray:
     return np.concatenate([a.real, a.imag])
 
 
+def _same_grid(channels: Sequence[Channel]) -> bool:
+    """True when every channel has the first one's lines (then the pole terms are computed once)."""
+    if not channels:
+        return False
+    w0 = channels[0].w
+    return all(c.w is w0 or (c.w.shape == w0.shape and np.array_equal(c.w, w0)) for c in channels)
+
+
 def residues_ls(channels: Sequence[Channel], lam: np.ndarray, powers: Sequence[int]) -> list[np.ndarray]:
     """Linear least-squares residues and residual terms per channel for fixed poles."""
     out = []
+    shared = basis(channels[0].w, lam, powers) if channels and _same_grid(channels) else None
+    if shared is not None and all(np.all(c.weight == c.weight[0]) for c in channels):
+        # A weight constant over the lines scales both sides: one solve for all channels.
+        rhs = np.column_stack([_ri(c.H) for c in channels])
+        p, *_ = np.linalg.lstsq(np.vstack([shared.real, shared.imag]), rhs, rcond=None)
+        return [p[:, k].copy() for k in range(len(channels))]
     for ch in channels:
-        B = basis(ch.w, lam, powers) * ch.weight[:, None]
+        B = (basis(ch.w, lam, powers) if shared is None else shared) * ch.weight[:, None]
         p, *_ = np.linalg.lstsq(np.vstack([B.real, B.imag]), _ri(ch.H * ch.weight), rcond=None)
         out.append(p)
     return out
@@ -117,22 +131,28 @@ def _channel_terms(theta, channels, m, powers, want_jac=True):
     dlam_df = 2 * np.pi * (-z + 1j * sq)
     dlam_dz = wn * (-1 - 1j * z / sq)
     out = []
+    shared = _same_grid(channels)             # common lines: the pole terms once, not per channel
     for k, ch in enumerate(channels):
-        B, E, F = _basis_ef(ch.w, lam, powers)
+        if k == 0 or not shared:
+            B, E, F = _basis_ef(ch.w, lam, powers)
+            E2, F2 = (E * E, F * F) if want_jac else (E, F)
         p = lins[k]
         r = (B @ p - ch.H) * ch.weight
         if not want_jac:
             out.append((r, None, None))
             continue
-        E2 = E * E
-        F2 = F * F
         R = p[0:2 * m:2] + 1j * p[1:2 * m:2]
-        dH_dlam = E2 * R[None, :]
-        dH_dlamc = F2 * np.conj(R)[None, :]
+        # dH/df = E^2 R dlam/df + F^2 conj(R dlam/df) (likewise for zeta); a weight constant over the
+        # lines is folded into the m coefficients instead of multiplying the N x m blocks
+        wt = ch.weight
+        c = float(wt[0]) if np.all(wt == wt[0]) else 1.0
         Jp = np.empty((ch.w.size, 2 * m), dtype=complex)
-        Jp[:, 0::2] = dH_dlam * dlam_df + dH_dlamc * np.conj(dlam_df)
-        Jp[:, 1::2] = dH_dlam * dlam_dz + dH_dlamc * np.conj(dlam_dz)
-        out.append((r, Jp * ch.weight[:, None], B * ch.weight[:, None]))
+        for col, dlam in ((0, dlam_df), (1, dlam_dz)):
+            a = c * R * dlam
+            Jp[:, col::2] = E2 * a + F2 * np.conj(a)
+        if c == 1.0 and not np.all(wt == 1.0):
+            Jp *= wt[:, None]
+        out.append((r, Jp, B * wt[:, None]))
     return out
 
 

@@ -6,7 +6,7 @@ integers.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -379,6 +379,8 @@ class StaticScene:
     objects: np.ndarray | None        # static dark objects inside the frame (dust), grown by a margin
     object_boxes: list[tuple[int, int, int, int]]   # (x, y, w, h) of each static object
     samples: int = 0
+    overlays: np.ndarray | None = None  # burnt-in text (timestamps, a scale bar's label), grown by a margin
+    overlay_boxes: list[tuple[int, int, int, int]] = field(default_factory=list)
 
 
 def background_model(samples: list[np.ndarray], seg: Segmentation | None = None, grow_px: int = 8,
@@ -474,7 +476,8 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     # the static scene's brightness B: each pixel's mean over the samples where nothing moving is
     # dark within grow_px (static structure -- rim, dust, texture, the ring light's shape -- stays in
     # it); each sample scaled to a common brightness first (flicker)
-    static = rim | (objects > 0)
+    ov_m, ov_boxes = burnt_in_overlays(ratios, thr, seg.body_width_px, rim_keep)
+    static = rim | (objects > 0) | (ov_m if ov_m is not None else False)
     gains = np.array([float(np.median(smp[::4, ::4])) for smp in samples])
     gains /= np.median(gains)
     total = np.zeros((h, w), np.float32)
@@ -516,4 +519,61 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     rim_m = cv2.dilate(rim.view(np.uint8), _square(1)).astype(bool) if rim.any() else None
     # static objects grown by the measuring band, so the robot passing by is cut off them
     obj_m = cv2.dilate(objects, _square(3)).astype(bool) if boxes else None
-    return StaticScene(rim_m, flat, noise, obj_m, boxes, len(samples))
+    return StaticScene(rim_m, flat, noise, obj_m, boxes, len(samples), ov_m, ov_boxes)
+
+
+def burnt_in_overlays(ratios: list[np.ndarray], thr: float, body_width_px: float, keep: np.ndarray | None = None
+                      ) -> tuple[np.ndarray | None, list[tuple[int, int, int, int]]]:
+    """Text burnt into every frame (a timestamp, a scale bar's label): mask and boxes (x, y, w, h).
+
+    ``ratios``: sample frames relative to their smooth background. High-contrast marks
+    (darker or brighter than the tray by ``max(3 thr, 0.2)``) are grown by a third of the
+    body's width (3 to 8 px) up and down and three times that sideways, so a line of characters
+    becomes one block. A block that is there in
+    every sample, covers at least 60 % of everything marked around it over the samples
+    (it does not move; a timestamp's changing digits stay inside it) and holds, in most
+    samples, at least four separate marks in a row at least 2.5 times as wide as high, is
+    text: its characters may change from frame to frame, one of them may be as dark and
+    as large as the robot, and it is masked. A robot, even a still one, is one mark; a
+    static dark object alone is left to the dust rule of :func:`background_model`. ``keep``
+    (uint8, 1 = may be marked) leaves the tray's rim out. Most clips have no overlay: the
+    samples' blocks are intersected first and the search stops as soon as nothing is left.
+    """
+    import cv2
+
+    if len(ratios) < 5:
+        return None, []
+    t = max(3 * thr, 0.2)
+    g = int(np.clip(body_width_px // 3, 3, 8))         # text's gaps are a few pixels, whatever the robot's size
+    grow = np.ones((2 * g + 1, 6 * g + 1), np.uint8)     # wider than high: a line of text, gaps between words
+
+    def marked(r: np.ndarray) -> np.ndarray:
+        m = np.asarray((r < 1 - t) | (r > 1 + t), np.uint8)
+        return m if keep is None else m & keep
+
+    inter = np.ones(ratios[0].shape, np.uint8)
+    for r in ratios:
+        inter &= np.asarray(cv2.dilate(marked(r), grow), np.uint8)
+        if not inter.any():
+            return None, []
+    marks = [marked(r) for r in ratios]
+    union = np.zeros_like(inter)
+    for m in marks:
+        union |= np.asarray(cv2.dilate(m, grow), np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(inter, connectivity=8)
+    mask = np.zeros(inter.shape, np.uint8)
+    boxes = []
+    for i in range(1, n):
+        x, y, bw, bh, area = stats[i]
+        if bw < 2.5 * bh or area < 20:
+            continue
+        sl = np.s_[y:y + bh, x:x + bw]
+        comp = np.asarray(labels[sl] == i, np.uint8)
+        if area < 0.6 * int(np.count_nonzero(union[sl])):
+            continue                                    # marked around it in some samples only: it moves
+        pieces = [cv2.connectedComponents(m[sl] & comp, connectivity=8)[0] - 1 for m in marks]
+        if np.median(pieces) < 4:
+            continue
+        mask[sl] |= comp
+        boxes.append((int(x), int(y), int(bw), int(bh)))
+    return (cv2.dilate(mask, _square(2)).astype(bool) if boxes else None), boxes

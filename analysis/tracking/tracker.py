@@ -544,6 +544,12 @@ def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str |
         with_objects = valid
         if static.objects is not None:
             valid = ~static.objects if valid is None else valid & ~static.objects
+        if static.overlays is not None:
+            valid = ~static.overlays if valid is None else valid & ~static.overlays
+            with_objects = ~static.overlays if with_objects is None else with_objects & ~static.overlays
+            warnings.append(f"{len(static.overlay_boxes)} burnt-in overlay(s) set aside (text in every frame, not "
+                            f"moving: a timestamp, a scale bar's label) at x,y,w,h "
+                            + "; ".join(",".join(str(v) for v in b) for b in static.overlay_boxes[:3]))
         if static.object_boxes:
             warnings.append(f"{len(static.object_boxes)} static dark object(s) set aside (never moved: dust, "
                             f"not the robot) at x,y,w,h " + "; ".join(",".join(str(v) for v in b)
