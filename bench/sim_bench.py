@@ -153,11 +153,11 @@ def main() -> None:
     out["jit_warm_first_call_s"] = round(warm["first_call_s"], 3)
     out["import_labkit_sim_s"] = round(warm["import_s"], 3)
 
-    # --- kernel, warm
-    simulate(params, sc, duration_s=0.01)
+    # --- kernel, warm (one run: the step's error control off)
+    simulate(params, sc, duration_s=0.01, error_control="off")
     dur = 0.5 if args.quick else 1.0
     c0, w0 = time.process_time(), time.perf_counter()
-    r = simulate(params, sc, duration_s=dur)
+    r = simulate(params, sc, duration_s=dur, error_control="off")
     c1, w1 = time.process_time(), time.perf_counter()
     kernel_us = (c1 - c0) / r.n_steps * 1e6
     out["dt_s"] = r.dt_s
@@ -178,7 +178,8 @@ def main() -> None:
     ref_dur = 0.005 if args.quick else 0.05
     rr = simulate(params, sc, duration_s=ref_dur, engine="reference")
     ref_us = rr.wall_s / rr.n_steps * 1e6
-    same = min(simulate(params, sc, duration_s=ref_dur).wall_s for _ in range(20)) / rr.n_steps * 1e6
+    same = min(simulate(params, sc, duration_s=ref_dur, error_control="off").wall_s
+               for _ in range(20)) / rr.n_steps * 1e6
     out["reference_stretch_s"] = ref_dur
     out["reference_us_per_step"] = round(ref_us, 1)
     out["kernel_us_per_step_same_stretch"] = round(same, 3)
@@ -198,15 +199,26 @@ def main() -> None:
     probe = freqs[:: max(1, len(freqs) // 8)]
     c0 = time.process_time()
     for f in probe:
-        simulate(params, Shaker(float(f), sc.amp_um), duration_s=sdur)
+        simulate(params, Shaker(float(f), sc.amp_um), duration_s=sdur, error_control="off")
     cpu_per_run = (time.process_time() - c0) / len(probe)
+    # the sweep's error control: the nominal robot at every point checks its step (4 runs'
+    # worth when it passes, more where it refines or is chaotic), and the draws of the
+    # points it refined are rerun at its step (docs/model.md, "Error control and validity")
+    c0 = time.process_time()
+    for f in probe:
+        simulate(params, Shaker(float(f), sc.amp_um), duration_s=sdur)
+    cpu_per_checked = (time.process_time() - c0) / len(probe)
     runs = len(freqs) * draws
+    status = [str(x) for x in s.convergence[:, 0]] if s.convergence is not None else []
     out["sweep"] = {"points": len(freqs), "freq_hz": [float(freqs[0]), float(freqs[-1])], "draws": draws,
                     "duration_s": sdur, "workers": 2, "runs": runs, "wall_s": round(sweep_wall, 2),
                     "full_size": not args.quick, "loadavg_1min_before": round(load_before, 2),
                     "cpu_s_per_run_estimate": round(cpu_per_run, 4),
-                    "cpu_s_total_estimate": round(cpu_per_run * runs, 1),
-                    "wall_s_on_2_idle_cores_estimate": round(cpu_per_run * runs / 2, 1),
+                    "cpu_s_per_checked_run_estimate": round(cpu_per_checked, 4),
+                    "nominal_status": {k: status.count(k) for k in sorted(set(status))},
+                    "cpu_s_total_estimate": round(cpu_per_run * (runs - len(freqs)) + cpu_per_checked * len(freqs), 1),
+                    "wall_s_on_2_idle_cores_estimate": round((cpu_per_run * (runs - len(freqs))
+                                                              + cpu_per_checked * len(freqs)) / 2, 1),
                     "target_wall_s": 40.0,
                     "mean_speed_mm_s_at_first_point": round(float(s.mean_speed_mm_s[0]), 3)}
     print(json.dumps(out))

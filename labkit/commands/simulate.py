@@ -457,6 +457,12 @@ def _print_single(s: dict[str, Any]) -> None:
                                 "LEFT the model's assumptions: " + ", ".join(v["flags"]))
               + f" (tilt {v['max_tilt_rad']:.3g} rad, bound {v['small_angle_bound_rad']:g}; "
                 f"highest body gap {v['max_jump_um']:.4g} um)")
+    c = s.get("convergence")
+    if c is not None and c["step_error_mm_s"] is not None:
+        print(f"  step: {c['status']} at {c['dt_s']:.3g} s (default {c['default_dt_s']:.3g} s), step error "
+              f"{c['step_error_mm_s']:.3g} mm/s (tolerance {c['tolerance_mm_s']:.3g}; speeds at h, h/2 ...: "
+              + ", ".join(f"{v:.4g}" for v in c["speeds_per_step_mm_s"])
+              + f"); a start 0.05 um apart: {c['seed_spread_mm_s']:+.3g} mm/s")
     if "dt_check" in s:
         c = s["dt_check"]
         d, q = c["default"], c["quarter"]
@@ -478,6 +484,8 @@ def _print_sweep(s: dict[str, Any]) -> None:
               + (f"  {p['amp_um']:7.3g}" if amp else "")
               + (f"  quarter step {p['quarter_step_speed_mm_s']:.3f} mm/s"
                  f" ({'converged' if p['dt_converged'] else 'NOT converged'})" if "dt_converged" in p else "")
-              + ("  flags: " + ", ".join(f"{k} x{n}" for k, n in p["flags"].items()) if p.get("flags") else ""))
+              + ("  flags: " + ", ".join(f"{k} x{n}" for k, n in p["flags"].items()) if p.get("flags") else "")
+              + ("  step: " + ", ".join(f"{k} x{n}" for k, n in p["convergence"].items())
+                 if p.get("convergence") else ""))
     if "out" in s:
         print(f"  wrote {s['out']}")

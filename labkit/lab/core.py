@@ -159,7 +159,8 @@ class VirtualLab:
         ``(t_s, instrument, kind, text)`` since the lab started: ``kind`` is
         ``"rx"`` (a line received), ``"tx"`` (a reply sent; binary blocks
         summarised), ``"fault"`` (an injected fault acted), ``"state"`` (spot,
-        set-up, camera) or ``"error"`` (a simulation failed).
+        set-up, camera), ``"error"`` (a simulation failed) or ``"warning"`` (a simulation
+        chaotic or not converged).
     burst_timeline:
         ``(start_s, instrument, channel, end_s)`` of every triggered (BUS, EXT)
         burst: ``end_s`` is when the output fell silent by itself after its
@@ -580,6 +581,10 @@ class VirtualLab:
             except Exception as exc:  # the instrument side keeps working; the log says why
                 self._log("lab", "error", f"simulate failed at {key}: {type(exc).__name__}: {exc}")
                 return None
+            if res.convergence is not None and res.convergence.status in ("chaotic", "not_converged"):
+                # every run checks its step (docs/model.md, "Error control and validity"); say when it could not
+                self._log("lab", "warning", f"simulation at {key}: {res.convergence.status} "
+                                            f"(step {res.dt_s:.3g} s)")
             self._sim_cache[key] = res
             while len(self._sim_cache) > 32:
                 self._sim_cache.popitem(last=False)

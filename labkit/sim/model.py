@@ -16,11 +16,11 @@ z_b'^2) + 1/2 sum I phi'^2 + sum_ij 1/2 M_i |r_att,j' + C_i x_ij'|^2``. Hence on
 constant symmetric positive definite mass matrix ``M = diag(m_b, m_b, I_x,
 I_y, I_z, 0...) + sum_ij M_i U_ij^T U_ij`` with ``U_ij = [A_j | C_i e_ij^T]``
 (``A_j`` the attachment's 2x5 kinematic matrix). The robot's rigid-body mass is
-``m_b + sum M_i`` (0.355 mg for the defaults: three modes of half a leg's mass each). The leg's base excitation
-by the body's acceleration and its reaction on the body are the two
-off-diagonal blocks of the same matrix, so they are consistent by
-construction, and with no external force every linear and angular momentum
-``M[:5] q'`` is conserved.
+``m_b + sum M_i = mass_mg``: ``m_b`` is the rest of the robot's mass
+(``RobotParams.body_coordinate_mass_mg``). The leg's base excitation by the
+body's acceleration and its reaction on the body are the two off-diagonal
+blocks of the same matrix, so they are consistent by construction, and with
+no external force every linear and angular momentum ``M[:5] q'`` is conserved.
 
 Potential and forces (M3, M4): modal springs and dampers ``M_i k_i``,
 ``M_i b_i`` on the modal coordinates; gravity ``-g (m_b e_z + sum M_i U_ij[z])``, vertical on
@@ -34,7 +34,7 @@ Choices where model.md is silent (each a RobotParams field or named here):
   +p`` for legs 1-2, 0 for 3-4, ``-p`` for 5-6 ({1, 4, 5} is a tripod);
   ``w = leg_half_width_mm``, ``p = leg_pitch_mm``, ``z = leg_z_mm``;
 * modal mass ``M_i = modal_participation x leg mass`` (leg mass = (mass_mg -
-  body_mass_mg) / 6); a PZT payload rides on the body;
+  body_mass_mg) / 6); the body's coordinates carry the rest of ``mass_mg``; a PZT payload rides on the body;
 * one mass matrix means one effective mass per mode: ``m_imp_factor`` and
   ``m_dis_factor`` must be 1 and ``base_participation`` 0 or 1 (both mean the
   mass matrix's own coupling); ``foot_mass_fraction`` no longer enters (gravity
@@ -257,14 +257,14 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
     mg = 1e-6  # mg -> kg
     g = params.g_m_s2
     leg_mass = params.leg_mass_mg * mg
-    m_b = params.body_mass_mg * mg
+    m_b = params.body_coordinate_mass_mg * mg         # M2: the model's masses add up to mass_mg
     if isinstance(scenario, PZT) and scenario.mass_mg is not None:
         # The payload rides on the body (the legs keep their mass).
-        m_b = scenario.mass_mg * mg - 6 * leg_mass
+        m_b += (scenario.mass_mg - params.mass_mg) * mg
         if m_b <= 0:
-            raise InputError(f"total mass {scenario.mass_mg} mg is not above the legs' "
-                             f"{6 * params.leg_mass_mg:g} mg", key="mass_mg",
-                             expected=f"a number in mg, > {6 * params.leg_mass_mg:g}")
+            modal = params.mass_mg - params.body_coordinate_mass_mg
+            raise InputError(f"total mass {scenario.mass_mg} mg is not above the legs' modal masses "
+                             f"({modal:.4g} mg)", key="mass_mg", expected=f"a number in mg, > {modal:.4g}")
     L = params.body_length_mm * 1e-3
     W = params.body_width_mm * 1e-3
     # Thin plate: rotation about x (across the width) sees the length, etc.

@@ -152,6 +152,11 @@ class RobotParams:
         if self.body_mass_mg >= self.mass_mg:
             raise ConfigError(f"body mass {self.body_mass_mg} mg is not below the total {self.mass_mg} mg",
                               key="body_mass_mg", expected=f"a number in mg, < mass_mg ({self.mass_mg})")
+        if self.body_coordinate_mass_mg <= 0:
+            raise ConfigError(f"the 18 modal masses ({self.mass_mg - self.body_coordinate_mass_mg:.4g} mg) are not "
+                              f"below the total {self.mass_mg} mg", key="modal_participation",
+                              expected=f"< {self.mass_mg / (3 * (self.mass_mg - self.body_mass_mg)):.4g} "
+                                       "(mass_mg / (18 x leg mass))")
         if not any(r > 1 for r in self.ratio) or not any(r < 1 for r in self.ratio):
             raise ConfigError(f"ratios {self.ratio} need one lateral (> 1) and one vertical (< 1) mode",
                               key="ratio", expected="3 numbers > 0, at least one > 1 and one < 1")
@@ -178,6 +183,13 @@ class RobotParams:
     def vertical_mode(self) -> int:
         """Index of the first vertical mode (lowest frequency with ratio < 1)."""
         return min((i for i in range(3) if self.ratio[i] < 1), key=lambda i: self.k_per_s2[i])
+
+    @property
+    def body_coordinate_mass_mg(self) -> float:
+        """The mass the body's coordinates carry: ``mass_mg`` minus the 18 modal masses
+        (``modal_participation`` x leg mass each): the chassis plus the legs' mass that moves
+        rigidly with it, so that the model's masses add up to ``mass_mg`` (docs/model.md M2)."""
+        return self.mass_mg - 18.0 * self.modal_participation * self.leg_mass_mg
 
     @property
     def leg_mass_mg(self) -> float:

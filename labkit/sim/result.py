@@ -62,6 +62,7 @@ class Validity:
     events_lost: int = 0
     steps_event_capped: int = 0
     chaotic: bool | None = None
+    not_converged: bool = False
 
     @property
     def flags(self) -> list[str]:
@@ -81,6 +82,8 @@ class Validity:
             out.append("event_cap")
         if self.chaotic:
             out.append("chaotic")
+        if self.not_converged:
+            out.append("not_converged")
         return out
 
     def summary(self) -> dict[str, Any]:
@@ -91,7 +94,51 @@ class Validity:
                 "body_on_film_feet_up_fraction": float(self.body_on_film_feet_up_fraction),
                 "max_jump_um": float(self.max_jump_um), "jump_limit_um": float(self.jump_limit_um),
                 "events_lost": int(self.events_lost), "steps_event_capped": int(self.steps_event_capped),
-                "chaotic": self.chaotic}
+                "chaotic": self.chaotic, "not_converged": bool(self.not_converged)}
+
+
+#: Convergence statuses (:class:`Convergence`): the default step passed its check; a smaller
+#: step passed and the run was redone there; no step down to the limit passed; the run is
+#: chaotic (runs from starts 0.05 um apart differ beyond the tolerance: no single trajectory converges);
+#: no check was made (error control off, or the reference engine).
+CONVERGENCE_STATUSES = ("converged", "refined", "not_converged", "chaotic", "unchecked")
+
+
+@dataclass
+class Convergence:
+    """The step-error estimate a run carries (docs/model.md, "Error control and validity").
+
+    ``status``: one of :data:`CONVERGENCE_STATUSES`; ``dt_s``: the step of the result;
+    ``default_dt_s``: the step the control started from; ``error_mm_s``: the estimated step
+    error of the result's mean speed (twice its difference from the run at half its step;
+    NaN: unchecked); ``tolerance_mm_s``: ``max(rel |v|, abs)`` it was held to;
+    ``seed_spread_mm_s``: the speed of the run at the default step from a start 0.05 um apart
+    minus its own (the chaos probe); ``measured_s``: the time the speeds are measured over
+    (``(t_from, t_to)``: after the transient); ``halvings``: how often the step was halved;
+    ``speeds_mm_s``: the speed per step tried (default, half, quarter ...);
+    ``wall_s``: what the checks and refinements took."""
+
+    status: str
+    dt_s: float
+    default_dt_s: float
+    error_mm_s: float = math.nan
+    tolerance_mm_s: float = math.nan
+    seed_spread_mm_s: float = math.nan
+    measured_s: tuple[float, float] = (0.0, 0.0)
+    halvings: int = 0
+    speeds_mm_s: tuple[float, ...] = ()
+    wall_s: float = 0.0
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able: every figure (NaN as None)."""
+        def num(x: float) -> float | None:
+            return None if not math.isfinite(x) else float(x)
+
+        return {"status": self.status, "dt_s": float(self.dt_s), "default_dt_s": float(self.default_dt_s),
+                "step_error_mm_s": num(self.error_mm_s), "tolerance_mm_s": num(self.tolerance_mm_s),
+                "seed_spread_mm_s": num(self.seed_spread_mm_s), "measured_s": [float(x) for x in self.measured_s],
+                "halvings": int(self.halvings), "speeds_per_step_mm_s": [float(x) for x in self.speeds_mm_s],
+                "wall_s": round(float(self.wall_s), 4)}
 
 
 def validity(params: RobotParams, body_gap_um: np.ndarray, angles_rad: np.ndarray, contact: np.ndarray,
@@ -172,7 +219,8 @@ class SimResult:
     after that many drive periods; 0: it does not, :func:`foot_period`); ``patterns``
     (6 labels); ``events`` (impact log: t_s, leg (0-5, -1 body), relative
     vertical velocity before/after the map in m/s, lateral velocity after,
-    stuck flag); ``validity`` (:class:`Validity`: where the run left the model's assumptions).
+    stuck flag); ``validity`` (:class:`Validity`: where the run left the model's assumptions);
+    ``convergence`` (:class:`Convergence`: the step-error estimate and what the control did).
     """
 
     params: RobotParams
@@ -206,6 +254,7 @@ class SimResult:
     max_height_um: np.ndarray | None = None
     foot_periods: list | None = None
     validity: Validity | None = None
+    convergence: Convergence | None = None
 
     def summary(self) -> dict[str, Any]:
         """JSON-able key figures."""
@@ -230,6 +279,7 @@ class SimResult:
             "seed": self.seed,
             "ablation": self.ablation,
             "validity": None if self.validity is None else self.validity.summary(),
+            "convergence": None if self.convergence is None else self.convergence.summary(),
         }
 
     def to_h5(self, path: str | Path) -> Path:
@@ -261,6 +311,9 @@ class SimResult:
             put(f, "events", self.events, "mixed", axes="event, field",
                 columns="t_s, leg (0-5; -1 body), vrel_pre_m_s, vrel_post_m_s, vy_post_m_s, stuck")
             f.attrs["mean_speed_mm_s"] = float(self.mean_speed_mm_s)
+            if self.convergence is not None:
+                f.attrs["convergence"] = self.convergence.status
+                f.attrs["step_error_mm_s"] = float(self.convergence.error_mm_s)
             put_json(f, "patterns", list(self.patterns))
             label_dimensions(f)     # t_s as the coordinate (xarray, HDFView)
         return path

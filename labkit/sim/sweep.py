@@ -32,6 +32,8 @@ from labkit.errors import InputError
 
 #: Contact modes in the order of the last axis of ``contact_fraction``.
 CONTACT_MODES = ("air", "adhesion", "rest")
+#: A sweep's error control (:func:`sweep`): the nominal robot checked at every point, every run, none.
+ERROR_CONTROL = ("sample", "every", "off")
 #: Per-foot pattern labels (SimResult.patterns).
 PATTERNS = ("firm_contact", "partial_contact", "jumping")
 
@@ -81,6 +83,13 @@ class SweepResult:
     flags:
         Per run, the validity flags of :class:`labkit.sim.result.Validity` joined by commas
         ("" for none), shape ``(points, draws)``; the summary counts them per point.
+    convergence:
+        Per run, the step control's status (:data:`labkit.sim.result.CONVERGENCE_STATUSES`, or
+        ``sampled``: run at the step its point's nominal robot settled on), ``(points, draws)``.
+    step_error_mm_s:
+        Per run, the step-error estimate (NaN where not checked), ``(points, draws)``.
+    dt_s:
+        Per run, the step used, ``(points, draws)``.
     """
 
     quantity: str
@@ -93,6 +102,14 @@ class SweepResult:
     params_toml: str = ""
     meta: dict[str, Any] = field(default_factory=dict)
     flags: np.ndarray | None = None
+    convergence: np.ndarray | None = None
+    step_error_mm_s: np.ndarray | None = None
+    dt_s: np.ndarray | None = None
+
+    def convergence_counts(self, point: int) -> dict[str, int]:
+        """How many runs (draws) at one point ended in each step-control status."""
+        labels = [] if self.convergence is None else [str(x) for x in self.convergence[point]]
+        return {name: labels.count(name) for name in sorted(set(labels))}
 
     def flag_counts(self, point: int) -> dict[str, int]:
         """How many runs (draws) at one point left each of the model's assumptions."""
@@ -151,6 +168,10 @@ class SweepResult:
                 "patterns": self.pattern_counts(i),
                 "dominant_pattern": self.dominant_pattern(i),
                 "flags": self.flag_counts(i),
+                "convergence": self.convergence_counts(i),
+                "step_error_mm_s": None if self.step_error_mm_s is None or not np.isfinite(self.step_error_mm_s[i, 0])
+                else float(self.step_error_mm_s[i, 0]),
+                "dt_s": None if self.dt_s is None else [float(x) for x in self.dt_s[i]],
             })
             if "amp_um" in self.meta and self.quantity != "amp_um":
                 points[-1]["amp_um"] = float(self.meta["amp_um"][i])
@@ -198,6 +219,12 @@ class SweepResult:
         put(g, "impacts", self.impacts, "1", axes="point, draw, foot")
         put(g, "patterns", self.patterns.astype("S16"), "label", axes="point, draw, foot",
             labels=",".join(PATTERNS))
+        if self.convergence is not None and self.step_error_mm_s is not None and self.dt_s is not None:
+            put(g, "convergence", self.convergence.astype("S16"), "label", axes="point, draw",
+                description="step control per run: converged, refined, not_converged, chaotic, sampled, unchecked")
+            put(g, "step_error_mm_s", self.step_error_mm_s, "mm/s", axes="point, draw",
+                description="mean speed at the run's step minus at half of it over the check stretch (NaN: unchecked)")
+            put(g, "dt_s", self.dt_s, "s", axes="point, draw")
         if self.flags is not None:
             put(g, "flags", self.flags.astype("S128"), "label", axes="point, draw",
                 description="validity flags per run, comma-separated (docs/model.md, Error control and validity)")
@@ -213,7 +240,10 @@ class SweepResult:
                        patterns=f["patterns"][()].astype(str), impacts=f["impacts"][()],
                        scenario=get_json(f, "scenario_json", {}), params_toml=str(f.attrs["params_toml"]),
                        meta=get_json(f, "meta_json", {}),
-                       flags=f["flags"][()].astype(str) if "flags" in f else None)
+                       flags=f["flags"][()].astype(str) if "flags" in f else None,
+                       convergence=f["convergence"][()].astype(str) if "convergence" in f else None,
+                       step_error_mm_s=f["step_error_mm_s"][()] if "step_error_mm_s" in f else None,
+                       dt_s=f["dt_s"][()] if "dt_s" in f else None)
 
 
 # --------------------------------------------------------------------------- helpers
@@ -289,12 +319,13 @@ def _task_seed(seed: int, draw: int) -> int:
 def run_point(task: tuple) -> dict[str, Any]:
     """Run one (point, draw) task: draw the parameters, apply the value, simulate.
 
-    A module-level function so the executor can pickle it by reference.
+    A module-level function so the executor can pickle it by reference. The task's
+    ``control`` is ``simulate``'s ``error_control`` (``"check"`` or ``"off"``).
     """
     from labkit.sim import simulate
     from labkit.sim.uncertainty import draw_params
 
-    params, scenario, quantity, value, draw, seed, duration_s, table, accel_limit_g, quarter, fraction = task
+    params, scenario, quantity, value, draw, seed, duration_s, table, accel_limit_g, quarter, fraction, control = task
     task_seed = _task_seed(seed, draw)
     if draw > 0:
         params = draw_params(params, np.random.default_rng(task_seed), table)
@@ -305,7 +336,7 @@ def run_point(task: tuple) -> dict[str, Any]:
         from labkit.sim.core import align_dt, default_dt
 
         dt_s = align_dt(default_dt(params, scenario) * fraction * (0.25 if quarter else 1.0), scenario)
-    r = simulate(params, scenario, duration_s=duration_s, seed=task_seed, dt_s=dt_s)
+    r = simulate(params, scenario, duration_s=duration_s, seed=task_seed, dt_s=dt_s, error_control=control)
     return result_row(r)
 
 
@@ -317,9 +348,13 @@ def result_row(r: Any) -> dict[str, Any]:
         modes = cf[foot]
         for m, name in enumerate(CONTACT_MODES):
             frac[j, m] = float(modes.get(name, modes.get(name.upper(), 0.0)))
+    conv = getattr(r, "convergence", None)
     return {"speed_mm_s": float(r.mean_speed_mm_s), "contact_fraction": frac,
             "patterns": [str(p) for p in r.patterns], "impacts": np.asarray(r.impacts, dtype=int),
-            "flags": ",".join(r.validity.flags) if getattr(r, "validity", None) is not None else ""}
+            "flags": ",".join(r.validity.flags) if getattr(r, "validity", None) is not None else "",
+            "convergence": conv.status if conv is not None else "unchecked",
+            "step_error_mm_s": float(conv.error_mm_s) if conv is not None else float("nan"),
+            "halvings": int(conv.halvings) if conv is not None else 0, "dt_s": float(r.dt_s)}
 
 
 def _feet(cf: Any) -> list:
@@ -334,7 +369,8 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
           scheduler: str | None = None, workers: int | None = None, seed: int = 0,
           quiet: bool = False, table: dict[str, float] | None = None,
           accel_limit_g: float | None = None, dt_check: bool = False,
-          step_fraction: float = 1.0, keys: dict[str, str] | None = None) -> SweepResult:
+          step_fraction: float = 1.0, keys: dict[str, str] | None = None,
+          error_control: str = "sample") -> SweepResult:
     """Simulate ``base_scenario`` at every value of ``quantity``, with Monte Carlo draws.
 
     Parameters
@@ -382,6 +418,12 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
         check then compares with a quarter of that. ``meta["step_fraction"]``.
     keys:
         Names of the fields in the bounds' messages (:func:`labkit.sim.core.check_run`).
+    error_control:
+        ``"sample"`` (default): the nominal robot (draw 0) at every point checks its step
+        (:func:`labkit.sim.errorcontrol.control`); where it had to halve the step, the other
+        draws of that point are rerun at the step it settled on (their status ``sampled``).
+        ``"every"``: every run checks itself. ``"off"``: no check (``unchecked``).
+        ``convergence``, ``step_error_mm_s`` and ``dt_s`` of the result hold what each run did.
 
     Returns
     -------
@@ -409,41 +451,82 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
     if accel_limit_g is not None and not accel_limit_g > 0:
         raise InputError(f"acceleration limit must be > 0 g, got {accel_limit_g}", key="accel_limit_g",
                          expected="a peak acceleration in g, > 0")
+    if error_control not in ERROR_CONTROL:
+        raise InputError(f"unknown error control {error_control!r}", key="error_control",
+                         expected=", ".join(ERROR_CONTROL))
     fraction = float(step_fraction)
     check_points(params, base_scenario, quantity, grid, duration_s, accel_limit_g, fraction, keys=keys)
-    tasks: list[tuple] = [(params, base_scenario, quantity, float(v), d, int(seed), float(duration_s), table,
-                           accel_limit_g, False, fraction) for v in grid for d in range(n_draws)]
+    common = (int(seed), float(duration_s), table, accel_limit_g)
+    tasks: list[tuple] = [(params, base_scenario, quantity, float(v), d, *common, False, fraction,
+                           _control(error_control, d)) for v in grid for d in range(n_draws)]
     n_main = len(tasks)
     if dt_check:
-        tasks += [(params, base_scenario, quantity, float(v), 0, int(seed), float(duration_s), table, accel_limit_g,
-                   True, fraction) for v in grid]
+        tasks += [(params, base_scenario, quantity, float(v), 0, *common, True, fraction, "off") for v in grid]
     rows = map_tasks(run_point, tasks, scheduler=scheduler, workers=workers,
                      desc=f"sweep {quantity}", quiet=quiet)
     quarter_rows, rows = rows[n_main:], rows[:n_main]
+    if error_control == "sample" and n_draws > 1:
+        _refine_sampled(rows, tasks[:n_main], n_draws, scheduler, workers, quiet)
     shape = (len(grid), n_draws)
     speeds = np.array([r["speed_mm_s"] for r in rows]).reshape(shape)
     frac = np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, len(CONTACT_MODES)))
     patterns = np.array([r["patterns"] for r in rows], dtype=object).reshape(shape + (6,)).astype(str)
     impacts = np.array([r["impacts"] for r in rows]).reshape(shape + (6,))
     flags = np.array([r.get("flags", "") for r in rows], dtype=object).reshape(shape).astype(str)
+    conv = np.array([r["convergence"] for r in rows], dtype=object).reshape(shape).astype(str)
+    err = np.array([r["step_error_mm_s"] for r in rows], float).reshape(shape)
+    steps = np.array([r["dt_s"] for r in rows], float).reshape(shape)
     meta = {"seed": int(seed), "draws": n_draws, "duration_s": float(duration_s),
             "uncertainty_table": table, "scheduler": scheduler or "local",
             "draw_0": "nominal", "seeding": "SeedSequence([seed, draw]) per draw, same at every point",
             "task_seeds": [_task_seed(seed, d) for d in range(n_draws)]}
+    meta["error_control"] = error_control
     if fraction != 1.0:
         meta["step_fraction"] = fraction
     if dt_check:
-        from labkit.sim.core import DT_CHECK_ABS_MM_S, DT_CHECK_REL
+        from labkit.sim.errorcontrol import agree
 
         q = np.array([r["speed_mm_s"] for r in quarter_rows])
         diff = speeds[:, 0] - q
-        tol = np.maximum(DT_CHECK_REL * np.abs(q), DT_CHECK_ABS_MM_S)
         meta["dt_check"] = {"quarter_speed_mm_s": [float(x) for x in q], "difference_mm_s": [float(x) for x in diff],
-                            "converged": [bool(x) for x in np.abs(diff) <= tol]}
+                            "converged": [bool(x) for x in agree(speeds[:, 0], q)]}
     if accel_limit_g is not None and hasattr(base_scenario, "amp_um"):
         meta["accel_limit_g"] = float(accel_limit_g)
         meta["amp_um"] = [float(limit_acceleration(apply_value(params, base_scenario, quantity, v)[1],
                                                    accel_limit_g).amp_um) for v in grid]
     return SweepResult(quantity=quantity, values=grid, speeds_mm_s=speeds, contact_fraction=frac,
                        patterns=patterns, impacts=impacts, scenario=scenario_dict(base_scenario),
-                       params_toml=params.to_toml_text(), meta=meta, flags=flags)
+                       params_toml=params.to_toml_text(), meta=meta, flags=flags, convergence=conv,
+                       step_error_mm_s=err, dt_s=steps)
+
+
+def _control(mode: str, draw: int) -> str:
+    """``simulate``'s error control for one draw under a sweep's mode (:data:`ERROR_CONTROL`)."""
+    return "check" if mode == "every" or (mode == "sample" and draw == 0) else "off"
+
+
+def _refine_sampled(rows: list[dict], tasks: list[tuple], n_draws: int, scheduler: str | None,
+                    workers: int | None, quiet: bool) -> None:
+    """Sampled error control: at every point whose nominal robot was refined (it halved its
+    step and then agreed with half of it), rerun the other draws at that step (in place in
+    ``rows``); elsewhere they keep the default step. Their status: ``sampled``."""
+    redo: list[int] = []
+    for i in range(0, len(rows), n_draws):
+        nominal = rows[i]
+        for k in range(i + 1, i + n_draws):
+            rows[k]["convergence"] = "sampled"
+        if nominal["convergence"] == "refined":
+            redo += list(range(i + 1, i + n_draws))
+    if not redo:
+        return
+    from labkit.executor import map_tasks
+
+    again = []
+    for k in redo:
+        t = list(tasks[k])
+        t[10] = t[10] / 2 ** rows[k - k % n_draws]["halvings"]
+        again.append(tuple(t))
+    for k, row in zip(redo, map_tasks(run_point, again, scheduler=scheduler, workers=workers,
+                                      desc="sweep: refined points", quiet=quiet)):
+        row["convergence"] = "sampled"
+        rows[k] = row

@@ -1,4 +1,5 @@
-"""Convergence of the headline output, the mean speed: default step against a quarter step.
+"""Convergence of the headline output, the mean speed: default step against a quarter step
+(the scheme at given steps, error control off; every run's own control: test_converged_default.py).
 
 Issue 10: within 3 % (or 0.1 mm/s) for the PZT default run and shaker runs at 150,
 240, 300, 700 and 1500 Hz, for the published parameters and the documented
@@ -14,7 +15,12 @@ import numpy as np
 import pytest
 
 from labkit.sim import PZT, RobotParams, Shaker, simulate
-from labkit.sim.core import DT_CHECK_ABS_MM_S, DT_CHECK_REL, default_dt, dt_check
+from labkit.sim.core import DT_CHECK_REL, default_dt, dt_check
+
+#: The scheme's own criterion for its default step (3 % or 0.1 mm/s); every run's error control
+#: holds the stricter max(3 %, 0.02 mm/s) and halves the step where the default one misses it
+#: (the 1500 Hz run of c_ad_n = 2e-6: -1.376 / -1.333 mm/s, refined once: test_converged_default.py).
+DEFAULT_STEP_ABS_MM_S = 0.1
 
 # A 100 um foot pad (docs/model.md M7): its film holds a lifted foot within ~0.1 um of the tray,
 # the film-dominated regime these integrator checks were written for (the default 30 um pad lets
@@ -29,10 +35,10 @@ CASES = [(PUBLISHED, PZT(1800, 20.0))] + [(PUBLISHED, Shaker(f, 25.0)) for f in 
                          ids=[f"{'pub' if p is PUBLISHED else 'cad2'}-{s.kind}-{s.freq_hz:g}" for p, s in CASES])
 def test_mean_speed_default_step_against_quarter_step(params, scenario):
     dt = default_dt(params, scenario)
-    a = simulate(params, scenario, duration_s=0.3, seed=0)
-    b = simulate(params, scenario, duration_s=0.3, seed=0, dt_s=dt / 4)
+    a = simulate(params, scenario, duration_s=0.3, seed=0, error_control="off")
+    b = simulate(params, scenario, duration_s=0.3, seed=0, dt_s=dt / 4, error_control="off")
     assert a.dt_s == dt and b.dt_s == pytest.approx(dt / 4)
-    tol = max(DT_CHECK_REL * abs(b.mean_speed_mm_s), DT_CHECK_ABS_MM_S)
+    tol = max(DT_CHECK_REL * abs(b.mean_speed_mm_s), DEFAULT_STEP_ABS_MM_S)
     assert abs(a.mean_speed_mm_s - b.mean_speed_mm_s) <= tol
 
 
@@ -71,10 +77,10 @@ def test_body_landing_on_its_film_converges_at_twice_the_default_step():
     of the default step."""
     p, s = ALTERNATIVE, Shaker(300, 25.0)
     dt = default_dt(p, s)
-    a = simulate(p, s, duration_s=0.3, seed=0, dt_s=2 * dt)
-    b = simulate(p, s, duration_s=0.3, seed=0, dt_s=dt / 4)
+    a = simulate(p, s, duration_s=0.3, seed=0, dt_s=2 * dt, error_control="off")
+    b = simulate(p, s, duration_s=0.3, seed=0, dt_s=dt / 4, error_control="off")
     assert a.counters["steps_halved"] > 0
-    tol = max(DT_CHECK_REL * abs(b.mean_speed_mm_s), DT_CHECK_ABS_MM_S)
+    tol = max(DT_CHECK_REL * abs(b.mean_speed_mm_s), DEFAULT_STEP_ABS_MM_S)
     assert abs(a.mean_speed_mm_s - b.mean_speed_mm_s) <= tol
 
 
@@ -92,9 +98,9 @@ def test_high_g_runs_converge_at_the_default_step(params, scenario):
     rings (x > 2). These runs are not chaotic (seeds agree to 0.1 %), so single trajectories
     are compared."""
     dt = default_dt(params, scenario)
-    a = simulate(params, scenario, duration_s=0.3, seed=0)
-    b = simulate(params, scenario, duration_s=0.3, seed=0, dt_s=dt / 4)
-    tol = max(DT_CHECK_REL * abs(b.mean_speed_mm_s), DT_CHECK_ABS_MM_S)
+    a = simulate(params, scenario, duration_s=0.3, seed=0, error_control="off")
+    b = simulate(params, scenario, duration_s=0.3, seed=0, dt_s=dt / 4, error_control="off")
+    tol = max(DT_CHECK_REL * abs(b.mean_speed_mm_s), DEFAULT_STEP_ABS_MM_S)
     assert abs(a.mean_speed_mm_s - b.mean_speed_mm_s) <= tol
     assert a.counters["steps_halved"] > 0 and abs(b.mean_speed_mm_s) > 1.0
     # the feet's landings converge too: a rebound its film stops within the position

@@ -31,8 +31,8 @@ def _jacobian(r: np.ndarray) -> np.ndarray:
 
 def _rigid_body(p: RobotParams) -> np.ndarray:
     mg = 1e-6
-    m_b = p.body_mass_mg * mg
     m_leg = 3 * p.modal_participation * p.leg_mass_mg * mg         # three modal masses per leg
+    m_b = p.mass_mg * mg - 6 * m_leg                                # the rest of the robot's mass (M2)
     L, W = p.body_length_mm * 1e-3, p.body_width_mm * 1e-3
     ref = np.zeros((5, 5))
     ref[0, 0] = ref[1, 1] = m_b

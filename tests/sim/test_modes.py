@@ -26,7 +26,7 @@ def _heave_by_hand(p: RobotParams, c_body: float = 0.0) -> tuple[float, float]:
     r = np.array(p.ratio)
     cz = 1 / np.sqrt(1 + r * r)
     Mi = p.modal_participation * p.leg_mass_mg * 1e-6
-    mb = p.body_mass_mg * 1e-6
+    mb = p.mass_mg * 1e-6 - 18 * Mi                          # the rest of the robot's mass (model.md M2)
     k = np.array(p.k_per_s2)
     b = np.array(p.b_per_s)
     # z' = -cz . x'; the mode mass's vertical velocity z' + cz_i x_i' = (e_i - 1) cz ... per mode

@@ -96,11 +96,10 @@ def _stiff(**kw):
 
 
 def _supported_mass_kg(p):
-    """Mass a foot carries on a rigid robot: a sixth of the robot's mass, the body plus
-    the 18 modal masses (docs/model.md M2, M4), computed from the
-    parameters, not from the model."""
-    m_modal = p.modal_participation * p.leg_mass_mg * 1e-6
-    return (p.body_mass_mg * 1e-6 + 18 * m_modal) / 6
+    """Mass a foot carries on a rigid robot: a sixth of the robot's mass ``mass_mg``, which
+    the body's coordinates and the 18 modal masses add up to (docs/model.md M2, M4), from
+    the parameters, not from the model."""
+    return p.mass_mg * 1e-6 / 6
 
 
 @pytest.mark.parametrize("c_ad_n", [0.0, 2e-7])
@@ -166,17 +165,16 @@ def test_squeeze_film_settling_matches_closed_form():
 
 
 def test_air_drag_terminal_velocity():
-    """A robot falling in still air reaches v^2 = (m_b + 18 M) g / (7 a), M the modal mass:
-    gravity acts on the body and the modal masses (M4), drag on the body and the six feet,
-    which fall with it (the legs keep their free-fall shape)."""
+    """A robot falling in still air reaches v^2 = m g / (7 a), m = mass_mg the robot's mass:
+    gravity acts on the body and the modal masses, which add up to it (M2, M4), drag on the
+    body and the six feet, which fall with it (the legs keep their free-fall shape)."""
     p = RobotParams(b_g_body_n_m2_s=0.0, b_g_foot_n_m2_s=0.0, foot_pad_um=0.0, cy_sign=(0, 0, 0))
     mdl = M.build_model(p, Shaker(240, 0.0))
     s = M.air_state(mdl, 0.5)
     dt = 2e-5
     out = run_model(mdl, s, np.zeros(6, np.int8), int(0.4 / dt), dt, every=50)
     v_end = out["state"][M.S_V + 1]
-    m_modal = p.modal_participation * p.leg_mass_mg * 1e-6
-    v_t = math.sqrt((p.body_mass_mg * 1e-6 + 18 * m_modal) * p.g_m_s2 / (7 * p.a_drag_n_s2_m2))
+    v_t = math.sqrt(p.mass_mg * 1e-6 * p.g_m_s2 / (7 * p.a_drag_n_s2_m2))
     assert v_end == pytest.approx(-v_t, rel=1e-3)
     assert out["count"][:6].sum() == 0
 

@@ -140,6 +140,8 @@ def collect(points: Sequence[Point], rows: Sequence[dict[str, Any]], draws: int,
                     params_toml=points[0].params.to_toml_text() if points else "", meta=dict(meta or {}),
                     foot_rise_um=arr("foot_rise_um"), leg_motion_um=arr("leg_motion_um"),
                     aperiodicity=arr("aperiodicity"),
+                    convergence=np.array([r["convergence"] for r in rows], dtype=object).reshape(shape).astype(str),
+                    step_error_mm_s=arr("step_error_mm_s"), dt_s=arr("dt_s"),
                     drives=[scenario_dict(p.drive) | ({"ablation": p.ablation} if p.ablation else {})
                             for p in points])
 

@@ -1,0 +1,116 @@
+"""Step-error control of a run: rerun it at half the step, halve until they agree.
+
+Every :func:`labkit.sim.core.simulate` run (numba engine, ``error_control="check"``, the
+default) goes through :func:`control` after its main run at the step ``h``
+(docs/model.md, "Error control and validity"):
+
+1. the run is repeated at ``h/2``; the step error of the run at ``h`` is estimated as
+   :data:`ERROR_FACTOR` times the difference of the two mean speeds (first-order
+   convergence, the safe side: the events make the scheme first order in places), and
+   must be within ``max(STEP_TOL_REL |v|, STEP_TOL_ABS_MM_S)``;
+2. the run is also repeated at ``h`` from a start 0.05 um apart (the leg modes jittered,
+   the next seed); if that moves the speed beyond the same tolerance the run is sensitive
+   at this step;
+3. a failing run halves its step until the runs at ``h/2^k`` and ``h/2^(k+1)`` agree (at
+   most :data:`MAX_HALVINGS` halvings) and the run at ``h/2^k`` is the result
+   (``refined``); when none agrees, the finest run is the result, flagged ``not_converged``;
+4. a run sensitive at :data:`CHAOS_LEVELS` successive steps (each probed once the one
+   before was sensitive), or at the step that agreed with half of it, is *chaotic*: no
+   single trajectory converges; it is kept at that step and flagged, never refined further.
+   A coarse step can make a robot that, resolved, stands still jump and scatter (a shaker
+   case at 950 Hz, 76 um: 1.98 and 3.05 mm/s at h and h/2, seeds 0.6 apart; 0.001 mm/s
+   from h/4 on, seeds agreeing): one sensitive step is not enough to call it chaotic.
+
+The whole run is checked, not a stretch of it: on random Monte Carlo cases a check over
+the first quarter passed runs whose error grew later (bench/convergence_bench.py). Cost of a
+run that passes: 4 runs' worth (the run, twice its steps, the probe); of a chaotic one 14;
+of one refined k times about 2^(k+2); sweeps check a sample (:mod:`labkit.sim.sweep`).
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from labkit.sim.result import Convergence, SimResult
+
+#: The tolerance of the check: the estimated step error within this fraction of the speed ...
+STEP_TOL_REL = 0.03
+#: ... or this many mm/s (what a tracked video resolves over a few seconds; meaningful for slow runs).
+STEP_TOL_ABS_MM_S = 0.02
+#: The step error of the run at h, estimated from the speeds at h and h/2: this many times
+#: their difference (2: first-order convergence; 4/3 would assume second order).
+ERROR_FACTOR = 2.0
+#: At most this many halvings of the step (h/16).
+MAX_HALVINGS = 4
+#: A run is chaotic when starts 0.05 um apart differ beyond the tolerance at this many
+#: successive steps (h, h/2, h/4) while the steps disagree, or at the step that agrees with
+#: half of it: a coarse step can make a robot jump and scatter that, resolved, stands still.
+CHAOS_LEVELS = 3
+
+#: ``run(dt_s, seed) -> SimResult``: the same run (robot, drive, duration, start, transient,
+#: recording) at another step or from another seed, without error control.
+Runner = Callable[[float, "int | None"], SimResult]
+
+
+def tolerance_mm_s(v_mm_s: float) -> float:
+    """The allowed step error at a mean speed ``v``: ``max(STEP_TOL_REL |v|, STEP_TOL_ABS_MM_S)``."""
+    return max(STEP_TOL_REL * abs(v_mm_s), STEP_TOL_ABS_MM_S)
+
+
+def probe_seed(seed: int | None) -> int:
+    """The seed of the chaos probe's start: the next one (1 for a run started exactly at rest)."""
+    return 1 if seed is None else int(seed) + 1
+
+
+def _status(runs: list[SimResult], spreads: list[float], run: Runner) -> tuple[str, int, float, float]:
+    """Walk down the steps (module doc): (status, level of the result, error, tolerance)."""
+    h, seed, sensitive_levels = runs[0].dt_s, runs[0].seed, 0
+    for k in range(MAX_HALVINGS):
+        v = runs[k].mean_speed_mm_s
+        if len(spreads) == k:                     # probe a finer level only after a sensitive one
+            spreads.append(run(runs[k].dt_s, probe_seed(seed)).mean_speed_mm_s - v
+                           if sensitive_levels else 0.0)
+        sensitive = abs(spreads[k]) > tolerance_mm_s(v)
+        sensitive_levels = sensitive_levels + 1 if sensitive else 0
+        if sensitive_levels >= CHAOS_LEVELS:
+            return "chaotic", k, math.nan, tolerance_mm_s(v)
+        runs.append(run(h / 2 ** (k + 1), seed))
+        w = runs[k + 1].mean_speed_mm_s
+        err, tol = ERROR_FACTOR * abs(v - w), tolerance_mm_s(w)
+        if err <= tol:
+            return ("chaotic" if sensitive else "converged" if k == 0 else "refined"), k, err, tol
+    return "not_converged", MAX_HALVINGS, err, tol
+
+
+def control(r: SimResult, run: Runner) -> SimResult:
+    """Check the step of the run ``r``, refine or flag it (module doc); returns the result to
+    keep, with :attr:`SimResult.convergence` and its validity flags set."""
+    t0 = time.perf_counter()
+    runs = [r]
+    spreads = [run(r.dt_s, probe_seed(r.seed)).mean_speed_mm_s - r.mean_speed_mm_s]
+    status, k, err, tol = _status(runs, spreads, run)
+    out = runs[k]
+    if out.validity is not None:
+        out.validity.chaotic = status == "chaotic"
+        out.validity.not_converged = status == "not_converged"
+    out.convergence = Convergence(status=status, dt_s=out.dt_s, default_dt_s=r.dt_s, error_mm_s=float(err),
+                                  tolerance_mm_s=float(tol), seed_spread_mm_s=float(spreads[min(k, len(spreads) - 1)]),
+                                  measured_s=(float(r.transient_s), float(r.duration_s)), halvings=k,
+                                  speeds_mm_s=tuple(float(x.mean_speed_mm_s) for x in runs),
+                                  wall_s=time.perf_counter() - t0)
+    return out
+
+
+def unchecked(r: SimResult) -> SimResult:
+    """Mark a run whose step was not checked (error control off, reference engine)."""
+    r.convergence = Convergence(status="unchecked", dt_s=r.dt_s, default_dt_s=r.dt_s)
+    return r
+
+
+def agree(a_mm_s: np.ndarray, b_mm_s: np.ndarray) -> np.ndarray:
+    """Element-wise: do two speeds agree within :func:`tolerance_mm_s` of the second?"""
+    b = np.asarray(b_mm_s, float)
+    return np.abs(np.asarray(a_mm_s, float) - b) <= np.maximum(STEP_TOL_REL * np.abs(b), STEP_TOL_ABS_MM_S)
