@@ -21,7 +21,7 @@ Draw 0 is always the nominal robot; draws ``1..n-1`` are perturbed. With
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -435,25 +435,12 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
     grid = np.asarray([float(v) for v in values], dtype=float)
     if grid.size == 0:
         raise InputError("no values to sweep", key=quantity, expected="at least one value")
-    if int(draws) < 0:
-        raise InputError(f"draws must be >= 0, got {draws}", key="draws", expected="an integer >= 0")
-    if not duration_s > 0:
-        raise InputError(f"duration must be > 0 s, got {duration_s}", key="duration_s",
-                         expected="a duration in s, > 0")
+    _check_options(int(draws), duration_s, step_fraction, accel_limit_g, error_control)
     table = dict(DEFAULT_TABLE if table is None else table)
     check_table(params, table)
     # Fail on a bad quantity before any process starts.
     apply_value(params, base_scenario, quantity, grid[0])
     n_draws = max(1, int(draws))
-    if not 0.0 < step_fraction <= 1.0:
-        raise InputError(f"step fraction must be in (0, 1], got {step_fraction}", key="step_fraction",
-                         expected="a fraction of the default step, 0 < f <= 1")
-    if accel_limit_g is not None and not accel_limit_g > 0:
-        raise InputError(f"acceleration limit must be > 0 g, got {accel_limit_g}", key="accel_limit_g",
-                         expected="a peak acceleration in g, > 0")
-    if error_control not in ERROR_CONTROL:
-        raise InputError(f"unknown error control {error_control!r}", key="error_control",
-                         expected=", ".join(ERROR_CONTROL))
     fraction = float(step_fraction)
     check_points(params, base_scenario, quantity, grid, duration_s, accel_limit_g, fraction, keys=keys)
     common = (int(seed), float(duration_s), table, accel_limit_g)
@@ -466,7 +453,9 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
                      desc=f"sweep {quantity}", quiet=quiet)
     quarter_rows, rows = rows[n_main:], rows[:n_main]
     if error_control == "sample" and n_draws > 1:
-        _refine_sampled(rows, tasks[:n_main], n_draws, scheduler, workers, quiet)
+        _refine_sampled(rows, tasks[:n_main], n_draws,
+                        lambda again: map_tasks(run_point, again, scheduler=scheduler, workers=workers,
+                                                desc="sweep: refined points", quiet=quiet))
     shape = (len(grid), n_draws)
     speeds = np.array([r["speed_mm_s"] for r in rows]).reshape(shape)
     frac = np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, len(CONTACT_MODES)))
@@ -505,8 +494,27 @@ def _control(mode: str, draw: int) -> str:
     return "check" if mode == "every" or (mode == "sample" and draw == 0) else "off"
 
 
-def _refine_sampled(rows: list[dict], tasks: list[tuple], n_draws: int, scheduler: str | None,
-                    workers: int | None, quiet: bool) -> None:
+def _check_options(draws: int, duration_s: float, step_fraction: float, accel_limit_g: float | None,
+                   error_control: str) -> None:
+    """InputError naming the first of a sweep's options that is out of range (before any run)."""
+    if draws < 0:
+        raise InputError(f"draws must be >= 0, got {draws}", key="draws", expected="an integer >= 0")
+    if not duration_s > 0:
+        raise InputError(f"duration must be > 0 s, got {duration_s}", key="duration_s",
+                         expected="a duration in s, > 0")
+    if not 0.0 < step_fraction <= 1.0:
+        raise InputError(f"step fraction must be in (0, 1], got {step_fraction}", key="step_fraction",
+                         expected="a fraction of the default step, 0 < f <= 1")
+    if accel_limit_g is not None and not accel_limit_g > 0:
+        raise InputError(f"acceleration limit must be > 0 g, got {accel_limit_g}", key="accel_limit_g",
+                         expected="a peak acceleration in g, > 0")
+    if error_control not in ERROR_CONTROL:
+        raise InputError(f"unknown error control {error_control!r}", key="error_control",
+                         expected=", ".join(ERROR_CONTROL))
+
+
+def _refine_sampled(rows: list[dict], tasks: list[tuple], n_draws: int,
+                    run: Callable[[list[tuple]], list[dict]]) -> None:
     """Sampled error control: at every point whose nominal robot was refined (it halved its
     step and then agreed with half of it), rerun the other draws at that step (in place in
     ``rows``); elsewhere they keep the default step. Their status: ``sampled``."""
@@ -519,14 +527,11 @@ def _refine_sampled(rows: list[dict], tasks: list[tuple], n_draws: int, schedule
             redo += list(range(i + 1, i + n_draws))
     if not redo:
         return
-    from labkit.executor import map_tasks
-
     again = []
     for k in redo:
         t = list(tasks[k])
         t[10] = t[10] / 2 ** rows[k - k % n_draws]["halvings"]
         again.append(tuple(t))
-    for k, row in zip(redo, map_tasks(run_point, again, scheduler=scheduler, workers=workers,
-                                      desc="sweep: refined points", quiet=quiet)):
+    for k, row in zip(redo, run(again)):
         row["convergence"] = "sampled"
         rows[k] = row
