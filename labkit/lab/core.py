@@ -35,7 +35,7 @@ from labkit.lab import camera
 from labkit.lab.control import SimLabControl
 from labkit.lab.funcgen import Drive, SimAgilent33220A, SimKeysight33500B, SimRigolDG1000Z
 from labkit.lab.miswire import Miswiring
-from labkit.lab.models import FUNCGEN_MODELS, SCOPE_MODELS, VIBROMETER_MODELS
+from labkit.lab.models import FUNCGEN_MODELS, SCOPE_MODELS, TWO_CHANNEL_SCOPES, VIBROMETER_MODELS
 from labkit.lab.physics import SPOTS, ShakerChain, TetheredModel, simulate_linear
 from labkit.lab.scope import SimInfiniiVision, SimRigolDS1000Z
 from labkit.lab.transport import Fault, PtyServer, TcpServer
@@ -235,6 +235,8 @@ class VirtualLab:
         self.scope = sc_class(self._signals, self._sync, seed=self.seed, memory_points=scope_memory_points)
         self.scope.idn = self.scope.idn.replace("DSOX3024T", sc_model).replace("DS1104Z", sc_model)
         self.scope.idn = _own_serial(self.scope.idn, bench)
+        if sc_model in TWO_CHANNEL_SCOPES:
+            self.scope.suffix_limits = {"CHAN": 2}
         vib_class = SimOFV3001 if vib_model == "OFV-3001" else SimOFV5000
         self.vibrometer: SimOFV5000 | SimOFV3001 = vib_class(self.spot_peak_velocity_mm_s)
         if self.miswire.vibrometer_range_mm_s_per_v is not None:
@@ -248,7 +250,6 @@ class VirtualLab:
     def start(self) -> VirtualLab:
         if self._started:
             return self
-        self._warm_simulator()
         self.servers = {
             "funcgen": TcpServer(self.funcgen, self._log, seed=self.seed + 1),
             "scope": TcpServer(self.scope, self._log, seed=self.seed + 2),
@@ -264,6 +265,9 @@ class VirtualLab:
                 vx = Vxi11Server(self.servers[name])
                 vx.start()
                 self.vxi11_servers[name] = vx
+        # compiled once the transports are bound (a refused port 111 ends the start without the wait);
+        # clients learn the resources only when start() has returned
+        self._warm_simulator()
         self._started = True
         return self
 

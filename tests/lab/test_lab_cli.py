@@ -5,6 +5,7 @@ import json
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import serial
@@ -101,3 +102,67 @@ def test_serve_bad_robot_file_exits_2(tmp_path):
     assert "robot.toml" in proc.stderr and "mass_mg" in proc.stderr and "Traceback" not in proc.stderr
     proc = run_cli("lab", "serve", "--robot", str(tmp_path / "none.toml"), check=2, timeout=60)
     assert "none.toml" in proc.stderr
+
+
+@pytest.mark.slow
+def test_serve_vxi11_gives_inst0_resources_in_json_config_and_record(tmp_path):
+    """``--vxi11``: the generator and the scope answer as ``TCPIP0::127.x.y.z::inst0::INSTR`` (pyvisa-py's
+    VXI-11 client), the config written uses those resources, the record keeps the raw sockets too."""
+    import pyvisa
+
+    from labkit.experiments.locks import served_labs
+
+    config = tmp_path / "lab.toml"
+    proc = subprocess.Popen([sys.executable, "-m", "labkit", "lab", "serve", "--json", "--vxi11", "--funcgen",
+                             "DG1062Z", "--scope", "DS1202Z-E", "--config", str(config)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        resources = json.loads(proc.stdout.readline())
+        assert resources["scope"].endswith("::inst0::INSTR") and resources["funcgen"].endswith("::inst0::INSTR")
+        assert resources["vibrometer"].startswith("ASRL") and resources["control"].endswith("::SOCKET")
+        # (the resource manager is pyvisa's shared one: closing it would close every session of this process)
+        sc = pyvisa.ResourceManager("@py").open_resource(resources["scope"], timeout=5000)
+        try:
+            assert sc.query("*IDN?").split(",")[1] == "DS1202Z-E"
+        finally:
+            sc.close()
+        import time
+
+        deadline = time.monotonic() + 20      # the record is written after the config (and the JSON line)
+        while not [r for r in served_labs() if r["pid"] == proc.pid] and time.monotonic() < deadline:
+            time.sleep(0.05)
+        record = next(r for r in served_labs() if r["pid"] == proc.pid)
+        text = config.read_text()
+        assert resources["scope"] in text and resources["funcgen"] in text
+        assert record["resources"]["scope"] == resources["scope"]
+        assert record["sockets"]["scope"].endswith("::SOCKET")
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130
+
+
+@pytest.mark.slow
+def test_serve_vxi11_without_root_says_port_111_needs_root():
+    """The same command as an unprivileged user (setpriv to nobody): port 111 cannot be bound; one line,
+    exit 2, naming the port and what to do, no traceback, and no lab left behind."""
+    import shutil
+    import tempfile
+
+    home = Path(tempfile.mkdtemp(prefix="labkit-nobody-"))     # pytest's tmp_path is root's alone (0700)
+    try:
+        home.chmod(0o777)
+        env = {"PATH": "/usr/bin:/bin", "HOME": str(home), "XDG_RUNTIME_DIR": str(home),
+               "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+        proc = subprocess.run(["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", sys.executable,
+                               "-m", "labkit", "lab", "serve", "--vxi11", "--config", str(home / "lab.toml")],
+                              capture_output=True, text=True, timeout=120, env=env, cwd=str(home))
+        assert proc.returncode == 2, proc.stderr
+        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1 and "port 111" in lines[0] and "root" in lines[0] and "--vxi11" in lines[0], lines
+        assert "Traceback" not in proc.stderr and not (home / "lab.toml").exists()
+    finally:
+        shutil.rmtree(home, ignore_errors=True)

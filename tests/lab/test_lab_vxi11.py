@@ -114,7 +114,8 @@ def test_a_makers_programming_example_runs_over_vxi11(which, lab, rigol_lab):
     """Plain pyvisa, the steps of the makers' examples (33500B Operating and Service Guide,
     "Burst Mode" example; InfiniiVision 3000T Programmer's Guide, "Programming Examples: VISA
     Python"; DG1000Z Programming Guide, "Programming Examples"; DS1000Z Programming Guide,
-    ":WAVeform" example): configure, burst, acquire, empty the error queue."""
+    ":WAVeform" example): configure, burst, acquire, empty the error queue. The four-channel DS1104Z
+    has no EXT input (DS :TRIGger:EDGe:SOURce): it triggers on the drive, channel 1."""
     bench = lab if which == "keysight" else rigol_lab
     rm = pyvisa.ResourceManager("@py")
     gen = rm.open_resource(bench.vxi11_resources["funcgen"], timeout=5000, read_termination="\n",
@@ -147,7 +148,7 @@ def test_a_makers_programming_example_runs_over_vxi11(which, lab, rigol_lab):
                         ":OUTP1 ON"):
                 gen.write(cmd)
             for cmd in ("*RST", ":CHAN1:DISP 1", ":CHAN1:SCAL 0.2", ":TIM:MAIN:SCAL 5e-4", ":TIM:MAIN:OFFS 3e-3",
-                        ":TRIG:EDG:SOUR EXT", ":TRIG:EDG:LEV 1", ":TRIG:SWE NORM", ":SING"):
+                        ":TRIG:EDG:SOUR CHAN1", ":TRIG:EDG:LEV 0.5", ":TRIG:SWE NORM", ":SING"):
                 osc.write(cmd)
             osc.query("*STB?")
             gen.write("*TRG")
