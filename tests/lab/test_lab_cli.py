@@ -134,6 +134,9 @@ def test_serve_vxi11_gives_inst0_resources_in_json_config_and_record(tmp_path):
         record = next(r for r in served_labs() if r["pid"] == proc.pid)
         text = config.read_text()
         assert resources["scope"] in text and resources["funcgen"] in text
+        # the ::INSTR config as it was written, through labkit's own check (drivers, sync, trigger)
+        checked = run_cli("check", str(config), check=0, timeout=120)
+        assert "all checks passed" in checked.stdout + checked.stderr
         assert record["resources"]["scope"] == resources["scope"]
         assert record["sockets"]["scope"].endswith("::SOCKET")
         proc.send_signal(signal.SIGINT)
