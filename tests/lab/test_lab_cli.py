@@ -137,6 +137,15 @@ def test_serve_vxi11_gives_inst0_resources_in_json_config_and_record(tmp_path):
         # the ::INSTR config as it was written, through labkit's own check (drivers, sync, trigger)
         checked = run_cli("check", str(config), check=0, timeout=120)
         assert "all checks passed" in checked.stdout + checked.stderr
+        # and labkit off through the same config switches an output left on over VXI-11
+        fg = pyvisa.ResourceManager("@py").open_resource(resources["funcgen"], timeout=5000)
+        try:
+            fg.write(":OUTP1 ON")
+            assert fg.query(":OUTP1?") == "ON\n"
+            off = run_cli("off", str(config), check=0, timeout=60)
+            assert "confirmed" in off.stdout + off.stderr and fg.query(":OUTP1?") == "OFF\n"
+        finally:
+            fg.close()
         assert record["resources"]["scope"] == resources["scope"]
         assert record["sockets"]["scope"].endswith("::SOCKET")
         proc.send_signal(signal.SIGINT)
