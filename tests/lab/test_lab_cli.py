@@ -1,10 +1,13 @@
 """``labkit lab serve`` in a real subprocess: JSON line, an instrument answers, SIGINT ends it."""
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import subprocess
 import sys
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -12,6 +15,21 @@ import serial
 from labhelpers import Raw
 
 from tests.conftest import run_cli  # noqa: F401  (the shared helper; used below)
+
+
+@contextlib.contextmanager
+def _served(*args: str) -> Iterator[tuple[subprocess.Popen, dict]]:
+    """``labkit lab serve --json ARGS`` in a subprocess: (process, resources); SIGINT at the end."""
+    proc = subprocess.Popen([sys.executable, "-m", "labkit", "lab", "serve", "--json", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        yield proc, json.loads(proc.stdout.readline())
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
 
 
 @pytest.mark.slow
@@ -44,11 +62,7 @@ def test_serve_prints_resources_answers_and_stops_on_sigint(tmp_path):
 @pytest.mark.slow
 def test_serve_other_models_rigol_and_ofv3001(tmp_path):
     """Every driver has a counterpart: the Rigol pair and the OFV-3001 are picked on the command line."""
-    proc = subprocess.Popen([sys.executable, "-m", "labkit", "lab", "serve", "--json", "--funcgen", "DG1062Z",
-                             "--scope", "DS1104Z", "--vibrometer", "OFV-3001"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        resources = json.loads(proc.stdout.readline())
+    with _served("--funcgen", "DG1062Z", "--scope", "DS1104Z", "--vibrometer", "OFV-3001") as (proc, resources):
         fg, sc = Raw(resources["funcgen"], 10), Raw(resources["scope"], 10)
         assert fg.query("*IDN?").split(",")[1] == "DG1062Z" and fg.query(":OUTP1?") == "OFF"
         assert sc.query("*IDN?").split(",")[1] == "DS1104Z" and sc.query(":SYST:ERR?") == '0,"No error"'
@@ -57,12 +71,6 @@ def test_serve_other_models_rigol_and_ofv3001(tmp_path):
         with serial.Serial(resources["vibrometer"][4:-7], 9600, timeout=5) as port:
             port.write(b"VELO?\n")
             assert port.readline() == b"3\n"
-        proc.send_signal(signal.SIGINT)
-        proc.communicate(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
     assert proc.returncode == 130
     proc = run_cli("lab", "serve", "--funcgen", "33600A", check=2, timeout=60)
     assert "33600A" in proc.stderr and "DG1062Z" in proc.stderr and "Traceback" not in proc.stderr
@@ -113,11 +121,8 @@ def test_serve_vxi11_gives_inst0_resources_in_json_config_and_record(tmp_path):
     from labkit.experiments.locks import served_labs
 
     config = tmp_path / "lab.toml"
-    proc = subprocess.Popen([sys.executable, "-m", "labkit", "lab", "serve", "--json", "--vxi11", "--funcgen",
-                             "DG1062Z", "--scope", "DS1202Z-E", "--config", str(config)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        resources = json.loads(proc.stdout.readline())
+    with _served("--vxi11", "--funcgen", "DG1062Z", "--scope", "DS1202Z-E", "--config", str(config)) as (proc,
+                                                                                                        resources):
         assert resources["scope"].endswith("::inst0::INSTR") and resources["funcgen"].endswith("::inst0::INSTR")
         assert resources["vibrometer"].startswith("ASRL") and resources["control"].endswith("::SOCKET")
         # (the resource manager is pyvisa's shared one: closing it would close every session of this process)
@@ -126,8 +131,6 @@ def test_serve_vxi11_gives_inst0_resources_in_json_config_and_record(tmp_path):
             assert sc.query("*IDN?").split(",")[1] == "DS1202Z-E"
         finally:
             sc.close()
-        import time
-
         deadline = time.monotonic() + 20      # the record is written after the config (and the JSON line)
         while not [r for r in served_labs() if r["pid"] == proc.pid] and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -148,12 +151,6 @@ def test_serve_vxi11_gives_inst0_resources_in_json_config_and_record(tmp_path):
             fg.close()
         assert record["resources"]["scope"] == resources["scope"]
         assert record["sockets"]["scope"].endswith("::SOCKET")
-        proc.send_signal(signal.SIGINT)
-        proc.communicate(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
     assert proc.returncode == 130
 
 
