@@ -175,6 +175,8 @@ class Oscilloscope(ScpiInstrument):
                               "input; nothing was sent", key="scope.trigger_source",
                               expected=f"CHAN1..CHAN{self.n_channels} (or no setting: the drive channel; "
                                        "the generator's sync can go into a spare channel)")
+        if src.startswith("CHAN") and src[4:].isdigit():
+            self._ch(int(src[4:]))          # a channel the scope has (CHAN3 on a DS1202Z-E: refused)
         return src
 
     def _model_name(self) -> str:

@@ -123,6 +123,8 @@ def test_trigger_source_default_and_ext_per_model(cls, model, channels, default,
         assert sc.trigger_source_for(None, 1) == default
         assert sc.trigger_source_for(None, 3) == default.replace("CHAN1", "CHAN3")
         assert sc.trigger_source_for("chan2", 1) == "CHAN2"
+        with pytest.raises(LimitError, match="scope channel"):
+            sc.set_trigger(f"CHAN{channels + 1}", 0.0)
         if not ext:
             with pytest.raises(ConfigError, match=f"the {model} has no external trigger input; nothing was sent"):
                 sc.set_trigger("EXT", 1.0)

@@ -113,17 +113,19 @@ def test_serve_bad_robot_file_exits_2(tmp_path):
 
 
 @pytest.mark.slow
-def test_serve_vxi11_gives_inst0_resources_in_json_config_and_record(tmp_path):
+@pytest.mark.parametrize("flag, form", [("--vxi11", "::inst0::INSTR"), ("--hislip", "::INSTR")])
+def test_serve_vxi11_or_hislip_gives_instr_resources_in_json_config_and_record(tmp_path, flag, form):
     """``--vxi11``: the generator and the scope answer as ``TCPIP0::127.x.y.z::inst0::INSTR`` (pyvisa-py's
-    VXI-11 client), the config written uses those resources, the record keeps the raw sockets too."""
+    VXI-11 client); ``--hislip``: as ``TCPIP0::127.0.0.1::hislip0,<port>::INSTR`` (its HiSLIP client). The
+    config written uses those resources and passes labkit check; the record keeps the raw sockets too."""
     import pyvisa
 
     from labkit.experiments.locks import served_labs
 
     config = tmp_path / "lab.toml"
-    with _served("--vxi11", "--funcgen", "DG1062Z", "--scope", "DS1202Z-E", "--config", str(config)) as (proc,
-                                                                                                        resources):
-        assert resources["scope"].endswith("::inst0::INSTR") and resources["funcgen"].endswith("::inst0::INSTR")
+    with _served(flag, "--funcgen", "DG1062Z", "--scope", "DS1202Z-E", "--config", str(config)) as (proc, resources):
+        assert resources["scope"].endswith(form) and resources["funcgen"].endswith(form)
+        assert ("hislip0," in resources["scope"]) == (flag == "--hislip")
         assert resources["vibrometer"].startswith("ASRL") and resources["control"].endswith("::SOCKET")
         # (the resource manager is pyvisa's shared one: closing it would close every session of this process)
         sc = pyvisa.ResourceManager("@py").open_resource(resources["scope"], timeout=5000)

@@ -188,8 +188,8 @@ def test_averaging_takes_one_triggered_record_per_average_and_lowers_the_noise(l
 
 def test_ext_on_a_four_channel_ds1000z_is_refused_before_any_scope_setting(tmp_path):
     """The DS1104Z has no EXT input (DS :TRIGger:EDGe:SOURce: CHANnel1-4, AC): a config asking for EXT
-    ends with one line naming scope.trigger_source, exit 2; the scope was asked its identity (and its
-    error queue) only, and the generator's output never went on."""
+    ends with one line naming scope.trigger_source, exit 2 (a run and labkit check alike); the scope
+    was asked its identity (and its error queue) only, and the generator's output never went on."""
     from clihelpers import run_cli
 
     with VirtualLab(seed=15, funcgen_model="DG1062Z", scope_model="DS1104Z") as lab:
@@ -204,3 +204,10 @@ def test_ext_on_a_four_channel_ds1000z_is_refused_before_any_scope_setting(tmp_p
         sent = [text for _, inst, d, text in lab.log if inst == "scope" and d == "rx"]
         assert sent and all(t in ("*IDN?", ":SYST:ERR?", "*CLS") for t in sent), sent
         assert not any(on for _, inst, _, on in lab.output_timeline if inst == "funcgen")
+        # labkit check says the same; without the line it triggers on the drive (channel 1) and passes
+        proc = run_cli("check", str(cfg), check=2, timeout=120)
+        assert "scope.trigger_source" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+        cfg.write_text(text.replace('trigger_source = "EXT"\n', ""))
+        proc = run_cli("check", str(cfg), check=0, timeout=120)
+        assert "scope trigger CHAN1, sweep NORM (read back)" in proc.stdout
+        assert "all checks passed" in proc.stdout
