@@ -152,9 +152,39 @@ class Oscilloscope(ScpiInstrument):
         self._send_all([self._timebase_command(scale)])
         self.state.update(record_s=rec, time_per_div_s=scale)
 
+    @property
+    def has_ext_trigger(self) -> bool:
+        """Whether the model has an external trigger input (every InfiniiVision has EXT TRIG)."""
+        return True
+
+    def trigger_source_for(self, requested: str | None, drive_channel: int) -> str:
+        """The trigger source of a run: ``requested``, or by default the generator's sync on EXT
+        where the scope has that input, else the drive itself (``CHAN<drive_channel>``).
+
+        Raises
+        ------
+        ConfigError
+            ``requested`` is EXT and the model has no EXT input (nothing is sent).
+        """
+        if requested is None:
+            return "EXT" if self.has_ext_trigger else f"CHAN{int(drive_channel)}"
+        src = str(requested).upper()
+        if src == "EXT" and not self.has_ext_trigger:
+            from labkit.errors import ConfigError
+            raise ConfigError(f"trigger_source = 'EXT', but the {self._model_name()} has no external trigger "
+                              "input; nothing was sent", key="scope.trigger_source",
+                              expected=f"CHAN1..CHAN{self.n_channels} (or no setting: the drive channel; "
+                                       "the generator's sync can go into a spare channel)")
+        if src.startswith("CHAN") and src[4:].isdigit():
+            self._ch(int(src[4:]))          # a channel the scope has (CHAN3 on a DS1202Z-E: refused)
+        return src
+
+    def _model_name(self) -> str:
+        return self.instrument_model or self.model
+
     def set_trigger(self, source: str = "CHAN1", level_v: float = 0.0, slope: str = "POS") -> None:
-        """Edge trigger on ``source`` (CHANn, EXT) at ``level_v``, slope POS/NEG."""
-        src = str(source).upper()
+        """Edge trigger on ``source`` (CHANn, EXT where the model has it) at ``level_v``, slope POS/NEG."""
+        src = self.trigger_source_for(source, 1)
         if not (src == "EXT" or (src.startswith("CHAN") and src[4:].isdigit())):
             check_choice("trigger source", src, ("CHAN1", "CHAN2", "CHAN3", "CHAN4", "EXT"))
         lev = check_range("trigger level_v", level_v, -1e3, 1e3, "V")
@@ -196,6 +226,12 @@ class Oscilloscope(ScpiInstrument):
         cmds = [":ACQ:TYPE NORM"] if n == 1 else [":ACQ:TYPE AVER", self._average_command(n)]
         self._send_all(cmds)
         self._read_back({":ACQ:TYPE?": "NORM" if n == 1 else "AVER"})
+        if n > 1:
+            ask = self._average_command(n).split()[0] + "?"
+            got = self.query_int(ask)
+            if got != n:
+                raise InstrumentError(f"{ask} answers {got}, {n} was set", instrument=self.name, command=ask)
+        self.state["acquisition"] = "NORM" if n == 1 else "AVER"
         self.state["averages"] = n
 
     def _average_command(self, count: int) -> str:
@@ -385,6 +421,13 @@ class RigolDS1000Z(Oscilloscope):
 
     def settings(self) -> dict[str, Any]:
         return {**super().settings(), "max_block_bytes": self.max_block_bytes}
+
+    @property
+    def has_ext_trigger(self) -> bool:
+        """Only the two-channel DS1000Z-E models (DS1102Z-E, DS1202Z-E) have an EXT TRIG input: the
+        four-channel DS1000Z's edge trigger sources are D0-D15, CHANnel1-4 and AC (DS1000Z
+        Programming Guide, :TRIGger:EDGe:SOURce)."""
+        return self.n_channels == 2
 
     def _timebase_command(self, scale_s: float) -> str:
         return f":TIM:MAIN:SCAL {scale_s:.6g}"

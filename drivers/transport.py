@@ -282,6 +282,7 @@ class SerialTransport(Transport):
         self._rterm = read_termination.encode()
         self._wterm = write_termination.encode()
         self._timeout = float(timeout_s)
+        self._rbuf = bytearray()     # bytes read past the last reply line
         self._ser = serial.serial_for_url(
             port, baudrate=int(baud_rate), bytesize=int(bytesize), parity=str(parity),
             stopbits=stopbits, timeout=self._timeout, write_timeout=self._timeout,
@@ -302,7 +303,8 @@ class SerialTransport(Transport):
         self._ser.flush()
 
     def _read_exact(self, n: int, deadline: float) -> bytes:
-        buf = bytearray()
+        buf = self._rbuf[:n]
+        del self._rbuf[:n]
         while len(buf) < n:
             left = deadline - time.monotonic()
             if left <= 0:
@@ -312,11 +314,22 @@ class SerialTransport(Transport):
         return bytes(buf)
 
     def read(self) -> str:
-        self._ser.timeout = self._timeout
-        line = self._ser.read_until(self._rterm)
-        if not line.endswith(self._rterm):
-            raise TransportError(f"timeout after {self._timeout:g} s (partial reply {line[:40]!r})")
-        return line[: -len(self._rterm)].decode("ascii")
+        """One reply line under one deadline: pyserial's own ``read_until`` waits its timeout per
+        byte (a controller sending a byte every 0.7 s would never time out with 1 s)."""
+        deadline = time.monotonic() + self._timeout
+        while (end := self._rbuf.find(self._rterm)) < 0:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TransportError(f"timeout after {self._timeout:g} s (partial reply {bytes(self._rbuf[:40])!r}; "
+                                     "the deadline covers the whole reply)")
+            if len(self._rbuf) > MAX_LINE_BYTES:
+                self._rbuf.clear()
+                raise TransportError(f"reply longer than {MAX_LINE_BYTES} bytes without a termination")
+            self._ser.timeout = left
+            self._rbuf += self._ser.read(max(1, self._ser.in_waiting))
+        line = bytes(self._rbuf[:end])
+        del self._rbuf[:end + len(self._rterm)]
+        return line.decode("ascii")
 
     def query_block(self, command: str, datatype: str, big_endian: bool) -> np.ndarray:
         self.write(command)

@@ -8,6 +8,14 @@ folder, path on standard error), records the lab there (one record per serving
 process: ``--lab`` runs and ``labkit off --lab`` find it), then serves until
 SIGINT or SIGTERM; the lab is shut down (generator outputs off,
 sockets and the pseudo-terminal closed) in every case.
+
+``--vxi11`` also serves the generator and the scope over VXI-11
+(``TCPIP0::127.x.y.z::inst0::INSTR``, each with a portmapper on port 111 of its own
+loopback address): those resources then replace the raw sockets in the JSON, the
+config and the record (the sockets stay served, listed in the record's ``sockets``).
+Port 111 is privileged: without root the command ends with one line and exit 2.
+``--hislip`` does the same over HiSLIP (``TCPIP0::127.0.0.1::hislip0,<port>::INSTR``, an
+ephemeral port: no root needed).
 """
 from __future__ import annotations
 
@@ -47,6 +55,13 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     serve.add_argument("--force", action="store_true", help="overwrite an existing --config FILE")
     serve.add_argument("--miswire", action="append", choices=MISWIRES, default=[], metavar="FAULT",
                        help=f"cable the lab wrong on purpose (repeatable): {', '.join(MISWIRES)}")
+    link = serve.add_mutually_exclusive_group()
+    link.add_argument("--vxi11", action="store_true",
+                      help="also serve the generator and the scope over VXI-11 (TCPIP0::host::inst0::INSTR; "
+                           "port 111 needs root); the config and the JSON then give those resources")
+    link.add_argument("--hislip", action="store_true",
+                      help="also serve the generator and the scope over HiSLIP (TCPIP0::host::hislip0,PORT::INSTR); "
+                           "the config and the JSON then give those resources")
     serve.add_argument("--amplifier-gain-db", type=float, default=20.0, metavar="DB",
                        help="the lab amplifier's real gain (default 20 dB, as its config declares)")
 
@@ -66,7 +81,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError("the folder does not exist", file=args.config, key="--config")
     lab = VirtualLab(robot=robot, seed=args.seed, funcgen_model=args.funcgen, scope_model=args.scope,
                      vibrometer_model=args.vibrometer, miswire=Miswiring.from_names(args.miswire),
-                     amplifier_gain_db=args.amplifier_gain_db)
+                     amplifier_gain_db=args.amplifier_gain_db, vxi11=args.vxi11,
+                     hislip=args.hislip)
     lab.set_setup(args.setup)
     lab.set_spot(args.spot)
     stop = threading.Event()
@@ -75,12 +91,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
     config = Path(args.config) if args.config else lab_file().with_suffix(".toml")
     try:
-        lab.start()
-        emit_json(lab.resources)   # always: this line is how clients find the lab
-        config.write_text(lab_config_text(args.setup, lab.resources, lab.models, path=str(config)))
+        _start(lab)
+        resources = {**lab.resources, **lab.vxi11_resources, **lab.hislip_resources}
+        emit_json(resources)   # always: this line is how clients find the lab
+        config.write_text(lab_config_text(args.setup, resources, lab.models, path=str(config)))
         # and this record is how `--lab` runs and `labkit off --lab` do
-        announce_lab(lab.resources, lab.models, config=str(config.resolve()), setup=args.setup,
-                     miswire=lab.miswire.names())
+        announce_lab(resources, lab.models, config=str(config.resolve()), setup=args.setup,
+                     miswire=lab.miswire.names(), **({"sockets": lab.resources} if resources != lab.resources else {}))
         if not args.json:
             models = ", ".join(f"{role}: {model}" for role, model in lab.models.items())
             print(f"virtual lab serving ({models}); Ctrl-C to stop\n"
@@ -95,3 +112,17 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             config.unlink(missing_ok=True)
         lab.close()
     return {}  # pragma: no cover - only reached if the wait ends without a signal
+
+
+def _start(lab: Any) -> None:
+    """Start the lab; a VXI-11 portmapper refused port 111 is bad input (one line, exit 2)."""
+    from labkit.errors import InputError
+
+    try:
+        lab.start()
+    except PermissionError as exc:
+        lab.close()
+        raise InputError(f"cannot bind the VXI-11 portmapper's port 111 ({exc.strerror or exc}): port 111 "
+                         "is privileged", key="--vxi11",
+                         expected="root (sudo labkit lab serve --vxi11), or no --vxi11 (raw sockets "
+                                  "TCPIP0::host::port::SOCKET)") from None

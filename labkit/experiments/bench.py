@@ -200,6 +200,8 @@ def _identities(cfg: Config, report: CheckReport, stack: contextlib.ExitStack) -
             cause = exc.__cause__ or exc
             report.add(f"identity {role}", FAIL, f"no answer from {spec.resource}: {exc}", f"model {spec.model}",
                        _hint(spec.resource, cause) or f"check instruments.{role}.resource (labkit devices)")
+        if role == "scope" and role in opened:   # EXT on a scope without it: ConfigError, nothing set
+            opened[role].trigger_source_for(cfg.scope.trigger_source, cfg.scope.drive_channel)
     return opened if len(opened) == 3 else None
 
 
@@ -268,6 +270,11 @@ class Bench:
     def vel_ch(self) -> int:
         return self.cfg.scope.velocity_channel
 
+    @property
+    def trigger(self) -> str:
+        """The trigger source: the configured one, or EXT where the scope has it, else the drive."""
+        return str(self.scope.trigger_source_for(self.cfg.scope.trigger_source, self.drive_ch))
+
 
 def _check_range(b: Bench) -> None:
     want = float(b.cfg.scale_mm_s_per_v)
@@ -304,7 +311,7 @@ def _check_noise(b: Bench) -> None:
 
 def _set_sync_trigger(b: Bench) -> bool:
     """The generator's SYNC on, the scope triggered by it (NORM: no trigger, no record). True if set."""
-    fg, scope, src = b.fg, b.scope, b.cfg.scope.trigger_source
+    fg, scope, src = b.fg, b.scope, b.trigger
     level = 1.0 if src == "EXT" else b.offset_v if src == f"CHAN{b.drive_ch}" else 0.0
     try:
         fg.enable_sync()                    # each family's sync commands, read back
@@ -354,7 +361,7 @@ def _triggered_record(b: Bench) -> dict[int, Any] | None:
     scope.set_record_points(4000)
     wait = max(1.0, 10 * rec)
     t0 = time.monotonic()
-    src = b.cfg.scope.trigger_source
+    src = b.trigger
     try:
         out = _record(b, rec, wait)
     except InstrumentError:
@@ -387,7 +394,7 @@ def _check_drive(b: Bench, rec: dict[int, Any], triggered: bool) -> None:
     if not triggered:
         b.report.add("drive phase at the trigger", FAIL, "not measured: no trigger", "a triggered record",
                      "see 'triggered acquisition'")
-    elif b.cfg.scope.trigger_source == "EXT":
+    elif b.trigger == "EXT":
         p_ok = amp_ok and abs(d.phase_deg) <= tol["phase_deg"]
         b.report.add("drive phase at the trigger", PASS if p_ok else FAIL, f"{d.phase_deg:+.1f} deg",
                      f"0 deg +-{tol['phase_deg']:g} (SYNC marks the sine's phase zero)",

@@ -122,9 +122,11 @@ class ScopeSetup:
     velocity_channel: int
     drive_volts_per_div: float | None = None
     velocity_volts_per_div: float | None = None
-    trigger_source: str = "EXT"        # the generator's sync into EXT, or CHAN<n>
+    trigger_source: str | None = None  # the generator's sync into EXT, or CHAN<n>; None: EXT if the scope has it
     samples_per_cycle: float = 100.0   # record points per drive period (stepped sine)
     max_points: int = 100_000          # cap on record points
+    acquisition: str = "normal"        # "normal" | "average" (the scope averages `averages` triggered records)
+    averages: int = 1
 
 
 @dataclass(frozen=True)
@@ -253,7 +255,10 @@ def load_inchip(path: str | Path) -> InchipConfig:
         span = max(freqs) / min(freqs)
         if span <= 1:
             raise f.error("stop_hz", "empty band", "stop_hz > start_hz for a chirp")
-    scope = _scope(root.table("scope"))
+    scope = _scope(root.table("scope"), instruments["scope"].model)
+    if method.kind == "chirp" and scope.averages > 1:
+        raise root.table("scope").error("acquisition", "'average' with method.kind = 'chirp'",
+                                        "'normal' (a chirp's records are averaged by method.averages)")
     vib = root.table("vibrometer")
     vib.only(("scale_mm_s_per_v",))
     scale = vib.number("scale_mm_s_per_v", unit="mm/s/V", minimum=0, exclusive_minimum=True)
@@ -321,7 +326,7 @@ def load_shaker(path: str | Path) -> ShakerConfig:
 
     method = _method(root.table("method"), allow_chirp=False)
     _check_point_lengths(root.table("method"), method, freqs, video_s=video_s)
-    scope = _scope(root.table("scope"))
+    scope = _scope(root.table("scope"), instruments["scope"].model)
     vib = root.table("vibrometer")
     vib.only(("scale_mm_s_per_v",))
     scale = vib.number("scale_mm_s_per_v", unit="mm/s/V", minimum=0, exclusive_minimum=True)
@@ -481,21 +486,35 @@ def _method(t: Table, *, allow_chirp: bool) -> Method:
                   keep_raw=t.boolean("keep_raw", default=False))
 
 
-def _scope(t: Table) -> ScopeSetup:
+def _scope(t: Table, model: str = "") -> ScopeSetup:
     t.only(("drive_channel", "velocity_channel", "drive_volts_per_div", "velocity_volts_per_div",
-            "trigger_source", "samples_per_cycle", "max_points"))
+            "trigger_source", "samples_per_cycle", "max_points", "acquisition", "averages"))
     d = t.integer("drive_channel", minimum=1, maximum=4)
     v = t.integer("velocity_channel", minimum=1, maximum=4)
     if d == v:
         raise t.error("velocity_channel", f"same channel as drive_channel ({d})", "a different scope channel")
-    trig = t.string("trigger_source", default="EXT", choices=("EXT", "CHAN1", "CHAN2", "CHAN3", "CHAN4"))
+    trig = t.string("trigger_source", default=None, choices=("EXT", "CHAN1", "CHAN2", "CHAN3", "CHAN4"))
     return ScopeSetup(d, v,
                       t.number("drive_volts_per_div", default=None, unit="V/div", minimum=0, exclusive_minimum=True),
                       t.number("velocity_volts_per_div", default=None, unit="V/div", minimum=0,
                                exclusive_minimum=True),
                       trig,
                       t.number("samples_per_cycle", default=100.0, minimum=8, maximum=MAX_SAMPLES_PER_CYCLE),
-                      t.integer("max_points", default=100_000, minimum=100, maximum=8_000_000))
+                      t.integer("max_points", default=100_000, minimum=100, maximum=8_000_000),
+                      *_acquisition(t, model))
+
+
+def _acquisition(t: Table, model: str) -> tuple[str, int]:
+    """``acquisition`` and ``averages``: 1 with "normal"; 2..65536 with "average" (the DS1000Z: powers of
+    two 2..1024, its :ACQuire:AVERages)."""
+    acq = t.string("acquisition", default="normal", choices=("normal", "average"))
+    rigol = model == "DS1000Z"
+    expected = "1 with acquisition = 'normal'; with 'average' " + (
+        "a power of two 2..1024 (DS1000Z)" if rigol else "2..65536")
+    n = t.integer("averages", default=1, minimum=1, maximum=1024 if rigol else 65536)
+    if (acq == "average") != (n > 1) or (rigol and n & (n - 1)):
+        raise t.error("averages", f"{n} with acquisition = {acq!r}", expected)
+    return acq, n
 
 
 def comparable(cfg: InchipConfig | ShakerConfig) -> dict[str, Any]:

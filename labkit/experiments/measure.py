@@ -51,25 +51,29 @@ class SinePhasors:
 
 
 def acquire(scope: Any, drive_channel: int, velocity_channel: int, record_s: float,
-            timeout_s: float) -> Records:
-    """One single-shot acquisition of both channels (timebase already set for ``record_s``)."""
+            timeout_s: float, averages: int = 1) -> Records:
+    """One single-shot acquisition of both channels (timebase already set for ``record_s``); a scope
+    set to average ``averages`` records takes that many triggers (the drive's sync, every cycle)."""
     scope.single()
     # The record cannot be complete before it has been acquired: sleep through it, then poll.
-    time.sleep(record_s)
+    time.sleep(record_s * averages)
     scope.wait_done(timeout_s)
     return _read(scope, drive_channel, velocity_channel)
 
 
 def acquire_burst(scope: Any, fire: Any, drive_channel: int, velocity_channel: int, settle_s: float,
-                  dwell_s: float, timeout_s: float) -> Records:
+                  dwell_s: float, timeout_s: float, averages: int = 1) -> Records:
     """Arm the scope, start the generator's burst (``fire()``, a ``*TRG``), record its settled part.
 
     The scope's record was placed ``settle_s`` after its trigger (the burst's start,
-    :meth:`set_record_delay`), so it holds ``dwell_s`` of the steady response.
+    :meth:`set_record_delay`), so it holds ``dwell_s`` of the steady response. A scope set
+    to average ``averages`` records gets one burst per record (``fire`` waits for the last
+    burst's end), each response starting from rest at its own trigger.
     """
     arm(scope)
-    fire()
-    time.sleep(settle_s + dwell_s)
+    for _ in range(averages):
+        fire()
+        time.sleep(settle_s + dwell_s)
     scope.wait_done(timeout_s)
     return _read(scope, drive_channel, velocity_channel)
 

@@ -196,6 +196,8 @@ class Rig:
             scope = _open(inst["scope"])
             _claim(scope, inst["scope"])
             self.scope = scope
+            # EXT where the scope has it, else the drive; EXT on a model without it: ConfigError, nothing set
+            trig = scope.trigger_source_for(cfg.scope.trigger_source, self.drive_channel)
             scope.poll_s = 0.002       # completion polls: fine-grained (the record time is slept)
             vib = self.vibrometer = _open(inst["vibrometer"])
             vib.scale_mm_s_per_v = cfg.scale_mm_s_per_v
@@ -203,14 +205,14 @@ class Rig:
             # the decoder's output lags the velocity: every point's phase is corrected for it
             self.velocity_delay_s = float(vib.signal_delay_s)
             scope.setup_channel(self.velocity_channel, self.velocity_vpd, 0.0, "DC")
-            trig = cfg.scope.trigger_source
             # EXT: the generator's TTL sync (phase zero of the sine, start of a sweep)
             offset_v = setup.drive[1] if setup.drive is not None else 0.0
             level = 1.0 if trig == "EXT" else (offset_v if trig == f"CHAN{self.drive_channel}" else 0.0)
             if trig == "EXT":
                 fg.enable_sync()      # sync on, from the drive channel, read back (docs/instruments.md)
             scope.set_trigger(trig, level, "POS")     # NORMal sweep: no trigger, no record
-            scope.set_averaging(1)    # one record per trigger (a scope left averaging would blend points)
+            # scope.averages records per point, read back (1: a scope left averaging would blend points)
+            scope.set_averaging(cfg.scope.averages)
             if setup.drive is not None:
                 self.on_drive_amplitude(*setup.drive)
             if setup.wants_camera:

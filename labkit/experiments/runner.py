@@ -458,14 +458,16 @@ class Runner:
                 time.sleep(left)
             waited = max(left, 0.0)
         retries = 2      # the scope may miss a burst's start on a loaded machine
+        n_avg = self.cfg.scope.averages      # records the scope averages into one (scope.acquisition)
         for _attempt in range(6):
             t_acq = time.monotonic()
             if self.bounded:
                 self._wait_burst_end()       # before arming: the trigger must follow the arm at once
                 try:
                     rec = measure.acquire_burst(rig.scope, lambda: self._fire_burst(freq_hz),
-                                                rig.drive_channel, rig.velocity_channel,
-                                                settle_s, dwell_s, timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                                                rig.drive_channel, rig.velocity_channel, settle_s, dwell_s,
+                                                timeout_s=(settle_s + dwell_s) * 2 * n_avg + ACQUIRE_MARGIN_S,
+                                                averages=n_avg)
                 except InstrumentError as exc:
                     if not getattr(exc, "no_trigger", False):
                         raise
@@ -485,7 +487,7 @@ class Runner:
             else:
                 try:
                     rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
-                                          timeout_s=dwell_s * 2 + ACQUIRE_MARGIN_S)
+                                          timeout_s=dwell_s * 2 * n_avg + ACQUIRE_MARGIN_S, averages=n_avg)
                 except InstrumentError as exc:
                     if getattr(exc, "no_trigger", False):
                         self._no_trigger()

@@ -151,9 +151,13 @@ def _scope(w: Wiring) -> list[str]:
                   "which scope channel sees the drive?"),
             _line("velocity_channel", w.velocity_channel, "scope channel (1-4) cabled to the vibrometer's "
                   "analog output; not the drive's", "which scope channel sees the vibrometer?"),
-            _line("trigger_source", "EXT", '"EXT" (generator SYNC -> scope EXT TRIG; default) or "CHAN1".."CHAN4"'),
+            '# trigger_source = "EXT"          # "EXT" (generator SYNC -> scope EXT TRIG) or "CHAN1".."CHAN4"; '
+            "default: EXT, the drive channel on a scope without EXT (4-channel DS1000Z)",
             _line("samples_per_cycle", 100.0, "record points per drive period, >= 8 (default 100)"),
             _line("max_points", 100000, "cap on record points, 100..8000000 (default 100000)"),
+            '# acquisition = "average"         # "normal" (default) or "average": the scope averages `averages` '
+            "triggered records per point",
+            "# averages = 16                   # with \"average\": 2..65536 (DS1000Z: a power of two 2..1024)",
             "# drive_volts_per_div = 0.5       # V/div, > 0 (default: from the drive amplitude)",
             "# velocity_volts_per_div = 2.5    # V/div, > 0 (default: the vibrometer's +-10 V, then narrowed)",
             ""]

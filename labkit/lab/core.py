@@ -35,7 +35,7 @@ from labkit.lab import camera
 from labkit.lab.control import SimLabControl
 from labkit.lab.funcgen import Drive, SimAgilent33220A, SimKeysight33500B, SimRigolDG1000Z
 from labkit.lab.miswire import Miswiring
-from labkit.lab.models import FUNCGEN_MODELS, SCOPE_MODELS, VIBROMETER_MODELS
+from labkit.lab.models import FUNCGEN_MODELS, SCOPE_MODELS, TWO_CHANNEL_SCOPES, VIBROMETER_MODELS
 from labkit.lab.physics import SPOTS, ShakerChain, TetheredModel, simulate_linear
 from labkit.lab.scope import SimInfiniiVision, SimRigolDS1000Z
 from labkit.lab.transport import Fault, PtyServer, TcpServer
@@ -185,7 +185,7 @@ class VirtualLab:
                  sim_duration_s: float = 1.0, scope_memory_points: int = 1_000_000,
                  funcgen_model: str = "33522B", scope_model: str = "DSOX3024T",
                  vibrometer_model: str = "OFV-5000", miswire: Miswiring | None = None,
-                 vxi11: bool = False) -> None:
+                 vxi11: bool = False, hislip: bool = False) -> None:
         self.seed = int(seed)
         self.miswire = miswire or Miswiring()
         self.params = load_robot(robot)
@@ -213,6 +213,9 @@ class VirtualLab:
         #: VXI-11 servers of the generator and the scope (``vxi11=True``; needs root for port 111)
         self.vxi11 = bool(vxi11)
         self.vxi11_servers: dict[str, Any] = {}
+        #: HiSLIP servers of the generator and the scope (``hislip=True``; ephemeral ports, no root)
+        self.hislip = bool(hislip)
+        self.hislip_servers: dict[str, Any] = {}
         self.camera_fps = 30.0
         self.last_recording: dict[str, Any] | None = None
         #: the only folder the camera writes to (``CAM:REC "<file name>"``); a fresh one per lab
@@ -236,6 +239,8 @@ class VirtualLab:
         self.scope = sc_class(self._signals, self._sync, seed=self.seed, memory_points=scope_memory_points)
         self.scope.idn = self.scope.idn.replace("DSOX3024T", sc_model).replace("DS1104Z", sc_model)
         self.scope.idn = _own_serial(self.scope.idn, bench)
+        if sc_model in TWO_CHANNEL_SCOPES:
+            self.scope.suffix_limits = {"CHAN": 2}
         vib_class = SimOFV3001 if vib_model == "OFV-3001" else SimOFV5000
         self.vibrometer: SimOFV5000 | SimOFV3001 = vib_class(self.spot_peak_velocity_mm_s)
         if self.miswire.vibrometer_range_mm_s_per_v is not None:
@@ -249,7 +254,6 @@ class VirtualLab:
     def start(self) -> VirtualLab:
         if self._started:
             return self
-        self._warm_simulator()
         self.servers = {
             "funcgen": TcpServer(self.funcgen, self._log, seed=self.seed + 1),
             "scope": TcpServer(self.scope, self._log, seed=self.seed + 2),
@@ -265,6 +269,16 @@ class VirtualLab:
                 vx = Vxi11Server(self.servers[name])
                 vx.start()
                 self.vxi11_servers[name] = vx
+        if self.hislip:
+            from labkit.lab.hislip import HislipServer
+
+            for name in ("funcgen", "scope"):
+                hs = HislipServer(self.servers[name])
+                hs.start()
+                self.hislip_servers[name] = hs
+        # compiled once the transports are bound (a refused port 111 ends the start without the wait);
+        # clients learn the resources only when start() has returned
+        self._warm_simulator()
         self._started = True
         return self
 
@@ -274,9 +288,9 @@ class VirtualLab:
             with self.funcgen.lock:
                 self.funcgen._set_output(ch, False)
         self.scope.close()
-        for vx in self.vxi11_servers.values():
+        for vx in [*self.vxi11_servers.values(), *self.hislip_servers.values()]:
             vx.close()
-        self.vxi11_servers = {}
+        self.vxi11_servers, self.hislip_servers = {}, {}
         for server in self.servers.values():
             server._stop.set()   # every server winds down at once, then each is joined
         for server in self.servers.values():
@@ -295,6 +309,11 @@ class VirtualLab:
     def resources(self) -> dict[str, str]:
         """VISA resource strings of the instruments and of the control channel."""
         return {name: server.resource for name, server in self.servers.items()}
+
+    @property
+    def hislip_resources(self) -> dict[str, str]:
+        """``TCPIP0::127.0.0.1::hislip0,<port>::INSTR`` of the generator and the scope (``hislip=True``)."""
+        return {name: server.resource for name, server in self.hislip_servers.items()}
 
     @property
     def vxi11_resources(self) -> dict[str, str]:

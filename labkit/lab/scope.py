@@ -720,14 +720,19 @@ class SimRigolDS1000Z(SimInfiniiVision):
         self.setting(":TRIGger:SWEep", "trig_sweep", "AUTO", lambda t: parse_enum(t, ["AUTO", "NORMal", "SINGle"]),
                      str)
         # :TRIGger:EDGe:SOURce/SLOPe/LEVel: the DS1000Z's node is EDGe (short form EDG)
-        self.setting(":TRIGger[:EDGe]:SOURce", "trig_source", "CHAN1",
-                     lambda t: parse_enum(t, ["CHANnel1", "CHANnel2", "CHANnel3", "CHANnel4", "EXTernal", "AC"]),
-                     str)
+        self.setting(":TRIGger[:EDGe]:SOURce", "trig_source", "CHAN1", self._parse_trig_source, str)
         self.setting(":TRIGger[:EDGe]:SLOPe", "trig_slope", "POS",
                      lambda t: parse_enum(t, ["POSitive", "NEGative", "RFALl"]), str)
         self.add(":TRIGger[:EDGe]:LEVel", set=self._set_trig_level, query=self._trig_level_query)
         # :CHANnel<n>:BWLimit {20M|OFF}
         self.setting(":CHANnel#:BWLimit", "bwlimit", "OFF", lambda t: parse_enum(t, ["20M", "OFF"]), str, True)
+
+    def _parse_trig_source(self, text: str) -> str:
+        """The four-channel DS1000Z triggers on CHANnel1-4 or AC (DS :TRIGger:EDGe:SOURce: no EXT input);
+        the two-channel DS1000Z-E on CHANnel1-2, EXT or AC (its front panel's EXT TRIG). Else -224."""
+        n = self.suffix_limits["CHAN"]
+        chans = [f"CHANnel{k}" for k in range(1, n + 1)]
+        return parse_enum(text, chans + (["EXTernal"] if n == 2 else []) + ["AC"])
 
     def _measure_item(self, c: Call) -> str:
         if not c.params or len(c.params) > 2:

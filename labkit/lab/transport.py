@@ -9,7 +9,7 @@ goes to ``on_log(instrument, "rx"|"tx", text)``.
 Faults (:class:`Fault`) are applied to replies: ``drop`` sends half of the
 reply and closes the connection (a pulled cable, mid-block for a waveform),
 ``stall`` swallows the reply (a hung instrument), ``garbage`` replaces it with
-random bytes and a ``\\n``, ``trickle`` sends it a byte at a time (raw sockets).
+random bytes and a ``\\n``, ``trickle`` sends it a byte at a time (sockets and ptys).
 """
 from __future__ import annotations
 
@@ -258,6 +258,10 @@ class _Endpoint:
         return part, "drop"
 
 
+#: the socket send buffer of a served connection (the kernel doubles it for its bookkeeping)
+SEND_BUFFER_BYTES = 256 << 10
+
+
 class TcpServer(_Endpoint):
     """A raw-socket line server on 127.0.0.1 (ephemeral port), one thread per client."""
 
@@ -282,25 +286,37 @@ class TcpServer(_Endpoint):
                     f"lab-{self.name}-conn")
 
     def _serve(self, conn: socket.socket) -> None:
+        """Read messages and send replies without blocking on either: a reply leaves as fast as
+        the link takes it (the instrument's output queue, :meth:`_flush`), and a message that
+        arrives while part of a reply is still queued interrupts it (:meth:`_interrupt`)."""
         framer = Framer()
-        conn.settimeout(0.05)
+        out = bytearray()
+        # an instrument's LAN buffer is small: a fixed one (no autotuning to megabytes) keeps an
+        # unread reply in the instrument, where the next message finds it
+        conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
+        conn.setblocking(False)
         try:
             while not self._stop.is_set():
-                try:
-                    chunk = conn.recv(65536)
-                except TimeoutError:
+                readable, writable, _ = select.select([conn], [conn] if out else [], [], 0.05)
+                if writable:
+                    self._flush(conn, out)
+                if not readable:
                     continue
+                chunk = conn.recv(65536)
                 if not chunk:
                     return
                 for line in self.lines(framer, chunk):
+                    if out:
+                        self._interrupt(out)
                     data, fault = self.process(line)
                     if data and fault == "trickle":
                         self._send_trickle(conn, data)
                     elif data:
-                        conn.settimeout(None)
-                        conn.sendall(data)
-                        conn.settimeout(0.05)
+                        out += data
+                        self._flush(conn, out)
                     if fault == "drop":
+                        conn.setblocking(True)
+                        conn.sendall(out)
                         conn.shutdown(socket.SHUT_RDWR)
                         return
         except OSError:
@@ -310,12 +326,37 @@ class TcpServer(_Endpoint):
                 self._conns.discard(conn)
             conn.close()
 
+    @staticmethod
+    def _flush(conn: socket.socket, out: bytearray) -> None:
+        """Hand the link as much of the queued reply as it takes now."""
+        try:
+            n = conn.send(out)
+        except BlockingIOError:
+            return
+        del out[:n]
+
+    def _interrupt(self, out: bytearray) -> None:
+        """A message arrived before the last reply was read (what the link has not taken counts as
+        unread): the rest is discarded and ``-410,"Query INTERRUPTED"`` queued (IEEE 488.2
+        6.3.2.3), where the instrument has an error queue; else the reply still goes out."""
+        push = getattr(self.handler, "push_error", None)
+        if push is None:
+            return
+        self.on_log(self.name, "fault", f"query interrupted: {len(out)} unread reply bytes discarded")
+        out.clear()
+        with self.handler_lock():
+            push(-410, "Query INTERRUPTED")
+
     def _send_trickle(self, conn: socket.socket, data: bytes) -> None:
         """One byte every ``_trickle_s`` until the reply is out, the client leaves or the lab stops."""
-        for i in range(len(data)):
-            if self._stop.wait(self._trickle_s):
-                return
-            conn.sendall(data[i:i + 1])
+        conn.setblocking(True)
+        try:
+            for i in range(len(data)):
+                if self._stop.wait(self._trickle_s):
+                    return
+                conn.sendall(data[i:i + 1])
+        finally:
+            conn.setblocking(False)
 
     def close(self) -> None:
         shut_down(self._stop, [self.sock], self._lock, self._conns, self._threads)
@@ -409,7 +450,12 @@ class PtyServer(_Endpoint):
                     self.on_log(self.name, "rx", line)
                     continue
                 data, fault = self.process(line)
-                if data:
+                if data and fault == "trickle":
+                    for i in range(len(data)):        # a controller whose line crawls
+                        if self._stop.wait(self._trickle_s):
+                            return
+                        self._write(data[i:i + 1])
+                elif data:
                     self._write(data)
                 if fault == "drop":
                     # a serial link cannot be "closed" from the far end: it goes quiet

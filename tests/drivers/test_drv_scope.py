@@ -75,15 +75,61 @@ def test_rigol_memory_depth_for_the_channels_on_and_averaging():
             (b":SYST:ERR?\n", R_OK)]
     script += [(f":CHAN{c}:DISP?\n".encode(), b"1\n" if c <= 2 else b"0\n") for c in (1, 2, 3, 4)]
     script += _w(":RUN", ":ACQ:MDEP 6000") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:MDEP?\n", b"6000\n")]
-    script += _w(":ACQ:TYPE AVER", ":ACQ:AVER 16") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:TYPE?\n", b"AVER\n")]
+    script += _w(":ACQ:TYPE AVER", ":ACQ:AVER 16") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:TYPE?\n", b"AVER\n"),
+                                                     (b":ACQ:AVER?\n", b"16\n")]
+    # a scope that kept another count: the read-back says so
+    script += _w(":ACQ:TYPE AVER", ":ACQ:AVER 32") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:TYPE?\n", b"AVER\n"),
+                                                     (b":ACQ:AVER?\n", b"16\n")]
     with expected_protocol(RigolDS1000Z, script) as sc:
         sc.setup_channel(1, 0.5)
         sc.setup_channel(2, 0.5)
         sc.set_record_points(5000)
         sc.set_averaging(16)
+        assert sc.state["record_points"] == 6000 and sc.state["averages"] == 16
+        assert sc.state["acquisition"] == "AVER"
         with pytest.raises(LimitError, match="averages 2, 4"):
             sc.set_averaging(12)
-    assert sc.state["record_points"] == 6000 and sc.state["averages"] == 16
+        with pytest.raises(InstrumentError, match=r":ACQ:AVER\? answers 16, 32 was set"):
+            sc.set_averaging(32)
+
+
+def test_infiniivision_averaging_count_read_back():
+    """IV :ACQuire:TYPE, :ACQuire:COUNt: type and count set, both read back; 1 is NORMal."""
+    script = _w(":ACQ:TYPE AVER", ":ACQ:COUN 100") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:TYPE?\n", b"AVER\n"),
+                                                      (b":ACQ:COUN?\n", b"+100\n")]
+    script += _w(":ACQ:TYPE NORM") + [(b":SYST:ERR?\n", R_OK), (b":ACQ:TYPE?\n", b"NORM\n")]
+    with expected_protocol(InfiniiVision, script) as sc:
+        sc.set_averaging(100)
+        assert (sc.state["acquisition"], sc.state["averages"]) == ("AVER", 100)
+        sc.set_averaging(1)
+        assert (sc.state["acquisition"], sc.state["averages"]) == ("NORM", 1)
+
+
+@pytest.mark.parametrize("cls, model, channels, default, ext", [
+    # DS1000Z Programming Guide, :TRIGger:EDGe:SOURce: D0-D15, CHANnel1-4, AC (no EXT on the four-channel
+    # models); the two-channel DS1000Z-E has an EXT TRIG input; every InfiniiVision has one
+    (RigolDS1000Z, "DS1054Z", 4, "CHAN1", False),
+    (RigolDS1000Z, "DS1202Z-E", 2, "EXT", True),
+    (InfiniiVision, "DSOX3024T", 4, "EXT", True),
+])
+def test_trigger_source_default_and_ext_per_model(cls, model, channels, default, ext):
+    """Without a setting a run triggers on EXT where the scope has it, else on the drive channel;
+    EXT asked of a scope without it is a ConfigError before anything is sent (the protocol is empty)."""
+    from labkit.errors import ConfigError
+
+    maker = "RIGOL TECHNOLOGIES" if cls is RigolDS1000Z else "KEYSIGHT TECHNOLOGIES"
+    with expected_protocol(cls, [], identity=f"{maker},{model},S1,01.00") as sc:
+        assert (sc.instrument_model, sc.n_channels, sc.has_ext_trigger) == (model, channels, ext)
+        assert sc.trigger_source_for(None, 1) == default
+        assert sc.trigger_source_for(None, 3) == default.replace("CHAN1", "CHAN3")
+        assert sc.trigger_source_for("chan2", 1) == "CHAN2"
+        with pytest.raises(LimitError, match="scope channel"):
+            sc.set_trigger(f"CHAN{channels + 1}", 0.0)
+        if not ext:
+            with pytest.raises(ConfigError, match=f"the {model} has no external trigger input; nothing was sent"):
+                sc.set_trigger("EXT", 1.0)
+            with pytest.raises(ConfigError, match="scope.trigger_source"):
+                sc.trigger_source_for("EXT", 1)
 
 
 @pytest.mark.parametrize("cls, ok, offs", [

@@ -160,3 +160,29 @@ def raw(lab):
     yield connect
     for client in opened:
         client.close()
+
+
+def knee_frf_over(lab: VirtualLab, funcgen: str, scope: str) -> complex:
+    """labkit's 33500B and InfiniiVision drivers at these resources measure the knee's FRF at
+    3.4 kHz (sync on EXT, one triggered record); returned over the lab's truth (seen through the
+    decoder's delay): 1 when the link carried every setting and sample faithfully."""
+    from labkit.drivers.funcgen import Keysight33500B
+    from labkit.drivers.scope import InfiniiVision
+
+    with Keysight33500B.open(funcgen, timeout_s=5, max_amp_vpp=10) as fg, \
+            InfiniiVision.open(scope, timeout_s=10, points=20_000) as sc:
+        fg.set_load()
+        fg.enable_sync()
+        fg.set_sine(3400.0, 2.0)
+        fg.output(True)
+        lab.set_spot("knee")
+        settle(lab)
+        sc.setup_channel(1, 0.5)
+        sc.setup_channel(2, 1.0)
+        sc.set_timebase(30 / 3400.0)
+        sc.set_trigger("EXT", 1.0)
+        sc.single()
+        sc.wait_done(10)
+        d, v = sc.read_waveform(1), sc.read_waveform(2)
+    h = fit_sine(v.t_s, v.volts * lab.vibrometer.scale_mm_s_per_v, 3400.0) / fit_sine(d.t_s, d.volts, 3400.0)
+    return complex(h / (complex(lab.frf("knee", 3400.0)) * decoder_lag(lab, 3400.0)))

@@ -396,8 +396,20 @@ DS_ROWS = [
     Row("DS has no InfiniiVision :DIGitize, :OPERegister, :WAVeform:POINts", [
         (":DIG", None), (":OPER:COND?", None), (":WAV:POIN?", None)], [-113, -113, -113]),
     Row("DS :TFORce: a single acquisition waiting in NORMal sweep triggers now", [
-        (":TRIG:SWE NORM;:TRIG:EDGE:SOUR EXT", None), (":SING", None), (":TRIG:STAT?", "WAIT"),
+        (":TRIG:SWE NORM;:TRIG:EDGE:SOUR AC", None), (":SING", None), (":TRIG:STAT?", "WAIT"),
         (":TFOR", None), (PAUSE, None), (":TRIG:STAT?", "STOP"), (":WAV:DATA?", block(9, 1200))]),
+    Row("DS :TRIGger:EDGe:SOURce D0-D15|CHANnel1-4|AC: the four-channel DS1000Z has no EXT input (-224)", [
+        (":TRIG:EDG:SOUR EXT", None), (":TRIG:EDG:SOUR?", "CHAN1"), (":TRIG:EDG:SOUR CHANnel4", None),
+        (":TRIG:EDG:SOUR?", "CHAN4"), (":TRIG:EDG:SOUR AC", None), (":TRIG:EDG:SOUR?", "AC")], [-224]),
+]
+
+#: the two-channel DS1000Z-E (DS1202Z-E): the same dialect, channels 1-2 and an EXT TRIG input
+DSE_ROWS = [
+    Row("488.2 10.14 *IDN?", [("*IDN?", model_word("DS1202Z-E"))]),
+    Row("DS1000Z-E :TRIGger:EDGe:SOURce CHANnel1|CHANnel2|EXT|AC: EXT accepted, CHANnel3 refused (-224); "
+        ":CHANnel3 is no header suffix there (-114)", [
+            (":TRIG:EDG:SOUR EXT", None), (":TRIG:EDG:SOUR?", "EXT"), (":TRIG:EDG:SOUR CHAN3", None),
+            (":TRIG:EDG:SOUR?", "EXT"), (":CHAN3:DISP 1", None)], [-224, -114]),
 ]
 
 # ------------------------------------------------------------------------------------------------
@@ -426,7 +438,14 @@ def _zeros() -> Any:
 
 
 def _now(source: str, t_min: float) -> float | None:
-    return None if source == "EXT" else t_min   # an edge at once on the inputs; nothing wired to EXT
+    return None if source in ("EXT", "AC") else t_min   # an edge at once on the inputs; nothing on EXT, AC
+
+
+def _two_channel(scope: Any, model: str) -> Any:
+    """The simulated DS1000Z as the lab builds a two-channel model (labkit/lab/core.py)."""
+    scope.suffix_limits = {"CHAN": 2}
+    scope.idn = scope.idn.replace("DS1104Z", model)
+    return scope
 
 
 FACTORIES: dict[str, Callable[[], Any]] = {
@@ -436,10 +455,11 @@ FACTORIES: dict[str, Callable[[], Any]] = {
     "33220A": lambda: SimAgilent33220A(),
     "DSOX3024T": lambda: SimInfiniiVision(_zeros, _now),
     "DS1104Z": lambda: SimRigolDS1000Z(_zeros, _now),
+    "DS1202Z-E": lambda: _two_channel(SimRigolDS1000Z(_zeros, _now), "DS1202Z-E"),
 }
-ERR_QUERY = {"DG1062Z": ":SYST:ERR?", "DSOX3024T": ":SYST:ERR?", "DS1104Z": ":SYST:ERR?"}
+ERR_QUERY = {"DG1062Z": ":SYST:ERR?", "DSOX3024T": ":SYST:ERR?", "DS1104Z": ":SYST:ERR?", "DS1202Z-E": ":SYST:ERR?"}
 TABLES = {"33522B": KS_ROWS, "33511B": KS1_ROWS, "DSOX3024T": IV_ROWS, "DG1062Z": DG_ROWS, "DS1104Z": DS_ROWS,
-          "33220A": A2_ROWS}
+          "DS1202Z-E": DSE_ROWS, "33220A": A2_ROWS}
 
 
 @pytest.fixture(scope="module")

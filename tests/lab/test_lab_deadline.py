@@ -61,3 +61,37 @@ def test_a_run_whose_scope_trickles_gives_up_within_its_timeout_exit_3_drive_off
         offs = [t for t, inst, ch, on in lab.output_timeline if inst == "funcgen" and ch == 1 and not on]
         assert lab.output_state("funcgen", 1) is False
         assert offs[-1] - started < 1.5 + 1.0, (started, offs)
+
+
+def test_a_trickled_serial_reply_times_out_within_the_timeout(lab):
+    """The vibrometer controller on the lab's pseudo-terminal sends its reply a byte every 0.7 s
+    (pyserial's read_until would wait 1 s per byte and return the whole line after 1.4 s): labkit's
+    serial read gives up at its 1 s timeout."""
+    from labkit.drivers.vibrometer import OFV5000
+
+    with OFV5000.open(lab.resources["vibrometer"], timeout_s=1.0) as vib:
+        assert vib.over_range() is False
+        lab.inject_fault("vibrometer", "trickle", match="OverRange", interval_s=0.7)
+        t0 = time.monotonic()
+        with pytest.raises(InstrumentError, match="timeout after 1 s"):
+            vib.over_range()
+        took = time.monotonic() - t0
+    assert 0.9 < took < 1.3, took
+
+
+def test_a_run_whose_vibrometer_trickles_gives_up_within_its_timeout_exit_3_drive_off(tmp_path):
+    """The same on the serial link in a run: the over-range query after the first acquisition
+    trickles; the run ends within the vibrometer's timeout (+1 s) with exit 3, one line, drive off."""
+    with VirtualLab(seed=9) as lab:
+        instruments = instruments_toml(lab.resources).replace(
+            'model = "OFV-5000"\n', 'model = "OFV-5000"\ntimeout_s = 1.5\n')
+        cfg = tmp_path / "inchip.toml"
+        cfg.write_text(stepped_inchip_toml(instruments, [800.0, 3400.0]))
+        lab.inject_fault("vibrometer", "trickle", match="OverRange", interval_s=1.0)   # "0\n": 2 s
+        proc = run_cli("sweep", "inchip", str(cfg), "--out", str(tmp_path / "run.h5"), check=None, timeout=120)
+        assert proc.returncode == 3, proc.stderr
+        assert "vibrometer" in proc.stderr and "timeout" in proc.stderr and "Traceback" not in proc.stderr
+        started = next(t for t, inst, d, text in lab.log if d == "fault" and text.startswith("trickle"))
+        offs = [t for t, inst, ch, on in lab.output_timeline if inst == "funcgen" and ch == 1 and not on]
+        assert lab.output_state("funcgen", 1) is False
+        assert 0 < offs[-1] - started < 1.5 + 1.0, (started, offs)

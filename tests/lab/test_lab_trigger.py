@@ -184,3 +184,30 @@ def test_averaging_takes_one_triggered_record_per_average_and_lowers_the_noise(l
         assert abs(fit_sine(t, v, 1000.0)) == pytest.approx(1.0, rel=0.01)
     assert stds[1] / stds[16] == pytest.approx(4.0, rel=0.25)
     assert sc.query(":WAV:PRE?").split(",")[3] == "+16"
+
+
+def test_ext_on_a_four_channel_ds1000z_is_refused_before_any_scope_setting(tmp_path):
+    """The DS1104Z has no EXT input (DS :TRIGger:EDGe:SOURce: CHANnel1-4, AC): a config asking for EXT
+    ends with one line naming scope.trigger_source, exit 2 (a run and labkit check alike); the scope
+    was asked its identity (and its error queue) only, and the generator's output never went on."""
+    from clihelpers import run_cli
+
+    with VirtualLab(seed=15, funcgen_model="DG1062Z", scope_model="DS1104Z") as lab:
+        instruments = instruments_toml(lab.resources, scope_model="DS1000Z").replace('"33500B"', '"DG1000Z"')
+        text = stepped_inchip_toml(instruments, [800.0]).replace(
+            "velocity_channel = 2\n", 'velocity_channel = 2\ntrigger_source = "EXT"\n')
+        cfg = tmp_path / "inchip.toml"
+        cfg.write_text(text)
+        proc = run_cli("sweep", "inchip", str(cfg), "--out", str(tmp_path / "run.h5"), check=2, timeout=120)
+        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1 and "scope.trigger_source" in lines[0] and "DS1104Z has no external trigger" in lines[0]
+        sent = [text for _, inst, d, text in lab.log if inst == "scope" and d == "rx"]
+        assert sent and all(t in ("*IDN?", ":SYST:ERR?", "*CLS") for t in sent), sent
+        assert not any(on for _, inst, _, on in lab.output_timeline if inst == "funcgen")
+        # labkit check says the same; without the line it triggers on the drive (channel 1) and passes
+        proc = run_cli("check", str(cfg), check=2, timeout=120)
+        assert "scope.trigger_source" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+        cfg.write_text(text.replace('trigger_source = "EXT"\n', ""))
+        proc = run_cli("check", str(cfg), check=0, timeout=120)
+        assert "scope trigger CHAN1, sweep NORM (read back)" in proc.stdout
+        assert "all checks passed" in proc.stdout
