@@ -50,15 +50,16 @@ class SinePhasors:
         return self.velocity_mm_s * abs(self.drive_v) / self.drive_v
 
 
-def acquire(scope: Any, drive_channel: int, velocity_channel: int, record_s: float,
-            timeout_s: float, averages: int = 1) -> Records:
-    """One single-shot acquisition of both channels (timebase already set for ``record_s``); a scope
-    set to average ``averages`` records takes that many triggers (the drive's sync, every cycle)."""
+def acquire(scope: Any, channels: tuple[int, int], record_s: float, timeout_s: float,
+            averages: int = 1) -> Records:
+    """One single-shot acquisition of the (drive, velocity) ``channels`` (timebase already set for
+    ``record_s``); a scope set to average ``averages`` records takes that many triggers (the
+    drive's sync, every cycle)."""
     scope.single()
     # The record cannot be complete before it has been acquired: sleep through it, then poll.
     time.sleep(record_s * averages)
     scope.wait_done(timeout_s)
-    return _read(scope, drive_channel, velocity_channel)
+    return _read(scope, *channels)
 
 
 def acquire_burst(scope: Any, fire: Any, drive_channel: int, velocity_channel: int, settle_s: float,

@@ -486,7 +486,7 @@ class Runner:
                     continue
             else:
                 try:
-                    rec = measure.acquire(rig.scope, rig.drive_channel, rig.velocity_channel, dwell_s,
+                    rec = measure.acquire(rig.scope, (rig.drive_channel, rig.velocity_channel), dwell_s,
                                           timeout_s=dwell_s * 2 * n_avg + ACQUIRE_MARGIN_S, averages=n_avg)
                 except InstrumentError as exc:
                     if getattr(exc, "no_trigger", False):

@@ -303,28 +303,33 @@ class TcpServer(_Endpoint):
                 if not readable:
                     continue
                 chunk = conn.recv(65536)
-                if not chunk:
+                if not chunk or not self._answer(conn, framer, chunk, out):
                     return
-                for line in self.lines(framer, chunk):
-                    if out:
-                        self._interrupt(out)
-                    data, fault = self.process(line)
-                    if data and fault == "trickle":
-                        self._send_trickle(conn, data)
-                    elif data:
-                        out += data
-                        self._flush(conn, out)
-                    if fault == "drop":
-                        conn.setblocking(True)
-                        conn.sendall(out)
-                        conn.shutdown(socket.SHUT_RDWR)
-                        return
         except OSError:
             return
         finally:
             with self._lock:
                 self._conns.discard(conn)
             conn.close()
+
+    def _answer(self, conn: socket.socket, framer: Framer, chunk: bytes, out: bytearray) -> bool:
+        """Process every complete message of ``chunk``, queueing (or trickling) the replies; False
+        when a ``drop`` fault closed the link."""
+        for line in self.lines(framer, chunk):
+            if out:
+                self._interrupt(out)
+            data, fault = self.process(line)
+            if data and fault == "trickle":
+                self._send_trickle(conn, data)
+            elif data:
+                out += data
+                self._flush(conn, out)
+            if fault == "drop":
+                conn.setblocking(True)
+                conn.sendall(out)
+                conn.shutdown(socket.SHUT_RDWR)
+                return False
+        return True
 
     @staticmethod
     def _flush(conn: socket.socket, out: bytearray) -> None:
@@ -446,20 +451,26 @@ class PtyServer(_Endpoint):
             except OSError:
                 return
             for line in self.lines(framer, chunk):
-                if self._dead:
-                    self.on_log(self.name, "rx", line)
-                    continue
-                data, fault = self.process(line)
-                if data and fault == "trickle":
-                    for i in range(len(data)):        # a controller whose line crawls
-                        if self._stop.wait(self._trickle_s):
-                            return
-                        self._write(data[i:i + 1])
-                elif data:
-                    self._write(data)
-                if fault == "drop":
-                    # a serial link cannot be "closed" from the far end: it goes quiet
-                    self._dead = True
+                if not self._answer(line):
+                    return
+
+    def _answer(self, line: str) -> bool:
+        """Process one message and write its reply (trickled under that fault); False when the lab stops."""
+        if self._dead:
+            self.on_log(self.name, "rx", line)
+            return True
+        data, fault = self.process(line)
+        if data and fault == "trickle":
+            for i in range(len(data)):        # a controller whose line crawls
+                if self._stop.wait(self._trickle_s):
+                    return False
+                self._write(data[i:i + 1])
+        elif data:
+            self._write(data)
+        if fault == "drop":
+            # a serial link cannot be "closed" from the far end: it goes quiet
+            self._dead = True
+        return True
 
     def _write(self, data: bytes) -> None:
         view = memoryview(data)
