@@ -49,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     paper.add_argument("--paper-scan", type=int, default=32, metavar="N", help="Sobol points of the first scan")
     paper.add_argument("--paper-rounds", type=int, default=2, metavar="N", help="zoom rounds (N/2 points each)")
     paper.add_argument("--paper-polish", type=int, default=30, metavar="N", help="Nelder-Mead evaluations")
+    paper.add_argument("--paper-ensemble", type=int, default=0, metavar="N",
+                       help="score each candidate over its nominal robot and N robots drawn from the Monte Carlo "
+                            "table (default 0: the nominal robot alone)")
     paper.add_argument("--sensitivity", action="store_true",
                        help="with --paper: one-at-a-time sensitivity around --params instead of a fit")
     parser.add_argument("--force", action="store_true", help="replace --out and its .calibration.json")
@@ -132,13 +135,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 def _run_paper(args: argparse.Namespace) -> dict[str, Any]:
     from labkit.sim import RobotParams
-    from labkit.sim.paper.fit import FREE, calibrate_paper, sensitivity
+    from labkit.sim.paper.fit import calibrate_paper, free_by_name, sensitivity
 
     if args.measured or args.names:
         raise InputError("--paper fits the paper's observations, not measured files", key="--paper",
                          expected="no MEASURED and no --fit (use --free to choose parameters)")
     free = None if not args.free else [n.strip() for n in args.free.split(",") if n.strip()]
-    known = [f.name for f in FREE]
+    known = list(free_by_name())
     for n in free or []:
         if n not in known:
             raise InputError(f"unknown free parameter {n!r}", key="--free", expected=", ".join(known))
@@ -177,7 +180,7 @@ def _run_paper(args: argparse.Namespace) -> dict[str, Any]:
 
     cal = calibrate_paper(start, free=free, scan=max(1, args.paper_scan), rounds=max(0, args.paper_rounds),
                           polish=max(0, args.paper_polish), seed=args.seed, scheduler=args.scheduler,
-                          workers=workers, quiet=quiet, log=log)
+                          workers=workers, quiet=quiet, log=log, ensemble=max(0, args.paper_ensemble))
     prov = cal.provenance()
     prov["start_params"] = args.params or "published"
     summary = {"out": str(out), **cal.summary()}

@@ -59,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
 
     run_opts = pclass(add_help=False)
     run_opts.add_argument("--params", metavar="NAME|FILE",
-                          help="robot parameters: a preset (published, paper) or a TOML file; default: published")
+                          help="robot parameters: a preset (published, paper) or a TOML file; default: paper")
     run_opts.add_argument("--duration-s", default="2.0", metavar="S", help="simulated time per run, s (default 2)")
     run_opts.add_argument("--seed", default="0", metavar="N", help="random seed (default 0)")
     run_opts.add_argument("--ablate", choices=ABLATIONS, default="none",
@@ -128,7 +128,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     md = sub.add_parser("modes", parents=[common],
                         help="modes of the robot standing on pinned feet, beside the paper's Fig. 6 spectrum")
     md.add_argument("--params", metavar="NAME|FILE",
-                    help="robot parameters: a preset (published, paper) or a TOML file; default: published")
+                    help="robot parameters: a preset (published, paper) or a TOML file; default: paper")
     md.add_argument("--max-hz", default="5000", metavar="HZ", help="highest frequency listed (default 5000)")
 
     from labkit.commands.simulate_regime import add_regime_map
@@ -141,7 +141,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     sc.add_argument("--out", default=".", metavar="DIR", help="folder for the figure and data (default .)")
     sc.add_argument("--force", action="store_true", help="replace sim_NAME.h5 / .png already in --out")
     sc.add_argument("--params", metavar="NAME|FILE",
-                    help="robot parameters: a preset (published, paper) or a TOML file; default: published")
+                    help="robot parameters: a preset (published, paper) or a TOML file; default: paper")
     sc.add_argument("--quick", action="store_true", help="few points, short runs (a smoke test, not the result)")
     sc.add_argument("--draws", default=None, metavar="N", help="override the scenario's Monte Carlo draws")
     sc.add_argument("--duration-s", default=None, metavar="S", help="override the scenario's run duration")
@@ -208,26 +208,42 @@ def parse_range(text: str, option: str) -> list[float]:
 
 
 def load_params(path: str | None):
-    """The robot parameters: a preset by name, a file's (ConfigError names file and key), or the defaults."""
-    from labkit.sim.presets import load
+    """The robot parameters: a preset by name, a file's (ConfigError names file and key), or (None) the
+    default preset (:data:`labkit.sim.presets.DEFAULT_PRESET`)."""
+    from labkit.sim.presets import DEFAULT_PRESET, load
 
-    return load(path)
+    return load(path or DEFAULT_PRESET)
+
+
+def _announce(args: argparse.Namespace) -> None:
+    """The run's first line names its parameter set (with --json: the summary's ``parameter_set``)."""
+    from labkit.sim.presets import DEFAULT_PRESET, describe
+
+    args.params = args.params or DEFAULT_PRESET
+    args.parameter_set = describe(args.params, load_params(args.params))
+    if not args.json:
+        print(args.parameter_set, flush=True)
 
 
 # --------------------------------------------------------------------------- run
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
+    _announce(args)
     if args.sim_command in ("shaker", "pzt"):
-        return _run_single(args)
-    if args.sim_command == "sweep":
-        return _run_sweep(args)
-    if args.sim_command == "modes":
-        return _run_modes(args)
-    if args.sim_command == "regime-map":
+        out = _run_single(args)
+    elif args.sim_command == "sweep":
+        out = _run_sweep(args)
+    elif args.sim_command == "modes":
+        out = _run_modes(args)
+    elif args.sim_command == "regime-map":
         from labkit.commands.simulate_regime import run_regime_map
 
-        return run_regime_map(args)
-    return _run_scenario(args)
+        out = run_regime_map(args)
+    else:
+        out = _run_scenario(args)
+    out.setdefault("params", args.params)
+    out["parameter_set"] = args.parameter_set
+    return out
 
 
 def _run_modes(args: argparse.Namespace) -> dict[str, Any]:
@@ -235,10 +251,13 @@ def _run_modes(args: argparse.Namespace) -> dict[str, Any]:
 
     max_hz = number(args.max_hz, "--max-hz", positive=True)
     pm = pinned_modes(load_params(args.params), max_hz=max_hz)
-    summary = {"params": args.params or "published", **pm.to_dict()}
+    summary = {"params": args.params, **pm.to_dict()}
     if not args.json:
         print(f"modes on pinned feet ({summary['params']}); legs clamped at "
               + ", ".join(f"{f:.0f}" for f in pm.leg_modes_hz) + " Hz")
+        ky, kz = pm.foot_stiffness_n_m
+        print(f"  one leg at its foot (body held): {ky:.3g} N/m lateral, {kz:.3g} N/m vertical; the rigid body "
+              f"on six: heave {pm.heave_on_springs_hz:.0f} Hz")
         for m in pm.modes:
             print(f"  {m.freq_hz:8.1f} Hz  zeta {m.damping_ratio:.3f}  body {m.body_share:4.2f}  {m.kind}")
         print("  paper Fig. 6 (out-of-chip): " + "; ".join(f"{f:.0f} Hz {w}" for f, w in
@@ -418,7 +437,7 @@ def _run_scenario(args: argparse.Namespace) -> dict[str, Any]:
         workers=None if args.workers is None else integer(args.workers, "--workers", minimum=1),
         quiet=args.quiet)
     summary = result.summary()
-    summary["params"] = args.params or "published"
+    summary["params"] = args.params
     if not args.json:
         print(f"{args.name}: {result.finding}")
         for line in result.lines():

@@ -144,6 +144,10 @@ class Stages:
         self._say(f"[{self.k}/{self.total}] done in {self.times_s[key]:.1f} s "
                   f"(total {time.perf_counter() - self.t0:.0f} s)")
 
+    def say(self, text: str) -> None:
+        """One line on standard error (not with ``quiet``)."""
+        self._say(text)
+
     def _say(self, text: str) -> None:
         if not self.quiet:
             print(f"labkit demo: {text}", file=self.stream, flush=True)
@@ -231,6 +235,8 @@ def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = Fa
     for sub in ("configs", "runs", "tracks", "sim"):
         (out / sub).mkdir(exist_ok=True)
     truth_robot, base = demo_robots()
+    st.say(f"parameter set: demo (the published Tables 1-2 with c_ad_n = {DEMO_C_AD_N:g} N and a "
+           f"{TRUE_HIP_HZ:g} Hz hip: the virtual robot; the `paper` set is not robust at the demo's drives)")
     truth_file = truth_robot.to_toml(out / "virtual_robot.toml", provenance={
         "source": "labkit demo: the virtual lab's robot (the truth; the pipeline never reads this file)",
         "changes_from_paper": f"c_ad_n = {DEMO_C_AD_N:g} N (walks); hip mode {TRUE_HIP_HZ:g} Hz, "

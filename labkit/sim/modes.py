@@ -52,10 +52,14 @@ class Mode:
 
 @dataclass
 class PinnedModes:
-    """The standing robot's modes, lowest first, and the leg modes' clamped frequencies."""
+    """The standing robot's modes, lowest first, the leg modes' clamped frequencies, and the body
+    on its legs: one leg's static stiffness at the foot (lateral, vertical; N/m, the other
+    direction pinned) and the heave of the rigid body on six such springs (Hz)."""
 
     modes: list[Mode]
     leg_modes_hz: tuple[float, float, float]
+    foot_stiffness_n_m: tuple[float, float] = (0.0, 0.0)
+    heave_on_springs_hz: float = 0.0
 
     def first_leg_mode_hz(self) -> float:
         return min(self.leg_modes_hz)
@@ -65,7 +69,8 @@ class PinnedModes:
         return [m for m in self.modes if m.body_share >= share and m.freq_hz < self.first_leg_mode_hz()]
 
     def to_dict(self) -> dict:
-        return {"leg_modes_hz": list(self.leg_modes_hz), "modes": [asdict(m) for m in self.modes],
+        return {"leg_modes_hz": list(self.leg_modes_hz), "foot_stiffness_n_m": list(self.foot_stiffness_n_m),
+                "heave_on_springs_hz": self.heave_on_springs_hz, "modes": [asdict(m) for m in self.modes],
                 "paper_fig6": [{"freq_hz": f, "what": w} for f, w in PAPER_FIG6]}
 
 
@@ -111,4 +116,40 @@ def pinned_modes(params: RobotParams, max_hz: float = 5000.0) -> PinnedModes:
                 for i, name in enumerate(("mode1_hip", "mode2_tilt", "mode3_bending"))}
         out.append(Mode(freq_hz=float(fd), damping_ratio=float(-s.real / wn), body=body, legs=legs,
                         kind=_kind(body, legs)))
-    return PinnedModes(modes=out, leg_modes_hz=params.modal_freq_hz)
+    kf = foot_stiffness(params)
+    heave = math.sqrt(6 * kf[1, 1] / mdl.m_b) / (2 * math.pi)
+    return PinnedModes(modes=out, leg_modes_hz=params.modal_freq_hz,
+                       foot_stiffness_n_m=(float(kf[0, 0]), float(kf[1, 1])), heave_on_springs_hz=float(heave))
+
+
+def foot_stiffness(params: RobotParams) -> np.ndarray:
+    """One leg's static stiffness at its foot with the body held (N/m; rows/columns lateral y, vertical z).
+
+    The sum over the leg's modes of each mode's static compliance along its direction
+    ``C_i = (Cy_i, Cz_i)``: ``C = sum_i C_i C_i^T / (M_i k_i)``, ``M_i`` the modal mass referred to
+    the foot (``modal_participation`` x leg mass, docs/model.md M13); the stiffness is ``C^-1``.
+    """
+    leg_kg = params.leg_mass_mg * 1e-6
+    r = np.array(params.ratio, float)
+    norm = np.sqrt(1 + r * r)
+    c = np.stack([np.array(params.cy_sign, float) * r / norm, 1 / norm], axis=1)
+    comp = sum(np.outer(ci, ci) / (params.modal_participation * leg_kg * k) for ci, k in zip(c, params.k_per_s2))
+    return np.linalg.pinv(np.asarray(comp))
+
+
+def cantilever_roots(n: int) -> np.ndarray:
+    """The first ``n`` roots ``beta_n L`` of ``1 + cos x cosh x = 0`` (uniform clamped-free beam)."""
+    from scipy.optimize import brentq
+
+    f = lambda x: 1 + math.cos(x) * math.cosh(x)  # noqa: E731
+    return np.array([brentq(f, (k + 0.5) * math.pi - 0.5, (k + 0.5) * math.pi + 0.5) for k in range(n)])
+
+
+def cantilever_tip_participation(mode: int, points: int = 4001) -> float:
+    """A uniform clamped-free beam's mode ``mode`` (1-based): its modal mass referred to the free end,
+    as a share of the beam's mass, ``int_0^1 phi^2 dx / phi(1)^2`` (the shape integrated numerically)."""
+    bl = float(cantilever_roots(mode)[-1])
+    x = np.linspace(0.0, 1.0, points)
+    sigma = (math.cosh(bl) + math.cos(bl)) / (math.sinh(bl) + math.sin(bl))
+    phi = np.cosh(bl * x) - np.cos(bl * x) - sigma * (np.sinh(bl * x) - np.sin(bl * x))
+    return float(np.trapezoid(phi * phi, x) / phi[-1] ** 2)

@@ -23,6 +23,14 @@ from typing import Any
 from labkit.errors import ConfigError
 
 G_M_S2 = 9.81
+#: A leg mode's modal mass referred to the foot, as a share of the leg's mass, for a uniform
+#: clamped-free beam: every mode's mass-normalised shape is 2 / sqrt(m) at the free end, so its
+#: effective mass there is m / 4 for every mode, and the modes' static contributions
+#: ``4 / (m w_n^2)`` sum to the beam's tip compliance ``L^3 / (3 E I)``
+#: (:func:`labkit.sim.modes.cantilever_tip_participation`, docs/model.md M13). The ``paper``
+#: set's ``modal_participation``: the legs' stiffness at the foot from their mass and Table 2's
+#: frequencies, not a free factor.
+CANTILEVER_TIP_PARTICIPATION = 0.25
 
 
 @dataclass(frozen=True)
@@ -61,7 +69,9 @@ _SPECS: dict[str, _Spec] = {
                           doc="static modal deflection per volt of the PZT drive (actuator gain)"),
     "foot_mass_fraction": _Spec("1", 0, False, 1, doc="kept for old parameter files; does not enter the coupled "
                                 "model (the modal masses carry the legs' weight, docs/model.md M2)"),
-    "modal_participation": _Spec("1", 0, True, 1, doc="modal mass M_i = participation x leg mass"),
+    "modal_participation": _Spec("1", 0, True, 1, doc="modal mass M_i = participation x leg mass, referred to "
+                                 "the foot; it sets the legs' stiffness there, M_i k_i (a uniform cantilever: "
+                                 "0.25, docs/model.md M13)"),
     "m_imp_factor": _Spec("1", 0, True, doc="m_i,imp / M_i (effective mass for foot forces); must be 1 in "
                           "the coupled model (one mass matrix, docs/model.md M2)"),
     "m_dis_factor": _Spec("1", 0, True, doc="m_i,dis / M_i (effective mass for distributed forces); must be 1 "

@@ -57,7 +57,8 @@ def test_report_on_a_virtual_lab_shaker_run(tmp_path):
     s = last_json(run_cli("shaker", str(cfg), "--lab", "--seed", "1", "--out", str(run), "--json", "--quiet"))
     assert s["points_ok"] == 2
     sweep = tmp_path / "sweep.h5"
-    run_cli("simulate", "sweep", "shaker", "--freq-hz", "100:300:5", "--amp-um", "20", "--draws", "2",
+    run_cli("simulate", "sweep", "shaker", "--params", "published", "--freq-hz", "100:300:5", "--amp-um", "20",
+            "--draws", "2",
             "--duration-s", "0.3", "--workers", "1", "--out", str(sweep), "--json", "--quiet")
     out = tmp_path / "rep"
     r = last_json(run_cli("report", "--runs", str(run), "--sim", str(sweep), "--knee-duration-s", "0.3",

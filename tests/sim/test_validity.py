@@ -47,7 +47,7 @@ def test_the_paper_robot_tumbling_at_600_hz_is_flagged_in_json_and_text():
 
 
 def test_a_calm_run_has_no_flags_and_the_sweep_counts_them(tmp_path):
-    js = last_json(run_cli("simulate", "shaker", "--duration-s", "0.2", "--json"))
+    js = last_json(run_cli("simulate", "shaker", "--params", "published", "--duration-s", "0.2", "--json"))
     assert js["validity"]["flags"] == [] and js["validity"]["max_tilt_rad"] < 1e-3
     out = tmp_path / "s.h5"
     sw = last_json(run_cli("simulate", "sweep", "shaker", "--params", "paper", "--freq-hz", "240,600",

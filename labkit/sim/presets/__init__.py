@@ -5,10 +5,12 @@ name            what it is
 ==============  ==========================================================================
 ``published``   the paper's Tables 1-2 and the documented choices of docs/model.md
                 (``RobotParams()``)
-``paper``       ``published`` with the parameters the paper did not measure calibrated to
-                its observations (``paper.toml`` here, written by
-                :func:`labkit.sim.paper.fit.calibrate_paper`; its ``[provenance]`` table
-                says how, with which observations met)
+``paper``       ``published`` with the legs' modal mass at the foot from a uniform cantilever
+                (1/4 of the leg's mass) and the parameters the paper did not measure
+                calibrated to its observations over an ensemble of drawn robots
+                (``paper.toml`` here, written by :func:`labkit.sim.paper.fit.calibrate_paper`;
+                its ``[provenance]`` table says how, with which observations met); the
+                default of ``labkit simulate`` (:data:`DEFAULT_PRESET`)
 ==============  ==========================================================================
 
 A file preset is a plain parameter file (``labkit/sim/presets/<name>.toml``),
@@ -22,6 +24,8 @@ from labkit.errors import ConfigError, InputError
 from labkit.sim.params import RobotParams
 
 HERE = Path(__file__).parent
+#: The set ``labkit simulate`` and ``labkit demo`` use when none is named.
+DEFAULT_PRESET = "paper"
 #: Provenance of the built-in ``published`` set.
 PUBLISHED_PROVENANCE = {"source": "Qu, Choi, Oldham 2017, Tables 1-2, and the choices of docs/model.md",
                         "preset": "published"}
@@ -60,3 +64,13 @@ def load(text: str | None) -> RobotParams:
         return preset(text)
     raise InputError("no such parameter file or preset", file=text, key="--params",
                      expected="a TOML file or one of " + ", ".join(preset_names()))
+
+
+def describe(text: str | None, params: RobotParams) -> str:
+    """The line a run starts with: ``parameter set: NAME (what it is)`` (``text`` as given to
+    ``--params``; None: the default preset)."""
+    name = text or DEFAULT_PRESET
+    what = params.provenance.get("summary") or params.provenance.get("source") or "a parameter file"
+    if name == "published":
+        what = "the paper's Tables 1-2"
+    return f"parameter set: {name} ({what})"

@@ -1,0 +1,115 @@
+"""The paper's operating point over drawn robots, and its smoothness; prints ONE JSON object.
+
+    python bench/ensemble_bench.py speed  [--params paper] [--seeds 0 1] [--robots 12] [--duration 2]
+    python bench/ensemble_bench.py smooth [--params paper] [--seed 0] [--robots 12] [--duration 2] [--step 0.05]
+
+``speed``: |speed| at 240 Hz, 25 um (a constant tray amplitude) of the nominal robot and of
+``--robots`` robots drawn from the Monte Carlo table (:data:`labkit.sim.uncertainty.DEFAULT_TABLE`)
+per draw seed: median, mean, sd, range and how many lie in the paper's band 2-6 mm/s (Fig. 8 at
+240 Hz, ``fig8_speed_240hz`` of ``labkit/sim/paper/observations.toml``).
+
+``smooth``: the mean |speed| of the same drawn ensemble with one uncertain parameter of the
+nominal robot moved by -``step`` and +``step`` (relative) before the draws (common random
+numbers: every variant's robots carry the same draw factors), and the largest relative change
+of the ensemble mean per parameter (the target: below 30 % at +-5 %).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from typing import Any
+
+from labkit.executor import map_tasks
+from labkit.sim import RobotParams, Shaker
+from labkit.sim.presets import load
+from labkit.sim.sweep import run_point
+
+FREQ_HZ = 240.0
+AMP_UM = 25.0
+BAND_MM_S = (2.0, 6.0)
+#: The uncertain parameters of the smoothness test: label -> how a relative factor changes the set.
+PARAMETERS = ("b_g_body_n_m2_s", "b_g_foot_n_m2_s", "foot_pad_um", "film_gap_nm", "modal_participation",
+              "body_mass_mg", "c_ad_n", "amp_um")
+
+
+def scaled(params: RobotParams, name: str, factor: float) -> tuple[RobotParams, float]:
+    """``params`` with one parameter times ``factor`` (body mass with the total) and the tray amplitude."""
+    if name == "amp_um":
+        return params, AMP_UM * factor
+    if name == "body_mass_mg":
+        body = params.body_mass_mg * factor
+        return params.replace(body_mass_mg=body, mass_mg=params.mass_mg + body - params.body_mass_mg), AMP_UM
+    return params.replace(**{name: getattr(params, name) * factor}), AMP_UM
+
+
+def tasks(params: RobotParams, amp_um: float, robots: int, seed: int, duration_s: float,
+          nominal: bool) -> list[tuple[Any, ...]]:
+    """:func:`labkit.sim.sweep.run_point` tasks: draw 0 the nominal robot, 1..robots drawn ones."""
+    first = 0 if nominal else 1
+    sc = Shaker(FREQ_HZ, amp_um)
+    return [(params, sc, "amp_um", amp_um, d, seed, duration_s, None, None, False, 1.0)
+            for d in range(first, robots + 1)]
+
+
+def stats(speeds: list[float]) -> dict[str, Any]:
+    lo, hi = BAND_MM_S
+    return {"median": statistics.median(speeds), "mean": statistics.fmean(speeds),
+            "sd": statistics.pstdev(speeds), "min": min(speeds), "max": max(speeds),
+            "in_band": sum(lo <= s <= hi for s in speeds), "of": len(speeds), "still": sum(s < 0.1 for s in speeds),
+            "speeds": [round(s, 3) for s in speeds]}
+
+
+def speed(args: argparse.Namespace, params: RobotParams) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for seed in args.seeds:
+        rows = map_tasks(run_point, tasks(params, AMP_UM, args.robots, seed, args.duration, True),
+                         workers=args.workers, quiet=True)
+        sp = [abs(r["speed_mm_s"]) for r in rows]
+        out[str(seed)] = {"nominal": round(sp[0], 3), "drawn": stats(sp[1:])}
+    return out
+
+
+def smooth(args: argparse.Namespace, params: RobotParams) -> dict[str, Any]:
+    variants = [("base", 1.0)] + [(n, f) for n in PARAMETERS for f in (1 - args.step, 1 + args.step)]
+    batch: list[tuple[Any, ...]] = []
+    for name, f in variants:
+        p, amp = (params, AMP_UM) if name == "base" else scaled(params, name, f)
+        batch += tasks(p, amp, args.robots, args.seed, args.duration, False)
+    rows = map_tasks(run_point, batch, workers=args.workers, quiet=True)
+    n = args.robots
+    means = [statistics.fmean(abs(r["speed_mm_s"]) for r in rows[k * n:(k + 1) * n]) for k in range(len(variants))]
+    base = means[0]
+    table = {}
+    for i, name in enumerate(PARAMETERS):
+        down, up = means[1 + 2 * i], means[2 + 2 * i]
+        table[name] = {"down": round(down, 3), "up": round(up, 3),
+                       "largest_change": round(max(abs(down - base), abs(up - base)) / base, 3) if base else None}
+    worst = max((v["largest_change"] or 0.0) for v in table.values())
+    return {"base_mean_mm_s": round(base, 3), "step": args.step, "seed": args.seed, "parameters": table,
+            "largest_change": worst, "target": 0.30, "met": worst < 0.30}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", choices=("speed", "smooth"))
+    ap.add_argument("--params", default="paper", help="a preset name or a parameter file")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--robots", type=int, default=12)
+    ap.add_argument("--duration", type=float, default=2.0)
+    ap.add_argument("--step", type=float, default=0.05)
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args()
+    params = load(args.params)
+    t0 = time.perf_counter()
+    body = speed(args, params) if args.what == "speed" else smooth(args, params)
+    print(json.dumps({"what": args.what, "params": args.params, "freq_hz": FREQ_HZ, "amp_um": AMP_UM,
+                      "robots": args.robots, "duration_s": args.duration, "result": body,
+                      "settings": vars(args),
+                      "wall_s": round(time.perf_counter() - t0, 1)}))
+
+
+if __name__ == "__main__":
+    main()
