@@ -19,8 +19,8 @@ Per observation (:class:`ObservationScore`):
   ``state``: met / not met / not applicable (:mod:`labkit.sim.paper.observations`);
   this is the verdict;
 * ``mean`` +- ``spread``: mean and standard deviation of the metric over the
-  individual robots (NaN-free robots only), with ``median`` and
-  ``met_share`` (share of robots, in the claim's regime, that meet it);
+  individual robots in the claim's regime (``robots`` of them, NaN-free), with
+  ``median`` and ``met_share`` (share of the robots in the regime that meet it);
 * ``per_seed``: the metric of each seed's ensemble of ``draws`` robots (how much
   the verdict depends on which robots were drawn).
 
@@ -75,6 +75,9 @@ class ObservationScore:
     met_share: float | None
     per_seed: list[float | None]
     per_seed_states: list[str]
+    #: The pooled ensemble's distance outside the band (:func:`~labkit.sim.paper.observations.violation`);
+    #: None when not applicable.
+    violation: float | None = None
 
     @property
     def met(self) -> bool:
@@ -109,6 +112,11 @@ class EnsembleScore:
 
     def by_id(self) -> dict[str, ObservationScore]:
         return {s.id: s for s in self.scores}
+
+    def violations(self, not_applicable: float = 1.0) -> dict[str, float]:
+        """Observation id -> the pooled ensemble's violation (0 when met), ``not_applicable`` for an
+        observation outside its regime (a calibration objective must not reward leaving a regime)."""
+        return {s.id: not_applicable if s.violation is None else s.violation for s in self.scores}
 
     def to_dict(self) -> dict[str, Any]:
         return {"settings": self.settings, "cpu_s": round(self.cpu_s, 1), "wall_s": round(self.wall_s, 1),
@@ -239,8 +247,8 @@ def _score(o: Any, got: dict[str, Any]) -> ObservationScore:
     nominal, pooled = check_one(o, got["nominal"]), check_one(o, got["pooled"])
     seeds: list[ObservationCheck] = [check_one(o, m) for m in got["seeds"]]
     robots = [check_one(o, m) for m in got["members"]]
-    vals = np.array([c.value for c in robots if c.value is not None and math.isfinite(c.value)], float)
     applicable = [c for c in robots if c.state != NOT_APPLICABLE]
+    vals = np.array([c.value for c in applicable if c.value is not None and math.isfinite(c.value)], float)
     return ObservationScore(
         id=o.id, scenario=o.scenario, metric=o.metric, band=o.band, source=o.source, paper_value=o.paper_value,
         nominal=_finite(nominal.value), nominal_state=nominal.state, ensemble=_finite(pooled.value),
@@ -248,4 +256,5 @@ def _score(o: Any, got: dict[str, Any]) -> ObservationScore:
         spread=float(vals.std(ddof=1)) if vals.size > 1 else None,
         median=float(np.median(vals)) if vals.size else None, robots=int(vals.size),
         met_share=(sum(c.passed for c in applicable) / len(applicable)) if applicable else None,
-        per_seed=[_finite(c.value) for c in seeds], per_seed_states=[c.state for c in seeds])
+        per_seed=[_finite(c.value) for c in seeds], per_seed_states=[c.state for c in seeds],
+        violation=_finite(pooled.violation))

@@ -465,23 +465,34 @@ def paper_ablations(params: RobotParams, opts: RunOptions) -> Outcome:
 def paper_payload(params: RobotParams, opts: RunOptions) -> Outcome:
     ps, metrics = evaluate("paper-payload", params, opts)
 
-    def plot(fig: Any) -> None:
-        ax = fig.add_subplot(111)
-        curve_axes(ax, ps, "simulated")
+    def mark(ax: Any) -> None:
         ax.axhline(1.0, color="tab:red", lw=0.8, ls="--", label="paper: > 1 mm/s up to about 1.7 mg")
         ax.axvspan(1.7, max(2.5, float(ps.values.max())), color="tab:red", alpha=0.06,
                    label="paper: stops above 1.7 mg")
-        ax.axhline(0, color="0.5", lw=0.5)
-        ax.set_xlabel("total robot mass (mg)")
-        ax.set_ylabel("mean forward speed (mm/s)")
-        ax.set_title(f"paper-payload, PZT {PAYLOAD_FREQ_HZ:g} Hz tripod {PAYLOAD_VOLTAGE_V:g} V (cf. paper Fig. 13): "
-                     f"{metrics_line(metrics, 'paper-payload')}", fontsize=8)
-        ax.legend(fontsize=6, loc="upper right")
-        _band_text(ax, check("paper-payload", metrics), y=0.8)
-        fig.tight_layout()
 
+    plot = _speed_plot("paper-payload", ps, metrics, "total robot mass (mg)",
+                       f"paper-payload, PZT {PAYLOAD_FREQ_HZ:g} Hz tripod {PAYLOAD_VOLTAGE_V:g} V (cf. paper Fig. 13)",
+                       mark)
     return _outcome("paper-payload", ps, metrics, "mass_mg", plot,
                     {"freq_hz": PAYLOAD_FREQ_HZ, "voltage_v": PAYLOAD_VOLTAGE_V})
+
+
+def _speed_plot(name: str, ps: PointSet, metrics: dict[str, float], xlabel: str, title: str,
+                mark: Callable[[Any], None]) -> Plot:
+    """A speed curve with the paper's marks (``mark(ax)``) and the observations' verdicts."""
+    def plot(fig: Any) -> None:
+        ax = fig.add_subplot(111)
+        curve_axes(ax, ps, "simulated")
+        mark(ax)
+        ax.axhline(0, color="0.5", lw=0.5)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("mean forward speed (mm/s)")
+        ax.set_title(f"{title}: {metrics_line(metrics, name)}", fontsize=8)
+        ax.legend(fontsize=6, loc="upper right")
+        _band_text(ax, check(name, metrics), y=0.8)
+        fig.tight_layout()
+
+    return plot
 
 
 def metrics_line(metrics: dict[str, float], name: str) -> str:
@@ -496,19 +507,11 @@ def metrics_line(metrics: dict[str, float], name: str) -> str:
 def paper_fig14(params: RobotParams, opts: RunOptions) -> Outcome:
     ps, metrics = evaluate("paper-fig14", params, opts)
 
-    def plot(fig: Any) -> None:
-        ax = fig.add_subplot(111)
-        curve_axes(ax, ps, "simulated")
+    def mark(ax: Any) -> None:
         ax.axvline(438.0, color="tab:red", lw=0.8, ls="--", label="paper: first lateral resonance 438 Hz")
-        ax.axhline(0, color="0.5", lw=0.5)
-        ax.set_xlabel("PZT frequency (Hz)")
-        ax.set_ylabel("mean forward speed (mm/s)")
-        ax.set_title(f"paper-fig14, PZT tripod {PAYLOAD_VOLTAGE_V:g} V (cf. paper Fig. 14): "
-                     f"{metrics_line(metrics, 'paper-fig14')}", fontsize=8)
-        ax.legend(fontsize=6, loc="upper right")
-        _band_text(ax, check("paper-fig14", metrics), y=0.8)
-        fig.tight_layout()
 
+    plot = _speed_plot("paper-fig14", ps, metrics, "PZT frequency (Hz)",
+                       f"paper-fig14, PZT tripod {PAYLOAD_VOLTAGE_V:g} V (cf. paper Fig. 14)", mark)
     return _outcome("paper-fig14", ps, metrics, "freq_hz", plot, {"voltage_v": PAYLOAD_VOLTAGE_V})
 
 
