@@ -170,3 +170,19 @@ def test_ensemble_score_counts_not_applicable_robots_out():
     e = EnsembleScore(scores=[s, out], settings={"seeds": [0, 1]}, cpu_s=0.0, wall_s=0.0, runs=0)
     assert list(e.violations(not_applicable=0.7).values()) == [0.0, 0.7]
     assert e.count() == {"met": 1, "not met": 0, "not applicable": 1} and e.seed_counts() == [2, 0]
+
+
+def test_spectrum_peak_needs_a_resonance():
+    """A resonance at 440 Hz in a flat background is found; a flat response (the highest point set
+    by round-off) has no peak, so the observation is not met rather than met by accident."""
+    from labkit.sim.scenarios.paper import peak_at, spectrum_measure
+
+    f = np.array([300, 350, 400, 438, 480, 530, 600, 1000, 1200, 1500, 1650, 1800, 1950, 2200], float)
+    w0, zeta = 440.0, 0.05
+    reso = 1.0 / np.sqrt((1 - (f / w0) ** 2) ** 2 + (2 * zeta * f / w0) ** 2)
+    assert peak_at(f, reso, 350, 600) == 438.0
+    flat = 0.52 + 1e-3 * np.sin(f)
+    assert math.isnan(peak_at(f, flat, 1500, 2200))
+    m = spectrum_measure(_ps(f, [0] * len(f), extra={"knee_gain": flat, "body_gain": reso}))
+    states = {c.id: c.state for c in check("paper-spectrum", m)}
+    assert states["spectrum_peak_1800hz"] == "not met" and states["spectrum_body_800_1200hz"] == "not met"

