@@ -22,7 +22,7 @@ import pickle
 import shlex
 import sys
 
-from labkit.sim.paper.ensemble import EnsembleScore, ObservationScore, run_ensemble, score_runs
+from labkit.sim.paper.ensemble import EnsembleScore, ObservationScore, merge_runs, run_ensemble, score_runs
 
 
 def _fmt(v: float | None) -> str:
@@ -70,27 +70,35 @@ def main() -> None:
     ap.add_argument("--size", default="quick", choices=("quick", "full"))
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--markdown", action="store_true", help="print the docs/simulator.md table")
-    ap.add_argument("--save-runs", help="keep the raw runs in this file (pickle)")
-    ap.add_argument("--load-runs", help="re-score runs saved with --save-runs (no simulation)")
+    ap.add_argument("--save-runs", help="keep the raw runs in this file (pickle; one file per seed: FILE.seedN)")
+    ap.add_argument("--load-runs", nargs="+", help="re-score (and merge) runs saved with --save-runs (no simulation)")
     args = ap.parse_args()
     argv = sys.argv[1:]
     keep = [a for i, a in enumerate(argv) if not a.startswith("--save-runs")
             and not (i and argv[i - 1] == "--save-runs")]
     command = "python bench/paper_table.py " + " ".join(shlex.quote(a) for a in keep)
     if args.load_runs:
-        with open(args.load_runs, "rb") as fh:
-            runs = pickle.load(fh)
+        parts = []
+        for name in args.load_runs:
+            with open(name, "rb") as fh:
+                parts.append(pickle.load(fh))
+        runs = merge_runs(parts)
     else:
         from labkit.sim.presets import load
 
         params = load(args.params)
-        seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
-        runs = run_ensemble(params, draws=args.draws, duration_s=args.duration_s, seeds=seeds, size=args.size,
-                            workers=args.workers)
-        runs.settings["params"] = args.params
-        if args.save_runs:
-            with open(args.save_runs, "wb") as fh:
-                pickle.dump(runs, fh)
+        parts = []
+        for seed in [int(s) for s in args.seeds.split(",") if s.strip()]:
+            # one executor call per seed, saved as it ends: a long ensemble on a shared machine
+            # keeps the seeds it finished
+            part = run_ensemble(params, draws=args.draws, duration_s=args.duration_s, seeds=[seed],
+                                size=args.size, workers=args.workers)
+            part.settings["params"] = args.params
+            if args.save_runs:
+                with open(f"{args.save_runs}.seed{seed}", "wb") as fh:
+                    pickle.dump(part, fh)
+            parts.append(part)
+        runs = merge_runs(parts)
     e = score_runs(runs)
     if args.markdown:
         print(markdown(e, command))

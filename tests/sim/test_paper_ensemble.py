@@ -15,7 +15,7 @@ import pytest
 from test_paper import _ps
 
 from labkit.sim import RobotParams
-from labkit.sim.paper.ensemble import score_ensemble
+from labkit.sim.paper.ensemble import merge_runs, run_ensemble, score_ensemble, score_runs
 from labkit.sim.paper.observations import NOT_APPLICABLE, ObservationCheck, check, observations, tally
 from labkit.sim.paper.shaker import ShakerLaw
 from labkit.sim.scenarios import run_scenario
@@ -130,6 +130,12 @@ def test_ensemble_pools_the_scenarios_robots(tmp_path):
     run, the pooled mean speed is the mean of the robots', and each robot is a different draw."""
     p = RobotParams.preset("paper")
     e = score_ensemble(p, draws=1, seeds=(0, 1), duration_s=0.2, scenarios=["paper-fig14"], workers=1)
+    # the same ensemble run one seed at a time and merged scores the same
+    parts = [run_ensemble(p, draws=1, seeds=[s], duration_s=0.2, scenarios=["paper-fig14"], workers=1)
+             for s in (0, 1)]
+    merged = score_runs(merge_runs(parts))
+    assert [x.to_dict() for x in merged.scores] == [x.to_dict() for x in e.scores]
+    assert merged.member_metrics == e.member_metrics and merged.settings["seeds"] == [0, 1]
     s = e.by_id()["fig14_moves_near_438hz"]
     direct = run_scenario("paper-fig14", p, None, quick=True, draws=1, duration_s=0.2, seed=0, workers=1,
                           quiet=True)

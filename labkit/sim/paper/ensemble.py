@@ -210,6 +210,33 @@ def run_ensemble(params: RobotParams, *, draws: int = DEFAULT_DRAWS, duration_s:
     return EnsembleRuns(plans=plans, rows=out, robots=robots, settings=settings, wall_s=time.perf_counter() - t0)
 
 
+def merge_runs(parts: Sequence[EnsembleRuns]) -> EnsembleRuns:
+    """One ensemble from runs of the same set, grid and duration over other seeds (e.g. one seed per
+    call, saved as each ends): the first part's nominal robot, every part's drawn robots."""
+    if not parts:
+        raise InputError("no runs to merge", key="runs", expected="one or more EnsembleRuns")
+    first = parts[0]
+    same = ("draws", "duration_s", "size", "scenarios")
+    for p in parts[1:]:
+        if any(p.settings[k] != first.settings[k] for k in same):
+            raise InputError(f"runs differ in {[k for k in same if p.settings[k] != first.settings[k]]}",
+                             key="runs", expected="runs of one ensemble (same draws, duration, size, scenarios)")
+    robots = [first.robots[0]] + [r for p in parts for r in p.robots[1:]]
+    rows = {}
+    for name, plan in first.plans.items():
+        merged = []
+        for i in range(len(plan.points)):
+            merged.append(first.rows[name][i * len(first.robots)])
+            for p in parts:
+                m = len(p.robots)
+                merged += p.rows[name][i * m + 1:(i + 1) * m]
+        rows[name] = merged
+    seeds = [s for p in parts for s in p.settings["seeds"]]
+    settings = {**first.settings, "seeds": seeds, "robots": len(robots) - 1}
+    return EnsembleRuns(plans=first.plans, rows=rows, robots=robots, settings=settings,
+                        wall_s=sum(p.wall_s for p in parts))
+
+
 def score_runs(runs: EnsembleRuns) -> EnsembleScore:
     """Score the simulations of :func:`run_ensemble` (cheap: no simulation; re-scores saved runs)."""
     from labkit.sim.scenarios.paper import PAPER
