@@ -1,76 +1,116 @@
-"""The paper's observations against parameter sets; prints ONE JSON object (or the docs' table).
+"""The paper's observations over the Monte Carlo ensemble; prints ONE JSON object (or the docs' table).
 
-    python bench/paper_table.py [--markdown] [--figures DIR] [--workers N]
+    nice -n 5 python bench/paper_table.py [--params paper] [--draws 6] [--duration-s 2] [--seeds 0,1,2]
+        [--size quick] [--workers N] [--markdown] [--save-runs FILE] [--load-runs FILE]
 
-Runs the four paper scenarios (``paper-fig8``, ``paper-patterns``, ``paper-ablations``,
-``paper-payload``) for the ``published`` set at the quick size, and the ``paper`` set at
-the quick size (the calibration's) and with 3 draws x 1 s: the table "Observation ->
-paper -> published -> paper" of docs/simulator.md, with its count of observations met.
-``--figures DIR`` keeps the ``paper`` set's quick figures (``sim_<scenario>_paper.png``).
+Scores every observation of labkit/sim/paper/observations.toml with
+:func:`labkit.sim.paper.ensemble.score_ensemble`: the nominal robot of the set and
+``draws`` robots drawn from the Monte Carlo table for each seed (default 6 x 2 s x
+seeds 0, 1, 2, the scenarios' quick point grids), all runs in one executor call.
+Per observation: the paper's value and band, the nominal robot's value and state, the
+pooled ensemble's value and state (the verdict: met / not met / not applicable), the
+robots' mean +- sd, median and share met, each seed's state. ``--markdown`` prints the
+table of docs/simulator.md with the command that made it; ``cpu_s`` is the
+simulations' CPU time. ``--save-runs`` keeps the raw runs (a pickle, for this
+machine only) so ``--load-runs`` can re-score them without simulating.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import shutil
-import tempfile
-import time
-from pathlib import Path
+import pickle
+import shlex
+import sys
 
-from labkit.sim import RobotParams
-from labkit.sim.scenarios import run_scenario
-
-SCENARIOS = ("paper-fig8", "paper-patterns", "paper-ablations", "paper-payload")
-COLUMNS = (("`published`, quick", "published", dict(quick=True)), ("`paper`, quick", "paper", dict(quick=True)),
-           ("`paper`, 3 draws x 1 s", "paper", dict(draws=3, duration_s=1.0)))
+from labkit.sim.paper.ensemble import (
+    EnsembleScore,
+    EnsembleSpec,
+    ObservationScore,
+    merge_runs,
+    run_ensemble,
+    score_runs,
+)
 
 
 def _fmt(v: float | None) -> str:
-    if v is None or v != v:
-        return "n/a"
-    return f"{v:.3g}"
+    return "n/a" if v is None or v != v else f"{v:.3g}"
+
+
+def _state(state: str, bold: bool = False) -> str:
+    word = {"met": "met", "not met": "not met", "not applicable": "n/a"}[state]
+    return f"**{word}**" if bold and state == "met" else word
+
+
+def _row(s: ObservationScore) -> str:
+    paper = s.band.replace(s.metric, "x") + (f" (paper {s.paper_value:g})" if s.paper_value is not None else "")
+    robots = "n/a" if s.mean is None else (
+        f"{_fmt(s.mean)} ± {_fmt(s.spread)} (median {_fmt(s.median)}, n {s.robots}"
+        + (f", {100 * s.met_share:.0f} % met)" if s.met_share is not None else ", all n/a)"))
+    seeds = " / ".join(_state(st) for st in s.per_seed_states)
+    return (f"| `{s.id}` | {s.source} | {paper} | {_fmt(s.nominal)} {_state(s.nominal_state)} | "
+            f"{_fmt(s.ensemble)} | {robots} | {_state(s.state, True)} | {seeds} |")
+
+
+def markdown(e: EnsembleScore, command: str) -> str:
+    """The docs/simulator.md table of an ensemble score, with its command and totals."""
+    st = e.settings
+    lines = [f"Made by `{command}` ({st['robots']} drawn robots: {st['draws']} per seed x seeds "
+             f"{', '.join(map(str, st['seeds']))}, {st['duration_s']:g} s runs, {st['size']} point grids; "
+             f"{e.runs} runs, {e.cpu_s:.0f} CPU s, {e.wall_s:.0f} s wall).", "",
+             "| observation | source | paper (pass band) | nominal robot | ensemble (pooled) | "
+             "robots: mean ± sd | ensemble verdict | per seed |", "|---|---|---|---|---|---|---|---|"]
+    lines += [_row(s) for s in e.scores]
+    ens, nom = e.count("ensemble"), e.count("nominal")
+    lines += ["", "| | met | not met | not applicable |", "|---|---|---|---|",
+              f"| ensemble (pooled) | {ens['met']} | {ens['not met']} | {ens['not applicable']} |",
+              f"| nominal robot | {nom['met']} | {nom['not met']} | {nom['not applicable']} |",
+              f"| per seed ({', '.join(map(str, st['seeds']))}) | {' / '.join(map(str, e.seed_counts()))} | | |"]
+    return "\n".join(lines)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--params", default="paper", help="a preset or a TOML file (default: paper)")
+    ap.add_argument("--draws", type=int, default=6)
+    ap.add_argument("--duration-s", type=float, default=2.0)
+    ap.add_argument("--seeds", default="0,1,2", help="comma-separated seeds")
+    ap.add_argument("--size", default="quick", choices=("quick", "full"))
+    ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--markdown", action="store_true", help="print the docs/simulator.md table")
-    ap.add_argument("--figures", help="folder for the paper set's quick figures")
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--save-runs", help="keep the raw runs in this file (pickle; one file per seed: FILE.seedN)")
+    ap.add_argument("--load-runs", nargs="+", help="re-score (and merge) runs saved with --save-runs (no simulation)")
     args = ap.parse_args()
-    cols: dict[str, dict] = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        for label, preset, kw in COLUMNS:
-            t0 = time.perf_counter()
-            rows: dict[str, dict] = {}
-            for name in SCENARIOS:
-                out = Path(tmp) / f"{preset}_{len(cols)}_{name}"
-                r = run_scenario(name, RobotParams.preset(preset), out, workers=args.workers, quiet=True, **kw)
-                for o in r.observations:
-                    rows[o.id] = {"value": o.value, "passed": bool(o.passed), "band": o.band, "source": o.source,
-                                 "metric": o.metric}
-                if args.figures and preset == "paper" and kw.get("quick") and r.figure:
-                    Path(args.figures).mkdir(parents=True, exist_ok=True)
-                    shutil.copy(r.figure, Path(args.figures) / f"sim_{name}_paper.png")
-            cols[label] = {"observations": rows, "met": sum(v["passed"] for v in rows.values()), "of": len(rows),
-                           "wall_s": round(time.perf_counter() - t0, 1)}
-    if not args.markdown:
-        print(json.dumps(cols))
-        return
-    ids = list(cols[COLUMNS[0][0]]["observations"])
-    print("| observation | source | paper (pass band) | " + " | ".join(c[0] for c in COLUMNS) + " |")
-    print("|---|---|---|" + "---|" * len(COLUMNS))
-    for i in ids:
-        first = cols[COLUMNS[0][0]]["observations"][i]
-        band = first["band"].replace(first["metric"], "x")
-        cells = []
-        for label, _, _ in COLUMNS:
-            o = cols[label]["observations"][i]
-            cells.append(f"{_fmt(o['value'])} " + ("**pass**" if o["passed"] else "fail"))
-        print(f"| `{i}` | {first['source']} | {band} | " + " | ".join(cells) + " |")
-    print()
-    print("| | " + " | ".join(c[0] for c in COLUMNS) + " |")
-    print("|---|" + "---|" * len(COLUMNS))
-    print("| observations met | " + " | ".join(f"{cols[c[0]]['met']} / {cols[c[0]]['of']}" for c in COLUMNS) + " |")
+    argv = sys.argv[1:]
+    keep = [a for i, a in enumerate(argv) if not a.startswith("--save-runs")
+            and not (i and argv[i - 1] == "--save-runs")]
+    command = "python bench/paper_table.py " + " ".join(shlex.quote(a) for a in keep)
+    if args.load_runs:
+        parts = []
+        for name in args.load_runs:
+            with open(name, "rb") as fh:
+                parts.append(pickle.load(fh))
+        runs = merge_runs(parts)
+    else:
+        from labkit.sim.presets import load
+
+        params = load(args.params)
+        parts = []
+        for seed in [int(s) for s in args.seeds.split(",") if s.strip()]:
+            # one executor call per seed, saved as it ends: a long ensemble on a shared machine
+            # keeps the seeds it finished
+            part = run_ensemble(params, EnsembleSpec(draws=args.draws, duration_s=args.duration_s, seeds=[seed],
+                                                     size=args.size), workers=args.workers)
+            part.settings["params"] = args.params
+            if args.save_runs:
+                with open(f"{args.save_runs}.seed{seed}", "wb") as fh:
+                    pickle.dump(part, fh)
+            parts.append(part)
+        runs = merge_runs(parts)
+    e = score_runs(runs)
+    if args.markdown:
+        print(markdown(e, command))
+    else:
+        print(json.dumps({"command": command, **e.to_dict()}))
 
 
 if __name__ == "__main__":

@@ -47,8 +47,10 @@ SCENARIO_NAMES = {
     "adhesion": "speed vs the adhesion magnitude (what the shaker behaviour hinges on)",
     "paper-fig8": "the paper's Fig. 8 observations on its shaker law (pass/fail per observation)",
     "paper-patterns": "the paper's 2-8 V leg patterns, Fig. 9-11 (pass/fail per observation)",
-    "paper-ablations": "the paper's Fig. 12 ablations at 4 V (pass/fail per observation)",
+    "paper-ablations": "the paper's Fig. 12 ablations in partial contact (pass/fail/n-a per observation)",
     "paper-payload": "the paper's Fig. 13 PZT payload limit (pass/fail per observation)",
+    "paper-fig14": "the paper's Fig. 14 PZT speed near 438 Hz (pass/fail per observation)",
+    "paper-spectrum": "the paper's Fig. 6 out-of-chip spectrum, stepped sine (pass/fail per observation)",
 }
 
 

@@ -27,6 +27,7 @@ def test_table_covers_the_issue_and_names_real_scenarios():
     obs = observations()
     assert len({o.id for o in obs}) == len(obs) >= 15
     assert {o.scenario for o in obs} == set(PAPER) <= set(SCENARIOS)
+    assert all(o.when is None or o.when != o.metric for o in obs)
     for o in obs:
         assert o.source and o.quote and o.tolerance
         # a number from the paper is inside its own pass band
@@ -37,23 +38,31 @@ def test_table_covers_the_issue_and_names_real_scenarios():
     assert all(o.basis in ("sign", "order", "range") for o in obs if o.paper_value is None)
 
 
-def _ps(values, speeds, patterns=None, rise=None):
+def _ps(values, speeds, patterns=None, rise=None, extra=None):
     n = len(values)
-    sp = np.asarray(speeds, float).reshape(n, 1)
+    sp = np.asarray(speeds, float).reshape(n, -1)
+    d = sp.shape[1]
     pats = np.array(patterns if patterns is not None else [["firm_contact"] * 6] * n).reshape(n, 1, 6)
-    r = np.asarray(rise if rise is not None else np.zeros(n), float).reshape(n, 1)
+    pats = np.repeat(pats, d, axis=1)
+    r = np.asarray(rise if rise is not None else np.zeros(n), float).reshape(n, 1).repeat(d, axis=1)
+    ex = {k: np.asarray(v, float).reshape(n, -1) for k, v in (extra or {}).items()}
     return PointSet(quantity="x", values=np.asarray(values, float), speeds_mm_s=sp, patterns=pats,
-                    contact_fraction=np.zeros((n, 1, 6, 3)), impacts=np.zeros((n, 1, 6)), foot_rise_um=r,
-                    leg_motion_um=np.ones((n, 1)), aperiodicity=np.zeros((n, 1)))
+                    contact_fraction=np.zeros((n, d, 6, 3)), impacts=np.zeros((n, d, 6)), foot_rise_um=r,
+                    leg_motion_um=np.ones((n, d)), aperiodicity=np.zeros((n, d)), extra=ex)
 
 
 def test_every_metric_of_the_table_is_measured_by_its_scenario():
+    abl = [2, 8, 4, 6, 102, 108, 104, 106, 204, 206]
     produced = {"paper-fig8": fig8_measure(_ps([200, 240, 270, 300, 450, 1000], [1, 1, 1, 1, 1, 1])),
                 "paper-patterns": patterns_measure(_ps([2, 4, 6, 8], [0, 0, 0, 0])),
                 "paper-payload": payload_measure(_ps([0.33, 1.2, 1.7, 2.0], [1, 1, 1, 1])),
-                "paper-ablations": PAPER["paper-ablations"].measure(_ps([0, 1, 2], [1, 1, 1]))}
+                "paper-ablations": PAPER["paper-ablations"].measure(_ps(abl, [1] * len(abl))),
+                "paper-fig14": PAPER["paper-fig14"].measure(_ps([400, 438, 480], [1, 1, 1])),
+                "paper-spectrum": PAPER["paper-spectrum"].measure(
+                    _ps([300, 438, 1200, 1800], [0] * 4, extra={"knee_gain": [1] * 4, "body_gain": [1] * 4}))}
     for o in observations():
         assert o.metric in produced[o.scenario], o.id
+        assert o.when is None or o.when in produced[o.scenario], o.id
 
 
 def test_fig8_metrics_on_a_paper_shaped_curve():
@@ -62,23 +71,49 @@ def test_fig8_metrics_on_a_paper_shaped_curve():
     v = [6.0, 4.0, 1.0, 2.5, 1.5, 0.0, 0.0, 0.0, 0.0, 0.0]
     m = fig8_measure(_ps(f, v))
     assert m["speed_240_hz_mm_s"] == 4.0
-    assert m["speed_ratio_270_to_200"] == pytest.approx(1 / 6)
+    assert m["speed_slope_200_300_hz_mm_s_per_100_hz"] == pytest.approx(
+        100 * np.polyfit([200, 240, 270, 300], [6.0, 4.0, 1.0, 2.5], 1)[0])
     assert m["speed_rise_near_300_hz_mm_s"] == pytest.approx(1.5)
     assert all(c.passed for c in check("paper-fig8", m))
     # a peak near the hip resonance instead fails the two 'no motion' observations and the fall
     v2 = [1.0, 2.0, 3.0, 4.0, 5.0, 8.0, 3.0, 0.0, 0.0, 0.0]
     failed = {c.id for c in check("paper-fig8", fig8_measure(_ps(f, v2))) if not c.passed}
     assert {"fig8_falls_from_200hz", "fig8_none_400_500hz"} <= failed
-    # no motion at 200 Hz: the ratio is undefined and fails (not 'falling')
-    assert math.isnan(fig8_measure(_ps(f, [0.0] * 10))["speed_ratio_270_to_200"])
+    # no motion at all: slope 0, not a decline
+    still = {c.id: c for c in check("paper-fig8", fig8_measure(_ps(f, [0.0] * 10)))}
+    assert still["fig8_falls_from_200hz"].state == "not met"
+
+
+def test_fig8_decline_is_a_fitted_slope_over_200_300_hz():
+    """'a fast decline in speed from 200 Hz': the least-squares slope over every point of 200-300 Hz,
+    not the ratio of two points; a straight decline gives its own slope back."""
+    f = [200, 225, 240, 255, 270, 285, 300, 600]
+    line = [6.0 - 0.04 * (x - 200) if x <= 300 else 0.0 for x in f]
+    m = fig8_measure(_ps(f, line))
+    assert m["speed_slope_200_300_hz_mm_s_per_100_hz"] == pytest.approx(-4.0, rel=1e-9)
+    # a peak at 255 Hz over a slow 200 Hz: the speed at 270 is still above 200's, the old ratio test's
+    # opposite case; the fitted slope is positive and the claim fails
+    peaked = [1.0, 3.0, 5.0, 8.0, 4.0, 2.5, 1.5, 0.0]
+    got = {c.id: c for c in check("paper-fig8", fig8_measure(_ps(f, peaked)))}
+    assert got["fig8_falls_from_200hz"].value > 0 and got["fig8_falls_from_200hz"].state == "not met"
 
 
 def test_pattern_metrics_count_order_violations():
     firm, part, jump = (["firm_contact"] * 6, ["partial_contact"] * 6, ["jumping"] * 6)
-    m = patterns_measure(_ps([2, 4, 6, 8], [0] * 4, [firm, part, part, jump], rise=[0, 1, 5, 210]))
-    assert m == {"firm_share_2v": 1.0, "partial_share_4_6v": 1.0, "jumping_share_8v": 1.0,
-                 "pattern_order_violations": 0.0, "jump_height_8v_um": 210.0}
+    extra = {"knee_amp_um": [20, 25, 60, 210], "releases": [0, 12, 30, 40], "release_jump": [np.nan, 0.4, 1, 2]}
+    m = patterns_measure(_ps([2, 4, 6, 8], [0] * 4, [firm, part, part, jump], rise=[0, 1, 5, 300], extra=extra))
+    assert m == {"firm_share_2v": 1.0, "partial_share_min_4_6v": 1.0, "jumping_share_8v": 1.0,
+                 "pattern_order_violations": 0.0, "knee_amplitude_8v_um": 210.0, "foot_rise_8v_um": 300.0,
+                 "speed_4v_mm_s": 0.0, "releases_4v": 12.0, "released_4v": 1.0, "release_jump_4v": 0.4}
     assert all(c.passed for c in check("paper-patterns", m))
+    # partial contact at 4 V only: the smaller of the two shares decides (not the better one)
+    one = patterns_measure(_ps([2, 4, 6, 8], [0] * 4, [firm, part, firm, jump], extra=extra))
+    assert one["partial_share_min_4_6v"] == 0.0
+    assert {c.id: c.state for c in check("paper-patterns", one)}["patterns_partial_at_4_6v"] == "not met"
+    # no release at 4 V: the release jump is not applicable, not passed
+    calm = patterns_measure(_ps([2, 4, 6, 8], [0] * 4, [firm, firm, part, jump],
+                                extra={**extra, "releases": [0, 0, 3, 9], "release_jump": [np.nan] * 4}))
+    assert {c.id: c.state for c in check("paper-patterns", calm)}["patterns_release_jump_4v"] == "not applicable"
     back = patterns_measure(_ps([2, 4, 6, 8], [0] * 4, [part, firm, jump, part]))
     assert back["pattern_order_violations"] == 2.0
 

@@ -2,14 +2,19 @@
 
 Each :class:`Observation` names the scenario that measures it, the metric
 (a number the scenario reports) and a pass band ``[low, high]`` (either side
-may be open). :func:`check` turns a scenario's metrics into one
-:class:`ObservationCheck` per observation of that scenario; :func:`violation`
-is the normalised distance outside the band, the calibration's residual.
+may be open), and optionally the regime it is about (``when``: a metric of the
+same scenario that is 1 when the full model is in that regime, e.g. in partial
+contact or moving, and 0 when not). :func:`check` turns a scenario's metrics
+into one :class:`ObservationCheck` per observation of that scenario, in one of
+three states: :data:`MET`, :data:`NOT_MET` or :data:`NOT_APPLICABLE` (the run is
+not in the claim's regime: it neither meets nor fails the claim, and never
+counts as met); :func:`violation` is the normalised distance outside the band,
+the calibration's residual.
 """
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -21,6 +26,9 @@ from labkit.errors import ConfigError
 TABLE_PATH = Path(__file__).with_name("observations.toml")
 BASES = ("number", "range", "sign", "order")
 WHO = ("experiment", "simulation", "both")
+#: The three states of an observation on a run.
+MET, NOT_MET, NOT_APPLICABLE = "met", "not met", "not applicable"
+STATES = (MET, NOT_MET, NOT_APPLICABLE)
 
 
 @dataclass(frozen=True)
@@ -38,6 +46,15 @@ class Observation:
     low: float | None = None
     high: float | None = None
     paper_value: float | None = None
+    #: The regime metric: the claim applies only where ``metrics[when] > 0.5`` (None: always).
+    when: str | None = None
+
+    def applies(self, metrics: Mapping[str, Any]) -> bool:
+        """Whether a scenario's metrics put the run in the claim's regime (always without ``when``)."""
+        if self.when is None:
+            return True
+        raw = metrics.get(self.when)
+        return raw is not None and math.isfinite(float(raw)) and float(raw) > 0.5
 
     @property
     def band(self) -> str:
@@ -91,7 +108,12 @@ def violation(obs: Observation, value: float | None, margin: float = 0.0) -> flo
 
 @dataclass(frozen=True)
 class ObservationCheck:
-    """One observation evaluated on one scenario result."""
+    """One observation evaluated on one scenario result.
+
+    ``state`` is :data:`MET`, :data:`NOT_MET` or :data:`NOT_APPLICABLE`; ``passed``
+    is ``state == MET`` (so not applicable is never passed); ``violation`` is NaN
+    when not applicable.
+    """
 
     id: str
     metric: str
@@ -100,16 +122,36 @@ class ObservationCheck:
     band: str
     source: str
     violation: float
+    state: str = ""
+    when: str | None = None
+
+    def __post_init__(self) -> None:
+        if not self.state:
+            object.__setattr__(self, "state", MET if self.passed else NOT_MET)
+        if self.state not in STATES or self.passed != (self.state == MET):
+            raise ValueError(f"inconsistent observation state {self.state!r} / passed={self.passed}")
+
+    @property
+    def applicable(self) -> bool:
+        return self.state != NOT_APPLICABLE
 
     def line(self) -> str:
-        """The pass/fail line the scenarios print."""
+        """The PASS / FAIL / N/A line the scenarios print."""
         v = "n/a" if self.value is None or not math.isfinite(self.value) else f"{self.value:.4g}"
-        verdict = "PASS" if self.passed else "FAIL"
-        return f"{verdict}  {self.id}: {self.metric} = {v}  (paper: {self.band}; {self.source})"
+        verdict = {MET: "PASS", NOT_MET: "FAIL", NOT_APPLICABLE: "N/A "}[self.state]
+        regime = f" [not applicable: {self.when} = 0]" if self.state == NOT_APPLICABLE else ""
+        return f"{verdict}  {self.id}: {self.metric} = {v}  (paper: {self.band}; {self.source}){regime}"
 
     def to_dict(self) -> dict[str, Any]:
+        viol = self.violation if math.isfinite(self.violation) else None
         return {"id": self.id, "metric": self.metric, "value": self.value, "passed": self.passed,
-                "band": self.band, "source": self.source, "violation": self.violation}
+                "state": self.state, "band": self.band, "source": self.source, "violation": viol,
+                "when": self.when}
+
+
+def tally(checks: Sequence[ObservationCheck]) -> dict[str, int]:
+    """Counts of the three states: ``{"met": n, "not met": n, "not applicable": n}``."""
+    return {s: sum(c.state == s for c in checks) for s in STATES}
 
 
 def _num(row: Mapping[str, Any], key: str, where: str, file: str | Path = TABLE_PATH) -> float | None:
@@ -136,10 +178,12 @@ def parse(table: Mapping[str, Any], *, file: str | Path = TABLE_PATH) -> list[Ob
         for k in text_keys:
             if not isinstance(row.get(k), str) or not row[k]:
                 raise ConfigError("missing or not text", file=str(file), key=f"{where}.{k}", expected="a string")
-        unknown = set(row) - set(text_keys) - {"low", "high", "paper_value"}
+        unknown = set(row) - set(text_keys) - {"low", "high", "paper_value", "when"}
         if unknown:
             raise ConfigError(f"unknown key(s) {sorted(unknown)}", file=str(file), key=where,
-                              expected=", ".join(text_keys + ("low", "high", "paper_value")))
+                              expected=", ".join(text_keys + ("low", "high", "paper_value", "when")))
+        if "when" in row and (not isinstance(row["when"], str) or not row["when"]):
+            raise ConfigError("not a metric name", file=str(file), key=f"{where}.when", expected="a string")
         if row["basis"] not in BASES:
             raise ConfigError(f"unknown basis {row['basis']!r}", file=str(file), key=f"{where}.basis",
                               expected=" | ".join(BASES))
@@ -155,7 +199,8 @@ def parse(table: Mapping[str, Any], *, file: str | Path = TABLE_PATH) -> list[Ob
         seen.add(row["id"])
         out.append(Observation(id=row["id"], scenario=row["scenario"], metric=row["metric"], source=row["source"],
                                quote=row["quote"], basis=row["basis"], tolerance=row["tolerance"], who=row["who"],
-                               low=low, high=high, paper_value=_num(row, "paper_value", where, file)))
+                               low=low, high=high, paper_value=_num(row, "paper_value", where, file),
+                               when=row.get("when")))
     return out
 
 
@@ -172,13 +217,19 @@ def observations(scenario: str | None = None) -> list[Observation]:
     return [o for o in _load_bundled() if scenario is None or o.scenario == scenario]
 
 
+def check_one(o: Observation, metrics: Mapping[str, Any]) -> ObservationCheck:
+    """One observation on a scenario's metrics: not applicable outside its regime, else met or not
+    (a missing metric is not met)."""
+    raw = metrics.get(o.metric)
+    value = None if raw is None else float(raw)
+    if not o.applies(metrics):
+        return ObservationCheck(id=o.id, metric=o.metric, value=value, passed=False, band=o.band, source=o.source,
+                                violation=float("nan"), state=NOT_APPLICABLE, when=o.when)
+    viol = violation(o, value)
+    return ObservationCheck(id=o.id, metric=o.metric, value=value, passed=viol == 0.0, band=o.band,
+                            source=o.source, violation=viol, when=o.when)
+
+
 def check(scenario: str, metrics: Mapping[str, Any]) -> list[ObservationCheck]:
-    """Every observation of ``scenario`` evaluated on its metrics (a missing metric fails)."""
-    out = []
-    for o in observations(scenario):
-        raw = metrics.get(o.metric)
-        value = None if raw is None else float(raw)
-        viol = violation(o, value)
-        out.append(ObservationCheck(id=o.id, metric=o.metric, value=value, passed=viol == 0.0, band=o.band,
-                                    source=o.source, violation=viol))
-    return out
+    """Every observation of ``scenario`` evaluated on its metrics (:func:`check_one`)."""
+    return [check_one(o, metrics) for o in observations(scenario)]

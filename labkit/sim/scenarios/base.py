@@ -90,7 +90,13 @@ class ScenarioResult:
 
     @property
     def failed(self) -> list[str]:
-        return [c.id for c in self.observations if not c.passed]
+        """Observations not met (in their regime and outside their band)."""
+        return [c.id for c in self.observations if c.applicable and not c.passed]
+
+    @property
+    def not_applicable(self) -> list[str]:
+        """Observations whose regime the run is not in (neither met nor failed)."""
+        return [c.id for c in self.observations if not c.applicable]
 
     def lines(self) -> list[str]:
         """The pass/fail line of every observation."""
@@ -105,6 +111,8 @@ class ScenarioResult:
             out.setdefault(k, v)
         if self.observations:
             out["observations"] = [c.to_dict() for c in self.observations]
+            out["observation_states"] = {"met": len(self.passed), "not met": len(self.failed),
+                                         "not applicable": len(self.not_applicable)}
         for k in ("figure", "data"):
             v = getattr(self, k)
             if v is not None:

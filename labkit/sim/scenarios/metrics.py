@@ -114,3 +114,90 @@ def fig8_checks(freqs: Any, speeds: Any) -> dict[str, bool]:
     high = s[(f >= 500) & (f <= 1800)]
     return {"mm_s_between_150_and_300_hz": bool(low.size and 0.5 <= low.max() <= 20.0),
             "none_from_500_hz_to_1800_hz": bool(high.size and high.max() < 0.1)}
+
+
+def lockin(t_s: np.ndarray, x: np.ndarray, freq_hz: float) -> complex:
+    """Complex amplitude of ``x`` at ``freq_hz`` over the whole number of periods at the end of the record."""
+    from scipy.integrate import trapezoid
+
+    t, x = np.asarray(t_s, float), np.asarray(x, float)
+    n_per = int(np.floor((t[-1] - t[0]) * freq_hz))
+    if n_per < 1:
+        return complex("nan")
+    m = t >= t[-1] - n_per / freq_hz
+    w = 2 * np.pi * freq_hz
+    tt = t[m]
+    # trapezoid weights: the record may be unevenly spaced (a long run's dense tail)
+    return complex(2.0 * trapezoid(x[m] * np.exp(-1j * w * tt), tt) / (tt[-1] - tt[0]))
+
+
+def knee_z_um(r: SimResult) -> np.ndarray:
+    """The knees' vertical displacement (um; time x leg), the knee velocity integrated as a
+    vibrometer's displacement trace is (trapezoids from the first sample)."""
+    from scipy.integrate import cumulative_trapezoid
+
+    return cumulative_trapezoid(np.asarray(r.knee_vz_mm_s), np.asarray(r.t_s), axis=0, initial=0.0) * 1e3
+
+
+def knee_amplitude_um(r: SimResult) -> float:
+    """Largest knee displacement amplitude (half peak-to-peak over the steady part, max over legs), um:
+    the quantity of the paper's "amplitudes (200 um) ... ground amplitude (25 um)" (Sec. 5.2, an LDV
+    trace at the knee)."""
+    m = steady(r)
+    z = knee_z_um(r)[m]
+    return float(((z.max(axis=0) - z.min(axis=0)) / 2).max())
+
+
+def release_jumps(r: SimResult) -> tuple[int, float]:
+    """Releases of a foot from the tray over the steady part and the median jump of the knee's
+    velocity relative to the tray across one record interval at a release, in units of the tray's
+    velocity amplitude (NaN without releases or tray motion). A film or adhesion that lets go
+    gradually gives ~0; a force "broken suddenly" (paper Sec. 5.2, Fig. 10) a finite jump."""
+    m = steady(r)
+    t = np.asarray(r.t_s)
+    tray_v = np.gradient(np.asarray(r.ground_z_um), t) * 1e-3
+    scale = float(np.abs(tray_v[m]).max()) if m.any() else 0.0
+    rel = np.asarray(r.knee_vz_mm_s) - tray_v[:, None]
+    held = np.asarray(r.contact) != 0
+    rel_ev = held[:-1] & ~held[1:] & m[1:, None]
+    k, leg = np.nonzero(rel_ev)
+    if not k.size or scale <= 0:
+        return int(k.size), float("nan")
+    jumps = np.abs(rel[k + 1, leg] - rel[k, leg]) / scale
+    return int(k.size), float(np.median(jumps))
+
+
+def response_gains(r: SimResult) -> tuple[float, float]:
+    """Knee (mean over legs) and body vertical velocity relative to the tray, per tray velocity, at the
+    drive frequency: the out-of-chip transmissibility of the paper's Fig. 6 (right)."""
+    m = steady(r)
+    t = np.asarray(r.t_s)[m]
+    f = r.scenario.freq_hz
+    w = 2j * np.pi * f
+    tray = w * lockin(t, np.asarray(r.ground_z_um)[m], f) * 1e-3
+    if not abs(tray) > 0:
+        return float("nan"), float("nan")
+    knee = np.mean([abs(lockin(t, np.asarray(r.knee_vz_mm_s)[m, j], f) - tray) for j in range(6)])
+    body = abs(w * lockin(t, np.asarray(r.body_z_um)[m], f) * 1e-3 - tray)
+    return float(knee / abs(tray)), float(body / abs(tray))
+
+
+#: The per-run measures :func:`run_measures` adds to a scenario run's row.
+RUN_MEASURES = ("knee_amp_um", "releases", "release_jump", "knee_gain", "body_gain")
+
+
+def run_measures(r: SimResult) -> dict[str, float]:
+    """The per-run measures of the paper scenarios beyond speed and patterns (:data:`RUN_MEASURES`)."""
+    n, jump = release_jumps(r)
+    knee, body = response_gains(r)
+    return {"knee_amp_um": knee_amplitude_um(r), "releases": float(n), "release_jump": jump,
+            "knee_gain": knee, "body_gain": body}
+
+
+def slope(values: np.ndarray, speeds: np.ndarray, lo: float, hi: float) -> float:
+    """Least-squares slope of |speed| against the value over ``lo <= value <= hi`` (NaN with < 2 points)."""
+    x, y = np.asarray(values, float), np.abs(np.asarray(speeds, float))
+    m = (x >= lo) & (x <= hi) & np.isfinite(y)
+    if m.sum() < 2:
+        return float("nan")
+    return float(np.polyfit(x[m], y[m], 1)[0])

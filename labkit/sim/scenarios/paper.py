@@ -32,11 +32,11 @@ from typing import Any
 import numpy as np
 
 from labkit.sim.excitation import PZT, Shaker
-from labkit.sim.paper.observations import check, observations
+from labkit.sim.paper.observations import MET, NOT_APPLICABLE, NOT_MET, check, observations, tally
 from labkit.sim.paper.shaker import PAPER_SHAKER, ShakerLaw
 from labkit.sim.params import RobotParams
 from labkit.sim.scenarios.base import Outcome, RunOptions, register
-from labkit.sim.scenarios.metrics import at, band
+from labkit.sim.scenarios.metrics import at, band, slope
 from labkit.sim.scenarios.plots import Plot, curve_axes, trace_axes
 from labkit.sim.scenarios.runs import Point, PointSet, run_points
 
@@ -55,17 +55,40 @@ FIG8_DRIVE_VPP = 8.0
 PATTERN_FREQ_HZ = 240.0
 PATTERN_DRIVES_VPP = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0)
 PATTERN_DRIVES_QUICK_VPP = (2.0, 4.0, 6.0, 8.0)
-#: Ablation drive: 240 Hz at 4 V, the paper's partial-contact case (**choice**: Fig. 12 has
-#: no drive in its caption; its text is about the partial firm-contact pattern).
+#: Ablations at 240 Hz, at the drive where the full model is in partial contact (Fig. 12 has no
+#: drive in its caption; its text is about the partial firm-contact pattern): every variant runs
+#: at each of these drives and :func:`ablation_drive` picks the full model's largest
+#: partial-contact share (the paper's partial drives, 4 and 6 V, at the quick size).
 ABLATION_FREQ_HZ = 240.0
-ABLATION_DRIVE_VPP = 4.0
+ABLATION_DRIVES_VPP = (3.0, 4.0, 5.0, 6.0, 7.0)
+ABLATION_DRIVES_QUICK_VPP = (4.0, 6.0)
 ABLATIONS_RUN = (("full model", None), ("no adhesion", "no_adhesion"), ("no squeeze film", "no_squeeze_film"))
+#: Sec. 5.3, adhesion "at small locomotion amplitudes ... can prevent effective movement, and at
+#: larger ... can be beneficial": full model and no adhesion at the paper's smallest and largest
+#: drives (2 V firm contact, 8 V jumping).
+ADHESION_DRIVES_VPP = (2.0, 8.0)
 #: PZT payload drive: Fig. 13's 1.8 kHz, tripod, 20 V (**choice**: the voltage is Fig. 14's
 #: "same voltage amplitude (20 V)"; Fig. 13's caption gives none).
 PAYLOAD_FREQ_HZ = 1800.0
 PAYLOAD_VOLTAGE_V = 20.0
 PAYLOAD_MASSES_MG = (0.33, 0.6, 0.9, 1.2, 1.4, 1.6, 1.7, 1.8, 2.0, 2.2, 2.5)
 PAYLOAD_MASSES_QUICK_MG = (0.33, 1.0, 1.2, 1.6, 1.7, 2.0, 2.5)
+#: Fig. 14: PZT tripod at 20 V around the first lateral resonance (438 Hz), the robot's own mass.
+FIG14_FREQS_HZ = (360.0, 380.0, 400.0, 420.0, 438.0, 460.0, 480.0, 500.0, 520.0)
+FIG14_FREQS_QUICK_HZ = (400.0, 420.0, 438.0, 460.0, 480.0)
+#: Fig. 6 (right): a stepped-sine out-of-chip run, "under small amplitude ground excitation": the
+#: shaker law at 1 V p-p (3.1 um at 240 Hz, under 1 g from 150 Hz up: the feet stay on the tray).
+SPECTRUM_DRIVE_VPP = 1.0
+SPECTRUM_FREQS_HZ = (150.0, 200.0, 225.0, 250.0, 300.0, 350.0, 380.0, 400.0, 420.0, 438.0, 460.0, 480.0, 520.0,
+                     560.0, 600.0, 700.0, 800.0, 900.0, 1000.0, 1100.0, 1150.0, 1200.0, 1250.0, 1300.0, 1400.0,
+                     1500.0, 1600.0, 1700.0, 1800.0, 1900.0, 2000.0, 2200.0)
+SPECTRUM_FREQS_QUICK_HZ = (150.0, 225.0, 300.0, 350.0, 400.0, 438.0, 480.0, 530.0, 600.0, 700.0, 800.0, 1000.0,
+                           1100.0, 1200.0, 1300.0, 1500.0, 1650.0, 1800.0, 1950.0, 2200.0)
+#: A linear response settles in a few of the legs' decay times (~7 ms at 438 Hz, zeta 0.05).
+SPECTRUM_MAX_DURATION_S = 0.3
+#: A resonance of the spectrum stands this share above the median of its window (**choice**: the
+#: paper's peaks in Fig. 6 stand out by several times; 20 % is far above the lock-in's round-off).
+PEAK_PROMINENCE = 0.2
 
 
 @dataclass(frozen=True)
@@ -112,7 +135,7 @@ def fig8_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER_SHAK
 def fig8_measure(ps: PointSet) -> dict[str, float]:
     f, v = ps.values, unsigned_speed(ps)
     return {"speed_240_hz_mm_s": at(f, v, 240.0),
-            "speed_ratio_270_to_200": _ratio(at(f, v, 270.0), at(f, v, 200.0), SPEED_FLOOR_MM_S),
+            "speed_slope_200_300_hz_mm_s_per_100_hz": slope(f, v, 200.0, 300.0) * 100.0,
             "speed_rise_near_300_hz_mm_s": band(f, v, 285.0, 330.0) - at(f, v, 270.0),
             "max_speed_500_1800_hz_mm_s": band(f, v, 500.0, 1800.0),
             "max_speed_420_500_hz_mm_s": band(f, v, 420.0, 500.0)}
@@ -128,34 +151,84 @@ def patterns_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER_
 
 def patterns_measure(ps: PointSet) -> dict[str, float]:
     idx = {float(v): i for i, v in enumerate(ps.values)}
+    nan = float("nan")
 
     def share(v: float, p: str) -> float:
-        return ps.share(idx[v], p) if v in idx else float("nan")
+        return ps.share(idx[v], p) if v in idx else nan
+
+    def extra(v: float, key: str, stat: Callable[[np.ndarray], float] = np.nanmean) -> float:
+        vals = ps.extra.get(key)
+        return float(stat(vals[idx[v]])) if v in idx and vals is not None and np.isfinite(vals[idx[v]]).any() else nan
 
     inside = [i for i, v in enumerate(ps.values) if 2.0 <= v <= 8.0]
     ranks = [PATTERN_ORDER[ps.dominant_pattern(i)] for i in inside]
+    releases = extra(4.0, "releases", np.nansum)
     return {"firm_share_2v": share(2.0, "firm_contact"),
-            "partial_share_4_6v": float(np.nanmax([share(4.0, "partial_contact"), share(6.0, "partial_contact")])),
+            "partial_share_min_4_6v": min(share(4.0, "partial_contact"), share(6.0, "partial_contact")),
             "jumping_share_8v": share(8.0, "jumping"),
             "pattern_order_violations": float(sum(b < a for a, b in zip(ranks, ranks[1:]))),
-            "jump_height_8v_um": float(np.mean(ps.foot_rise_um[idx[8.0]])) if 8.0 in idx else float("nan")}
+            "knee_amplitude_8v_um": extra(8.0, "knee_amp_um"),
+            "foot_rise_8v_um": float(np.mean(ps.foot_rise_um[idx[8.0]])) if 8.0 in idx else nan,
+            "speed_4v_mm_s": float(unsigned_speed(ps)[idx[4.0]]) if 4.0 in idx else nan,
+            "releases_4v": releases, "released_4v": float(releases > 0),
+            "release_jump_4v": extra(4.0, "release_jump", np.nanmedian)}
 
 
 # --------------------------------------------------------------------------- fig. 12
 
+def ablation_x(variant: int, drive_vpp: float) -> float:
+    """The coordinate of an ablation point: ``100 * variant + drive`` (variant: index in :data:`ABLATIONS_RUN`)."""
+    return 100.0 * variant + float(drive_vpp)
+
+
 def ablations_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER_SHAKER) -> Plan:
-    drive = Shaker(freq_hz=ABLATION_FREQ_HZ, amp_um=law.amp_um(ABLATION_FREQ_HZ, ABLATION_DRIVE_VPP))
-    pts = [Point(params, drive, float(k), ablation) for k, (_, ablation) in enumerate(ABLATIONS_RUN)]
+    pts = []
+    for v in opts.pick(ABLATION_DRIVES_VPP, ABLATION_DRIVES_QUICK_VPP):
+        drive = Shaker(freq_hz=ABLATION_FREQ_HZ, amp_um=law.amp_um(ABLATION_FREQ_HZ, v))
+        pts += [Point(params, drive, ablation_x(k, v), ablation) for k, (_, ablation) in enumerate(ABLATIONS_RUN)]
+    for v in ADHESION_DRIVES_VPP:
+        drive = Shaker(freq_hz=ABLATION_FREQ_HZ, amp_um=law.amp_um(ABLATION_FREQ_HZ, v))
+        pts += [Point(params, drive, ablation_x(k, v), ablation) for k, (_, ablation) in enumerate(ABLATIONS_RUN[:2])]
     return Plan(pts, opts.pick(3, 1, opts.draws), opts.pick(1.0, 0.5, opts.duration_s))
 
 
+def ablation_drive(ps: PointSet) -> tuple[float, float]:
+    """The drive (V p-p) of the full model's largest partial-contact share among the drives run with
+    all three variants (the lowest on a tie), and that share."""
+    x = ps.values
+    full = {float(x[i]): i for i in range(len(x)) if x[i] < 100.0}
+    cands = sorted(v for v in full if ablation_x(1, v) in x and ablation_x(2, v) in x)
+    if not cands:
+        return float("nan"), float("nan")
+    shares = [ps.share(full[v], "partial_contact") for v in cands]
+    k = int(np.argmax(shares))
+    return cands[k], float(shares[k])
+
+
 def ablations_measure(ps: PointSet) -> dict[str, float]:
+    idx = {float(x): i for i, x in enumerate(ps.values)}
     ap = np.nanmean(ps.aperiodicity, axis=1)
     lm = ps.leg_motion_um.mean(axis=1)
     v = unsigned_speed(ps)
-    return {"aperiodicity_full": float(ap[0]), "aperiodicity_gain_no_adhesion": float(ap[1] - ap[0]),
-            "leg_motion_ratio_no_squeeze": _ratio(float(lm[2]), float(lm[0])),
-            "speed_gain_no_squeeze_mm_s": float(v[2] - v[0])}
+    nan = float("nan")
+
+    def get(arr: np.ndarray, variant: int, drive: float) -> float:
+        i = idx.get(ablation_x(variant, drive))
+        return float(arr[i]) if i is not None else nan
+
+    d, share = ablation_drive(ps)
+    moving = get(v, 0, d) >= SPEED_FLOOR_MM_S
+    partial = share > 0.5
+    small, large = ADHESION_DRIVES_VPP
+    return {"ablation_drive_vpp": d, "full_partial_share": share, "full_in_partial_contact": float(partial),
+            "full_partial_and_moving": float(partial and moving),
+            "aperiodicity_full": get(ap, 0, d), "aperiodicity_gain_no_adhesion": get(ap, 1, d) - get(ap, 0, d),
+            "leg_motion_ratio_no_squeeze": _ratio(get(lm, 2, d), get(lm, 0, d)),
+            "speed_gain_no_squeeze_mm_s": get(v, 2, d) - get(v, 0, d),
+            "speed_gain_no_adhesion_small_mm_s": get(v, 1, small) - get(v, 0, small),
+            "no_adhesion_moves_small": float(get(v, 1, small) >= SPEED_FLOOR_MM_S),
+            "speed_gain_adhesion_large_mm_s": get(v, 0, large) - get(v, 1, large),
+            "moves_large": float(max(get(v, 0, large), get(v, 1, large)) >= SPEED_FLOOR_MM_S)}
 
 
 # --------------------------------------------------------------------------- fig. 13
@@ -169,20 +242,85 @@ def payload_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER_S
 def payload_measure(ps: PointSet) -> dict[str, float]:
     m, v = ps.values, unsigned_speed(ps)
     low, high = v[m <= 1.6 + 1e-9], v[m >= 2.0 - 1e-9]
+    sd = np.abs(ps.speeds_mm_s).std(axis=1, ddof=1) if ps.draws > 1 else np.full(len(m), np.nan)
+    near, rest = sd[(m >= 1.6 - 1e-9) & (m <= 1.8 + 1e-9)], sd[m <= 1.4 + 1e-9]
     return {"min_speed_to_1_6_mg_mm_s": float(low.min()) if low.size else float("nan"),
             "max_speed_from_2_0_mg_mm_s": float(high.max()) if high.size else float("nan"),
-            "speed_gain_1_2_to_1_7_mg_mm_s": at(m, v, 1.7) - at(m, v, 1.2)}
+            "speed_gain_1_2_to_1_7_mg_mm_s": at(m, v, 1.7) - at(m, v, 1.2),
+            "payload_rise_onset_mg": rise_onset(m, v, 1.7),
+            "speed_sd_ratio_near_1_7_mg": _ratio(float(np.max(near)) if near.size else float("nan"),
+                                                 float(np.max(rest)) if rest.size else float("nan")),
+            "payload_ensemble": float(ps.draws > 1)}
+
+
+def rise_onset(masses: np.ndarray, speeds: np.ndarray, upto: float) -> float:
+    """Where the speed's rise towards ``upto`` begins: the largest mass (<= ``upto``) whose speed is
+    within :data:`SPEED_FLOOR_MM_S` of the curve's minimum there (NaN for no points)."""
+    m, v = np.asarray(masses, float), np.asarray(speeds, float)
+    keep = m <= upto + 1e-9
+    if not keep.any():
+        return float("nan")
+    m, v = m[keep], v[keep]
+    return float(m[v <= v.min() + SPEED_FLOOR_MM_S].max())
+
+
+# --------------------------------------------------------------------------- fig. 14
+
+def fig14_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER_SHAKER) -> Plan:
+    freqs = opts.pick(FIG14_FREQS_HZ, FIG14_FREQS_QUICK_HZ)
+    pts = [Point(params, PZT(freq_hz=f, voltage_v=PAYLOAD_VOLTAGE_V), f) for f in freqs]
+    return Plan(pts, opts.pick(5, 1, opts.draws), opts.pick(1.0, 0.4, opts.duration_s))
+
+
+def fig14_measure(ps: PointSet) -> dict[str, float]:
+    f, v = ps.values, unsigned_speed(ps)
+    return {"max_speed_400_480_hz_mm_s": band(f, v, 400.0, 480.0),
+            "speed_438_hz_mm_s": at(f, v, 438.0)}
+
+
+# --------------------------------------------------------------------------- fig. 6 (right)
+
+def spectrum_plan(params: RobotParams, opts: RunOptions, law: ShakerLaw = PAPER_SHAKER) -> Plan:
+    freqs = opts.pick(SPECTRUM_FREQS_HZ, SPECTRUM_FREQS_QUICK_HZ)
+    pts = [Point(params, Shaker(freq_hz=f, amp_um=law.amp_um(f, SPECTRUM_DRIVE_VPP)), f) for f in freqs]
+    dur = min(opts.pick(0.3, 0.15, opts.duration_s), SPECTRUM_MAX_DURATION_S)
+    return Plan(pts, opts.pick(3, 1, opts.draws), dur)
+
+
+def spectrum_measure(ps: PointSet) -> dict[str, float]:
+    f = ps.values
+    knee = np.nanmean(ps.extra["knee_gain"], axis=1) if "knee_gain" in ps.extra else np.full(len(f), np.nan)
+    body = np.nanmean(ps.extra["body_gain"], axis=1) if "body_gain" in ps.extra else np.full(len(f), np.nan)
+    return {"knee_peak_hz_350_600": peak_at(f, knee, 350.0, 600.0),
+            "knee_peak_hz_1000_1500": peak_at(f, knee, 1000.0, 1500.0),
+            "knee_peak_hz_1500_2200": peak_at(f, knee, 1500.0, 2200.0),
+            "body_peak_hz_150_1500": peak_at(f, body, 150.0, 1500.0)}
+
+
+def peak_at(freqs: np.ndarray, gain: np.ndarray, lo: float, hi: float,
+            prominence: float = PEAK_PROMINENCE) -> float:
+    """Frequency of the largest ``gain`` over ``lo <= f <= hi``; NaN when none is finite or when the
+    largest does not stand ``prominence`` (a share) above the window's median: a flat response has
+    no resonance, whichever point is highest by round-off."""
+    f, g = np.asarray(freqs, float), np.asarray(gain, float)
+    m = (f >= lo) & (f <= hi) & np.isfinite(g)
+    if not m.any():
+        return float("nan")
+    k = int(np.argmax(g[m]))
+    return float(f[m][k]) if g[m][k] >= (1.0 + prominence) * float(np.median(g[m])) else float("nan")
 
 
 #: The coordinate of each paper scenario's points.
 AXIS = {"paper-fig8": "freq_hz", "paper-patterns": "drive_vpp", "paper-ablations": "run",
-        "paper-payload": "mass_mg"}
+        "paper-payload": "mass_mg", "paper-fig14": "freq_hz", "paper-spectrum": "freq_hz"}
 
 PAPER: dict[str, PaperScenario] = {
     "paper-fig8": PaperScenario("paper-fig8", fig8_plan, fig8_measure),
     "paper-patterns": PaperScenario("paper-patterns", patterns_plan, patterns_measure),
     "paper-ablations": PaperScenario("paper-ablations", ablations_plan, ablations_measure),
     "paper-payload": PaperScenario("paper-payload", payload_plan, payload_measure),
+    "paper-fig14": PaperScenario("paper-fig14", fig14_plan, fig14_measure),
+    "paper-spectrum": PaperScenario("paper-spectrum", spectrum_plan, spectrum_measure),
 }
 
 
@@ -204,9 +342,11 @@ def evaluate(name: str, params: RobotParams, opts: RunOptions,
 def _outcome(name: str, ps: PointSet, metrics: dict[str, float], axis: str, plot: Plot,
              extra: dict[str, Any] | None = None, size_in: tuple[float, float] = (7.0, 4.6)) -> Outcome:
     checks = check(name, metrics)
-    met = sum(c.passed for c in checks)
-    finding = (f"{met}/{len(checks)} paper observations met"
-               + (f"; not met: {', '.join(c.id for c in checks if not c.passed)}" if met < len(checks) else ""))
+    n = tally(checks)
+    finding = (f"{n[MET]}/{len(checks)} paper observations met"
+               + (f", {n[NOT_APPLICABLE]} not applicable (not in the claim's regime: "
+                  f"{', '.join(c.id for c in checks if not c.applicable)})" if n[NOT_APPLICABLE] else "")
+               + (f"; not met: {', '.join(c.id for c in checks if c.state == NOT_MET)}" if n[NOT_MET] else ""))
     numbers = {"metrics": metrics, "points": ps.points(axis), "draws": ps.draws,
                "duration_s": ps.meta.get("duration_s"), **(extra or {})}
     return Outcome(finding=finding, checks={c.id: c.passed for c in checks}, numbers=numbers,
@@ -216,7 +356,7 @@ def _outcome(name: str, ps: PointSet, metrics: dict[str, float], axis: str, plot
 
 def _band_text(ax: Any, checks: Sequence[Any], y: float = 0.99) -> None:
     """``PASS id`` / ``FAIL id`` lines in a corner of an axis."""
-    lines = [f"{'PASS' if c.passed else 'FAIL'} {c.id}" for c in checks]
+    lines = [f"{c.line().split()[0]} {c.id}" for c in checks]
     ax.text(0.01, y, "\n".join(lines), transform=ax.transAxes, va="top", ha="left", fontsize=6,
             family="monospace", color="0.2", bbox={"facecolor": "white", "alpha": 0.8, "lw": 0})
 
@@ -291,16 +431,18 @@ def paper_patterns(params: RobotParams, opts: RunOptions) -> Outcome:
                     size_in=(7.0, 5.2))
 
 
-@register("paper-ablations", "full model vs no adhesion vs no squeeze film at 240 Hz, 4 V (paper Fig. 12)",
+@register("paper-ablations", "full model vs no adhesion vs no squeeze film at 240 Hz where the full model is "
+          "in partial contact; adhesion at 2 and 8 V (paper Fig. 12, Sec. 5.3)",
           "without adhesion the partial-contact motion is no longer periodic; without the squeeze film the "
-          "legs move more and the robot is faster")
+          "legs move more and the robot is faster; adhesion blocks motion at 2 V and helps at 8 V")
 def paper_ablations(params: RobotParams, opts: RunOptions) -> Outcome:
     ps, metrics = evaluate("paper-ablations", params, opts)
     plan = ablations_plan(params, opts, tray_law(opts))
-    drive = plan.points[0].drive
+    volts = metrics["ablation_drive_vpp"]
+    volts = volts if np.isfinite(volts) else opts.pick(ABLATION_DRIVES_VPP, ABLATION_DRIVES_QUICK_VPP)[0]
+    drive = Shaker(freq_hz=ABLATION_FREQ_HZ, amp_um=tray_law(opts).amp_um(ABLATION_FREQ_HZ, volts))
 
     def plot(fig: Any) -> None:
-        assert isinstance(drive, Shaker)
         order = [("no squeeze film", drive, "no_squeeze_film"), ("no adhesion", drive, "no_adhesion"),
                  ("full model", drive, None)]
         runs = _trace_runs(params, order, plan.duration_s, opts.seed)
@@ -308,16 +450,22 @@ def paper_ablations(params: RobotParams, opts: RunOptions) -> Outcome:
             ax = fig.add_subplot(1, 3, i + 1)
             trace_axes(ax, label, r, ABLATION_FREQ_HZ, legend=i == 0)
             ax.set_xlabel("t (ms)", fontsize=7)
-        fig.suptitle(f"paper-ablations (cf. paper Fig. 12), {ABLATION_FREQ_HZ:g} Hz, {drive.amp_um:.3g} um: "
-                     f"{metrics_line(metrics, 'paper-ablations')}", fontsize=8)
+        fig.suptitle(f"paper-ablations (cf. paper Fig. 12), {ABLATION_FREQ_HZ:g} Hz, {volts:g} V, "
+                     f"{drive.amp_um:.3g} um: {metrics_line(metrics, 'paper-ablations')}", fontsize=8)
         fig.tight_layout()
 
-    runs = {label: {"mean_speed_mm_s": float(ps.mean_speed_mm_s[k]),
-                    "aperiodicity": float(np.nanmean(ps.aperiodicity[k])),
-                    "leg_motion_um": float(ps.leg_motion_um[k].mean()), "dominant_pattern": ps.dominant_pattern(k)}
-            for k, (label, _) in enumerate(ABLATIONS_RUN)}
+    idx = {float(x): i for i, x in enumerate(ps.values)}
+    runs = {f"{label}, {v:g} V": {"mean_speed_mm_s": float(ps.mean_speed_mm_s[i]),
+                                  "aperiodicity": float(np.nanmean(ps.aperiodicity[i])),
+                                  "leg_motion_um": float(ps.leg_motion_um[i].mean()),
+                                  "partial_share": ps.share(i, "partial_contact"),
+                                  "contact_fraction": dict(zip(("air", "adhesion", "rest"),
+                                                               ps.contact_fraction[i].mean(axis=(0, 1)).tolist())),
+                                  "dominant_pattern": ps.dominant_pattern(i)}
+            for k, (label, _) in enumerate(ABLATIONS_RUN) for v in sorted({x % 100 for x in idx})
+            if (i := idx.get(ablation_x(k, v))) is not None}
     return _outcome("paper-ablations", ps, metrics, "run", plot,
-                    {"freq_hz": ABLATION_FREQ_HZ, "amp_um": drive.amp_um if isinstance(drive, Shaker) else None,
+                    {"freq_hz": ABLATION_FREQ_HZ, "drive_vpp": volts, "amp_um": drive.amp_um,
                      "runs": runs, "tray_law": tray_law(opts).describe()}, size_in=(9.0, 3.4))
 
 
@@ -326,26 +474,82 @@ def paper_ablations(params: RobotParams, opts: RunOptions) -> Outcome:
 def paper_payload(params: RobotParams, opts: RunOptions) -> Outcome:
     ps, metrics = evaluate("paper-payload", params, opts)
 
-    def plot(fig: Any) -> None:
-        ax = fig.add_subplot(111)
-        curve_axes(ax, ps, "simulated")
+    def mark(ax: Any) -> None:
         ax.axhline(1.0, color="tab:red", lw=0.8, ls="--", label="paper: > 1 mm/s up to about 1.7 mg")
         ax.axvspan(1.7, max(2.5, float(ps.values.max())), color="tab:red", alpha=0.06,
                    label="paper: stops above 1.7 mg")
-        ax.axhline(0, color="0.5", lw=0.5)
-        ax.set_xlabel("total robot mass (mg)")
-        ax.set_ylabel("mean forward speed (mm/s)")
-        ax.set_title(f"paper-payload, PZT {PAYLOAD_FREQ_HZ:g} Hz tripod {PAYLOAD_VOLTAGE_V:g} V (cf. paper Fig. 13): "
-                     f"{metrics_line(metrics, 'paper-payload')}", fontsize=8)
-        ax.legend(fontsize=6, loc="upper right")
-        _band_text(ax, check("paper-payload", metrics), y=0.8)
-        fig.tight_layout()
 
+    plot = _speed_plot("paper-payload", ps, metrics, ("total robot mass (mg)",
+                       f"paper-payload, PZT {PAYLOAD_FREQ_HZ:g} Hz tripod {PAYLOAD_VOLTAGE_V:g} V (cf. paper Fig. 13)"),
+                       mark)
     return _outcome("paper-payload", ps, metrics, "mass_mg", plot,
                     {"freq_hz": PAYLOAD_FREQ_HZ, "voltage_v": PAYLOAD_VOLTAGE_V})
 
 
+def _speed_plot(name: str, ps: PointSet, metrics: dict[str, float], labels: tuple[str, str],
+                mark: Callable[[Any], None]) -> Plot:
+    """A speed curve with the paper's marks (``mark(ax)``) and the observations' verdicts;
+    ``labels``: the x axis's label and the title."""
+    xlabel, title = labels
+    def plot(fig: Any) -> None:
+        ax = fig.add_subplot(111)
+        curve_axes(ax, ps, "simulated")
+        mark(ax)
+        ax.axhline(0, color="0.5", lw=0.5)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("mean forward speed (mm/s)")
+        ax.set_title(f"{title}: {metrics_line(metrics, name)}", fontsize=8)
+        ax.legend(fontsize=6, loc="upper right")
+        _band_text(ax, check(name, metrics), y=0.8)
+        fig.tight_layout()
+
+    return plot
+
+
 def metrics_line(metrics: dict[str, float], name: str) -> str:
-    """``"n/m met"`` for a figure title."""
+    """``"n/m met"`` (and how many not applicable) for a figure title."""
     checks = check(name, metrics)
-    return f"{sum(c.passed for c in checks)}/{len(checks)} observations met"
+    n = tally(checks)
+    return f"{n[MET]}/{len(checks)} observations met" + (f", {n[NOT_APPLICABLE]} n/a" if n[NOT_APPLICABLE] else "")
+
+
+@register("paper-fig14", "speed vs PZT frequency near the first lateral resonance, 20 V tripod (paper Fig. 14)",
+          "the robot walks when its PZTs drive it around 438 Hz")
+def paper_fig14(params: RobotParams, opts: RunOptions) -> Outcome:
+    ps, metrics = evaluate("paper-fig14", params, opts)
+
+    def mark(ax: Any) -> None:
+        ax.axvline(438.0, color="tab:red", lw=0.8, ls="--", label="paper: first lateral resonance 438 Hz")
+
+    plot = _speed_plot("paper-fig14", ps, metrics, ("PZT frequency (Hz)",
+                       f"paper-fig14, PZT tripod {PAYLOAD_VOLTAGE_V:g} V (cf. paper Fig. 14)"), mark)
+    return _outcome("paper-fig14", ps, metrics, "freq_hz", plot, {"voltage_v": PAYLOAD_VOLTAGE_V})
+
+
+@register("paper-spectrum", "out-of-chip response: knee and body velocity relative to the tray, stepped sine "
+          "at small amplitude (paper Fig. 6 right)",
+          "resonances near 438 Hz, 1.2 kHz and 1.8 kHz; body motion near 800 Hz and 1.2 kHz")
+def paper_spectrum(params: RobotParams, opts: RunOptions) -> Outcome:
+    ps, metrics = evaluate("paper-spectrum", params, opts)
+    knee = np.nanmean(ps.extra["knee_gain"], axis=1)
+    body = np.nanmean(ps.extra["body_gain"], axis=1)
+
+    def plot(fig: Any) -> None:
+        ax = fig.add_subplot(111)
+        ax.loglog(ps.values, knee, "k-", marker=".", label="knee (mean of legs) / tray")
+        ax.loglog(ps.values, body, ":", color="tab:pink", marker=".", label="body / tray")
+        for f in (438.0, 1200.0, 1800.0):
+            ax.axvline(f, color="tab:red", lw=0.6, ls="--")
+        ax.axvspan(800.0, 1200.0, color="tab:pink", alpha=0.08, label="paper: body motion 800 Hz-1.2 kHz")
+        ax.set_xlabel("shaker frequency (Hz)")
+        ax.set_ylabel("relative velocity / tray velocity")
+        ax.set_title(f"paper-spectrum at {SPECTRUM_DRIVE_VPP:g} V (cf. paper Fig. 6 right; dashed: 438 Hz, 1.2, "
+                     f"1.8 kHz): {metrics_line(metrics, 'paper-spectrum')}", fontsize=8)
+        ax.legend(fontsize=6, loc="lower right")
+        _band_text(ax, check("paper-spectrum", metrics))
+        fig.tight_layout()
+
+    gains = [{"freq_hz": float(f), "knee_gain": float(k), "body_gain": float(b)}
+             for f, k, b in zip(ps.values, knee, body)]
+    return _outcome("paper-spectrum", ps, metrics, "freq_hz", plot,
+                    {"drive_vpp": SPECTRUM_DRIVE_VPP, "gains": gains, "tray_law": tray_law(opts).describe()})

@@ -55,11 +55,14 @@ def task_seed(seed: int, draw: int) -> int:
 
 def run_task(task: Task) -> dict[str, Any]:
     """Simulate one task and keep its small measures (a module-level function: pickled by reference)."""
+    import time
+
     from labkit.sim.core import simulate
-    from labkit.sim.scenarios.metrics import foot_rise_um, leg_aperiodicity, leg_motion_um
+    from labkit.sim.scenarios.metrics import foot_rise_um, leg_aperiodicity, leg_motion_um, run_measures
     from labkit.sim.sweep import result_row
     from labkit.sim.uncertainty import draw_params
 
+    t0 = time.process_time()
     seed = task_seed(task.seed, task.draw)
     params = task.point.params
     if task.draw > 0:
@@ -67,6 +70,7 @@ def run_task(task: Task) -> dict[str, Any]:
     r = simulate(params, task.point.drive, duration_s=task.duration_s, seed=seed, ablation=task.point.ablation)
     row = result_row(r)
     row.update(foot_rise_um=foot_rise_um(r), leg_motion_um=leg_motion_um(r), aperiodicity=leg_aperiodicity(r))
+    row.update(run_measures(r), cpu_s=time.process_time() - t0)
     return row
 
 
@@ -80,6 +84,8 @@ class PointSet(SweepResult):
     leg_motion_um: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
     aperiodicity: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
     drives: list[dict[str, Any]] = field(default_factory=list)
+    #: Further per-run measures (point x draw) by name (labkit.sim.scenarios.metrics.RUN_MEASURES).
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     def share(self, point: int, pattern: str) -> float:
         """Share of (draw, foot) pairs at one point that show ``pattern``."""
@@ -113,6 +119,8 @@ class PointSet(SweepResult):
             put(f, "foot_rise_um", self.foot_rise_um, "um", axes="point, draw")
             put(f, "leg_motion_um", self.leg_motion_um, "um", axes="point, draw")
             put(f, "aperiodicity", self.aperiodicity, "1", axes="point, draw")
+            for name, values in self.extra.items():
+                put(f, f"run_{name}", values, "um" if name.endswith("_um") else "1", axes="point, draw")
         return path
 
 
@@ -126,6 +134,7 @@ def make_tasks(points: Sequence[Point], draws: int, duration_s: float, seed: int
 def collect(points: Sequence[Point], rows: Sequence[dict[str, Any]], draws: int,
             meta: dict[str, Any] | None = None, quantity: str = "x") -> PointSet:
     """Assemble the rows of :func:`make_tasks`'s tasks (in order) into a :class:`PointSet`."""
+    from labkit.sim.scenarios.metrics import RUN_MEASURES
     from labkit.sim.sweep import scenario_dict
 
     shape = (len(points), max(1, int(draws)))
@@ -142,6 +151,7 @@ def collect(points: Sequence[Point], rows: Sequence[dict[str, Any]], draws: int,
                     aperiodicity=arr("aperiodicity"),
                     convergence=np.array([r["convergence"] for r in rows], dtype=object).reshape(shape).astype(str),
                     step_error_mm_s=arr("step_error_mm_s"), dt_s=arr("dt_s"),
+                    extra={k: arr(k) for k in RUN_MEASURES if rows and all(k in r for r in rows)},
                     drives=[scenario_dict(p.drive) | ({"ablation": p.ablation} if p.ablation else {})
                             for p in points])
 
