@@ -29,6 +29,7 @@ from labkit.analysis.report import inputs as ri
 from labkit.analysis.report import provenance as prov
 from labkit.analysis.report.numbers import format_uncertain, format_value
 from labkit.errors import InputError
+from labkit.files.base import Json
 
 
 class Row(TypedDict):
@@ -493,43 +494,41 @@ def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
 
 
 def _judge_speed(sec: Section, m: ri.MeasuredSpeeds, c: ri.SimCurve, tol: Tolerances, band: str) -> None:
-    p = {"measured": sorted(set(m.sources)), "simulated": c.file, "sweep": c.describe}
+    p: dict[str, Json] = {"measured": [*sorted(set(m.sources))], "simulated": c.file, "sweep": c.describe}
     a_nom = compare.speed_agreement(m.freq_hz, m.speed_mm_s, m.lo_mm_s, m.hi_mm_s, c.freq_hz,
                                     c.nominal_mm_s, c.p10_mm_s, c.p90_mm_s, provenance=p)
     a_mc = compare.speed_agreement(m.freq_hz, m.speed_mm_s, m.lo_mm_s, m.hi_mm_s, c.freq_hz,
                                    c.mean_mm_s, c.p10_mm_s, c.p90_mm_s, provenance=p)
     pct = compare.draw_percentiles(m.freq_hz, m.speed_mm_s, c.freq_hz, c.draws_mm_s)
-    cov = compare.coverage(pct.tolist(), [q["inside_band"] for q in a_nom["points"]],
-                           (tol.band_lo_pct, tol.band_hi_pct))
+    cov = compare.coverage(pct.tolist(), [q.inside_band for q in a_nom.points], (tol.band_lo_pct, tol.band_hi_pct))
     details = sec.details
-    details.setdefault("speed", {})[c.file] = {"nominal": a_nom, "monte_carlo_mean": a_mc, "coverage": cov,
-                                                  "percentiles": pct.tolist()}
-    details.setdefault("speed_mc_mean_rms_error_mm_s", a_mc["rms_error_mm_s"])
-    details.setdefault("speed_nominal", a_nom)
-    details.setdefault("speed_coverage", cov)
-    rel = a_nom["relative_rms_error"]
+    details.setdefault("speed", {})[c.file] = {"nominal": a_nom.to_dict(), "monte_carlo_mean": a_mc.to_dict(),
+                                                  "coverage": cov.to_dict(), "percentiles": pct.tolist()}
+    details.setdefault("speed_mc_mean_rms_error_mm_s", a_mc.rms_error_mm_s)
+    details.setdefault("speed_nominal", a_nom.to_dict())
+    details.setdefault("speed_coverage", cov.to_dict())
+    rel = a_nom.relative_rms_error
     tag = f" vs {c.label}"
-    med = cov["median_percentile"]
+    med = cov.median_percentile
     band_text = (f"median percentile of the measured speeds within the draws: {format_value(med, 3)} "
                  f"(50 if unbiased; {c.draws} draws)")
     sec.rows.append(_row(f"speed, nominal robot{tag}", "relative RMS error (RMS error / RMS measured)", rel, "1",
                          f"≤ {tol.speed_relative_rms_max:g}", verdict(rel, at_most=tol.speed_relative_rms_max),
-                         band=band_text, n=a_nom["n_points"],
-                         text=f"{format_value(rel, 3)} (RMS error {format_value(a_nom['rms_error_mm_s'], 3)} mm/s)"))
-    fr = cov["fraction_inside"]
+                         band=band_text, n=a_nom.n_points,
+                         text=f"{format_value(rel, 3)} (RMS error {format_value(a_nom.rms_error_mm_s, 3)} mm/s)"))
+    fr = cov.fraction_inside
     sec.rows.append(_row(f"speed, Monte Carlo band{tag}", f"fraction of measured speeds inside the {band} band",
-                         fr, "1", f"≥ {tol.speed_coverage_min:g} (expected {cov['expected_fraction']:g})",
-                         verdict(fr, at_least=tol.speed_coverage_min), band=band_text, n=cov["n"]))
+                         fr, "1", f"≥ {tol.speed_coverage_min:g} (expected {cov.expected_fraction:g})",
+                         verdict(fr, at_least=tol.speed_coverage_min), band=band_text, n=cov.n))
     sec.html.append(f"<h3>Measured against {rh.e(c.label)}: {rh.e(c.describe)}</h3>")
     table_rows = []
-    for q, pc in zip(a_nom["points"], pct):
+    for q, pc in zip(a_nom.points, pct):
         std = None
-        if q["measured_lo_mm_s"] is not None and q["measured_hi_mm_s"] is not None:
-            std = (q["measured_hi_mm_s"] - q["measured_lo_mm_s"]) / (2 * 1.96)
-        table_rows.append([q["freq_hz"], format_uncertain(q["measured_mm_s"], std),
-                           format_value(q["simulated_mm_s"], 3),
-                           f"{format_value(q['band_lo_mm_s'], 3)} \u2013 {format_value(q['band_hi_mm_s'], 3)}",
-                           format_value(float(pc), 3), "yes" if q["inside_band"] else "no"])
+        if q.measured_lo_mm_s is not None and q.measured_hi_mm_s is not None:
+            std = (q.measured_hi_mm_s - q.measured_lo_mm_s) / (2 * 1.96)
+        table_rows.append([q.freq_hz, format_uncertain(q.measured_mm_s, std), format_value(q.simulated_mm_s, 3),
+                           f"{format_value(q.band_lo_mm_s, 3)} \u2013 {format_value(q.band_hi_mm_s, 3)}",
+                           format_value(float(pc), 3), "yes" if q.inside_band else "no"])
     sec.html.append(rh.table(["freq_hz", "measured (mm/s, ± std)", "nominal robot (mm/s)", f"band {band} (mm/s)",
                               "percentile in draws", "inside band"], table_rows, num_cols={0, 1, 2, 3, 4}))
 
@@ -653,13 +652,13 @@ def _knee_rows(sec: Section, case: ri.KneeCase, tol: Tolerances, leg: int) -> li
     """Judge one drive with both records: rows, details, the pattern pair; the table's row."""
     meas, s, freq, amp = case.measured, case.simulated, case.freq_hz, case.tray_amp_um
     assert meas is not None and s is not None
-    pv = {"measured": meas.file, "measured_point": meas.point, "simulated": s.source, "leg": leg + 1}
+    pv: dict[str, Json] = {"measured": meas.file, "measured_point": meas.point, "simulated": s.source, "leg": leg + 1}
     a = compare.knee_motion_agreement(meas.t_s, meas.knee_vz_mm_s, s.t_s, s.knee_vz_mm_s, freq,
                                       ref_meas=meas.tray_vz_mm_s, ref_sim=s.tray_vz_mm_s, provenance=pv)
-    sec.details.setdefault("knee", {})[f"{freq:.4g}Hz_{amp:.3g}um"] = a
+    sec.details.setdefault("knee", {})[f"{freq:.4g}Hz_{amp:.3g}um"] = a.to_dict()
     drive = f"{freq:.4g} Hz, {amp:.3g} um"
     r_lo, r_hi = 1.0 / tol.knee_amplitude_ratio_max, tol.knee_amplitude_ratio_max
-    ratio, phase, corr = a["amplitude_ratio"], a["phase_diff_deg"], a["correlation"]
+    ratio, phase, corr = a.amplitude_ratio, a.phase_diff_deg, a.correlation
     sec.rows.append(_row(f"knee @ {drive}", "amplitude ratio (sim/meas)", ratio, "1",
                          f"{r_lo:.2f}\u2013{r_hi:.2f}", verdict(ratio, at_least=r_lo, at_most=r_hi),
                          text=_fixed(ratio, 2)))
@@ -673,7 +672,7 @@ def _knee_rows(sec: Section, case: ri.KneeCase, tol: Tolerances, leg: int) -> li
     if case.measured_pattern in compare.PATTERNS:
         sec.pairs.append(ri.PatternPair("knee record", drive, case.measured_pattern, s.knee_pattern, ri.KNEE,
                                         ri.KNEE, meas.file, s.source))
-    return [freq, amp, format_value(a["amplitude_meas_mm_s"], 3), format_value(a["amplitude_sim_mm_s"], 3),
+    return [freq, amp, format_value(a.amplitude_meas_mm_s, 3), format_value(a.amplitude_sim_mm_s, 3),
             _fixed(ratio, 2), _fixed(phase, 1), _fixed(corr, 3), case.measured_pattern, s.knee_pattern,
             s.foot_pattern]
 
@@ -740,12 +739,12 @@ def _pattern_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
             continue
         a = compare.pattern_agreement([p.measured for p in ps], [p.simulated for p in ps],
                                       keys=[p.drive for p in ps])
-        sec.details.setdefault("patterns", {})[source] = a
-        fr = a["fraction_agree"]
-        agree = sum(q["agree"] for q in a["pairs"])
+        sec.details.setdefault("patterns", {})[source] = a.to_dict()
+        fr = a.fraction_agree
+        agree = sum(q.agree for q in a.pairs)
         sec.rows.append(_row(f"leg pattern ({source}s)", "fraction of drives with the same pattern", fr, "1",
                              f"≥ {tol.pattern_agreement_min:g}", verdict(fr, at_least=tol.pattern_agreement_min),
-                             n=a["n"], text=f"{format_value(fr, 3)} ({agree} of {a['n']})"))
+                             n=a.n, text=f"{format_value(fr, 3)} ({agree} of {a.n})"))
     apart = [p for p in pairs if not p.comparable]
     if apart:
         sec.message = (f"{len(apart)} pair(s) not compared: the observed pattern was classified from a knee "
