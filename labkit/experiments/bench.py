@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -33,6 +33,7 @@ from labkit.errors import ConfigError, InputError, InstrumentError, LabkitError
 from labkit.experiments import kinds
 from labkit.experiments.config import VIB_OUTPUT_MAX_V, InstrumentSpec
 from labkit.experiments.kinds import Config
+from labkit.jsonutil import Json
 
 #: the largest peak-to-peak drive the check puts out (in-chip: the config's drive scaled down to it)
 CHECK_VPP = 1.0
@@ -86,7 +87,8 @@ class CheckReport:
         self.lines.append(line)
         return line
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Json]:
+        """What ``labkit check --json`` prints."""
         return {"config": self.config, "kind": self.kind, "ok": self.ok, "checks": [asdict(x) for x in self.lines]}
 
 
@@ -107,10 +109,22 @@ def _band(kind: str, start: float | None, stop: float | None, count: int | None)
     return band
 
 
+class InitSummary(TypedDict):
+    """What :func:`init_config` reports (``labkit init --json``): the config written, what is left to
+    fill in (``todo``), the next command, the instrument found per role and every identification."""
+
+    config: str
+    kind: str
+    todo: list[str]
+    next: str
+    instruments: dict[str, str | None]
+    identified: list[dict[str, Json]]
+
+
 def init_config(out: str | Path, *, kind: str = "inchip", resources: list[str] | tuple[str, ...] = (),
                 all_devices: bool = False, lab: bool = False,
                 band: tuple[float | None, float | None, int | None] = (None, None, None),
-                force: bool = False, timeout_s: float = 0.5) -> dict[str, Any]:
+                force: bool = False, timeout_s: float = 0.5) -> InitSummary:
     """Identify the instruments, write a commented config of ``kind`` to ``out``; return a summary.
 
     Every argument is checked before anything is sent to an instrument.

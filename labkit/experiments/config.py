@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from labkit.experiments.tomlcheck import Table
+from labkit.jsonutil import Json
 from labkit.tomlio import load_toml
 
 LOCATIONS = ("body", "hip", "knee")
@@ -498,7 +499,7 @@ def _scope(t: Table) -> ScopeSetup:
                       t.integer("max_points", default=100_000, minimum=100, maximum=8_000_000))
 
 
-def comparable(cfg: InchipConfig | ShakerConfig) -> dict[str, Any]:
+def comparable(cfg: InchipConfig | ShakerConfig) -> dict[str, Json]:
     """The config as a dict with resources left out, for matching a resumed run's config.
 
     Resources may change between sessions (a virtual lab's ports, a renumbered

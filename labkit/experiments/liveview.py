@@ -46,10 +46,29 @@ from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 from urllib.parse import parse_qs, urlsplit
 
 from labkit.experiments import live
+
+
+class ViewStatus(TypedDict):
+    """``GET /status``: the stream's age on this machine's clock and whether a process writes the run."""
+
+    now: float
+    stream_age_s: float | None
+    running: bool
+    stale_s: float
+
+
+class StopReply(TypedDict):
+    """``POST /stop``: whether the request went to the run (``sent``, the run's ``pid``) or why not."""
+
+    ok: bool
+    error: NotRequired[str]
+    sent: NotRequired[str]
+    pid: NotRequired[int]
+
 
 #: the page's own files (labkit/data/), by URL path
 STATIC = {"/live-view.js": ("live-view.js", "text/javascript; charset=utf-8"),
@@ -185,7 +204,7 @@ class LiveView:
         self.close()
 
     # -- what the page may ask -----------------------------------------------------------------
-    def status(self) -> dict[str, Any]:
+    def status(self) -> ViewStatus:
         """The stream's age on this machine's clock and whether a process is writing the run."""
         try:
             age = time.time() - self.stream.stat().st_mtime
@@ -195,7 +214,7 @@ class LiveView:
         return {"now": time.time(), "stream_age_s": age, "running": holder is not None,
                 "stale_s": live.STALE_S}
 
-    def stop(self, when: str) -> dict[str, Any]:
+    def stop(self, when: str) -> StopReply:
         """Ask the run to stop after its point (``"point"``) or at once (``"now"``, SIGINT)."""
         holder = live.run_holder(self.run_path)
         if holder is None:

@@ -4,11 +4,12 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeAlias, TypedDict, TypeVar
+from typing import TYPE_CHECKING, Any, TypedDict, TypeVar
 
 import numpy as np
 
 from labkit.errors import InputError
+from labkit.jsonutil import Json as Json  # re-exported: the readers' JSON-valued fields
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import xarray
@@ -64,9 +65,6 @@ def require_xarray() -> Any:
                          expected='pip install "labkit[xarray]"') from None
     return xarray
 
-
-#: a JSON value, as :func:`json.loads` returns it (a ``*_json`` attribute decoded, a summary's free-form part)
-Json: TypeAlias = "None | bool | int | float | str | list[Json] | dict[str, Json]"
 
 T = TypeVar("T")
 
