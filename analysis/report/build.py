@@ -68,9 +68,9 @@ class Section:
     html: list[str] = field(default_factory=list)
     rows: list[Row] = field(default_factory=list)                                   # judged comparisons
     files: list[str] = field(default_factory=list)                                  # inputs, for provenance
-    notes: dict[str, Any] = field(default_factory=dict)
+    notes: dict[str, str] = field(default_factory=dict)
     verdict: Verdict = field(default_factory=lambda: Verdict(result="n/a", text=""))
-    provenance: dict[str, Any] = field(default_factory=dict)
+    provenance: prov.SectionProvenance = field(default_factory=lambda: prov.SectionProvenance())
     summarises: list[Row] | None = None    # the agreement section judges other sections' rows
     details: dict[str, Any] = field(default_factory=dict)       # this section's numbers, for agreement.json
     pairs: list[ri.PatternPair] = field(default_factory=list)   # leg patterns it observed and simulated
@@ -202,7 +202,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
 
         created = utc_now()
         headline = _headline(fit_data, details, sections)
-        meta = {"created_utc": created, "software": software, "command": command,
+        meta: prov.ReportMeta = {"created_utc": created, "software": software, "command": command,
                 "command_as_given": typed, "input_files": inputs,
                 "inputs": {"runs": list(map(str, runs)), "tracks": list(map(str, tracks)), "fit": fit,
                            "sims": list(map(str, sims)), "params": params},
@@ -227,6 +227,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
             old.unlink()
     html_path, agreement_path, figure_data_path = out / "report.html", out / "agreement.json", out / "figure_data.json"
     mc = details.get("speed_mc_mean_rms_error_mm_s")
+    nominal = headline.get("speed_rms_error_nominal_mm_s")
     return {"html": str(html_path), "figures": [str(f.png) for s in sections for f, _, _ in s.figures],
             "svgs": [str(f.svg) for s in sections for f, _, _ in s.figures],
             "agreement_json": str(agreement_path), "figure_data_json": str(figure_data_path),
@@ -236,7 +237,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
             "notes": {s.id: s.message for s in sections if s.status == "ok" and s.message},
             "headline": headline,
             "speed_rms_error_mm_s": mc,
-            "speed_rms_error_nominal_mm_s": headline.get("speed_rms_error_nominal_mm_s", {}).get("value"),
+            "speed_rms_error_nominal_mm_s": nominal["value"] if nominal else None,
             "agreement": [{k: r[k] for k in ("section", "comparison", "metric", "value", "value_text", "units",
                                              "tolerance", "verdict", "band_statistic", "n")} for r in rows]}
 
@@ -352,6 +353,7 @@ def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
                                                 f"model to {fm.rebuild_error:.1e})")
         ff = figs.frf_figure(g.locations, modes, out / f"fig_frf_{name}", fine=fine, units=g.units,
                              title=GROUP_TITLES.get(name, name))
+        assert "locations" in ff.data       # an FRF figure's data
         for loc, d in g.locations.items():
             entry = ff.data["locations"][loc]
             if loc in fine:
@@ -865,21 +867,38 @@ def _agreement_section(rows: list[Row], tol: Tolerances, sections: list[Section]
 
 # --------------------------------------------------------------------------- headline numbers
 
-def _headline(fit: ri.FitData | None, details: dict[str, Any], sections: list[Section]) -> dict[str, Any]:
-    """The numbers two reports are compared by (``labkit report --compare``)."""
-    h: dict[str, Any] = {}
+class _Headline(TypedDict):
+    label: str
+    value: float | int | None
+    units: str
 
-    def put(key: str, label: str, value: Any, units: str, **extra: Any) -> None:
-        h[key] = {"label": label, "value": value, "units": units, **extra}
+
+class _HeadlineExtra(TypedDict, total=False):
+    std: float | None
+    of: int
+    digits: int
+
+
+class HeadlineEntry(_Headline, _HeadlineExtra):
+    """One headline number (``agreement.json``: ``headline``): with its standard deviation, the
+    count it is out of (``of``), or the digits to show."""
+
+
+def _headline(fit: ri.FitData | None, details: dict[str, Any], sections: list[Section]) -> dict[str, HeadlineEntry]:
+    """The numbers two reports are compared by (``labkit report --compare``)."""
+    h: dict[str, HeadlineEntry] = {}
+
+    def put(key: str, label: str, value: float | int | None, units: str, extra: _HeadlineExtra | None = None) -> None:
+        h[key] = {"label": label, "value": value, "units": units, **(extra or {})}
 
     if fit:
         for name, g in fit.groups.items():
             for i, m in enumerate(g.modes):
                 put(f"{name}_mode{i + 1}_freq_hz", f"{name} mode {i + 1} frequency", m.freq_hz, "Hz",
-                    std=m.freq_hz_std)
+                    {"std": m.freq_hz_std})
                 put(f"{name}_mode{i + 1}_damping_ratio", f"{name} mode {i + 1} damping ratio",
-                    m.damping_ratio, "1", std=m.damping_ratio_std)
-            put(f"{name}_fit_quality", f"{name} fit quality (1 - NRMSE\u00b2)", g.quality, "1", digits=6)
+                    m.damping_ratio, "1", {"std": m.damping_ratio_std})
+            put(f"{name}_fit_quality", f"{name} fit quality (1 - NRMSE\u00b2)", g.quality, "1", {"digits": 6})
     nom, cov = details.get("speed_nominal"), details.get("speed_coverage")
     speed = [("speed_rms_error_nominal_mm_s", "speed RMS error, nominal robot", nom, "rms_error_mm_s", "mm/s"),
              ("speed_relative_rms_error_nominal", "speed relative RMS error, nominal robot", nom,
@@ -907,5 +926,5 @@ def _headline(fit: ri.FitData | None, details: dict[str, Any], sections: list[Se
             a["fraction_agree"], "1")
     rows = [r for s in sections for r in s.rows if r["verdict"] in ("pass", "fail")]
     put("comparisons_passed", "comparisons within tolerance", sum(r["verdict"] == "pass" for r in rows), "",
-        of=len(rows))
+        {"of": len(rows)})
     return h

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypedDict
@@ -520,7 +521,7 @@ class RobotParameters(LabFile):
         return ds
 
 
-def provenance_digest(prov: dict[str, Any]) -> dict[str, Json]:
+def provenance_digest(prov: Mapping[str, Json]) -> dict[str, Json]:
     """What ``labkit info`` shows of a ``[provenance]`` table: source, runs, fit file, and per mode
     where its value came from (fit with uncertainty, or the base file)."""
     keep = ("source", "created_utc", "runs", "fit_file", "method", "generated_by", "calibration")

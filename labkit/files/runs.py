@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from labkit.files.base import FileSummary, LabFile, column, json_attr, require_xarray, root_attrs, text, units_of
+from labkit.files.base import FileSummary, Json, LabFile, column, json_attr, require_xarray, root_attrs, text, units_of
 
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
@@ -59,7 +59,7 @@ class Instrument:
     role: str
     model: str
     resource: str
-    snapshot: dict[str, Any]
+    snapshot: dict[str, Json]
 
 
 @dataclass
