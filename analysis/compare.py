@@ -50,7 +50,7 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(a, b)[0, 1])
 
 
-class _Result:
+class Result:
     """What every comparison result has: its JSON-able form (fields in order, nested results as dicts)."""
 
     def to_dict(self) -> dict[str, Json]:
@@ -69,7 +69,7 @@ def _plain(value: Any) -> Json:
 # --------------------------------------------------------------------------- speed vs frequency
 
 @dataclass(frozen=True)
-class SpeedPoint(_Result):
+class SpeedPoint(Result):
     """One measured point against the simulated curve interpolated at its frequency (None: not finite)."""
 
     freq_hz: float | None
@@ -84,7 +84,7 @@ class SpeedPoint(_Result):
 
 
 @dataclass(frozen=True)
-class SpeedAgreement(_Result):
+class SpeedAgreement(Result):
     """:func:`speed_agreement`'s metrics (None where undefined: no points, no moving robot)."""
 
     n_points: int
@@ -236,7 +236,7 @@ def draw_percentiles(meas_freq_hz: ArrayLike, meas_value: ArrayLike, sim_freq_hz
 
 
 @dataclass(frozen=True)
-class Coverage(_Result):
+class Coverage(Result):
     """:func:`coverage`: observations inside the percentile band, the fraction expected, the median percentile."""
 
     n: int
@@ -329,7 +329,7 @@ def verdict(value: float | None, *, at_most: float | None = None, at_least: floa
 # --------------------------------------------------------------------------- leg patterns
 
 @dataclass(frozen=True)
-class PatternMatch(_Result):
+class PatternMatch(Result):
     """One condition of :func:`pattern_agreement`: what it is (``key``), both labels, whether they agree."""
 
     key: str | float | None
@@ -339,7 +339,7 @@ class PatternMatch(_Result):
 
 
 @dataclass(frozen=True)
-class PatternAgreement(_Result):
+class PatternAgreement(Result):
     """:func:`pattern_agreement`: the fraction agreeing, the confusion counts and every pair."""
 
     n: int
@@ -417,7 +417,7 @@ def fold_period(t_s: np.ndarray, x: np.ndarray, freq_hz: float, *, bins: int = 6
 
 
 @dataclass(frozen=True)
-class KneeAgreement(_Result):
+class KneeAgreement(Result):
     """:func:`knee_motion_agreement`: fundamentals, their ratio and phase difference, the folded periods."""
 
     freq_hz: float

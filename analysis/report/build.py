@@ -47,6 +47,28 @@ class Row(TypedDict):
     section: NotRequired[str]
 
 
+@dataclass(frozen=True)
+class SpeedJudged(compare.Result):
+    """One simulated sweep judged against the measured speeds: the nominal robot, the Monte Carlo
+    mean, the band's coverage and each measured speed's percentile within the draws."""
+
+    nominal: compare.SpeedAgreement
+    monte_carlo_mean: compare.SpeedAgreement
+    coverage: compare.Coverage
+    percentiles: list[float]
+
+
+class Details(TypedDict, total=False):
+    """The sections' numbers (``agreement.json``: ``details``; the headline is read from them)."""
+
+    speed: dict[str, SpeedJudged]                  # by sweep file
+    speed_mc_mean_rms_error_mm_s: float | None     # of the first sweep judged
+    speed_nominal: compare.SpeedAgreement          # of the first sweep judged
+    speed_coverage: compare.Coverage               # of the first sweep judged
+    knee: dict[str, compare.KneeAgreement]         # by drive
+    patterns: dict[str, compare.PatternAgreement]  # by what the patterns were compared with
+
+
 class Verdict(TypedDict):
     """A section's verdict (in ``agreement.json`` and on the page)."""
 
@@ -72,7 +94,7 @@ class Section:
     verdict: Verdict = field(default_factory=lambda: Verdict(result="n/a", text=""))
     provenance: prov.SectionProvenance = field(default_factory=lambda: prov.SectionProvenance())
     summarises: list[Row] | None = None    # the agreement section judges other sections' rows
-    details: dict[str, Any] = field(default_factory=dict)       # this section's numbers, for agreement.json
+    details: Details = field(default_factory=lambda: Details())   # this section's numbers, for agreement.json
     pairs: list[ri.PatternPair] = field(default_factory=list)   # leg patterns it observed and simulated
 
     def figure(self, files: figs.FigureFiles, caption: str) -> None:
@@ -191,7 +213,9 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
         sections = run_sections(replace(read, out=stage))
         rows = [Row(**r, section=s.id) for s in sections for r in s.rows]
         sections.append(_agreement_section(rows, tol, sections))
-        details = {k: v for s in sections for k, v in s.details.items()}
+        details = Details()
+        for s in sections:
+            details.update(s.details)
         inputs = prov.file_records(f for s in sections if s.status == "ok" for f in s.files)
         for f in inputs:
             f["shown_as"] = prov.display_path(f["path"], out)
@@ -264,6 +288,8 @@ def _read_inputs(runs: Sequence[str], tracks: Sequence[str], fit: str | None, si
 
 
 def _jsonable(x: Any) -> Any:
+    if isinstance(x, compare.Result):
+        return _jsonable(x.to_dict())
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -481,12 +507,12 @@ def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     judged = sec.details.get("speed", {})
     if judged:
         first = next(iter(judged.values()))
-        nom, cov = first["nominal"], first["coverage"]
-        note = (f"nominal robot: RMS error {format_value(nom['rms_error_mm_s'], 3)} mm/s "
-                f"(relative {format_value(nom['relative_rms_error'], 2)}, tolerance "
+        nom, cov = first.nominal, first.coverage
+        note = (f"nominal robot: RMS error {format_value(nom.rms_error_mm_s, 3)} mm/s "
+                f"(relative {format_value(nom.relative_rms_error, 2)}, tolerance "
                 f"\u2264 {tol.speed_relative_rms_max:g})\n"
-                f"{band} band holds {sum(q['inside_band'] for q in nom['points'])} of {cov['n']} measured points; "
-                f"median percentile in the draws {format_value(cov['median_percentile'], 3)} (50 if unbiased)")
+                f"{band} band holds {sum(q.inside_band for q in nom.points)} of {cov.n} measured points; "
+                f"median percentile in the draws {format_value(cov.median_percentile, 3)} (50 if unbiased)")
     ff = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed", note=note)
     sec.figure(ff, f"Measured speed (markers, 95 % confidence interval) against the simulated nominal robot "
                    f"(line) and the Monte Carlo {band} band over draws; below, the leg pattern (simulated: the "
@@ -504,11 +530,11 @@ def _judge_speed(sec: Section, m: ri.MeasuredSpeeds, c: ri.SimCurve, tol: Tolera
     pct = compare.draw_percentiles(m.freq_hz, m.speed_mm_s, c.freq_hz, c.draws_mm_s)
     cov = compare.coverage(pct.tolist(), [q.inside_band for q in a_nom.points], (tol.band_lo_pct, tol.band_hi_pct))
     details = sec.details
-    details.setdefault("speed", {})[c.file] = {"nominal": a_nom.to_dict(), "monte_carlo_mean": a_mc.to_dict(),
-                                                  "coverage": cov.to_dict(), "percentiles": pct.tolist()}
-    details.setdefault("speed_mc_mean_rms_error_mm_s", a_mc.rms_error_mm_s)
-    details.setdefault("speed_nominal", a_nom.to_dict())
-    details.setdefault("speed_coverage", cov.to_dict())
+    details.setdefault("speed", {})[c.file] = SpeedJudged(a_nom, a_mc, cov, pct.tolist())
+    if "speed_nominal" not in details:                  # the headline reads the first sweep judged
+        details["speed_mc_mean_rms_error_mm_s"] = a_mc.rms_error_mm_s
+        details["speed_nominal"] = a_nom
+        details["speed_coverage"] = cov
     rel = a_nom.relative_rms_error
     tag = f" vs {c.label}"
     med = cov.median_percentile
@@ -657,7 +683,7 @@ def _knee_rows(sec: Section, case: ri.KneeCase, tol: Tolerances, leg: int) -> li
     pv: dict[str, Json] = {"measured": meas.file, "measured_point": meas.point, "simulated": s.source, "leg": leg + 1}
     a = compare.knee_motion_agreement(meas.t_s, meas.knee_vz_mm_s, s.t_s, s.knee_vz_mm_s, freq,
                                       ref_meas=meas.tray_vz_mm_s, ref_sim=s.tray_vz_mm_s, provenance=pv)
-    sec.details.setdefault("knee", {})[f"{freq:.4g}Hz_{amp:.3g}um"] = a.to_dict()
+    sec.details.setdefault("knee", {})[f"{freq:.4g}Hz_{amp:.3g}um"] = a
     drive = f"{freq:.4g} Hz, {amp:.3g} um"
     r_lo, r_hi = 1.0 / tol.knee_amplitude_ratio_max, tol.knee_amplitude_ratio_max
     ratio, phase, corr = a.amplitude_ratio, a.phase_diff_deg, a.correlation
@@ -741,7 +767,7 @@ def _pattern_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
             continue
         a = compare.pattern_agreement([p.measured for p in ps], [p.simulated for p in ps],
                                       keys=[p.drive for p in ps])
-        sec.details.setdefault("patterns", {})[source] = a.to_dict()
+        sec.details.setdefault("patterns", {})[source] = a
         fr = a.fraction_agree
         agree = sum(q.agree for q in a.pairs)
         sec.rows.append(_row(f"leg pattern ({source}s)", "fraction of drives with the same pattern", fr, "1",
@@ -884,7 +910,7 @@ class HeadlineEntry(_Headline, _HeadlineExtra):
     count it is out of (``of``), or the digits to show."""
 
 
-def _headline(fit: ri.FitData | None, details: dict[str, Any], sections: list[Section]) -> dict[str, HeadlineEntry]:
+def _headline(fit: ri.FitData | None, details: Details, sections: list[Section]) -> dict[str, HeadlineEntry]:
     """The numbers two reports are compared by (``labkit report --compare``)."""
     h: dict[str, HeadlineEntry] = {}
 
@@ -900,17 +926,19 @@ def _headline(fit: ri.FitData | None, details: dict[str, Any], sections: list[Se
                     m.damping_ratio, "1", {"std": m.damping_ratio_std})
             put(f"{name}_fit_quality", f"{name} fit quality (1 - NRMSE\u00b2)", g.quality, "1", {"digits": 6})
     nom, cov = details.get("speed_nominal"), details.get("speed_coverage")
-    speed = [("speed_rms_error_nominal_mm_s", "speed RMS error, nominal robot", nom, "rms_error_mm_s", "mm/s"),
-             ("speed_relative_rms_error_nominal", "speed relative RMS error, nominal robot", nom,
-              "relative_rms_error", "1"),
-             ("speed_rms_error_mc_mean_mm_s", "speed RMS error, Monte Carlo mean", details,
-              "speed_mc_mean_rms_error_mm_s", "mm/s"),
-             ("speed_band_coverage", "measured speeds inside the Monte Carlo band", cov, "fraction_inside", "1"),
-             ("speed_median_percentile", "median percentile of measured speeds in the draws", cov,
-              "median_percentile", "%")]
-    for key, label, src, field_, units in speed:
-        if src and src.get(field_) is not None:
-            put(key, label, src[field_], units)
+    speed = [("speed_rms_error_nominal_mm_s", "speed RMS error, nominal robot",
+              nom.rms_error_mm_s if nom else None, "mm/s"),
+             ("speed_relative_rms_error_nominal", "speed relative RMS error, nominal robot",
+              nom.relative_rms_error if nom else None, "1"),
+             ("speed_rms_error_mc_mean_mm_s", "speed RMS error, Monte Carlo mean",
+              details.get("speed_mc_mean_rms_error_mm_s"), "mm/s"),
+             ("speed_band_coverage", "measured speeds inside the Monte Carlo band",
+              cov.fraction_inside if cov else None, "1"),
+             ("speed_median_percentile", "median percentile of measured speeds in the draws",
+              cov.median_percentile if cov else None, "%")]
+    for key, label, value, units in speed:
+        if value is not None:
+            put(key, label, value, units)
     knee = list(details.get("knee", {}).values())
     for key, label, field_, reduce, units in (
             ("knee_amplitude_ratio_median", "knee amplitude ratio (median over drives)", "amplitude_ratio",
@@ -918,12 +946,12 @@ def _headline(fit: ri.FitData | None, details: dict[str, Any], sections: list[Se
             ("knee_phase_diff_max_deg", "knee |phase difference| (largest)", "phase_diff_deg",
              lambda v: max(abs(x) for x in v), "deg"),
             ("knee_correlation_min", "knee waveform correlation (smallest)", "correlation", min, "1")):
-        values = [a[field_] for a in knee if a.get(field_) is not None]
+        values = [getattr(a, field_) for a in knee if getattr(a, field_) is not None]
         if values:
             put(key, label, reduce(values), units)
     for source, a in details.get("patterns", {}).items():
         put(f"pattern_agreement_{source.replace(' ', '_')}", f"leg-pattern agreement ({source}s)",
-            a["fraction_agree"], "1")
+            a.fraction_agree, "1")
     rows = [r for s in sections for r in s.rows if r["verdict"] in ("pass", "fail")]
     put("comparisons_passed", "comparisons within tolerance", sum(r["verdict"] == "pass" for r in rows), "",
         {"of": len(rows)})
