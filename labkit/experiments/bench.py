@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import TYPE_CHECKING, Any, NamedTuple, TypedDict
 
 import numpy as np
 
@@ -34,6 +34,9 @@ from labkit.experiments import kinds
 from labkit.experiments.config import VIB_OUTPUT_MAX_V, InstrumentSpec
 from labkit.experiments.kinds import Config
 from labkit.jsonutil import Json
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from labkit.experiments.protocols import FunctionGenerator, Scope, Vibrometer
 
 #: the largest peak-to-peak drive the check puts out (in-chip: the config's drive scaled down to it)
 CHECK_VPP = 1.0
@@ -195,18 +198,26 @@ def _open(spec: InstrumentSpec, **limits: float) -> Any:
     return open_instrument(spec.model, spec.resource, name=spec.role, **settings)
 
 
-def _identities(cfg: Config, report: CheckReport, stack: contextlib.ExitStack) -> dict[str, Any] | None:
+class Opened(NamedTuple):
+    """The three instruments ``labkit check`` opened, each past its identity handshake."""
+
+    funcgen: FunctionGenerator
+    scope: Scope
+    vibrometer: Vibrometer
+
+
+def _identities(cfg: Config, report: CheckReport, stack: contextlib.ExitStack) -> Opened | None:
     """Open each instrument (its driver's handshake checks the identity); None when one failed."""
     from labkit.experiments.discovery import _hint
 
     limits = kinds.of(cfg).rig_setup(cfg).funcgen_limits
-    opened: dict[str, Any] = {}
-    for role in ("funcgen", "scope", "vibrometer"):
+    opened: list[Any] = []              # in the order of Opened's fields
+    for role in Opened._fields:
         spec = cfg.instruments[role]
         try:
             inst = stack.enter_context(_open(spec, **(limits if role == "funcgen" else {})))
             report.add(f"identity {role}", PASS, inst.identity, f"model {spec.model} at {spec.resource}")
-            opened[role] = inst
+            opened.append(inst)
         except ConfigError as exc:
             report.add(f"identity {role}", FAIL, exc.message, f"model {spec.model}",
                        f"fix instruments.{role}.model (labkit identify {spec.resource})")
@@ -214,7 +225,7 @@ def _identities(cfg: Config, report: CheckReport, stack: contextlib.ExitStack) -
             cause = exc.__cause__ or exc
             report.add(f"identity {role}", FAIL, f"no answer from {spec.resource}: {exc}", f"model {spec.model}",
                        _hint(spec.resource, cause) or f"check instruments.{role}.resource (labkit devices)")
-    return opened if len(opened) == 3 else None
+    return Opened(*opened) if len(opened) == len(Opened._fields) else None
 
 
 # ----------------------------------------------------------------------------- check: measuring
@@ -512,7 +523,7 @@ def run_check(config: str | Path, *, lab: Any = False) -> CheckReport:
                        "fix the identities first")
             return report
         f, vpp, off = _check_drive_levels(cfg)
-        b = Bench(cfg, opened["funcgen"], opened["scope"], opened["vibrometer"], report, f, vpp, off,
+        b = Bench(cfg, opened.funcgen, opened.scope, opened.vibrometer, report, f, vpp, off,
                   mover=_mover(cfg, stack))
         guard = DriveGuard(b.fg, where=f"{cfg.instruments['funcgen'].model} at {cfg.instruments['funcgen'].resource}",
                            config=str(cfg.path))
