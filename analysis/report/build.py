@@ -69,6 +69,25 @@ class Details(TypedDict, total=False):
     patterns: dict[str, compare.PatternAgreement]  # by what the patterns were compared with
 
 
+class ReportSummary(TypedDict):
+    """What :func:`build_report` returns (``labkit report --json``): the files written, each
+    section's status, verdict and message, the headline numbers and every judged comparison."""
+
+    html: str
+    figures: list[str]
+    svgs: list[str]
+    agreement_json: str
+    figure_data_json: str
+    sections: dict[str, str]
+    verdicts: dict[str, str]
+    missing: dict[str, str]
+    notes: dict[str, str]
+    headline: dict[str, HeadlineEntry]
+    speed_rms_error_mm_s: float | None
+    speed_rms_error_nominal_mm_s: float | int | None
+    agreement: list[Row]
+
+
 class Verdict(TypedDict):
     """A section's verdict (in ``agreement.json`` and on the page)."""
 
@@ -154,7 +173,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
                  knee_duration_s: float = 0.3, leg: int = 0,
                  tolerances: Tolerances | Mapping[str, float] | None = None, command: str | None = None,
                  scheduler: str | None = None, workers: int | None = None,
-                 title: str = "labkit: model against measurement", quiet: bool = True) -> dict[str, Any]:
+                 title: str = "labkit: model against measurement", quiet: bool = True) -> ReportSummary:
     """Read the inputs, compare, draw, and write ``report.html``, the figures, ``agreement.json``
     and ``figure_data.json`` into ``out_dir``.
 
@@ -189,7 +208,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
 
     Returns
     -------
-    dict
+    ReportSummary
         Paths written, per-section status and verdict, the headline numbers and every
         judged comparison.
     """
@@ -262,8 +281,14 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
             "headline": headline,
             "speed_rms_error_mm_s": mc,
             "speed_rms_error_nominal_mm_s": nominal["value"] if nominal else None,
-            "agreement": [{k: r[k] for k in ("section", "comparison", "metric", "value", "value_text", "units",
-                                             "tolerance", "verdict", "band_statistic", "n")} for r in rows]}
+            "agreement": [_summary_row(r) for r in rows]}
+
+
+def _summary_row(r: Row) -> Row:
+    """A judged comparison as ``labkit report --json`` lists it (its section first)."""
+    return {"section": r.get("section", ""), "comparison": r["comparison"], "metric": r["metric"],
+            "value": r["value"], "value_text": r["value_text"], "units": r["units"], "tolerance": r["tolerance"],
+            "verdict": r["verdict"], "band_statistic": r["band_statistic"], "n": r["n"]}
 
 
 def _read_inputs(runs: Sequence[str], tracks: Sequence[str], fit: str | None, sims: Sequence[str]) -> tuple[

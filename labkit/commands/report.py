@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
+    from labkit.analysis.report.build import ReportSummary
     from labkit.analysis.report.sidebyside import Comparison
 
 from labkit.errors import InputError
@@ -60,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--force", action="store_true", help="replace a report already in --out")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any] | Comparison:
+def run(args: argparse.Namespace) -> ReportSummary | Comparison:
     import shlex
     import sys
     from pathlib import Path
