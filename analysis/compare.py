@@ -11,9 +11,10 @@ Three comparisons, as in the paper's section 5:
   vibrometer against the simulated one at the same drive: amplitude and phase
   of the fundamental, and the correlation of one drive period (Fig. 10/11).
 
-Every function returns a JSON-able dict holding the numbers *and* a
+Every function returns a frozen dataclass holding the numbers *and* a
 ``provenance`` entry (which files, which parameters, which method), so a
-report can say where each number came from. Inputs are plain numpy arrays;
+report can say where each number came from; its ``to_dict()`` is the
+JSON-able form the report writes to ``agreement.json``. Inputs are plain numpy arrays;
 reading files is :mod:`labkit.analysis.report.inputs`' job.
 """
 from __future__ import annotations
@@ -24,6 +25,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from labkit.files.base import Json
 
 #: Pattern labels, as the simulator writes them (SimResult.patterns); re-exported, with the
 #: knee-record classifier shared with the simulator's calibration.
@@ -47,14 +50,64 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(a, b)[0, 1])
 
 
+class Result:
+    """What every comparison result has: its JSON-able form (fields in order, nested results as dicts)."""
+
+    def to_dict(self) -> dict[str, Json]:
+        return {k: _plain(v) for k, v in asdict(self).items()}  # type: ignore[call-overload]  # subclasses are dataclasses
+
+
+def _plain(value: Any) -> Json:
+    """A value of :func:`dataclasses.asdict` with tuples as lists (as JSON has them)."""
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
+
+
 # --------------------------------------------------------------------------- speed vs frequency
+
+@dataclass(frozen=True)
+class SpeedPoint(Result):
+    """One measured point against the simulated curve interpolated at its frequency (None: not finite)."""
+
+    freq_hz: float | None
+    measured_mm_s: float | None
+    measured_lo_mm_s: float | None
+    measured_hi_mm_s: float | None
+    simulated_mm_s: float | None
+    band_lo_mm_s: float | None
+    band_hi_mm_s: float | None
+    error_mm_s: float | None
+    inside_band: bool
+
+
+@dataclass(frozen=True)
+class SpeedAgreement(Result):
+    """:func:`speed_agreement`'s metrics (None where undefined: no points, no moving robot)."""
+
+    n_points: int
+    n_outside_range: int
+    rms_error_mm_s: float | None
+    mean_error_mm_s: float | None
+    relative_rms_error: float | None
+    median_relative_error: float | None
+    min_speed_mm_s: float
+    correlation: float | None
+    fraction_inside_band: float | None
+    fraction_ci_overlaps_band: float | None
+    points: tuple[SpeedPoint, ...]
+    method: str
+    provenance: dict[str, Json]
+
 
 def speed_agreement(meas_freq_hz: ArrayLike, meas_speed_mm_s: ArrayLike,
                     meas_lo_mm_s: ArrayLike | None, meas_hi_mm_s: ArrayLike | None,
                     sim_freq_hz: ArrayLike, sim_mean_mm_s: ArrayLike,
                     sim_lo_mm_s: ArrayLike, sim_hi_mm_s: ArrayLike, *,
                     min_speed_mm_s: float = 0.1,
-                    provenance: dict[str, Any] | None = None) -> dict[str, Any]:
+                    provenance: Mapping[str, Json] | None = None) -> SpeedAgreement:
     """Error metrics of simulated against measured speed over frequency.
 
     The simulated curve (mean and band) is linearly interpolated at the
@@ -77,7 +130,7 @@ def speed_agreement(meas_freq_hz: ArrayLike, meas_speed_mm_s: ArrayLike,
 
     Returns
     -------
-    dict
+    SpeedAgreement
         ``n_points``, ``n_outside_range``, ``rms_error_mm_s``,
         ``mean_error_mm_s`` (bias, simulated minus measured),
         ``relative_rms_error`` (RMS error over RMS measured speed),
@@ -111,27 +164,23 @@ def speed_agreement(meas_freq_hz: ArrayLike, meas_speed_mm_s: ArrayLike,
     n = int(f.size)
     rms_meas = float(np.sqrt(np.mean(m ** 2))) if n else float("nan")
     rms_err = float(np.sqrt(np.mean(err ** 2))) if n else float("nan")
-    points = [{"freq_hz": _f(a), "measured_mm_s": _f(b), "measured_lo_mm_s": _f(c), "measured_hi_mm_s": _f(d),
-               "simulated_mm_s": _f(e), "band_lo_mm_s": _f(g), "band_hi_mm_s": _f(h),
-               "error_mm_s": _f(e - b), "inside_band": bool(i)}
-              for a, b, c, d, e, g, h, i in zip(f, m, lo, hi, sim, band_lo, band_hi, in_band)]
-    return {
-        "n_points": n,
-        "n_outside_range": int((~inside_range).sum()),
-        "rms_error_mm_s": _f(rms_err),
-        "mean_error_mm_s": _f(err.mean()) if n else None,
-        "relative_rms_error": _f(rms_err / rms_meas) if n and rms_meas > 0 else None,
-        "median_relative_error": (_f(np.median(np.abs(err[moving]) / np.abs(m[moving])))
-                                  if moving.any() else None),
-        "min_speed_mm_s": float(min_speed_mm_s),
-        "correlation": _f(_corr(m, sim)),
-        "fraction_inside_band": _f(in_band.mean()) if n else None,
-        "fraction_ci_overlaps_band": _f(overlaps.mean()) if n else None,
-        "points": points,
-        "method": "simulated mean and band linearly interpolated at measured frequencies; "
-                  "error = simulated - measured",
-        "provenance": dict(provenance or {}),
-    }
+    points = tuple(SpeedPoint(_f(a), _f(b), _f(c), _f(d), _f(e), _f(g), _f(h), _f(e - b), bool(i))
+                   for a, b, c, d, e, g, h, i in zip(f, m, lo, hi, sim, band_lo, band_hi, in_band))
+    return SpeedAgreement(
+        n_points=n,
+        n_outside_range=int((~inside_range).sum()),
+        rms_error_mm_s=_f(rms_err),
+        mean_error_mm_s=_f(err.mean()) if n else None,
+        relative_rms_error=_f(rms_err / rms_meas) if n and rms_meas > 0 else None,
+        median_relative_error=(_f(np.median(np.abs(err[moving]) / np.abs(m[moving]))) if moving.any() else None),
+        min_speed_mm_s=float(min_speed_mm_s),
+        correlation=_f(_corr(m, sim)),
+        fraction_inside_band=_f(in_band.mean()) if n else None,
+        fraction_ci_overlaps_band=_f(overlaps.mean()) if n else None,
+        points=points,
+        method="simulated mean and band linearly interpolated at measured frequencies; error = simulated - measured",
+        provenance=dict(provenance or {}),
+    )
 
 
 def band_from_draws(speeds_mm_s: np.ndarray, *, k: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -186,8 +235,19 @@ def draw_percentiles(meas_freq_hz: ArrayLike, meas_value: ArrayLike, sim_freq_hz
     return out
 
 
+@dataclass(frozen=True)
+class Coverage(Result):
+    """:func:`coverage`: observations inside the percentile band, the fraction expected, the median percentile."""
+
+    n: int
+    fraction_inside: float | None
+    expected_fraction: float
+    median_percentile: float | None
+    band_percentiles: list[float]
+
+
 def coverage(percentiles: Sequence[float], inside: Sequence[bool],
-             band: tuple[float, float] = (10.0, 90.0)) -> dict[str, Any]:
+             band: tuple[float, float] = (10.0, 90.0)) -> Coverage:
     """Coverage score: the fraction of observations inside the Monte Carlo percentile band
     (``inside``, as :func:`speed_agreement` finds it against that band), against the fraction
     expected if the draws were the observations' distribution, with the observations' median
@@ -195,10 +255,8 @@ def coverage(percentiles: Sequence[float], inside: Sequence[bool],
     p = np.asarray(percentiles, float)
     p = p[np.isfinite(p)]
     ins = np.asarray(inside, bool)
-    return {"n": int(ins.size), "fraction_inside": _f(ins.mean()) if ins.size else None,
-            "expected_fraction": (band[1] - band[0]) / 100.0,
-            "median_percentile": _f(np.median(p)) if p.size else None,
-            "band_percentiles": list(band)}
+    return Coverage(int(ins.size), _f(ins.mean()) if ins.size else None, (band[1] - band[0]) / 100.0,
+                    _f(np.median(p)) if p.size else None, list(band))
 
 
 # --------------------------------------------------------------------------- tolerances and verdicts
@@ -270,9 +328,30 @@ def verdict(value: float | None, *, at_most: float | None = None, at_least: floa
 
 # --------------------------------------------------------------------------- leg patterns
 
+@dataclass(frozen=True)
+class PatternMatch(Result):
+    """One condition of :func:`pattern_agreement`: what it is (``key``), both labels, whether they agree."""
+
+    key: str | float | None
+    measured: str
+    simulated: str
+    agree: bool
+
+
+@dataclass(frozen=True)
+class PatternAgreement(Result):
+    """:func:`pattern_agreement`: the fraction agreeing, the confusion counts and every pair."""
+
+    n: int
+    fraction_agree: float | None
+    confusion: dict[str, dict[str, int]]
+    pairs: tuple[PatternMatch, ...]
+    provenance: dict[str, Json]
+
+
 def pattern_agreement(measured: Sequence[str], simulated: Sequence[str], *,
-                      keys: Sequence[Any] | None = None,
-                      provenance: dict[str, Any] | None = None) -> dict[str, Any]:
+                      keys: Sequence[str | float] | None = None,
+                      provenance: Mapping[str, Json] | None = None) -> PatternAgreement:
     """Agreement of observed and simulated leg-motion patterns, one label per condition.
 
     Parameters
@@ -286,7 +365,7 @@ def pattern_agreement(measured: Sequence[str], simulated: Sequence[str], *,
 
     Returns
     -------
-    dict
+    PatternAgreement
         ``n``, ``fraction_agree``, ``confusion`` (measured -> simulated ->
         count), ``pairs`` and ``provenance``.
     """
@@ -297,16 +376,15 @@ def pattern_agreement(measured: Sequence[str], simulated: Sequence[str], *,
     for label in meas + sim:
         if label not in PATTERNS:
             raise ValueError(f"unknown pattern label {label!r} (expected one of {', '.join(PATTERNS)})")
-    keys = list(range(len(meas))) if keys is None else list(keys)
+    names: list[str | float] = list(range(len(meas))) if keys is None else list(keys)
     confusion = {a: {b: 0 for b in PATTERNS} for a in PATTERNS}
     for a, b in zip(meas, sim):
         confusion[a][b] += 1
     agree = [a == b for a, b in zip(meas, sim)]
-    return {"n": len(meas), "fraction_agree": _f(np.mean(agree)) if agree else None,
-            "confusion": confusion,
-            "pairs": [{"key": k if isinstance(k, str) else _f(k), "measured": a, "simulated": b, "agree": bool(c)}
-                      for k, a, b, c in zip(keys, meas, sim, agree)],
-            "provenance": dict(provenance or {})}
+    return PatternAgreement(len(meas), _f(np.mean(agree)) if agree else None, confusion,
+                            tuple(PatternMatch(k if isinstance(k, str) else _f(k), a, b, bool(c))
+                                  for k, a, b, c in zip(names, meas, sim, agree)),
+                            dict(provenance or {}))
 
 
 def dominant_pattern(labels: Sequence[str] | np.ndarray) -> str:
@@ -338,10 +416,29 @@ def fold_period(t_s: np.ndarray, x: np.ndarray, freq_hz: float, *, bins: int = 6
     return out
 
 
+@dataclass(frozen=True)
+class KneeAgreement(Result):
+    """:func:`knee_motion_agreement`: fundamentals, their ratio and phase difference, the folded periods."""
+
+    freq_hz: float
+    amplitude_meas_mm_s: float | None
+    amplitude_sim_mm_s: float | None
+    amplitude_ratio: float | None
+    phase_meas_deg: float | None
+    phase_sim_deg: float | None
+    phase_diff_deg: float | None
+    correlation: float | None
+    rms_diff_mm_s: float | None
+    method: str
+    cycle_meas_mm_s: list[float | None]
+    cycle_sim_mm_s: list[float | None]
+    provenance: dict[str, Json]
+
+
 def knee_motion_agreement(t_meas_s: np.ndarray, vz_meas_mm_s: np.ndarray,
                           t_sim_s: np.ndarray, vz_sim_mm_s: np.ndarray, freq_hz: float, *,
                           ref_meas: np.ndarray | None = None, ref_sim: np.ndarray | None = None,
-                          bins: int = 64, provenance: dict[str, Any] | None = None) -> dict[str, Any]:
+                          bins: int = 64, provenance: Mapping[str, Json] | None = None) -> KneeAgreement:
     """Compare measured and simulated knee vertical velocity at one drive.
 
     Phases are taken relative to a reference signal recorded with each (the
@@ -352,7 +449,7 @@ def knee_motion_agreement(t_meas_s: np.ndarray, vz_meas_mm_s: np.ndarray,
 
     Returns
     -------
-    dict
+    KneeAgreement
         ``freq_hz``, ``amplitude_meas_mm_s``, ``amplitude_sim_mm_s``,
         ``amplitude_ratio`` (sim / meas), ``phase_meas_deg``,
         ``phase_sim_deg``, ``phase_diff_deg`` (sim - meas, wrapped to
@@ -369,19 +466,19 @@ def knee_motion_agreement(t_meas_s: np.ndarray, vz_meas_mm_s: np.ndarray,
     # Fold both onto the tray's phase: bin 0 is where each reference crosses zero upward.
     cyc_m = fold_period(t_meas_s, vz_meas_mm_s, freq_hz, bins=bins, phase_rad=ref_m)
     cyc_s = fold_period(t_sim_s, vz_sim_mm_s, freq_hz, bins=bins, phase_rad=ref_s)
-    return {
-        "freq_hz": float(freq_hz),
-        "amplitude_meas_mm_s": _f(fm["amplitude"]),
-        "amplitude_sim_mm_s": _f(fs["amplitude"]),
-        "amplitude_ratio": _f(fs["amplitude"] / fm["amplitude"]) if fm["amplitude"] > 0 else None,
-        "phase_meas_deg": _f(np.degrees(np.angle(np.exp(1j * phase_m)))),
-        "phase_sim_deg": _f(np.degrees(np.angle(np.exp(1j * phase_s)))),
-        "phase_diff_deg": _f(np.degrees(diff)),
-        "correlation": _f(_corr(cyc_m, cyc_s)),
-        "rms_diff_mm_s": _f(np.sqrt(np.nanmean((cyc_s - cyc_m) ** 2))),
-        "method": f"fundamental by least squares at the drive frequency; correlation of one period "
-                  f"folded into {bins} phase bins, each aligned to its tray reference",
-        "cycle_meas_mm_s": [_f(v) for v in cyc_m],
-        "cycle_sim_mm_s": [_f(v) for v in cyc_s],
-        "provenance": dict(provenance or {}),
-    }
+    return KneeAgreement(
+        freq_hz=float(freq_hz),
+        amplitude_meas_mm_s=_f(fm["amplitude"]),
+        amplitude_sim_mm_s=_f(fs["amplitude"]),
+        amplitude_ratio=_f(fs["amplitude"] / fm["amplitude"]) if fm["amplitude"] > 0 else None,
+        phase_meas_deg=_f(np.degrees(np.angle(np.exp(1j * phase_m)))),
+        phase_sim_deg=_f(np.degrees(np.angle(np.exp(1j * phase_s)))),
+        phase_diff_deg=_f(np.degrees(diff)),
+        correlation=_f(_corr(cyc_m, cyc_s)),
+        rms_diff_mm_s=_f(np.sqrt(np.nanmean((cyc_s - cyc_m) ** 2))),
+        method=f"fundamental by least squares at the drive frequency; correlation of one period "
+               f"folded into {bins} phase bins, each aligned to its tray reference",
+        cycle_meas_mm_s=[_f(v) for v in cyc_m],
+        cycle_sim_mm_s=[_f(v) for v in cyc_s],
+        provenance=dict(provenance or {}),
+    )

@@ -8,9 +8,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias
 
 import numpy as np
+
+#: a JSON value, as :func:`json.loads` returns it (a snapshot, a decoded ``*_json`` attribute, a record)
+Json: TypeAlias = "None | bool | int | float | str | list[Json] | dict[str, Json]"
 
 
 def to_jsonable(obj: Any, *, finite: bool = False) -> Any:

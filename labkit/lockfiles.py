@@ -17,7 +17,22 @@ import json
 import os
 import re
 from pathlib import Path
-from typing import Any
+from typing import TypedDict, cast
+
+from labkit.jsonutil import Json
+
+
+class LockRecord(TypedDict, total=False):
+    """What a lock file holds (JSON): who holds it and for what (``pid`` is ``"?"`` when unreadable)."""
+
+    pid: int | str
+    host: str
+    command: str
+    run_file: str
+    config: str
+    since: str
+    key: str
+
 
 #: the one folder of run locks on this machine (not per user: two users' runs share the rig)
 LOCK_DIR = Path("/tmp/labkit-locks")
@@ -54,8 +69,8 @@ def file_key(path: str | Path) -> str:
     return "file:" + os.path.realpath(path)
 
 
-def read_record(p: Path) -> dict[str, Any] | None:
-    """The JSON record in a lock file, or None when it cannot be read."""
+def read_record(p: Path) -> dict[str, Json] | None:
+    """The JSON object in a record file (a lock's, a served lab's), or None when it cannot be read."""
     try:
         data = json.loads(p.read_text() or "{}")
         return data if isinstance(data, dict) else None
@@ -63,7 +78,12 @@ def read_record(p: Path) -> dict[str, Any] | None:
         return None
 
 
-def holder(key: str) -> dict[str, Any] | None:
+def read_lock(p: Path) -> LockRecord:
+    """Who holds the lock file ``p``, as its record says (``{"pid": "?"}`` when it cannot be read)."""
+    return cast(LockRecord, read_record(p) or {"pid": "?"})
+
+
+def holder(key: str) -> LockRecord | None:
     """Who holds the lock on ``key`` now (its JSON record), or None when nobody does."""
     p = lock_path(key)
     if not p.exists():
@@ -76,19 +96,19 @@ def holder(key: str) -> dict[str, Any] | None:
         try:
             fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         except BlockingIOError:
-            return read_record(p) or {"pid": "?"}
+            return read_lock(p)
         fcntl.flock(fd, fcntl.LOCK_UN)
         return None
     finally:
         os.close(fd)
 
 
-def writer_of(path: str | Path) -> dict[str, Any] | None:
+def writer_of(path: str | Path) -> LockRecord | None:
     """The run writing ``path`` now (its lock record: ``pid``, ``host``, ``command``, ``since``), else None."""
     return holder(file_key(path))
 
 
-def describe(info: dict[str, Any]) -> str:
+def describe(info: LockRecord) -> str:
     """``PID 123 on bench-pc (labkit sweep inchip a.toml --out run.h5, run file run.h5, since 16:40:02)``."""
     parts = [f"PID {info.get('pid', '?')}" + (f" on {info['host']}" if info.get("host") else "")]
     extra = []

@@ -29,6 +29,7 @@ from labkit.analysis.report import inputs as ri
 from labkit.analysis.report import provenance as prov
 from labkit.analysis.report.numbers import format_uncertain, format_value
 from labkit.errors import InputError
+from labkit.files.base import Json
 
 
 class Row(TypedDict):
@@ -44,6 +45,47 @@ class Row(TypedDict):
     band_statistic: str
     n: int
     section: NotRequired[str]
+
+
+@dataclass(frozen=True)
+class SpeedJudged(compare.Result):
+    """One simulated sweep judged against the measured speeds: the nominal robot, the Monte Carlo
+    mean, the band's coverage and each measured speed's percentile within the draws."""
+
+    nominal: compare.SpeedAgreement
+    monte_carlo_mean: compare.SpeedAgreement
+    coverage: compare.Coverage
+    percentiles: list[float]
+
+
+class Details(TypedDict, total=False):
+    """The sections' numbers (``agreement.json``: ``details``; the headline is read from them)."""
+
+    speed: dict[str, SpeedJudged]                  # by sweep file
+    speed_mc_mean_rms_error_mm_s: float | None     # of the first sweep judged
+    speed_nominal: compare.SpeedAgreement          # of the first sweep judged
+    speed_coverage: compare.Coverage               # of the first sweep judged
+    knee: dict[str, compare.KneeAgreement]         # by drive
+    patterns: dict[str, compare.PatternAgreement]  # by what the patterns were compared with
+
+
+class ReportSummary(TypedDict):
+    """What :func:`build_report` returns (``labkit report --json``): the files written, each
+    section's status, verdict and message, the headline numbers and every judged comparison."""
+
+    html: str
+    figures: list[str]
+    svgs: list[str]
+    agreement_json: str
+    figure_data_json: str
+    sections: dict[str, str]
+    verdicts: dict[str, str]
+    missing: dict[str, str]
+    notes: dict[str, str]
+    headline: dict[str, HeadlineEntry]
+    speed_rms_error_mm_s: float | None
+    speed_rms_error_nominal_mm_s: float | int | None
+    agreement: list[Row]
 
 
 class Verdict(TypedDict):
@@ -67,11 +109,11 @@ class Section:
     html: list[str] = field(default_factory=list)
     rows: list[Row] = field(default_factory=list)                                   # judged comparisons
     files: list[str] = field(default_factory=list)                                  # inputs, for provenance
-    notes: dict[str, Any] = field(default_factory=dict)
+    notes: dict[str, str] = field(default_factory=dict)
     verdict: Verdict = field(default_factory=lambda: Verdict(result="n/a", text=""))
-    provenance: dict[str, Any] = field(default_factory=dict)
+    provenance: prov.SectionProvenance = field(default_factory=lambda: prov.SectionProvenance())
     summarises: list[Row] | None = None    # the agreement section judges other sections' rows
-    details: dict[str, Any] = field(default_factory=dict)       # this section's numbers, for agreement.json
+    details: Details = field(default_factory=lambda: Details())   # this section's numbers, for agreement.json
     pairs: list[ri.PatternPair] = field(default_factory=list)   # leg patterns it observed and simulated
 
     def figure(self, files: figs.FigureFiles, caption: str) -> None:
@@ -131,7 +173,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
                  knee_duration_s: float = 0.3, leg: int = 0,
                  tolerances: Tolerances | Mapping[str, float] | None = None, command: str | None = None,
                  scheduler: str | None = None, workers: int | None = None,
-                 title: str = "labkit: model against measurement", quiet: bool = True) -> dict[str, Any]:
+                 title: str = "labkit: model against measurement", quiet: bool = True) -> ReportSummary:
     """Read the inputs, compare, draw, and write ``report.html``, the figures, ``agreement.json``
     and ``figure_data.json`` into ``out_dir``.
 
@@ -166,7 +208,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
 
     Returns
     -------
-    dict
+    ReportSummary
         Paths written, per-section status and verdict, the headline numbers and every
         judged comparison.
     """
@@ -190,7 +232,9 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
         sections = run_sections(replace(read, out=stage))
         rows = [Row(**r, section=s.id) for s in sections for r in s.rows]
         sections.append(_agreement_section(rows, tol, sections))
-        details = {k: v for s in sections for k, v in s.details.items()}
+        details = Details()
+        for s in sections:
+            details.update(s.details)
         inputs = prov.file_records(f for s in sections if s.status == "ok" for f in s.files)
         for f in inputs:
             f["shown_as"] = prov.display_path(f["path"], out)
@@ -201,7 +245,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
 
         created = utc_now()
         headline = _headline(fit_data, details, sections)
-        meta = {"created_utc": created, "software": software, "command": command,
+        meta: prov.ReportMeta = {"created_utc": created, "software": software, "command": command,
                 "command_as_given": typed, "input_files": inputs,
                 "inputs": {"runs": list(map(str, runs)), "tracks": list(map(str, tracks)), "fit": fit,
                            "sims": list(map(str, sims)), "params": params},
@@ -226,6 +270,7 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
             old.unlink()
     html_path, agreement_path, figure_data_path = out / "report.html", out / "agreement.json", out / "figure_data.json"
     mc = details.get("speed_mc_mean_rms_error_mm_s")
+    nominal = headline.get("speed_rms_error_nominal_mm_s")
     return {"html": str(html_path), "figures": [str(f.png) for s in sections for f, _, _ in s.figures],
             "svgs": [str(f.svg) for s in sections for f, _, _ in s.figures],
             "agreement_json": str(agreement_path), "figure_data_json": str(figure_data_path),
@@ -235,9 +280,15 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
             "notes": {s.id: s.message for s in sections if s.status == "ok" and s.message},
             "headline": headline,
             "speed_rms_error_mm_s": mc,
-            "speed_rms_error_nominal_mm_s": headline.get("speed_rms_error_nominal_mm_s", {}).get("value"),
-            "agreement": [{k: r[k] for k in ("section", "comparison", "metric", "value", "value_text", "units",
-                                             "tolerance", "verdict", "band_statistic", "n")} for r in rows]}
+            "speed_rms_error_nominal_mm_s": nominal["value"] if nominal else None,
+            "agreement": [_summary_row(r) for r in rows]}
+
+
+def _summary_row(r: Row) -> Row:
+    """A judged comparison as ``labkit report --json`` lists it (its section first)."""
+    return {"section": r.get("section", ""), "comparison": r["comparison"], "metric": r["metric"],
+            "value": r["value"], "value_text": r["value_text"], "units": r["units"], "tolerance": r["tolerance"],
+            "verdict": r["verdict"], "band_statistic": r["band_statistic"], "n": r["n"]}
 
 
 def _read_inputs(runs: Sequence[str], tracks: Sequence[str], fit: str | None, sims: Sequence[str]) -> tuple[
@@ -262,6 +313,8 @@ def _read_inputs(runs: Sequence[str], tracks: Sequence[str], fit: str | None, si
 
 
 def _jsonable(x: Any) -> Any:
+    if isinstance(x, compare.Result):
+        return _jsonable(x.to_dict())
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -351,6 +404,7 @@ def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
                                                 f"model to {fm.rebuild_error:.1e})")
         ff = figs.frf_figure(g.locations, modes, out / f"fig_frf_{name}", fine=fine, units=g.units,
                              title=GROUP_TITLES.get(name, name))
+        assert "locations" in ff.data       # an FRF figure's data
         for loc, d in g.locations.items():
             entry = ff.data["locations"][loc]
             if loc in fine:
@@ -478,12 +532,12 @@ def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     judged = sec.details.get("speed", {})
     if judged:
         first = next(iter(judged.values()))
-        nom, cov = first["nominal"], first["coverage"]
-        note = (f"nominal robot: RMS error {format_value(nom['rms_error_mm_s'], 3)} mm/s "
-                f"(relative {format_value(nom['relative_rms_error'], 2)}, tolerance "
+        nom, cov = first.nominal, first.coverage
+        note = (f"nominal robot: RMS error {format_value(nom.rms_error_mm_s, 3)} mm/s "
+                f"(relative {format_value(nom.relative_rms_error, 2)}, tolerance "
                 f"\u2264 {tol.speed_relative_rms_max:g})\n"
-                f"{band} band holds {sum(q['inside_band'] for q in nom['points'])} of {cov['n']} measured points; "
-                f"median percentile in the draws {format_value(cov['median_percentile'], 3)} (50 if unbiased)")
+                f"{band} band holds {sum(q.inside_band for q in nom.points)} of {cov.n} measured points; "
+                f"median percentile in the draws {format_value(cov.median_percentile, 3)} (50 if unbiased)")
     ff = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed", note=note)
     sec.figure(ff, f"Measured speed (markers, 95 % confidence interval) against the simulated nominal robot "
                    f"(line) and the Monte Carlo {band} band over draws; below, the leg pattern (simulated: the "
@@ -493,43 +547,41 @@ def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
 
 
 def _judge_speed(sec: Section, m: ri.MeasuredSpeeds, c: ri.SimCurve, tol: Tolerances, band: str) -> None:
-    p = {"measured": sorted(set(m.sources)), "simulated": c.file, "sweep": c.describe}
+    p: dict[str, Json] = {"measured": [*sorted(set(m.sources))], "simulated": c.file, "sweep": c.describe}
     a_nom = compare.speed_agreement(m.freq_hz, m.speed_mm_s, m.lo_mm_s, m.hi_mm_s, c.freq_hz,
                                     c.nominal_mm_s, c.p10_mm_s, c.p90_mm_s, provenance=p)
     a_mc = compare.speed_agreement(m.freq_hz, m.speed_mm_s, m.lo_mm_s, m.hi_mm_s, c.freq_hz,
                                    c.mean_mm_s, c.p10_mm_s, c.p90_mm_s, provenance=p)
     pct = compare.draw_percentiles(m.freq_hz, m.speed_mm_s, c.freq_hz, c.draws_mm_s)
-    cov = compare.coverage(pct.tolist(), [q["inside_band"] for q in a_nom["points"]],
-                           (tol.band_lo_pct, tol.band_hi_pct))
+    cov = compare.coverage(pct.tolist(), [q.inside_band for q in a_nom.points], (tol.band_lo_pct, tol.band_hi_pct))
     details = sec.details
-    details.setdefault("speed", {})[c.file] = {"nominal": a_nom, "monte_carlo_mean": a_mc, "coverage": cov,
-                                                  "percentiles": pct.tolist()}
-    details.setdefault("speed_mc_mean_rms_error_mm_s", a_mc["rms_error_mm_s"])
-    details.setdefault("speed_nominal", a_nom)
-    details.setdefault("speed_coverage", cov)
-    rel = a_nom["relative_rms_error"]
+    details.setdefault("speed", {})[c.file] = SpeedJudged(a_nom, a_mc, cov, pct.tolist())
+    if "speed_nominal" not in details:                  # the headline reads the first sweep judged
+        details["speed_mc_mean_rms_error_mm_s"] = a_mc.rms_error_mm_s
+        details["speed_nominal"] = a_nom
+        details["speed_coverage"] = cov
+    rel = a_nom.relative_rms_error
     tag = f" vs {c.label}"
-    med = cov["median_percentile"]
+    med = cov.median_percentile
     band_text = (f"median percentile of the measured speeds within the draws: {format_value(med, 3)} "
                  f"(50 if unbiased; {c.draws} draws)")
     sec.rows.append(_row(f"speed, nominal robot{tag}", "relative RMS error (RMS error / RMS measured)", rel, "1",
                          f"≤ {tol.speed_relative_rms_max:g}", verdict(rel, at_most=tol.speed_relative_rms_max),
-                         band=band_text, n=a_nom["n_points"],
-                         text=f"{format_value(rel, 3)} (RMS error {format_value(a_nom['rms_error_mm_s'], 3)} mm/s)"))
-    fr = cov["fraction_inside"]
+                         band=band_text, n=a_nom.n_points,
+                         text=f"{format_value(rel, 3)} (RMS error {format_value(a_nom.rms_error_mm_s, 3)} mm/s)"))
+    fr = cov.fraction_inside
     sec.rows.append(_row(f"speed, Monte Carlo band{tag}", f"fraction of measured speeds inside the {band} band",
-                         fr, "1", f"≥ {tol.speed_coverage_min:g} (expected {cov['expected_fraction']:g})",
-                         verdict(fr, at_least=tol.speed_coverage_min), band=band_text, n=cov["n"]))
+                         fr, "1", f"≥ {tol.speed_coverage_min:g} (expected {cov.expected_fraction:g})",
+                         verdict(fr, at_least=tol.speed_coverage_min), band=band_text, n=cov.n))
     sec.html.append(f"<h3>Measured against {rh.e(c.label)}: {rh.e(c.describe)}</h3>")
     table_rows = []
-    for q, pc in zip(a_nom["points"], pct):
+    for q, pc in zip(a_nom.points, pct):
         std = None
-        if q["measured_lo_mm_s"] is not None and q["measured_hi_mm_s"] is not None:
-            std = (q["measured_hi_mm_s"] - q["measured_lo_mm_s"]) / (2 * 1.96)
-        table_rows.append([q["freq_hz"], format_uncertain(q["measured_mm_s"], std),
-                           format_value(q["simulated_mm_s"], 3),
-                           f"{format_value(q['band_lo_mm_s'], 3)} \u2013 {format_value(q['band_hi_mm_s'], 3)}",
-                           format_value(float(pc), 3), "yes" if q["inside_band"] else "no"])
+        if q.measured_lo_mm_s is not None and q.measured_hi_mm_s is not None:
+            std = (q.measured_hi_mm_s - q.measured_lo_mm_s) / (2 * 1.96)
+        table_rows.append([q.freq_hz, format_uncertain(q.measured_mm_s, std), format_value(q.simulated_mm_s, 3),
+                           f"{format_value(q.band_lo_mm_s, 3)} \u2013 {format_value(q.band_hi_mm_s, 3)}",
+                           format_value(float(pc), 3), "yes" if q.inside_band else "no"])
     sec.html.append(rh.table(["freq_hz", "measured (mm/s, ± std)", "nominal robot (mm/s)", f"band {band} (mm/s)",
                               "percentile in draws", "inside band"], table_rows, num_cols={0, 1, 2, 3, 4}))
 
@@ -653,13 +705,13 @@ def _knee_rows(sec: Section, case: ri.KneeCase, tol: Tolerances, leg: int) -> li
     """Judge one drive with both records: rows, details, the pattern pair; the table's row."""
     meas, s, freq, amp = case.measured, case.simulated, case.freq_hz, case.tray_amp_um
     assert meas is not None and s is not None
-    pv = {"measured": meas.file, "measured_point": meas.point, "simulated": s.source, "leg": leg + 1}
+    pv: dict[str, Json] = {"measured": meas.file, "measured_point": meas.point, "simulated": s.source, "leg": leg + 1}
     a = compare.knee_motion_agreement(meas.t_s, meas.knee_vz_mm_s, s.t_s, s.knee_vz_mm_s, freq,
                                       ref_meas=meas.tray_vz_mm_s, ref_sim=s.tray_vz_mm_s, provenance=pv)
     sec.details.setdefault("knee", {})[f"{freq:.4g}Hz_{amp:.3g}um"] = a
     drive = f"{freq:.4g} Hz, {amp:.3g} um"
     r_lo, r_hi = 1.0 / tol.knee_amplitude_ratio_max, tol.knee_amplitude_ratio_max
-    ratio, phase, corr = a["amplitude_ratio"], a["phase_diff_deg"], a["correlation"]
+    ratio, phase, corr = a.amplitude_ratio, a.phase_diff_deg, a.correlation
     sec.rows.append(_row(f"knee @ {drive}", "amplitude ratio (sim/meas)", ratio, "1",
                          f"{r_lo:.2f}\u2013{r_hi:.2f}", verdict(ratio, at_least=r_lo, at_most=r_hi),
                          text=_fixed(ratio, 2)))
@@ -673,7 +725,7 @@ def _knee_rows(sec: Section, case: ri.KneeCase, tol: Tolerances, leg: int) -> li
     if case.measured_pattern in compare.PATTERNS:
         sec.pairs.append(ri.PatternPair("knee record", drive, case.measured_pattern, s.knee_pattern, ri.KNEE,
                                         ri.KNEE, meas.file, s.source))
-    return [freq, amp, format_value(a["amplitude_meas_mm_s"], 3), format_value(a["amplitude_sim_mm_s"], 3),
+    return [freq, amp, format_value(a.amplitude_meas_mm_s, 3), format_value(a.amplitude_sim_mm_s, 3),
             _fixed(ratio, 2), _fixed(phase, 1), _fixed(corr, 3), case.measured_pattern, s.knee_pattern,
             s.foot_pattern]
 
@@ -744,11 +796,11 @@ def _pattern_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
         a = compare.pattern_agreement([p.measured for p in ps], [p.simulated for p in ps],
                                       keys=[p.drive for p in ps])
         sec.details.setdefault("patterns", {})[source] = a
-        fr = a["fraction_agree"]
-        agree = sum(q["agree"] for q in a["pairs"])
+        fr = a.fraction_agree
+        agree = sum(q.agree for q in a.pairs)
         sec.rows.append(_row(f"leg pattern ({source}s)", "fraction of drives with the same pattern", fr, "1",
                              f"≥ {tol.pattern_agreement_min:g}", verdict(fr, at_least=tol.pattern_agreement_min),
-                             n=a["n"], text=f"{format_value(fr, 3)} ({agree} of {a['n']})"))
+                             n=a.n, text=f"{format_value(fr, 3)} ({agree} of {a.n})"))
     apart = [p for p in pairs if not p.comparable]
     if apart:
         sec.message = (f"{len(apart)} pair(s) not compared: the observed pattern was classified from a knee "
@@ -869,33 +921,52 @@ def _agreement_section(rows: list[Row], tol: Tolerances, sections: list[Section]
 
 # --------------------------------------------------------------------------- headline numbers
 
-def _headline(fit: ri.FitData | None, details: dict[str, Any], sections: list[Section]) -> dict[str, Any]:
-    """The numbers two reports are compared by (``labkit report --compare``)."""
-    h: dict[str, Any] = {}
+class _Headline(TypedDict):
+    label: str
+    value: float | int | None
+    units: str
 
-    def put(key: str, label: str, value: Any, units: str, **extra: Any) -> None:
-        h[key] = {"label": label, "value": value, "units": units, **extra}
+
+class _HeadlineExtra(TypedDict, total=False):
+    std: float | None
+    of: int
+    digits: int
+
+
+class HeadlineEntry(_Headline, _HeadlineExtra):
+    """One headline number (``agreement.json``: ``headline``): with its standard deviation, the
+    count it is out of (``of``), or the digits to show."""
+
+
+def _headline(fit: ri.FitData | None, details: Details, sections: list[Section]) -> dict[str, HeadlineEntry]:
+    """The numbers two reports are compared by (``labkit report --compare``)."""
+    h: dict[str, HeadlineEntry] = {}
+
+    def put(key: str, label: str, value: float | int | None, units: str, extra: _HeadlineExtra | None = None) -> None:
+        h[key] = {"label": label, "value": value, "units": units, **(extra or {})}
 
     if fit:
         for name, g in fit.groups.items():
             for i, m in enumerate(g.modes):
                 put(f"{name}_mode{i + 1}_freq_hz", f"{name} mode {i + 1} frequency", m.freq_hz, "Hz",
-                    std=m.freq_hz_std)
+                    {"std": m.freq_hz_std})
                 put(f"{name}_mode{i + 1}_damping_ratio", f"{name} mode {i + 1} damping ratio",
-                    m.damping_ratio, "1", std=m.damping_ratio_std)
-            put(f"{name}_fit_quality", f"{name} fit quality (1 - NRMSE\u00b2)", g.quality, "1", digits=6)
+                    m.damping_ratio, "1", {"std": m.damping_ratio_std})
+            put(f"{name}_fit_quality", f"{name} fit quality (1 - NRMSE\u00b2)", g.quality, "1", {"digits": 6})
     nom, cov = details.get("speed_nominal"), details.get("speed_coverage")
-    speed = [("speed_rms_error_nominal_mm_s", "speed RMS error, nominal robot", nom, "rms_error_mm_s", "mm/s"),
-             ("speed_relative_rms_error_nominal", "speed relative RMS error, nominal robot", nom,
-              "relative_rms_error", "1"),
-             ("speed_rms_error_mc_mean_mm_s", "speed RMS error, Monte Carlo mean", details,
-              "speed_mc_mean_rms_error_mm_s", "mm/s"),
-             ("speed_band_coverage", "measured speeds inside the Monte Carlo band", cov, "fraction_inside", "1"),
-             ("speed_median_percentile", "median percentile of measured speeds in the draws", cov,
-              "median_percentile", "%")]
-    for key, label, src, field_, units in speed:
-        if src and src.get(field_) is not None:
-            put(key, label, src[field_], units)
+    speed = [("speed_rms_error_nominal_mm_s", "speed RMS error, nominal robot",
+              nom.rms_error_mm_s if nom else None, "mm/s"),
+             ("speed_relative_rms_error_nominal", "speed relative RMS error, nominal robot",
+              nom.relative_rms_error if nom else None, "1"),
+             ("speed_rms_error_mc_mean_mm_s", "speed RMS error, Monte Carlo mean",
+              details.get("speed_mc_mean_rms_error_mm_s"), "mm/s"),
+             ("speed_band_coverage", "measured speeds inside the Monte Carlo band",
+              cov.fraction_inside if cov else None, "1"),
+             ("speed_median_percentile", "median percentile of measured speeds in the draws",
+              cov.median_percentile if cov else None, "%")]
+    for key, label, value, units in speed:
+        if value is not None:
+            put(key, label, value, units)
     knee = list(details.get("knee", {}).values())
     for key, label, field_, reduce, units in (
             ("knee_amplitude_ratio_median", "knee amplitude ratio (median over drives)", "amplitude_ratio",
@@ -903,13 +974,13 @@ def _headline(fit: ri.FitData | None, details: dict[str, Any], sections: list[Se
             ("knee_phase_diff_max_deg", "knee |phase difference| (largest)", "phase_diff_deg",
              lambda v: max(abs(x) for x in v), "deg"),
             ("knee_correlation_min", "knee waveform correlation (smallest)", "correlation", min, "1")):
-        values = [a[field_] for a in knee if a.get(field_) is not None]
+        values = [getattr(a, field_) for a in knee if getattr(a, field_) is not None]
         if values:
             put(key, label, reduce(values), units)
     for source, a in details.get("patterns", {}).items():
         put(f"pattern_agreement_{source.replace(' ', '_')}", f"leg-pattern agreement ({source}s)",
-            a["fraction_agree"], "1")
+            a.fraction_agree, "1")
     rows = [r for s in sections for r in s.rows if r["verdict"] in ("pass", "fail")]
     put("comparisons_passed", "comparisons within tolerance", sum(r["verdict"] == "pass" for r in rows), "",
-        of=len(rows))
+        {"of": len(rows)})
     return h

@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NotRequired, TypeAlias, TypedDict, final
 
 import numpy as np
 
@@ -50,13 +50,91 @@ MEAS_COLOUR = "#c0392b"
 SIM_COLOUR = "#1f4e9c"
 
 
+# The numbers each figure shows (``figure_data.json``, beside its files and caption)
+
+class FrfLines(TypedDict):
+    """One location of an FRF figure: its measured lines and, when drawn, the fit's grid."""
+
+    n_lines: int
+    fit_grid_points: NotRequired[int]
+    fit_min_abs: NotRequired[float]
+    # added by the report's FRF section: (freq_hz, |FRF|) of the model's dips and peaks
+    fit_minima: NotRequired[list[list[float]]]
+    fit_maxima: NotRequired[list[list[float]]]
+    lines_model_minima: NotRequired[list[list[float]]]
+
+
+@final
+class FrfData(TypedDict):
+    locations: dict[str, FrfLines]
+    modes: list[str]
+
+
+@final
+class StabilisationData(TypedDict):
+    poles: int
+    chosen_hz: list[float]
+
+
+class SweepDrawn(TypedDict):
+    """One simulated sweep of the speed figure: band, nominal curve and dominant patterns."""
+
+    file: str
+    freq_hz: list[float]
+    draws: int
+    p10_mm_s: list[float]
+    p90_mm_s: list[float]
+    nominal_mm_s: list[float]
+    patterns: list[str]
+
+
+@final
+class SpeedData(TypedDict):
+    sims: list[SweepDrawn]
+    measured_points: int
+    measured_freq_hz: NotRequired[list[float]]
+    measured_mm_s: NotRequired[list[float]]
+    pattern_rows: NotRequired[list[str]]
+
+
+class DriveDrawn(TypedDict):
+    """One panel of the knee figure: the drive, which records it shows and their drawn phases."""
+
+    freq_hz: float
+    tray_amp_um: float
+    measured: bool
+    simulated: bool
+    measured_phase_deg: NotRequired[float | None]
+    simulated_phase_deg: NotRequired[float | None]
+
+
+@final
+class KneeData(TypedDict):
+    drives: list[DriveDrawn]
+
+
+@final
+class TracksData(TypedDict):
+    tracks: list[str]
+    spacing_mm: float
+
+
+@final
+class FrameData(TypedDict):
+    frame_size_px: list[int]
+    points: int
+
+
+FigureData: TypeAlias = "FrfData | StabilisationData | SpeedData | KneeData | TracksData | FrameData"
+
+
 @dataclass
 class FigureFiles:
     """One figure as written: ``png`` and ``svg`` paths, and the numbers it shows."""
 
     png: Path
     svg: Path
-    data: dict[str, Any] = field(default_factory=dict)
+    data: FigureData
 
 
 def _figure(w: float, h: float) -> Figure:
@@ -65,7 +143,7 @@ def _figure(w: float, h: float) -> Figure:
     return Figure(figsize=(w, h), layout="constrained")
 
 
-def _save(fig: Figure, stem: Path, data: dict[str, Any] | None = None) -> FigureFiles:
+def _save(fig: Figure, stem: Path, data: FigureData) -> FigureFiles:
     import matplotlib
 
     from labkit.outputs import atomic_outputs
@@ -77,7 +155,7 @@ def _save(fig: Figure, stem: Path, data: dict[str, Any] | None = None) -> Figure
         fig.savefig(tmp_png, dpi=PNG_DPI, format="png")
         with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": stem.name}):
             fig.savefig(tmp_svg, format="svg")
-    return FigureFiles(png, svg, data or {})
+    return FigureFiles(png, svg, data)
 
 
 def _legend_outside(ax: Axes, **kw: Any) -> None:
@@ -99,12 +177,12 @@ def frf_figure(locations: Mapping[str, Frf], modes: Sequence[Mode], stem: Path, 
     fine = fine or {}
     fig = _figure(8.0, 6.2)
     am, ap = fig.subplots(2, 1, sharex=True, height_ratios=[2.2, 1])
-    data: dict[str, Any] = {"locations": {}}
+    data: FrfData = {"locations": {}, "modes": [mode_label(m) for m in modes]}
     for k, (loc, d) in enumerate(locations.items()):
         c = loc_colour(loc, k)
         f = np.asarray(d.freq_hz, float)
         h = np.asarray(d.frf, complex)
-        entry: dict[str, Any] = {"n_lines": int(f.size)}
+        entry: FrfLines = {"n_lines": int(f.size)}
         fm = fine.get(loc)
         if fm is not None:
             am.loglog(fm.freq_hz, np.abs(fm.frf), "-", color=c, lw=1.1, zorder=2, label=f"{loc}: fit")
@@ -127,7 +205,6 @@ def frf_figure(locations: Mapping[str, Frf], modes: Sequence[Mode], stem: Path, 
     _legend_outside(am)
     if title:
         fig.suptitle(title, fontsize=10)
-    data["modes"] = [mode_label(m) for m in modes]
     return _save(fig, stem, data)
 
 
@@ -225,7 +302,7 @@ def speed_figure(measured: MeasuredSpeeds | None, sims: Sequence[SimCurve], stem
         ax, strip = fig.subplots(2, 1, sharex=True, height_ratios=[4, max(1, len(rows)) * 0.6])
     else:
         ax, strip = fig.subplots(), None
-    data: dict[str, Any] = {"sims": [], "measured_points": 0}
+    data: SpeedData = {"sims": [], "measured_points": 0}
     xs: list[float] = []
     top = 0.0
     for i, s in enumerate(sims):
@@ -334,7 +411,7 @@ def knee_figure(cases: Sequence[KneeCase], stem: Path, periods: float = 4.0, nco
     grid = fig.subfigures(nrows, ncols, wspace=0.02, hspace=0.03, squeeze=False)
     subs = list(np.asarray(grid, dtype=object).ravel())
     cmap = ListedColormap(CONTACT_COLOURS)
-    data: dict[str, Any] = {"drives": []}
+    data: KneeData = {"drives": []}
     for k, sub in enumerate(subs):
         if k >= n:
             sub.set_facecolor("none")
@@ -343,7 +420,7 @@ def knee_figure(cases: Sequence[KneeCase], stem: Path, periods: float = 4.0, nco
         f = float(case.freq_hz)
         ax, tl = sub.subplots(2, 1, sharex=True, height_ratios=[3, 1])
         meas, sim = case.measured, case.simulated
-        drawn: dict[str, Any] = {"freq_hz": f, "tray_amp_um": case.tray_amp_um, "measured": meas is not None,
+        drawn: DriveDrawn = {"freq_hz": f, "tray_amp_um": case.tray_amp_um, "measured": meas is not None,
                  "simulated": sim is not None}
         if meas is not None:
             tray = meas.tray_vz_mm_s

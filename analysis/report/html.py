@@ -13,7 +13,8 @@ from typing import TYPE_CHECKING, Any
 from labkit.analysis.report.numbers import format_value
 
 if TYPE_CHECKING:
-    from labkit.analysis.report.build import Section
+    from labkit.analysis.report.build import HeadlineEntry, Section
+    from labkit.analysis.report.provenance import ReportMeta, SectionProvenance
 
 CSS = """
 body { font-family: system-ui, -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 2em auto;
@@ -111,7 +112,7 @@ def verdict_badge(result: str) -> str:
     return f'<span class="badge {cls}">{e(result.upper() if cls != "na" else result)}</span>'
 
 
-def provenance_block(p: dict[str, Any]) -> str:
+def provenance_block(p: SectionProvenance) -> str:
     """One section's provenance: which of the report's inputs it used (by number) and its notes."""
     parts = ['<div class="provenance"><b>Inputs</b>: ']
     files = p.get("files", [])
@@ -127,7 +128,7 @@ def provenance_block(p: dict[str, Any]) -> str:
     return "".join(parts)
 
 
-def report_provenance(meta: dict[str, Any]) -> str:
+def report_provenance(meta: ReportMeta) -> str:
     """The report's provenance, once: every input with SHA-256 and size, the software, the command."""
     rows = [[("html", f'<span id="input-{i}">{i}</span>'),
              ("html", f'<span class="mono">{e(f["shown_as"])}</span>'),
@@ -140,7 +141,7 @@ def report_provenance(meta: dict[str, Any]) -> str:
             + f'<code>{e(meta.get("command", ""))}</code></div></section>')
 
 
-def headline_block(headline: dict[str, Any]) -> str:
+def headline_block(headline: dict[str, HeadlineEntry]) -> str:
     """The headline numbers (those ``labkit report --compare`` puts side by side) as a table."""
     from labkit.analysis.report.numbers import format_uncertain
 
@@ -162,8 +163,8 @@ def headline_block(headline: dict[str, Any]) -> str:
               "<code>labkit report --compare A_DIR B_DIR</code> puts two reports' side by side.</p></div>")
 
 
-def render(title: str, sections: list[Section], meta: dict[str, Any],
-           headline: dict[str, Any] | None = None) -> str:
+def render(title: str, sections: list[Section], meta: ReportMeta,
+           headline: dict[str, HeadlineEntry] | None = None) -> str:
     """The whole page."""
     parts = [f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\">"
              f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"

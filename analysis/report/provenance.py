@@ -6,7 +6,7 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 
 def sha256(path: str | Path, chunk: int = 1 << 20) -> str:
@@ -51,12 +51,53 @@ def report_command(out: str | Path, runs: Iterable[str], tracks: Iterable[str], 
     return shlex.join([*words, "--out", Path(out).resolve().name])
 
 
-def file_records(paths: Iterable[str | Path]) -> list[dict[str, Any]]:
+class InputRecord(TypedDict, total=False):
+    """One input of a report (``agreement.json``: ``meta.input_files``): its path, and for a file its
+    SHA-256 and size; ``shown_as`` is the path relative to the report's folder, ``number`` its place
+    in the report's list (in a section's provenance)."""
+
+    path: str
+    sha256: str
+    bytes: int
+    shown_as: str
+    number: int
+
+
+class SectionProvenance(TypedDict, total=False):
+    """A section's provenance (empty for a missing section): its inputs and its notes."""
+
+    files: list[InputRecord]
+    notes: dict[str, str]
+
+
+class RunInputs(TypedDict):
+    """The inputs as given to :func:`labkit.analysis.report.build_report`."""
+
+    runs: list[str]
+    tracks: list[str]
+    fit: str | None
+    sims: list[str]
+    params: str | None
+
+
+class ReportMeta(TypedDict):
+    """The report's provenance, once (``agreement.json``: ``meta``)."""
+
+    created_utc: str
+    software: str
+    command: str
+    command_as_given: str | None
+    input_files: list[InputRecord]
+    inputs: RunInputs
+    tolerances: dict[str, float]
+
+
+def file_records(paths: Iterable[str | Path]) -> list[InputRecord]:
     """``{"path", "sha256", "bytes"}`` per distinct existing file, in first-seen order
     (a path that is not a file, e.g. a description of a simulation run here, is kept as
     ``{"path": text}`` without a checksum)."""
     seen: set[str] = set()
-    out: list[dict[str, Any]] = []
+    out: list[InputRecord] = []
     for p in paths:
         key = str(p)
         if key in seen:
@@ -70,10 +111,10 @@ def file_records(paths: Iterable[str | Path]) -> list[dict[str, Any]]:
     return out
 
 
-def section_provenance(files: Iterable[str | Path], *, inputs: list[dict[str, Any]],
-                       notes: dict[str, Any] | None = None) -> dict[str, Any]:
+def section_provenance(files: Iterable[str | Path], *, inputs: list[InputRecord],
+                       notes: dict[str, str] | None = None) -> SectionProvenance:
     """One section's provenance: its files (as in ``inputs``, with their number there) and notes."""
     index = {f["path"]: i for i, f in enumerate(inputs, 1)}
-    mine = [dict(inputs[index[str(p)] - 1], number=index[str(p)]) for p in dict.fromkeys(map(str, files))
-            if str(p) in index]
+    mine: list[InputRecord] = [{**inputs[index[str(p)] - 1], "number": index[str(p)]}
+                               for p in dict.fromkeys(map(str, files)) if str(p) in index]
     return {"files": mine, "notes": dict(notes or {})}

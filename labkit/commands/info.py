@@ -9,30 +9,109 @@ files every dataset's shape, dtype and units are listed as well.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeAlias, TypedDict
 
 from labkit.errors import ConfigError, InputError
-from labkit.lockfiles import describe, writer_of
+from labkit.jsonutil import Json
+from labkit.lockfiles import LockRecord, describe, writer_of
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from labkit.files.base import FileSummary
 
 NAME = "info"
 HELP = ("summarise a labkit file: run file, track, fit, simulation (HDF5), parameter file or config (TOML), "
         "track table (CSV), video (.mkv/.avi), figure (PNG), report (HTML), JSON, UFF")
 
 
+class JsonFileSummary(TypedDict):
+    """A JSON sidecar: what it is, its size and its top-level keys."""
+
+    kind: str
+    bytes: int
+    keys: list[str]
+    items: int
+
+
+class PngSummary(TypedDict):
+    kind: str
+    width_px: int
+    height_px: int
+    bytes: int
+
+
+class HtmlSummary(TypedDict):
+    kind: str
+    title: str
+    sections: int
+    figures: int
+    bytes: int
+
+
+class UffSummary(TypedDict):
+    kind: str
+    datasets_by_type: dict[str, int]
+
+
+class Unreadable(TypedDict, total=False):
+    """The content of a file that names its kind but cannot be read as one."""
+
+    kind: str
+    error: str
+
+
+#: what a sidecar reader returns
+Sidecar: TypeAlias = "JsonFileSummary | PngSummary | HtmlSummary | UffSummary"
+#: what a file means (``content``): the summary of its kind, a sidecar's, or why it could not be read
+Content: TypeAlias = "FileSummary | Sidecar | Unreadable"
+
+
+class DatasetListing(TypedDict):
+    name: str
+    shape: list[int]
+    dtype: str
+    units: Json
+
+
+class _Info(TypedDict):
+    file: str
+    format: str
+
+
+class Info(_Info, total=False):
+    """What ``labkit info`` reports (``--json`` prints it): the file, its format, what it means
+    (``content``, from :func:`labkit.open` or the sidecar readers) and, by format, its TOML tables
+    or its HDF5 attributes, groups, datasets and dimension names."""
+
+    content: Content
+    tables: list[str]
+    keys: list[str]
+    provenance: Json
+    provenance_digest: dict[str, Json]
+    kind: Json
+    schema_version: Json
+    attrs: dict[str, Json]
+    groups: list[str]
+    datasets: list[DatasetListing]
+    dims: dict[str, list[str]]
+    being_written_by: LockRecord
+    being_written: str
+
+
 def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="a file written by labkit")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> Info:
     summary = summarise(args.file)
     if not args.json:
         _print(summary)
     return summary
 
 
-def summarise(path: str | Path) -> dict[str, Any]:
-    """What ``labkit info`` reports about ``path`` (a JSON-able dict; InputError if unreadable)."""
+def summarise(path: str | Path) -> Info:
+    """What ``labkit info`` reports about ``path`` (JSON-able; InputError if unreadable)."""
     from labkit.files import VIDEO_SUFFIXES, open_file
 
     path = Path(path)
@@ -55,7 +134,7 @@ def summarise(path: str | Path) -> dict[str, Any]:
                      expected="HDF5 (.h5), TOML, CSV, a video (.mkv/.avi/.mp4), PNG, HTML, JSON or UFF")
 
 
-def _json_summary(path: Path) -> dict[str, Any]:
+def _json_summary(path: Path) -> JsonFileSummary:
     """A JSON sidecar (calibration details, report agreement, figure data, demo summary): its top-level keys."""
     import json
 
@@ -73,7 +152,7 @@ def _json_summary(path: Path) -> dict[str, Any]:
             "items": len(obj) if isinstance(obj, (dict, list)) else 1}
 
 
-def _png_summary(path: Path) -> dict[str, Any]:
+def _png_summary(path: Path) -> PngSummary:
     """A figure: its size in pixels (from the PNG header)."""
     head = path.read_bytes()[:24]
     if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n":
@@ -82,7 +161,7 @@ def _png_summary(path: Path) -> dict[str, Any]:
             "height_px": int.from_bytes(head[20:24], "big"), "bytes": path.stat().st_size}
 
 
-def _html_summary(path: Path) -> dict[str, Any]:
+def _html_summary(path: Path) -> HtmlSummary:
     """A report page: title, sections and figures (self-contained: figures are inline)."""
     import re
 
@@ -95,7 +174,7 @@ def _html_summary(path: Path) -> dict[str, Any]:
             "bytes": len(page.encode())}
 
 
-def _uff_summary(path: Path) -> dict[str, Any]:
+def _uff_summary(path: Path) -> UffSummary:
     """A universal file (``labkit fit --uff``): its datasets by type (58: FRFs, ...)."""
     lines = path.read_text(encoding="ascii", errors="replace").splitlines()
     types: dict[str, int] = {}
@@ -114,16 +193,17 @@ def _uff_summary(path: Path) -> dict[str, Any]:
 
 
 #: sidecar files labkit writes beside its data files, by suffix
-SIDECARS = {".json": _json_summary, ".png": _png_summary, ".html": _html_summary, ".uff": _uff_summary}
+SIDECARS: dict[str, Callable[[Path], Sidecar]] = {".json": _json_summary, ".png": _png_summary,
+                                                  ".html": _html_summary, ".uff": _uff_summary}
 
 
-def summarise_toml(path: Path) -> dict[str, Any]:
+def summarise_toml(path: Path) -> Info:
     """Tables and keys of a TOML file; for a robot parameter file its modes and provenance digest."""
     from labkit.files.kinds import CONFIG_TABLES, provenance_digest, read_config, read_params
     from labkit.tomlio import load_toml
 
     table, raw = load_toml(path)
-    out: dict[str, Any] = {"file": str(path), "format": "toml",
+    out: Info = {"file": str(path), "format": "toml",
                            "tables": sorted(k for k, v in table.items() if isinstance(v, dict)),
                            "keys": sorted(k for k, v in table.items() if not isinstance(v, dict)),
                            "provenance": table.get("provenance", {})}
@@ -138,7 +218,7 @@ def summarise_toml(path: Path) -> dict[str, Any]:
     return out
 
 
-def summarise_h5(path: Path) -> dict[str, Any]:
+def summarise_h5(path: Path) -> Info:
     """Root attributes, every dataset's shape, dtype and units, and the typed summary of known kinds.
 
     A file that a run is writing (it holds the file's lock) gets ``being_written_by`` (the
@@ -154,22 +234,36 @@ def summarise_h5(path: Path) -> dict[str, Any]:
         out = {"file": str(path), "format": "hdf5", "kind": None, "schema_version": None, "attrs": {},
                "groups": [], "datasets": [], "dims": {}}
     if busy is not None:
-        out["being_written_by"] = {k: busy[k] for k in ("pid", "host", "command", "since") if k in busy}
+        out["being_written_by"] = _writer(busy)
         out["being_written"] = f"being written by {describe(busy)}"
     return out
 
 
-def _summarise_h5(path: Path) -> dict[str, Any]:
+def _writer(busy: LockRecord) -> LockRecord:
+    """What ``labkit info`` shows of a lock record: who (PID, host), running what, since when."""
+    out: LockRecord = {}
+    if "pid" in busy:
+        out["pid"] = busy["pid"]
+    if "host" in busy:
+        out["host"] = busy["host"]
+    if "command" in busy:
+        out["command"] = busy["command"]
+    if "since" in busy:
+        out["since"] = busy["since"]
+    return out
+
+
+def _summarise_h5(path: Path) -> Info:
     import h5py
 
     from labkit.files import H5_KINDS, open_file
     from labkit.h5io import open_h5
 
-    datasets: list[dict[str, Any]] = []
+    datasets: list[DatasetListing] = []
     groups: list[str] = []
     dims: dict[str, list[str]] = {}
     with open_h5(path, verify=True) as f:
-        attrs = {k: _attr(v) for k, v in f.attrs.items() if len(str(v)) < 400}
+        attrs: dict[str, Json] = {k: _attr(v) for k, v in f.attrs.items() if len(str(v)) < 400}
 
         def visit(name: str, obj: Any) -> None:
             if isinstance(obj, h5py.Dataset):
@@ -182,7 +276,7 @@ def _summarise_h5(path: Path) -> dict[str, Any]:
                 groups.append(name)
 
         f.visititems(visit)
-    out = {"file": str(path), "format": "hdf5", "kind": attrs.get("kind"),
+    out: Info = {"file": str(path), "format": "hdf5", "kind": attrs.get("kind"),
            "schema_version": attrs.get("schema_version"), "attrs": attrs,
            "groups": groups, "datasets": datasets, "dims": dims}
     if attrs.get("kind") in H5_KINDS:
@@ -193,7 +287,7 @@ def _summarise_h5(path: Path) -> dict[str, Any]:
     return out
 
 
-def _attr(value: Any) -> Any:
+def _attr(value: Any) -> Json:
     if isinstance(value, bytes):
         return value.decode("utf-8", "replace")
     if hasattr(value, "tolist"):
@@ -201,9 +295,9 @@ def _attr(value: Any) -> Any:
     return value
 
 
-def _print(summary: dict[str, Any]) -> None:
+def _print(summary: Info) -> None:
     print(f"{summary['file']} ({summary['format']})")
-    content = summary.get("content", {})
+    content: Mapping[str, Any] = summary.get("content", {})
     if summary["format"] == "toml":
         print(f"  tables: {', '.join(summary['tables']) or '-'}")
         if content.get("experiment"):
@@ -219,7 +313,7 @@ def _print(summary: dict[str, Any]) -> None:
                     print(f"  {k}: {', '.join(f'{v:.6g}' for v in content[k])}")
             digest = summary.get("provenance_digest", {})
             for k, v in digest.items():
-                if k == "modes":
+                if k == "modes" and isinstance(v, dict):
                     for m, where in v.items():
                         print(f"  provenance: mode {m}: {where}")
                 else:

@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from labkit.experiments.bench import InitSummary
 
 NAME = "init"
 HELP = "write a commented config (every key, unit, default, limit; TODOs for the wiring) from identified instruments"
@@ -21,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--timeout-s", type=float, default=0.5, help="per identity query (default 0.5 s)")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> InitSummary:
     from labkit.experiments.bench import init_config
 
     summary = init_config(args.out, kind=args.kind, resources=args.resources, all_devices=args.all, lab=args.lab,

@@ -2,7 +2,11 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from labkit.analysis.report.build import ReportSummary
+    from labkit.analysis.report.sidebyside import Comparison
 
 from labkit.errors import InputError
 
@@ -57,7 +61,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--force", action="store_true", help="replace a report already in --out")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> ReportSummary | Comparison:
     import shlex
     import sys
     from pathlib import Path
@@ -96,7 +100,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     return summary
 
 
-def _compare(args: argparse.Namespace) -> dict[str, Any]:
+def _compare(args: argparse.Namespace) -> Comparison:
     from labkit.analysis.report.sidebyside import compare_reports, comparison_lines
 
     result = compare_reports(*args.compare)

@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple, TypedDict
 
 import numpy as np
 
@@ -33,6 +33,10 @@ from labkit.errors import ConfigError, InputError, InstrumentError, LabkitError
 from labkit.experiments import kinds
 from labkit.experiments.config import VIB_OUTPUT_MAX_V, InstrumentSpec
 from labkit.experiments.kinds import Config
+from labkit.jsonutil import Json
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from labkit.experiments.protocols import FunctionGenerator, Scope, Vibrometer
 
 #: the largest peak-to-peak drive the check puts out (in-chip: the config's drive scaled down to it)
 CHECK_VPP = 1.0
@@ -86,7 +90,8 @@ class CheckReport:
         self.lines.append(line)
         return line
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Json]:
+        """What ``labkit check --json`` prints."""
         return {"config": self.config, "kind": self.kind, "ok": self.ok, "checks": [asdict(x) for x in self.lines]}
 
 
@@ -107,10 +112,22 @@ def _band(kind: str, start: float | None, stop: float | None, count: int | None)
     return band
 
 
+class InitSummary(TypedDict):
+    """What :func:`init_config` reports (``labkit init --json``): the config written, what is left to
+    fill in (``todo``), the next command, the instrument found per role and every identification."""
+
+    config: str
+    kind: str
+    todo: list[str]
+    next: str
+    instruments: dict[str, str | None]
+    identified: list[dict[str, Json]]
+
+
 def init_config(out: str | Path, *, kind: str = "inchip", resources: list[str] | tuple[str, ...] = (),
                 all_devices: bool = False, lab: bool = False,
                 band: tuple[float | None, float | None, int | None] = (None, None, None),
-                force: bool = False, timeout_s: float = 0.5) -> dict[str, Any]:
+                force: bool = False, timeout_s: float = 0.5) -> InitSummary:
     """Identify the instruments, write a commented config of ``kind`` to ``out``; return a summary.
 
     Every argument is checked before anything is sent to an instrument.
@@ -181,13 +198,21 @@ def _open(spec: InstrumentSpec, **limits: float) -> Any:
     return open_instrument(spec.model, spec.resource, name=spec.role, **settings)
 
 
-def _identities(cfg: Config, report: CheckReport, stack: contextlib.ExitStack) -> dict[str, Any] | None:
+class Opened(NamedTuple):
+    """The three instruments ``labkit check`` opened, each past its identity handshake."""
+
+    funcgen: FunctionGenerator
+    scope: Scope
+    vibrometer: Vibrometer
+
+
+def _identities(cfg: Config, report: CheckReport, stack: contextlib.ExitStack) -> Opened | None:
     """Open each instrument (its driver's handshake checks the identity); None when one failed."""
     from labkit.experiments.discovery import _hint
 
     limits = kinds.of(cfg).rig_setup(cfg).funcgen_limits
     opened: dict[str, Any] = {}
-    for role in ("funcgen", "scope", "vibrometer"):
+    for role in Opened._fields:
         spec = cfg.instruments[role]
         try:
             inst = stack.enter_context(_open(spec, **(limits if role == "funcgen" else {})))
@@ -202,7 +227,7 @@ def _identities(cfg: Config, report: CheckReport, stack: contextlib.ExitStack) -
                        _hint(spec.resource, cause) or f"check instruments.{role}.resource (labkit devices)")
         if role == "scope" and role in opened:   # EXT on a scope without it: ConfigError, nothing set
             opened[role].trigger_source_for(cfg.scope.trigger_source, cfg.scope.drive_channel)
-    return opened if len(opened) == 3 else None
+    return Opened(**opened) if len(opened) == len(Opened._fields) else None
 
 
 # ----------------------------------------------------------------------------- check: measuring
@@ -505,7 +530,7 @@ def run_check(config: str | Path, *, lab: Any = False) -> CheckReport:
                        "fix the identities first")
             return report
         f, vpp, off = _check_drive_levels(cfg)
-        b = Bench(cfg, opened["funcgen"], opened["scope"], opened["vibrometer"], report, f, vpp, off,
+        b = Bench(cfg, opened.funcgen, opened.scope, opened.vibrometer, report, f, vpp, off,
                   mover=_mover(cfg, stack))
         guard = DriveGuard(b.fg, where=f"{cfg.instruments['funcgen'].model} at {cfg.instruments['funcgen'].resource}",
                            config=str(cfg.path))

@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from labkit.experiments.tomlcheck import Table
+from labkit.jsonutil import Json
 from labkit.tomlio import load_toml
 
 LOCATIONS = ("body", "hip", "knee")
@@ -517,7 +518,7 @@ def _acquisition(t: Table, model: str) -> tuple[str, int]:
     return acq, n
 
 
-def comparable(cfg: InchipConfig | ShakerConfig) -> dict[str, Any]:
+def comparable(cfg: InchipConfig | ShakerConfig) -> dict[str, Json]:
     """The config as a dict with resources left out, for matching a resumed run's config.
 
     Resources may change between sessions (a virtual lab's ports, a renumbered

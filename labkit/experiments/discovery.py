@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from labkit.errors import InstrumentError
+from labkit.jsonutil import Json
 
 #: pyvisa-py's session types, the resource prefix each lists, and what it needs
 _BACKENDS = (
@@ -61,7 +62,8 @@ class Devices:
     serial_ports: list[SerialPort]
     labs: list[dict[str, Any]]
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Json]:
+        """What ``labkit devices --json`` prints."""
         import dataclasses
 
         return {"backends": [dataclasses.asdict(b) for b in self.backends],
@@ -153,7 +155,8 @@ class Identity:
     problem: str = ""
     hint: str = ""
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> dict[str, Json]:
+        """What ``labkit identify --json`` prints of one resource."""
         import dataclasses
 
         return dataclasses.asdict(self)

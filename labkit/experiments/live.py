@@ -49,6 +49,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+from labkit.lockfiles import LockRecord
+
 #: seconds between heartbeat lines
 HEARTBEAT_S = 1.0
 #: a reader calls the run "not responding" when the last line is older than this
@@ -342,7 +344,7 @@ def stream_of(path: str | Path) -> tuple[Path, Path]:
     return p, stream
 
 
-def run_holder(run_path: str | Path) -> dict[str, Any] | None:
+def run_holder(run_path: str | Path) -> LockRecord | None:
     """The lock record (pid, command, ...) of the process writing ``run_path`` now, or None."""
     from labkit.lockfiles import file_key, holder
 

@@ -46,10 +46,47 @@ from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 from urllib.parse import parse_qs, urlsplit
 
 from labkit.experiments import live
+
+
+class ViewStatus(TypedDict):
+    """``GET /status``: the stream's age on this machine's clock and whether a process writes the run."""
+
+    now: float
+    stream_age_s: float | None
+    running: bool
+    stale_s: float
+
+
+class SpeedRecord(TypedDict):
+    """The page's ``speed`` event of one shaker point: the point (as the stream names it) and its
+    video's tracked speed with its interval, or the ``error`` that kept it from being tracked."""
+
+    t: str
+    index: int
+    k: int | None
+    video: str
+    freq_hz: float | None
+    tray_amp_um: float | None
+    error: NotRequired[str]
+    speed_mm_s: NotRequired[float | None]
+    ci_mm_s: NotRequired[list[float | None]]
+    ci_level: NotRequired[float | None]
+    frames: NotRequired[int]
+    scaled_by: NotRequired[str]
+
+
+class StopReply(TypedDict):
+    """``POST /stop``: whether the request went to the run (``sent``, the run's ``pid``) or why not."""
+
+    ok: bool
+    error: NotRequired[str]
+    sent: NotRequired[str]
+    pid: NotRequired[int]
+
 
 #: the page's own files (labkit/data/), by URL path
 STATIC = {"/live-view.js": ("live-view.js", "text/javascript; charset=utf-8"),
@@ -79,7 +116,7 @@ class SpeedTracker:
 
     def __init__(self, run_path: Path, stream: Path, closing: threading.Event) -> None:
         self.run_path, self.stream, self.closing = run_path, stream, closing
-        self.results: list[dict[str, Any]] = []
+        self.results: list[SpeedRecord] = []
         self.scales: list[tuple[float, float]] = []        # (mm/px, its standard uncertainty)
 
     def run(self) -> None:
@@ -97,13 +134,13 @@ class SpeedTracker:
                     return
             self.closing.wait(0.5)
 
-    def track(self, rec: dict[str, Any]) -> dict[str, Any]:
+    def track(self, rec: dict[str, Any]) -> SpeedRecord:
         """The ``speed`` record of one point's video (``error`` when it could not be tracked)."""
         from labkit.analysis.tracking import Scale, track_file
         from labkit.errors import InputError
 
-        out: dict[str, Any] = {"t": "speed", "index": rec["index"], "k": rec.get("k"), "video": rec["video"],
-                               "freq_hz": rec.get("freq_hz"), "tray_amp_um": rec.get("tray_amp_um")}
+        out: SpeedRecord = {"t": "speed", "index": rec["index"], "k": rec.get("k"), "video": rec["video"],
+                            "freq_hz": rec.get("freq_hz"), "tray_amp_um": rec.get("tray_amp_um")}
         video = self.run_path.parent / str(rec["video"])
         scale = None
         try:
@@ -121,9 +158,11 @@ class SpeedTracker:
             out["error"] = f"{type(exc).__name__}: {str(exc)[:300]}"
             return out
         lo, hi = summ["speed_ci_mm_s"]
-        out.update(speed_mm_s=live.num(summ["mean_speed_mm_s"]), ci_mm_s=[live.num(lo), live.num(hi)],
-                   ci_level=live.num(summ.get("ci_level", math.nan)), frames=int(summ["frames"]),
-                   scaled_by=("other videos of the run" if scale is not None else "the robot's length"))
+        out["speed_mm_s"] = live.num(summ["mean_speed_mm_s"])
+        out["ci_mm_s"] = [live.num(lo), live.num(hi)]
+        out["ci_level"] = live.num(summ.get("ci_level", math.nan))
+        out["frames"] = int(summ["frames"])
+        out["scaled_by"] = "other videos of the run" if scale is not None else "the robot's length"
         return out
 
 
@@ -185,7 +224,7 @@ class LiveView:
         self.close()
 
     # -- what the page may ask -----------------------------------------------------------------
-    def status(self) -> dict[str, Any]:
+    def status(self) -> ViewStatus:
         """The stream's age on this machine's clock and whether a process is writing the run."""
         try:
             age = time.time() - self.stream.stat().st_mtime
@@ -195,7 +234,7 @@ class LiveView:
         return {"now": time.time(), "stream_age_s": age, "running": holder is not None,
                 "stale_s": live.STALE_S}
 
-    def stop(self, when: str) -> dict[str, Any]:
+    def stop(self, when: str) -> StopReply:
         """Ask the run to stop after its point (``"point"``) or at once (``"now"``, SIGINT)."""
         holder = live.run_holder(self.run_path)
         if holder is None:
@@ -273,8 +312,8 @@ class _Handler(BaseHTTPRequestHandler):
                 for end, rec in live.follow(self.view.stream, offset, wait=False):
                     out.append(f"id: {end}\ndata: {json.dumps(rec, allow_nan=False)}\n\n")
                     offset = end
-                for rec in (tracker.results[speeds:] if tracker is not None else []):
-                    out.append(f"event: speed\ndata: {json.dumps(rec, allow_nan=False)}\n\n")
+                for speed in (tracker.results[speeds:] if tracker is not None else []):
+                    out.append(f"event: speed\ndata: {json.dumps(speed, allow_nan=False)}\n\n")
                     speeds += 1
                 if time.monotonic() >= next_status:
                     out.append(f"event: status\ndata: {json.dumps(self.view.status())}\n\n")

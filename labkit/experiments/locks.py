@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import InputError
-from labkit.lockfiles import describe, file_key, lock_path, read_record, runtime_dir
+from labkit.lockfiles import LockRecord, describe, file_key, lock_path, read_lock, read_record, runtime_dir
 from labkit.outputs import process_alive
 
 
@@ -88,10 +88,10 @@ class RunLocks:
 
     def __init__(self) -> None:
         self._fds: list[tuple[int, Path]] = []
-        self.record: dict[str, Any] = {}
+        self.record: LockRecord = {}
         self.config = ""
 
-    def take(self, key: str, what: str, record: dict[str, Any], *, file: str | None = None,
+    def take(self, key: str, what: str, record: LockRecord, *, file: str | None = None,
              conf_key: str | None = None) -> None:
         """Lock ``key`` or raise :class:`RigBusy` naming the run that holds it."""
         p = lock_path(key)
@@ -107,12 +107,12 @@ class RunLocks:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            other = read_record(p) or {"pid": "?"}
+            other = read_lock(p)
             raise RigBusy(f"{what} is in use by another run: {describe(other)}; wait for it to end "
                           f"(or stop it), then start this one", file=file, key=conf_key) from None
         if writable:
             os.ftruncate(fd, 0)
-            os.write(fd, json.dumps(record | {"key": key}).encode())
+            os.write(fd, json.dumps({**record, "key": key}).encode())
         self._fds.append((fd, p))
         self.record = record
 
@@ -133,7 +133,7 @@ class RunLocks:
         self.release()
 
 
-def _holder(run_file: str | Path | None, config: str) -> dict[str, Any]:
+def _holder(run_file: str | Path | None, config: str) -> LockRecord:
     """What a lock file says about its holder (this process)."""
     return {"pid": os.getpid(), "host": socket.gethostname(),
             "command": " ".join(["labkit", *sys.argv[1:]]) if sys.argv else "",
@@ -145,7 +145,7 @@ def _holder(run_file: str | Path | None, config: str) -> dict[str, Any]:
 _ACTIVE: list[RunLocks] = []
 
 
-def _take_instruments(locks: RunLocks, resources: Iterable[tuple[str, str]], record: dict[str, Any],
+def _take_instruments(locks: RunLocks, resources: Iterable[tuple[str, str]], record: LockRecord,
                       config: str) -> None:
     seen: set[str] = set()
     for role, resource in resources:

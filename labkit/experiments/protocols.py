@@ -3,7 +3,8 @@
 The experiments are typed against these, not against driver classes: any
 object with these methods fits (the drivers in :mod:`labkit.drivers`, the
 virtual lab's clients, a test double at a transport's edge). Nothing here
-imports a driver.
+imports a driver. A ``snapshot()`` (identity and settings) is a JSON value: it is written
+to the run file as the instrument's ``snapshot_json``.
 
 ==========================  ==============================================================
 protocol                    satisfied by
@@ -22,6 +23,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
+from labkit.jsonutil import Json
+
 if TYPE_CHECKING:  # pragma: no cover - only for annotations (keeps the CLI's start-up light)
     import numpy as np
 
@@ -35,7 +38,7 @@ class FunctionGenerator(Protocol):
     """
 
     name: str
-    state: dict[str, Any]
+    state: dict[str, Json]
 
     def set_load_high_z(self) -> None: ...
 
@@ -67,7 +70,7 @@ class FunctionGenerator(Protocol):
 
     def safe_off(self) -> None: ...
 
-    def snapshot(self) -> dict[str, Any]: ...
+    def snapshot(self) -> dict[str, Json]: ...
 
     def close(self) -> None: ...
 
@@ -107,7 +110,7 @@ class Scope(Protocol):
 
     def read_waveform(self, ch: int, fmt: str = "WORD") -> Any: ...
 
-    def snapshot(self) -> dict[str, Any]: ...
+    def snapshot(self) -> dict[str, Json]: ...
 
     def close(self) -> None: ...
 
@@ -121,7 +124,7 @@ class Vibrometer(Protocol):
 
     def over_range(self) -> bool: ...
 
-    def snapshot(self) -> dict[str, Any]: ...
+    def snapshot(self) -> dict[str, Json]: ...
 
     def close(self) -> None: ...
 
@@ -130,9 +133,9 @@ class Vibrometer(Protocol):
 class Camera(Protocol):
     """A camera that films for a while into a video file (frames keep their own times)."""
 
-    def record(self, path: str | Path, duration_s: float) -> dict[str, Any]: ...
+    def record(self, path: str | Path, duration_s: float) -> dict[str, Json]: ...
 
-    def snapshot(self) -> dict[str, Any]: ...
+    def snapshot(self) -> dict[str, Json]: ...
 
     def close(self) -> None: ...
 
@@ -151,7 +154,7 @@ class ShakerEnvelope(Protocol):
 
     def max_disp_amp_um(self, freq_hz: float, payload_kg: float = 0.0) -> float: ...
 
-    def snapshot(self) -> dict[str, Any]: ...
+    def snapshot(self) -> dict[str, Json]: ...
 
 
 @runtime_checkable
@@ -169,7 +172,7 @@ class Amplifier(Protocol):
 
     def check_input(self, amp_vpp: float) -> float: ...
 
-    def snapshot(self) -> dict[str, Any]: ...
+    def snapshot(self) -> dict[str, Json]: ...
 
 
 class SpotMover(Protocol):

@@ -4,11 +4,12 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict, TypeVar
 
 import numpy as np
 
 from labkit.errors import InputError
+from labkit.jsonutil import Json as Json  # re-exported: the readers' JSON-valued fields
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import xarray
@@ -65,6 +66,19 @@ def require_xarray() -> Any:
     return xarray
 
 
+T = TypeVar("T")
+
+
+class FileSummary(TypedDict):
+    """What every :meth:`LabFile.summary` holds (``labkit info --json`` prints it under ``content``);
+    each kind's summary extends it (``TrackSummary``, ``RunSummary``, ...)."""
+
+    file: str | None        # None for a sweep listed inside a scenario set (the set's file is the file)
+    kind: str
+    schema_version: int
+    software: str
+
+
 @dataclass
 class LabFile:
     """A file labkit wrote, opened by :func:`labkit.open`.
@@ -87,7 +101,7 @@ class LabFile:
     path: Path
     kind: str
     schema_version: int = 0
-    attrs: dict[str, Any] = field(default_factory=dict, repr=False)
+    attrs: dict[str, Json] = field(default_factory=dict, repr=False)
     units: dict[str, str] = field(default_factory=dict, repr=False)
 
     @property
@@ -95,7 +109,7 @@ class LabFile:
         """The program that wrote the file (``"labkit 0.1.0"``), if recorded."""
         return str(self.attrs.get("software", ""))
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> FileSummary:
         """A short JSON-able description (``labkit info`` prints it)."""
         return {"file": str(self.path), "kind": self.kind, "schema_version": self.schema_version,
                 "software": self.software}
@@ -105,9 +119,9 @@ class LabFile:
         raise NotImplementedError(f"{type(self).__name__}.to_xarray")
 
 
-def root_attrs(f: Any) -> dict[str, Any]:
+def root_attrs(f: Any) -> dict[str, Json]:
     """A file's root attributes; ``*_json`` attributes decoded to objects under their name minus ``_json``."""
-    out: dict[str, Any] = {}
+    out: dict[str, Json] = {}
     for k, v in f.attrs.items():
         if k.endswith("_json"):
             out[k[:-5]] = json_attr(f.attrs, k)

@@ -3,14 +3,26 @@ from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, TypedDict
 
 import numpy as np
 
 from labkit.errors import InputError
-from labkit.files.base import LabFile, column, json_attr, require_xarray, root_attrs, text, units_of
+from labkit.files.base import (
+    FileSummary,
+    Json,
+    LabFile,
+    T,
+    column,
+    json_attr,
+    require_xarray,
+    root_attrs,
+    text,
+    units_of,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
@@ -28,6 +40,16 @@ def _var(dims: tuple[str, ...], v: np.ndarray, units: str) -> tuple[tuple[str, .
 
 
 # --------------------------------------------------------------------------- tracks
+
+class TrackSummary(FileSummary):
+    """:meth:`Track.summary` (speed and interval are a sentence for an older CSV that lacks them)."""
+
+    frames: int
+    mean_speed_mm_s: float | str
+    speed_ci_mm_s: list[float] | str
+    source_video: str
+    mm_per_px: float | None
+
 
 @dataclass
 class Track(LabFile):
@@ -47,14 +69,14 @@ class Track(LabFile):
     def t_s(self) -> np.ndarray:
         return self.columns["t_s"]
 
-    def summary(self) -> dict[str, Any]:
-        speed: Any = self.mean_speed_mm_s
-        ci: Any = list(self.speed_ci_mm_s)
-        if not np.isfinite(speed) and self.kind == "track_csv":
+    def summary(self) -> TrackSummary:
+        speed: float | str = self.mean_speed_mm_s
+        ci: list[float] | str = list(self.speed_ci_mm_s)
+        if not np.isfinite(self.mean_speed_mm_s) and self.kind == "track_csv":
             speed = ci = "not in this CSV (older labkit; the track's .h5 file holds it)"
-        return super().summary() | {"frames": int(self.t_s.size), "mean_speed_mm_s": speed,
-                                    "speed_ci_mm_s": ci, "source_video": self.source_video,
-                                    "mm_per_px": self.attrs.get("mm_per_px")}
+        return {**super().summary(), "frames": int(self.t_s.size), "mean_speed_mm_s": speed,
+                "speed_ci_mm_s": ci, "source_video": self.source_video,
+                "mm_per_px": _number(self.attrs.get("mm_per_px"))}
 
     def to_xarray(self) -> xarray.Dataset:
         """Per-frame columns over ``t_s``; the smoothed path as ``smoothed_*`` over ``t_smoothed_s``."""
@@ -69,6 +91,11 @@ class Track(LabFile):
         ds.attrs.update(kind=self.kind, file=str(self.path), mean_speed_mm_s=self.mean_speed_mm_s,
                         source_video=self.source_video)
         return ds
+
+
+def _number(value: Json) -> float | None:
+    """A numeric attribute, or None when it is absent (or not a number)."""
+    return value if isinstance(value, (int, float)) and not isinstance(value, bool) else None
 
 
 def read_track(path: Path, f: Any) -> Track:
@@ -103,22 +130,25 @@ def read_track_csv(path: Path) -> Track:
     except (ValueError, IndexError) as exc:
         raise InputError(f"bad row ({exc})", file=path) from None
     units = {h: _csv_units(h) for h in header}
-    attrs: dict[str, Any] = {"comment": "\n".join(comments)} | _csv_header_values(comments)
-    ci = attrs.get("speed_ci_mm_s", (np.nan, np.nan))
-    source = re.search(r"labkit track of (.*?);", attrs["comment"])
-    return Track(path, "track_csv", 0, attrs, units, cols, {}, float(attrs.get("mean_speed_mm_s", np.nan)),
-                 (float(ci[0]), float(ci[-1])), source.group(1) if source else "")
+    values = _csv_header_values(comments)
+    ci = values.get("speed_ci_mm_s", (np.nan, np.nan))
+    comment = "\n".join(comments)
+    source = re.search(r"labkit track of (.*?);", comment)
+    attrs: dict[str, Json] = {"comment": comment}
+    attrs |= {k: v[0] if len(v) == 1 else list(v) for k, v in values.items()}
+    return Track(path, "track_csv", 0, attrs, units, cols, {}, values.get("mean_speed_mm_s", (np.nan,))[0],
+                 (ci[0], ci[-1]), source.group(1) if source else "")
 
 
-def _csv_header_values(comments: list[str]) -> dict[str, Any]:
-    """``key=value`` pairs of a track CSV's comment lines (``mm_per_px=0.05; speed_ci_mm_s=1.2,1.4``)."""
-    out: dict[str, Any] = {}
+def _csv_header_values(comments: list[str]) -> dict[str, tuple[float, ...]]:
+    """``key=value`` pairs of a track CSV's comment lines (``mm_per_px=0.05; speed_ci_mm_s=1.2,1.4``),
+    each value as its numbers (non-numeric values are left out)."""
+    out: dict[str, tuple[float, ...]] = {}
     for key, value in re.findall(r"(\w+)=([^;\s]+)", "\n".join(comments)):
         try:
-            numbers = [float(v) for v in value.split(",")]
+            out[key] = tuple(float(v) for v in value.split(","))
         except ValueError:
             continue
-        out[key] = numbers[0] if len(numbers) == 1 else tuple(numbers)
     return out
 
 
@@ -144,6 +174,18 @@ class FitGroup:
     units: dict[str, str]
 
 
+class ModeDigest(TypedDict):
+    freq_hz: float
+    damping_ratio: float
+
+
+class FitSummary(FileSummary):
+    """:meth:`ModalFit.summary`: the runs fitted per group and each group's modes."""
+
+    runs: dict[str, list[str]]
+    modes: dict[str, list[ModeDigest]]
+
+
 @dataclass
 class ModalFit(LabFile):
     """A resonance fit (kind ``modal_fit``): measured and fitted FRFs, modes with uncertainties."""
@@ -151,8 +193,8 @@ class ModalFit(LabFile):
     groups: dict[str, FitGroup] = field(default_factory=dict, repr=False)
     runs: dict[str, list[str]] = field(default_factory=dict)
 
-    def summary(self) -> dict[str, Any]:
-        return super().summary() | {
+    def summary(self) -> FitSummary:
+        return {**super().summary(),
             "runs": self.runs,
             "modes": {g: [{"freq_hz": float(f), "damping_ratio": float(z)} for f, z in
                           zip(fg.modes.get("freq_hz", []), fg.modes.get("damping_ratio", []))]
@@ -225,12 +267,18 @@ def _params_from_text(params_toml: str, path: Path) -> Any:
     return RobotParams.from_dict(table, file=f"{path}:params_toml")
 
 
+class SimRunSummary(FileSummary):
+    scenario: dict[str, Json]
+    mean_speed_mm_s: float
+    samples: int
+
+
 @dataclass
 class SimRun(LabFile):
     """One simulator run (kind ``sim_result``): time series of body, feet, contact and knee."""
 
     columns: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
-    scenario: dict[str, Any] = field(default_factory=dict)
+    scenario: dict[str, Json] = field(default_factory=dict)
     params_toml: str = field(default="", repr=False)
     mean_speed_mm_s: float = float("nan")
 
@@ -243,9 +291,9 @@ class SimRun(LabFile):
         """The robot parameters of the run (:class:`labkit.sim.RobotParams`)."""
         return _params_from_text(self.params_toml, self.path)
 
-    def summary(self) -> dict[str, Any]:
-        return super().summary() | {"scenario": self.scenario, "mean_speed_mm_s": self.mean_speed_mm_s,
-                                    "samples": int(self.t_s.size)}
+    def summary(self) -> SimRunSummary:
+        return {**super().summary(), "scenario": self.scenario, "mean_speed_mm_s": self.mean_speed_mm_s,
+                "samples": int(self.t_s.size)}
 
     def to_xarray(self) -> xarray.Dataset:
         """Time series over ``t_s`` (per-leg arrays over ``leg``, body angles over ``axis``)."""
@@ -281,6 +329,14 @@ def read_sim_result(path: Path, f: Any) -> SimRun:
                   float(f.attrs.get("mean_speed_mm_s", np.nan)))
 
 
+class SweepSummary(FileSummary):
+    """:meth:`SimSweep.summary`: the swept quantity, its points and the Monte Carlo draws (0: nominal only)."""
+
+    quantity: str
+    points: int
+    draws: int
+
+
 @dataclass
 class SimSweep(LabFile):
     """A simulated sweep (kind ``sim_sweep``, or ``sim_points`` for a scenario's set of drive points):
@@ -296,11 +352,10 @@ class SimSweep(LabFile):
         """The nominal robot parameters of the sweep (:class:`labkit.sim.RobotParams`)."""
         return _params_from_text(self.params_toml, self.path)
 
-    def summary(self) -> dict[str, Any]:
-        return super().summary() | {"quantity": self.quantity, "points": int(self.values.size),
-                                    "draws": int(self.columns["speeds_mm_s"].shape[1])
-                                    if self.columns.get("speeds_mm_s") is not None
-                                    and self.columns["speeds_mm_s"].ndim == 2 else 0}
+    def summary(self) -> SweepSummary:
+        speeds = self.columns.get("speeds_mm_s")
+        return {**super().summary(), "quantity": self.quantity, "points": int(self.values.size),
+                "draws": int(speeds.shape[1]) if speeds is not None and speeds.ndim == 2 else 0}
 
     def to_xarray(self) -> xarray.Dataset:
         """Over the swept quantity (``freq_hz``, ``amp_um``, ...) x ``draw`` (0 = nominal) x ``foot`` x ``mode``."""
@@ -333,6 +388,10 @@ def read_sim_sweep(path: Path, f: Any, group: Any = None, version: int | None = 
                     q, cols["values"], cols, text(g.attrs.get("params_toml", "")))
 
 
+class SweepSetSummary(FileSummary):
+    sweeps: dict[str, SweepSummary]
+
+
 @dataclass
 class SimSweepSet(LabFile):
     """Several simulated sweeps in one file (kind ``sim_sweep_set``, from ``labkit simulate scenario``):
@@ -340,8 +399,8 @@ class SimSweepSet(LabFile):
 
     sweeps: dict[str, SimSweep] = field(default_factory=dict, repr=False)
 
-    def summary(self) -> dict[str, Any]:
-        return super().summary() | {"sweeps": {k: s.summary() | {"file": None} for k, s in self.sweeps.items()}}
+    def summary(self) -> SweepSetSummary:
+        return {**super().summary(), "sweeps": {k: {**s.summary(), "file": None} for k, s in self.sweeps.items()}}
 
     def to_xarray(self, label: str | None = None) -> xarray.Dataset:
         """One sweep (default: the first) as :meth:`SimSweep.to_xarray`."""
@@ -362,6 +421,18 @@ def read_sim_sweep_set(path: Path, f: Any) -> SimSweepSet:
     return SimSweepSet(path, "sim_sweep_set", version, root_attrs(f), {}, sweeps)
 
 
+class RunDigest(TypedDict):
+    samples: int
+    mean_speed_mm_s: float
+
+
+class RunSetSummary(FileSummary):
+    """:meth:`SimRunSet.summary`: each run's length and speed, and the file's own summary (``info``)."""
+
+    runs: dict[str, RunDigest]
+    info: Json
+
+
 @dataclass
 class SimRunSet(LabFile):
     """Several simulator runs in one file (kind ``sim_ablations``, from ``labkit simulate scenario
@@ -369,8 +440,8 @@ class SimRunSet(LabFile):
 
     runs: dict[str, dict[str, np.ndarray]] = field(default_factory=dict, repr=False)
 
-    def summary(self) -> dict[str, Any]:
-        return super().summary() | {
+    def summary(self) -> RunSetSummary:
+        return {**super().summary(),
             "runs": {k: {"samples": int(v["t_s"].size), "mean_speed_mm_s": float(np.ravel(v.get(
                 "mean_speed_mm_s", np.nan))[0])} for k, v in self.runs.items()},
             "info": self.attrs.get("summary", {})}
@@ -380,7 +451,7 @@ class SimRunSet(LabFile):
         xr = require_xarray()
         name = next(iter(self.runs), "") if label is None else label
         cols = _pick(self.runs, name, self.path)
-        data: dict[str, Any] = {}
+        data: dict[str, tuple[tuple[str, ...], np.ndarray, dict[str, str]]] = {}
         for k, v in cols.items():
             if k == "t_s" or v.ndim == 0:
                 continue
@@ -405,7 +476,7 @@ def read_sim_run_set(path: Path, f: Any) -> SimRunSet:
                      root_attrs(f), units, runs)
 
 
-def _pick(items: dict[str, Any], label: str | None, path: Path) -> Any:
+def _pick(items: dict[str, T], label: str | None, path: Path) -> T:
     if not items:
         raise InputError("holds no data", file=path)
     name = next(iter(items)) if label is None else label
@@ -416,18 +487,25 @@ def _pick(items: dict[str, Any], label: str | None, path: Path) -> Any:
 
 # --------------------------------------------------------------------------- parameter files, videos
 
+class ParamsSummary(FileSummary):
+    """:meth:`RobotParameters.summary`: the modes and where each came from (:func:`provenance_digest`)."""
+
+    modal_freq_hz: list[float]
+    modal_damping_ratio: list[float]
+    provenance: dict[str, Json]
+
+
 @dataclass
 class RobotParameters(LabFile):
     """A robot parameter file (TOML): ``params`` (:class:`labkit.sim.RobotParams`) and its ``provenance``."""
 
     params: Any = None
-    provenance: dict[str, Any] = field(default_factory=dict)
+    provenance: dict[str, Json] = field(default_factory=dict)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> ParamsSummary:
         p = self.params
-        return super().summary() | {"modal_freq_hz": list(p.modal_freq_hz),
-                                    "modal_damping_ratio": list(p.modal_damping_ratio),
-                                    "provenance": provenance_digest(self.provenance)}
+        return {**super().summary(), "modal_freq_hz": list(p.modal_freq_hz),
+                "modal_damping_ratio": list(p.modal_damping_ratio), "provenance": provenance_digest(self.provenance)}
 
     def to_xarray(self) -> xarray.Dataset:
         """Scalars as 0-d variables, per-mode triples over ``mode`` (1, 2, 3); units on each."""
@@ -443,27 +521,28 @@ class RobotParameters(LabFile):
         return ds
 
 
-def provenance_digest(prov: dict[str, Any]) -> dict[str, Any]:
+def provenance_digest(prov: Mapping[str, Json]) -> dict[str, Json]:
     """What ``labkit info`` shows of a ``[provenance]`` table: source, runs, fit file, and per mode
     where its value came from (fit with uncertainty, or the base file)."""
     keep = ("source", "created_utc", "runs", "fit_file", "method", "generated_by", "calibration")
-    out: dict[str, Any] = {k: prov[k] for k in keep if k in prov}
+    out: dict[str, Json] = {k: prov[k] for k in keep if k in prov}
     modes = prov.get("modes")
     if isinstance(modes, dict):
-        out["modes"] = {}
+        where: dict[str, Json] = {}
+        out["modes"] = where
         for m, d in modes.items():
             if not isinstance(d, dict):
                 continue
             if d.get("source") == "fit":
                 nan = float("nan")
-                out["modes"][m] = (f"fit ({d.get('method', '?')}, {d.get('group', '?')}): "
+                where[m] = (f"fit ({d.get('method', '?')}, {d.get('group', '?')}): "
                                    f"{d.get('freq_hz', nan):.6g} +- {d.get('freq_hz_std', nan):.2g} Hz, "
                                    f"zeta {d.get('damping_ratio', nan):.4g} +- {d.get('damping_ratio_std', nan):.2g}")
             else:
-                out["modes"][m] = f"{d.get('source', '?')}: {d.get('base', '')}".rstrip(": ")
+                where[m] = f"{d.get('source', '?')}: {d.get('base', '')}".rstrip(": ")
     others = sorted(k for k in prov if k not in keep and k != "modes")
     if others:
-        out["other_keys"] = others
+        out["other_keys"] = list(others)
     return out
 
 
@@ -476,6 +555,27 @@ def read_params(path: Path) -> RobotParameters:
 
 #: top-level tables that mark a TOML file as an experiment config (not a robot parameter file)
 CONFIG_TABLES = ("run", "instruments")
+
+
+ConfigTable = Literal["drive", "frequencies", "grid", "method"]
+#: the tables of a config that ``labkit info`` shows key by key
+SHOWN_TABLES: tuple[ConfigTable, ...] = ("drive", "frequencies", "grid", "method")
+
+
+class _ShownTables(TypedDict, total=False):
+    drive: dict[str, Json]
+    frequencies: dict[str, Json]
+    grid: dict[str, Json]
+    method: dict[str, Json]
+
+
+class ConfigSummary(FileSummary, _ShownTables):
+    """:meth:`ExperimentConfig.summary`: the experiment, its instruments (role -> model), its tables
+    and the contents of those it has of ``drive``, ``frequencies``, ``grid``, ``method``."""
+
+    experiment: str
+    instruments: dict[str, str]
+    tables: list[str]
 
 
 @dataclass
@@ -497,10 +597,10 @@ class ExperimentConfig(LabFile):
         inst = self.table.get("instruments", {})
         return {k: str(v.get("model", "?")) for k, v in inst.items() if isinstance(v, dict)}
 
-    def summary(self) -> dict[str, Any]:
-        out = super().summary() | {"experiment": self.experiment, "instruments": self.instruments,
-                                   "tables": sorted(k for k, v in self.table.items() if isinstance(v, dict))}
-        for key in ("drive", "frequencies", "grid", "method"):
+    def summary(self) -> ConfigSummary:
+        out: ConfigSummary = {**super().summary(), "experiment": self.experiment, "instruments": self.instruments,
+                              "tables": sorted(k for k, v in self.table.items() if isinstance(v, dict))}
+        for key in SHOWN_TABLES:
             if isinstance(self.table.get(key), dict):
                 out[key] = self.table[key]
         return out
@@ -527,6 +627,18 @@ def read_toml(path: Path) -> RobotParameters | ExperimentConfig:
     return read_params(path)
 
 
+class VideoSummary(FileSummary):
+    """:meth:`Video.summary`: the measured frame rate, and the container's rate field where it differs."""
+
+    width_px: int
+    height_px: int
+    frames: int
+    fps: float
+    fps_container: float | str
+    codec: str
+    duration_s: float | None
+
+
 @dataclass
 class Video(LabFile):
     """A video labkit recorded or drew (``.mkv`` with per-frame timestamps, ``.avi``)."""
@@ -545,16 +657,15 @@ class Video(LabFile):
         dt = dt[dt > 0]
         return float(1.0 / np.median(dt)) if dt.size else float("nan")
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> VideoSummary:
         d = float(self.t_s[-1] - self.t_s[0]) if self.t_s.size > 1 else None
         fps = self.fps_measured
-        container: Any = self.fps_nominal
+        container: float | str = self.fps_nominal
         if np.isfinite(fps) and abs(self.fps_nominal - fps) > 0.01 * fps:
             # e.g. Matroska's 1 ms time base read back as "1000 fps": not the frame rate
             container = f"{self.fps_nominal:g} (the container's rate field; the timestamps give {fps:.4g})"
-        return super().summary() | {"width_px": self.width, "height_px": self.height, "frames": self.frames,
-                                    "fps": fps, "fps_container": container, "codec": self.codec,
-                                    "duration_s": d}
+        return {**super().summary(), "width_px": self.width, "height_px": self.height, "frames": self.frames,
+                "fps": fps, "fps_container": container, "codec": self.codec, "duration_s": d}
 
     def to_xarray(self) -> xarray.Dataset:
         """The frame times (``t_s`` coordinate over ``frame``); pixels are read with ``labkit.analysis.tracking``."""

@@ -17,13 +17,39 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from labkit.files.base import LabFile, column, json_attr, require_xarray, root_attrs, text, units_of
+from labkit.files.base import FileSummary, Json, LabFile, column, json_attr, require_xarray, root_attrs, text, units_of
 
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
 #: run-file layouts this reader knows: 1 (no dimension scales), 2 (dimension scales, t_s in records)
 READS_SCHEMA = (1, 2)
+
+
+class RunSummary(FileSummary):
+    """:meth:`RunFile.summary`: how far the run got and with which instruments (role -> model)."""
+
+    status: str
+    points_planned: int
+    points_done: int
+    points_ok: int
+    points_interlocked: int
+    instruments: dict[str, str]
+    config_path: str
+
+
+class InchipSummary(RunSummary):
+    """:meth:`InchipRun.summary`: the method and the FRF lines per location."""
+
+    method: str
+    locations: dict[str, int]
+
+
+class ShakerSummary(RunSummary):
+    """:meth:`ShakerRun.summary`: where the robot sat and what the amplitude means."""
+
+    robot_spot: str
+    amplitude_kind: str
 
 
 @dataclass
@@ -33,7 +59,7 @@ class Instrument:
     role: str
     model: str
     resource: str
-    snapshot: dict[str, Any]
+    snapshot: dict[str, Json]
 
 
 @dataclass
@@ -112,15 +138,13 @@ class RunFile(LabFile):
                 out[index] = Record(index, float(g.attrs["dt_s"]), sig, {k: units_of(g[k]) for k in sig})
         return out
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> RunSummary:
         st = self.points.get("status", np.array([], str))
-        out = super().summary() | {
-            "status": self.status, "points_planned": self.points_planned, "points_done": self.complete_points,
-            "points_ok": int(np.sum(st == "ok")), "points_interlocked": int(np.sum(st == "interlock")),
-            "instruments": {r: i.model for r, i in self.instruments.items()},
-            "config_path": self.attrs.get("config_path", ""),
-        }
-        return out
+        return {**super().summary(),
+                "status": self.status, "points_planned": self.points_planned, "points_done": self.complete_points,
+                "points_ok": int(np.sum(st == "ok")), "points_interlocked": int(np.sum(st == "interlock")),
+                "instruments": {r: i.model for r, i in self.instruments.items()},
+                "config_path": text(self.attrs.get("config_path", ""))}
 
 
 @dataclass
@@ -153,9 +177,9 @@ class InchipRun(RunFile):
     method: str = "?"
     locations: dict[str, Location] = field(default_factory=dict, repr=False)
 
-    def summary(self) -> dict[str, Any]:
-        return super().summary() | {"method": self.method,
-                                    "locations": {k: int(v.freq_hz.size) for k, v in self.locations.items()}}
+    def summary(self) -> InchipSummary:
+        return {**super().summary(), "method": self.method,
+                "locations": {k: int(v.freq_hz.size) for k, v in self.locations.items()}}
 
     def to_xarray(self) -> xarray.Dataset:
         """``frf``, ``quality`` (and the stepped sine's ``drive_v``, ``velocity_mm_s``) over
@@ -185,8 +209,8 @@ class ShakerRun(RunFile):
         """The video of each complete point as an absolute path (None without video)."""
         return [(self.path.parent / v).resolve() if v else None for v in self.points.get("video", [])]
 
-    def summary(self) -> dict[str, Any]:
-        return super().summary() | {"robot_spot": self.robot_spot, "amplitude_kind": self.amplitude_kind}
+    def summary(self) -> ShakerSummary:
+        return {**super().summary(), "robot_spot": self.robot_spot, "amplitude_kind": self.amplitude_kind}
 
     def to_xarray(self) -> xarray.Dataset:
         """Every ``/points`` column over the ``point`` dimension (coordinate: plan ``index``;
@@ -224,10 +248,7 @@ def read_run_file(path: str | Path) -> InchipRun | ShakerRun:
             cfg = tomllib.loads(cfg_text) if cfg_text else {}
         except tomllib.TOMLDecodeError:
             cfg = {}
-        common: dict[str, Any] = dict(path=path, kind=kind, schema_version=version, attrs=attrs,
-                                      status=text(f.attrs.get("status", "?")), config_toml=cfg_text, config=cfg,
-                                      points_planned=int(f.attrs.get("points_planned", 0)))
-        common["instruments"] = {
+        instruments = {
             role: Instrument(role, text(g.attrs.get("model", "")), text(g.attrs.get("resource", "")),
                              json_attr(g.attrs, "snapshot_json", {}) or {})
             for role, g in (f["instruments"].items() if "instruments" in f else [])}
@@ -239,13 +260,18 @@ def read_run_file(path: str | Path) -> InchipRun | ShakerRun:
         units = {k: units_of(pts[k]) for k in pts}
         ev = f.get("events")
         events = {k: column(ev[k]) for k in ev} if ev is not None else {}
+        # the fields every run file has, read once; each kind adds its own below
+        header = RunFile(path, kind, version, attrs, units, status=text(f.attrs.get("status", "?")),
+                         config_toml=cfg_text, config=cfg, instruments=instruments, points=points, events=events,
+                         points_planned=int(f.attrs.get("points_planned", 0)),
+                         record_group="raw" if kind == "run_inchip" else "records")
         if kind == "run_inchip":
             locs = _locations(f, points)
             for loc in locs.values():
                 units.update(loc.units)
-            return InchipRun(**common, units=units, points=points, events=events, record_group="raw",
-                             method=text(f.attrs.get("method", "?")), locations=locs)
-        return ShakerRun(**common, units=units, points=points, events=events, record_group="records",
+            return InchipRun(**vars(header), method=text(f.attrs.get("method", "?")),
+                             locations=locs)
+        return ShakerRun(**vars(header),
                          robot_spot=text(f.attrs.get("robot_spot", "?")),
                          amplitude_kind=text(f.attrs.get("amplitude_kind", "?")))
 

@@ -15,24 +15,24 @@ def test_speed_agreement_known_errors():
     out = compare.speed_agreement(f, meas, meas - 0.5, meas + 0.5, sim_f, sim, sim - 0.6, sim + 0.6,
                                   provenance={"measured": ["a.h5"], "simulated": ["s.h5"]})
     err = np.array([1.0, 1.0, 0.0, 0.0])
-    assert out["n_points"] == 4 and out["n_outside_range"] == 0
-    assert out["rms_error_mm_s"] == pytest.approx(np.sqrt(np.mean(err ** 2)))
-    assert out["mean_error_mm_s"] == pytest.approx(0.5)
-    assert out["relative_rms_error"] == pytest.approx(np.sqrt(0.5) / np.sqrt(np.mean(meas ** 2)))
-    assert out["correlation"] == pytest.approx(np.corrcoef(meas, [3, 5, 3, 1])[0, 1])
+    assert out.n_points == 4 and out.n_outside_range == 0
+    assert out.rms_error_mm_s == pytest.approx(np.sqrt(np.mean(err ** 2)))
+    assert out.mean_error_mm_s == pytest.approx(0.5)
+    assert out.relative_rms_error == pytest.approx(np.sqrt(0.5) / np.sqrt(np.mean(meas ** 2)))
+    assert out.correlation == pytest.approx(np.corrcoef(meas, [3, 5, 3, 1])[0, 1])
     # inside band (+-0.6): only the two exact points
-    assert out["fraction_inside_band"] == pytest.approx(0.5)
+    assert out.fraction_inside_band == pytest.approx(0.5)
     # CI (+-0.5) overlaps the band (+-0.6) when |err| <= 1.1: all four
-    assert out["fraction_ci_overlaps_band"] == pytest.approx(1.0)
-    assert out["provenance"]["measured"] == ["a.h5"]
+    assert out.fraction_ci_overlaps_band == pytest.approx(1.0)
+    assert out.provenance["measured"] == ["a.h5"]
 
 
 def test_speed_agreement_leaves_out_points_outside_sim_range():
     out = compare.speed_agreement([50.0, 200.0, 900.0], [1.0, 2.0, 0.0], None, None,
                                   [100.0, 300.0], [2.0, 2.0], [1.5, 1.5], [2.5, 2.5])
-    assert out["n_points"] == 1 and out["n_outside_range"] == 2
-    assert out["rms_error_mm_s"] == pytest.approx(0.0)
-    assert out["correlation"] is None                     # undefined with one point
+    assert out.n_points == 1 and out.n_outside_range == 2
+    assert out.rms_error_mm_s == pytest.approx(0.0)
+    assert out.correlation is None                     # undefined with one point
 
 
 def test_band_from_draws():
@@ -45,8 +45,8 @@ def test_band_from_draws():
 def test_pattern_agreement_and_confusion():
     out = compare.pattern_agreement(["firm_contact", "jumping", "partial_contact"],
                                     ["firm_contact", "partial_contact", "partial_contact"], keys=[2, 8, 4])
-    assert out["fraction_agree"] == pytest.approx(2 / 3)
-    assert out["confusion"]["jumping"]["partial_contact"] == 1
+    assert out.fraction_agree == pytest.approx(2 / 3)
+    assert out.confusion["jumping"]["partial_contact"] == 1
     with pytest.raises(ValueError, match="unknown pattern"):
         compare.pattern_agreement(["walking"], ["jumping"])
 
@@ -60,14 +60,14 @@ def test_fundamental_and_knee_agreement_phase_and_amplitude():
     knee_m = 60.0 * np.cos(2 * np.pi * f * tm - 0.5)
     knee_s = 30.0 * np.cos(2 * np.pi * f * ts - 0.8)
     out = compare.knee_motion_agreement(tm, knee_m, ts, knee_s, f, ref_meas=tray_m, ref_sim=tray_s)
-    assert out["amplitude_meas_mm_s"] == pytest.approx(60.0, rel=1e-6)
-    assert out["amplitude_ratio"] == pytest.approx(0.5, rel=1e-6)
-    assert out["phase_meas_deg"] == pytest.approx(np.degrees(-0.5), abs=1e-6)
-    assert out["phase_diff_deg"] == pytest.approx(np.degrees(-0.3), abs=1e-6)
-    assert 0.9 < out["correlation"] < 1.0
+    assert out.amplitude_meas_mm_s == pytest.approx(60.0, rel=1e-6)
+    assert out.amplitude_ratio == pytest.approx(0.5, rel=1e-6)
+    assert out.phase_meas_deg == pytest.approx(np.degrees(-0.5), abs=1e-6)
+    assert out.phase_diff_deg == pytest.approx(np.degrees(-0.3), abs=1e-6)
+    assert 0.9 < out.correlation < 1.0
     # anti-phase knee: correlation near -1
     out2 = compare.knee_motion_agreement(tm, -knee_m, ts, knee_s, f, ref_meas=tray_m, ref_sim=tray_s)
-    assert out2["correlation"] < -0.9
+    assert out2.correlation < -0.9
 
 
 def test_classify_knee_pattern():
@@ -95,8 +95,8 @@ def test_draw_percentiles_and_coverage():
     # 2.5 beats two of four draws; 0 beats none; 6 ties the largest (mid-rank 3.5 of 4); 250 Hz is outside
     assert pct[:3].tolist() == [50.0, 0.0, 87.5] and np.isnan(pct[3])
     cov = compare.coverage(pct, [True, False, True], (10.0, 90.0))
-    assert cov["fraction_inside"] == pytest.approx(2 / 3) and cov["expected_fraction"] == pytest.approx(0.8)
-    assert cov["median_percentile"] == pytest.approx(50.0)
+    assert cov.fraction_inside == pytest.approx(2 / 3) and cov.expected_fraction == pytest.approx(0.8)
+    assert cov.median_percentile == pytest.approx(50.0)
     lo, hi = compare.percentile_band(draws, (10.0, 90.0))
     assert lo.tolist() == pytest.approx([1.3, 3.3]) and hi.tolist() == pytest.approx([3.7, 5.7])
 
@@ -111,3 +111,20 @@ def test_tolerances_and_verdicts():
     assert compare.verdict(0.2, at_most=0.3) == "pass" and compare.verdict(0.4, at_most=0.3) == "fail"
     assert compare.verdict(1.0, at_least=0.75, at_most=1.33) == "pass"
     assert compare.verdict(None, at_most=1) == "n/a" and compare.verdict(float("nan"), at_least=0) == "n/a"
+
+
+def test_results_to_dict_json_in_field_order():
+    """agreement.json holds each result's to_dict(): fields in order, tuples as lists, nested results as dicts."""
+    import json
+
+    out = compare.pattern_agreement(["jumping", "firm_contact"], ["jumping", "partial_contact"],
+                                    keys=[240.0, "8 V"], provenance={"measured": ["a.h5"]})
+    d = out.to_dict()
+    assert list(d) == ["n", "fraction_agree", "confusion", "pairs", "provenance"]
+    assert d["pairs"] == [{"key": 240.0, "measured": "jumping", "simulated": "jumping", "agree": True},
+                          {"key": "8 V", "measured": "firm_contact", "simulated": "partial_contact", "agree": False}]
+    assert json.loads(json.dumps(d)) == d
+    speed = compare.speed_agreement([150.0], [2.0], None, None, [100.0, 200.0], [2.0, 2.0], [1.0, 1.0], [3.0, 3.0])
+    sd = speed.to_dict()
+    assert isinstance(sd["points"], list) and sd["points"][0]["inside_band"] is True
+    assert list(sd)[-3:] == ["points", "method", "provenance"]
