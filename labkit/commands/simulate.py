@@ -307,7 +307,7 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
     with _StepProgress(args.quiet) as bar:
         # a step the user set is the step used: the run is then not checked (its status says "unchecked")
         r = simulate(params, scenario, duration_s=duration_s, seed=seed, start_height_um=height_um, dt_s=dt_s,
-                     progress=bar.update, keys=OPTION_KEYS, error_control="check" if dt_s is None else "off")
+                     progress=bar.update, keys=OPTION_KEYS)
     check = None
     if getattr(args, "dt_check", False):
         from labkit.sim.core import dt_check

@@ -87,7 +87,8 @@ def format_summary(s: dict[str, Any]) -> str:
     f = s["files"]
     v = s["virtual_robot"]["changes_from_paper"]
     lines = [f"labkit demo ({s['mode']}) finished in {s['wall_s']:.0f} s; everything is in {s['out_dir']}/",
-             f"Virtual robot: the paper's, with adhesion c_ad_n = {v['c_ad_n']:g} N (so it walks) and its hip mode "
+             f"Virtual robot: the paper's, with adhesion c_ad_n = {v['c_ad_n']:g} N (so it walks), "
+             f"{v['foot_pad_um']:g} um foot pads (a periodic walk) and its hip mode "
              f"at {v['hip_freq_hz']:g} Hz, zeta {v['hip_damping_ratio']:g}; the pipeline starts from the paper's "
              "modes (base file) and never reads the virtual robot's.", ""]
     lines.append("Identified resonances of the tethered robot (in-chip fit) against the virtual robot's:")

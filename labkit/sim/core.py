@@ -190,7 +190,8 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
         ``"check"`` (default): the run is repeated at half the step and the step halved until
         they agree, chaotic runs flagged (:func:`labkit.sim.errorcontrol.control`;
         the result's ``convergence`` carries the estimate; the reference engine is not checked).
-        ``"off"``: the run at ``dt_s`` only (``convergence.status == "unchecked"``).
+        ``"off"``: the run at its step only (``convergence.status == "unchecked"``). A ``dt_s``
+        given is the step used, as given: the control applies to the default step only.
 
     Raises
     ------
@@ -208,7 +209,7 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     if error_control not in ERROR_CONTROL:
         raise InputError(f"unknown error control {error_control!r}", key="error_control",
                          expected=" or ".join(ERROR_CONTROL))
-    if error_control == "check" and engine == "numba":
+    if error_control == "check" and engine == "numba" and dt_s is None:
         def rerun(step: float, sd: int | None) -> SimResult:
             return simulate(params, scenario, duration_s, step, record_dt_s, sd, ablation=ablation,
                             transient_s=r.transient_s, jitter_um=jitter_um, start_height_um=start_height_um, keys=keys,

@@ -1273,6 +1273,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
     n_ev = 0
     tol = P[P_POSTOL]
     first = True
+    exempt = 0                 # bit j: point j was re-pinned at the instant of its release
     while True:
         if first and abs(W[W_CT] - now) <= 1e-9 * dt and W[W_CV] == volts(P, tv):
             # the last step ended without events: its end-of-step forces are this state's
@@ -1313,9 +1314,14 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
                     rel = True
                 continue
             g1 = W[W_GAP1 + j]
-            if g1 >= -tol:
-                continue
             g0 = W[W_GAP0 + j]
+            # every sink below the ground is an impact event (a sink let be, within the position
+            # tolerance, would be lifted back at the next step's start: m g d of energy fed into
+            # every rebound, and a drop never came to rest), except for a point re-pinned in this
+            # step at the instant it was released: released again, it would loop there; its sink
+            # is then let be within the tolerance
+            if g1 >= 0.0 or ((exempt >> j) & 1 and g1 >= -tol):
+                continue
             frac = g0 / (g0 - g1) if g0 > 0.0 else 0.0
             if frac < best:
                 best = frac
@@ -1347,13 +1353,17 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
             g = event_value(P, A, S, T, mode, now, tau, tv, W, I, who, rel)
             # an impact: the gap within the position tolerance; a release: the secant's next
             # correction (from the last two points) below EVENT_TIME_TOL of the step
-            if (not rel and abs(g) <= tol) or hi - lo <= 1e-9 * rem \
+            if (not rel and 0.0 <= g <= tol) or hi - lo <= 1e-9 * rem \
                     or (rel and g != gp and abs(g * (tau - tp)) <= EVENT_TIME_TOL * rem * abs(g - gp)):
                 fresh = True
                 break
             tp = tau
             gp = g
             lo, glo, hi, ghi, side, tau = bracket_root(lo, glo, hi, ghi, side, tau, g)
+        if not rel and not fresh:
+            # an impact is applied where the point is still above the ground (the bracket's
+            # upper end): lifting a point that sank back onto the ground would add energy
+            tau = lo
         if tau > 0.0:
             if not fresh:
                 count[CNT_ADV] += 1
@@ -1380,6 +1390,8 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
             if rem <= 0.0:
                 return False
             continue
+        if tau <= 0.0 and W[W_GAP0 + who] <= 0.0:
+            exempt |= 1 << who
         # every free point at or below the ground and approaching it impacts now
         gaps(P, A, S, now, W, W_GAP0)
         _, vg, _ = ground(P, W, now)

@@ -160,20 +160,28 @@ def test_restitution_acts_with_the_films_on():
     above at most its integral to contact over the row's mass (0.12 m/s for the published feet's
     30 um pads on 50 nm asperities; the old law, floored at h_min = 1 um with the whole leg's
     coefficient, took 30 m/s), and it stops a rebound within the position tolerance only below
-    ~0.3 mm/s. So feet touch the tray and rebound with c_r: most landings rebound, and c_r
-    changes the walk (the old law made every landing plastic and c_r inert).
+    ~0.3 mm/s. So feet touch the tray and rebound with c_r (Newton's law at every rebounding
+    landing), and c_r decides the gait: with c_r 0.8 the feet land more often than with 0.2, from
+    every start (95-111 against 147-185 landings in 0.3 s, seeds 0-2; the old law made every
+    landing plastic and c_r inert).
 
-    At the default step (240 Hz, 100 um, 0.3 s; the feet land at ~1.5 mm/s)."""
+    At the default step (240 Hz, 100 um, 0.3 s; the feet land at ~1.5 mm/s), seeds 0-2. The mean
+    speed is not asserted: this walk is chaotic, and over seeds 0-5 c_r 0.2 / 0.8 walk at
+    -24.8 +- 1.2 / -25.2 +- 0.8 mm/s (mean +- standard error), no difference beyond the seeds'
+    spread (measured; a single seed's 10 % difference was round-off, not restitution)."""
     sc = Shaker(240, 100)
-    runs = [simulate(RobotParams(c_r=c_r, c_ad_n=2e-6), sc, duration_s=0.3, seed=0) for c_r in (0.2, 0.8)]
-    for r in runs:
-        ev = r.events[r.events[:, M.EV_LEG] >= 0]
-        assert len(ev) > 50 and np.median(np.abs(ev[:, M.EV_VPRE])) > 5e-4          # m/s
-        assert (ev[:, M.EV_STUCK] == 0).mean() > 0.5                              # most rebound
-        assert r.max_height_um.max() > 100.0                                       # feet fly
-    v = [r.mean_speed_mm_s for r in runs]
-    assert abs(v[0] - v[1]) > 0.1 * max(abs(v[0]), abs(v[1]))
-    assert runs[0].impacts.sum() < runs[1].impacts.sum()
+    impacts = {}
+    for c_r in (0.2, 0.8):
+        for seed in range(3):
+            r = simulate(RobotParams(c_r=c_r, c_ad_n=2e-6), sc, duration_s=0.3, seed=seed)
+            ev = r.events[r.events[:, M.EV_LEG] >= 0]
+            assert len(ev) > 50 and np.median(np.abs(ev[:, M.EV_VPRE])) > 5e-4          # m/s
+            up = ev[:, M.EV_STUCK] == 0
+            assert up.mean() > 0.5                                                    # most rebound
+            np.testing.assert_allclose(ev[up, M.EV_VPOST], -c_r * ev[up, M.EV_VPRE], rtol=1e-9)
+            assert r.max_height_um.max() > 100.0                                       # feet fly
+            impacts.setdefault(c_r, []).append(int(r.impacts.sum()))
+    assert max(impacts[0.2]) < min(impacts[0.8]), impacts
 
 
 def _same(a, b, rtol):

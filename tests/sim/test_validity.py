@@ -36,10 +36,13 @@ def test_a_full_event_log_is_flagged_not_silent(monkeypatch):
     assert r.summary()["validity"]["events_lost"] == r.counters["events_lost"]
 
 
-def test_the_paper_robot_tumbling_at_600_hz_is_flagged_in_json_and_text():
-    """The issue's case: the calibrated robot at 600 Hz, 60 um rolls to ~1 rad from a
-    symmetric start; the run says it left the small-angle model."""
-    args = ["simulate", "shaker", "--params", "paper", "--freq-hz", "600", "--amp-um", "60", "--duration-s", "0.5"]
+def test_the_paper_robot_tumbling_at_240_hz_60_um_is_flagged_in_json_and_text():
+    """The calibrated robot at 240 Hz, 60 um tilts to 0.9-1.1 rad in 0.5 s; the run says it left
+    the small-angle model. (The issue's case was 600 Hz, 60 um; with the film law finite at
+    contact, docs/model.md M7, the robot stays still there, 12 impacts and no tilt in 0.5 s.)
+    The tumble is chaotic, but it is no edge case: from a symmetric start and seeds 0, 1, 2 the
+    largest tilt was 1.11, 1.00, 0.91 and 0.99 rad, nine times the bound or more (measured)."""
+    args = ["simulate", "shaker", "--params", "paper", "--freq-hz", "240", "--amp-um", "60", "--duration-s", "0.5"]
     js = last_json(run_cli(*args, "--json"))
     v = js["validity"]
     assert v["max_tilt_rad"] > SMALL_ANGLE_RAD and "small_angle" in v["flags"]
@@ -50,7 +53,8 @@ def test_a_calm_run_has_no_flags_and_the_sweep_counts_them(tmp_path):
     js = last_json(run_cli("simulate", "shaker", "--params", "published", "--duration-s", "0.2", "--json"))
     assert js["validity"]["flags"] == [] and js["validity"]["max_tilt_rad"] < 1e-3
     out = tmp_path / "s.h5"
-    sw = last_json(run_cli("simulate", "sweep", "shaker", "--params", "paper", "--freq-hz", "240,600",
+    # 600 Hz, 60 um: the robot stands (no flag); 240 Hz, 60 um: it tumbles (the test above)
+    sw = last_json(run_cli("simulate", "sweep", "shaker", "--params", "paper", "--freq-hz", "600,240",
                            "--amp-um", "60", "--duration-s", "0.5", "--workers", "1", "--out", str(out), "--json"))
     assert "small_angle" not in sw["points"][0]["flags"] and sw["points"][1]["flags"].get("small_angle") == 1
     from labkit.sim.sweep import SweepResult
