@@ -68,6 +68,24 @@ BURST_MARGIN_CYCLES = 2
 DRIVE_TOLERANCE = 0.2
 
 
+#: an idle level within this of 0 V counts as no DC on the load, V
+IDLE_TOLERANCE_V = 1e-6
+
+
+def burst_idle(amp_vpp: float, offset_v: float) -> tuple[float, float]:
+    """The burst start phase (deg) whose level is nearest 0 V, and that level (V).
+
+    A sine burst of whole cycles ends at its start phase and the output holds that level
+    until the next burst: ``offset_v + amp_vpp/2 * sin(phase)``. With ``|offset_v| <= amp_vpp/2``
+    (the in-chip drive's 2 V offset under 4 Vpp) it is 0 V; otherwise the nearest the sine comes.
+    """
+    half = amp_vpp / 2
+    if not half > 0:
+        return 0.0, offset_v
+    s = max(-1.0, min(1.0, -offset_v / half))
+    return math.degrees(math.asin(s)), offset_v + half * s
+
+
 class InterlockEnd(LimitError):
     """The run ended on an interlock (``on_interlock = "end"``); the file is complete up to it."""
 
@@ -105,6 +123,7 @@ class Runner:
         # bounded drive: each acquisition is a finite burst (settle + dwell cycles), armed per point
         self.bounded = False
         self.burst_n: int | None = None          # cycles of the armed burst
+        self.burst_phase: float | None = None    # its start phase, deg (sets the level between bursts)
         self.burst_end = 0.0                     # time.monotonic() when the last burst ends by itself
         self.record_delay: tuple[float, float] | None = None   # (record_s, delay_s) set on the scope
         self.drive_set_vpp: float | None = None  # amplitude commanded (for the measured-drive check)
@@ -247,11 +266,14 @@ class Runner:
             text = ("drive bounded: each acquisition is a burst of settle + dwell cycles "
                     f"(+{BURST_MARGIN_CYCLES}); the generator stops by itself at its end")
             offset = float(getattr(self.cfg, "offset_v", 0.0) or 0.0)
-            if offset:
-                text += f" (between bursts its output holds the {offset:g} V DC offset)"
-                _warn(f"between bursts the generator holds the {offset:g} V DC offset on the PZT (its output "
-                      "stays on); if this computer dies mid-run that DC stays until someone runs 'labkit off "
-                      f"{self.cfg.path}' or presses the generator's Output key (docs/faults.md)")
+            amp = float(getattr(self.cfg, "amp_vpp", 0.0) or 0.0)
+            phase, idle = burst_idle(amp, offset)
+            text += f"; between bursts the output idles at {idle:.3g} V (burst start phase {phase:g} deg)"
+            if abs(idle) > IDLE_TOLERANCE_V:
+                _warn(f"between bursts the generator holds {idle:.3g} V DC on the PZT (|offset_v| {abs(offset):g} V "
+                      f"> amp_vpp/2 = {amp / 2:g} V: no start phase reaches 0 V); if this computer dies mid-run "
+                      f"that DC stays until someone runs 'labkit off {self.cfg.path}' or presses the generator's "
+                      "Output key (docs/faults.md)")
         else:
             text = f"DRIVE NOT BOUNDED: {why}"
             if callable(getattr(fg, "burst_off", None)):
@@ -268,10 +290,11 @@ class Runner:
         if not self.bounded:
             return
         n = math.ceil((settle_s + hold_s) * freq_hz) + BURST_MARGIN_CYCLES
-        if n != self.burst_n:
+        phase = burst_idle(*(self.sine_set or (0.0, 0.0)))[0]
+        if (n, phase) != (self.burst_n, self.burst_phase):
             self._wait_burst_end()          # never re-arm a running burst
-            self.guard.funcgen.burst(n, trigger_source="BUS")
-            self.burst_n = n
+            self.guard.funcgen.burst(n, trigger_source="BUS", start_phase_deg=phase)
+            self.burst_n, self.burst_phase = n, phase
 
     def _wait_burst_end(self) -> None:
         """A trigger during a running burst is ignored by the generator: wait for its end."""
