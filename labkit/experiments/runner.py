@@ -47,6 +47,7 @@ from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, Si
 from labkit.experiments.rig import Rig
 from labkit.experiments.runfile import RunFile, WriteFailed
 from labkit.experiments.safety import (
+    RECONNECT_WINDOW_S,
     DriveGuard,
     Interlock,
     check_stop,
@@ -68,6 +69,8 @@ BURST_MARGIN_CYCLES = 2
 DRIVE_TOLERANCE = 0.2
 
 
+#: dropped links a run replaces (each within safety.RECONNECT_WINDOW_S) before a drop ends it
+MAX_RECONNECTS = 3
 #: an idle level within this of 0 V counts as no DC on the load, V
 IDLE_TOLERANCE_V = 1e-6
 
@@ -124,6 +127,7 @@ class Runner:
         self.bounded = False
         self.burst_n: int | None = None          # cycles of the armed burst
         self.burst_phase: float | None = None    # its start phase, deg (sets the level between bursts)
+        self.reconnects = 0                      # dropped links replaced so far (at most MAX_RECONNECTS)
         self.burst_end = 0.0                     # time.monotonic() when the last burst ends by itself
         self.record_delay: tuple[float, float] | None = None   # (record_s, delay_s) set on the scope
         self.drive_set_vpp: float | None = None  # amplitude commanded (for the measured-drive check)
@@ -192,7 +196,7 @@ class Runner:
                         self._move_spot(step.spot, drive_off=True)
                         continue
                     t0 = time.monotonic()
-                    self._point(step)
+                    self._point_reconnecting(step)
                     n_done += 1
                     bar.set_postfix_str(f"point {n_done}/{plan.points_total}", refresh=False)
                     bar.update(step.est_s)
@@ -401,6 +405,52 @@ class Runner:
                 self.file.add_records(group, p.index, dt, arrays)
             self.file.end_point(p.index, rows | {"time_unix_s": time.time(), "duration_s": time.time() - t_start})
         self._live_point(p, rows, loc_rows)
+
+    def _point_reconnecting(self, p: Any) -> None:
+        """:meth:`_point`; a link dropped during it is replaced within the reconnect window and the
+        point measured again from the start (none of its rows were written: nothing is lost
+        or doubled). Past :data:`MAX_RECONNECTS` per run, or when the link does not come back
+        in time, the error ends the run as before (drive off, exit 3; 4 if OFF is unconfirmed)."""
+        while True:
+            try:
+                self._point(p)
+                return
+            except DriveNotOff:
+                raise
+            except InstrumentError as exc:
+                role = self._dropped_role(exc)
+                if role is None or self.reconnects >= MAX_RECONNECTS:
+                    raise
+                self.reconnects += 1
+                self._event(f"point {p.index}: the {role}'s link dropped ({exc}); reconnecting "
+                            f"(window {RECONNECT_WINDOW_S:g} s)")
+                try:
+                    if role != "funcgen":
+                        self.guard.off(f"the {role}'s link dropped")
+                    self.rig.reconnect(role, RECONNECT_WINDOW_S)
+                except InstrumentError as again:
+                    self._event(f"the {role} did not come back: {again}")
+                    raise exc from again
+                self._forget_settings()
+                self._event(f"the {role} is back (same *IDN?); point {p.index} measured again")
+
+    def _dropped_role(self, exc: InstrumentError) -> str | None:
+        """The role (funcgen, scope) whose link the peer closed, if ``exc`` came from one; else None."""
+        for role, inst in (("funcgen", self.guard.funcgen), ("scope", self.rig.scope)):
+            if exc.instrument != getattr(inst, "name", None):
+                continue
+            dropped = getattr(getattr(inst, "transport", None), "dropped", None)
+            return role if dropped is not None and dropped() else None
+        return None
+
+    def _forget_settings(self) -> None:
+        """After a reconnect nothing programmed is assumed: the next point sends it all again."""
+        self.sine_set = self.freq_set = self.record_s = self.record_delay = None
+        self.burst_n = self.burst_phase = None
+        self.burst_end = 0.0
+        m = self.cfg.method
+        if m.kind == "stepped":
+            self.rig.set_record_points(math.ceil(m.dwell_cycles * self.cfg.scope.samples_per_cycle))
 
     @contextlib.contextmanager
     def _writing(self, index: int) -> Iterator[None]:
