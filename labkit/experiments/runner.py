@@ -33,6 +33,7 @@ import math
 import os
 import sys
 import time
+from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, cast
@@ -69,6 +70,8 @@ BURST_MARGIN_CYCLES = 2
 DRIVE_TOLERANCE = 0.2
 
 
+#: points whose timing a runner keeps (the bench reads them; a long run keeps no more)
+TIMING_POINTS = 256
 #: dropped links a run replaces (each within safety.RECONNECT_WINDOW_S) before a drop ends it
 MAX_RECONNECTS = 3
 #: an idle level within this of 0 V counts as no DC on the load, V
@@ -122,7 +125,8 @@ class Runner:
         self.record_s: float | None = None
         self.interlocks: list[dict[str, Any]] = []
         self.gain_um_per_vpp: dict[float, float] = {}       # shaker: tray response per drive volt
-        self.timing: list[dict[str, float]] = []            # per point: total, waited (for the bench)
+        # per point: total, waited (for the bench); the last TIMING_POINTS only (flat memory)
+        self.timing: deque[dict[str, float]] = deque(maxlen=TIMING_POINTS)
         # bounded drive: each acquisition is a finite burst (settle + dwell cycles), armed per point
         self.bounded = False
         self.burst_n: int | None = None          # cycles of the armed burst
