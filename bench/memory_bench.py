@@ -13,6 +13,7 @@ grow towards 32 MiB; run files are now opened with both bounded, ``labkit.experi
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -23,23 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-CONFIG = """
-[run]
-locations = ["knee"]
-{instruments}[drive]
-amp_vpp = 4.0
-offset_v = 2.0
-[frequencies]
-list_hz = [{freqs}]
-[method]
-settle_s = {settle_s}
-dwell_cycles = {dwell_cycles}
-[scope]
-drive_channel = 1
-velocity_channel = 2
-[vibrometer]
-scale_mm_s_per_v = 25.0
-"""
+# the same in-chip sweep as the overhead bench
+from run_bench import CONFIG
 
 #: labkit's own repository (the bench runs ``python -m labkit`` from there)
 REPO = Path(__file__).resolve().parents[1]
@@ -58,14 +44,12 @@ def rss_bytes(pid: int) -> int | None:
 
 
 def points_written(path: Path) -> int:
-    """Complete points in a run file another process is writing (0 while it cannot be read)."""
+    """Complete points in the run file the ``labkit`` process is writing (0 until it can be read)."""
     import h5py
 
-    try:
-        with h5py.File(path, "r", locking=False) as f:
-            return int(f["points/index"].shape[0])
-    except Exception:
-        return 0
+    with contextlib.suppress(Exception), h5py.File(path, "r", locking=False) as f:
+        return len(f["points/index"])
+    return 0
 
 
 def measure(points: int, warmup: int, settle_s: float, dwell_cycles: float) -> dict:
