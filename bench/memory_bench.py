@@ -3,10 +3,10 @@
 Prints ONE JSON object: the resident memory (``VmRSS`` of the ``labkit`` process, read from
 ``/proc``) against the points written (the run file, read without locking), sampled as the
 run goes, and its least-squares slope in bytes per point after a warm-up of ``--warmup``
-points. The lab runs in this process, so its own records do not count. Target: flat, under
-100 bytes a point (it was about 1.4 KB: HDF5 kept every chunk it wrote in its 8 MiB chunk cache
-per dataset and let its metadata cache, which holds the variable-length strings' global heap,
-grow towards 32 MiB; run files are now opened with both bounded, ``labkit.experiments.runfile``).
+points. The lab runs in this process, so its own records do not count. Target: under 100
+bytes a point. Measured on a loaded 2-core machine: 674 bytes a point over points 300-2000
+before HDF5's chunk and metadata caches were bounded (``labkit.experiments.runfile.open_for_writing``),
+436 after; 248 over points 1000-5000 after (docs/faults.md).
 
     python bench/memory_bench.py [--points 5000] [--warmup 500]
 """
