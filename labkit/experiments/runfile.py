@@ -292,9 +292,10 @@ def check_room(path: str | Path, need_bytes: float, *, key: str = "--out") -> No
                        "free some space or write elsewhere", file=path, key=key)
 
 
-#: HDF5's chunk cache per dataset of a run file being written: a few of its 256-row chunks (the
-#: default, 8 MiB a dataset, kept every chunk the run wrote: memory grew with every point)
-CHUNK_CACHE_BYTES = 64 * 1024
+#: HDF5's chunk cache per dataset of a run file being written: the 256-row chunk being appended
+#: to (4 KiB for complex rows) and one more (the default, 8 MiB a dataset, kept every chunk the
+#: run wrote, and 64 KiB still filled over the first 4000 points: memory grew with every point)
+CHUNK_CACHE_BYTES = 8 * 1024
 #: HDF5's metadata cache of a run file being written, capped (its default grows towards 32 MiB,
 #: holding the global heap of every variable-length string written: status, location, events)
 METADATA_CACHE_BYTES = 256 * 1024

@@ -104,6 +104,11 @@ def test_a_long_run_holds_bounded_caches_and_no_new_objects(tmp_path):
             assert run.f.id.get_mdc_size()[2] <= 1.1 * rf.METADATA_CACHE_BYTES     # HDF5 may overshoot a little
         assert h5py.h5f.get_obj_count(run.f.id, h5py.h5f.OBJ_ALL) == opened
         assert run.done == {}                       # what was finished at open, not a per-point record
+        chunks = []
+        run.f.visititems(lambda n, o: chunks.append(o.chunks[0] * o.dtype.itemsize)
+                         if isinstance(o, h5py.Dataset) and o.chunks else None)
+        # the chunk being appended to fits, and little more is kept (64 KiB still grew for 4000 points)
+        assert max(chunks) <= rf.CHUNK_CACHE_BYTES <= 2 * max(chunks)
     with rf.RunFile.resume(path, cfg, comparable(cfg)) as run:
         assert run.f.id.get_mdc_config().max_size == rf.METADATA_CACHE_BYTES
         assert len(run.done) == 3000
