@@ -6,8 +6,8 @@ run goes, and its least-squares slope in bytes per point after a warm-up of ``--
 points. The lab runs in this process, so its own records do not count. Target: under 100
 bytes a point. Measured on a loaded 2-core machine: 674 bytes a point over points 300-2000
 before HDF5's chunk and metadata caches were bounded (``labkit.experiments.runfile.open_for_writing``),
-436 after (a 64 KiB chunk cache); 248 over points 1000-5000 with it (docs/faults.md has the
-8 KiB figure).
+436 after (a 64 KiB chunk cache); over points 1000-5000, 248 with that cache and 141 with
+the 8 KiB one now used (docs/faults.md).
 
     python bench/memory_bench.py [--points 5000] [--warmup 500]
 """
