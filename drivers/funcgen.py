@@ -351,17 +351,33 @@ class FunctionGenerator(ScpiInstrument):
         self._send_all([self._src("SWE:STAT OFF")])
         self.state.setdefault("sweep", {})["on"] = False
 
-    def burst(self, ncycles: int, trigger_source: str = "BUS") -> None:
-        """Triggered burst of ``ncycles`` cycles of the current waveform, and enable it."""
+    def burst(self, ncycles: int, trigger_source: str = "BUS", start_phase_deg: float | None = None) -> None:
+        """Triggered burst of ``ncycles`` cycles of the current waveform, and enable it.
+
+        ``start_phase_deg`` (``BURS:PHAS``) is where each burst starts; a sine burst of whole
+        cycles also ends there, and between bursts the output holds that level (the 33220A and
+        33500 guides: "the voltage level corresponding to the starting burst phase"), so
+        ``offset + amp/2 * sin(phase)`` is what the load sees while idle (docs/faults.md).
+        None leaves the generator's own start phase.
+        """
         n = int(check_range("burst ncycles", ncycles, 1, 1e8, "cycles"))
         src = check_choice("trigger_source", trigger_source, ("IMM", "EXT", "BUS"))
+        phase = None if start_phase_deg is None else check_range("burst start_phase_deg", start_phase_deg,
+                                                                 -360.0, 360.0, "deg")
         if not self._amp_checked:
             raise LimitError("amplitude not set: burst() needs set_sine() first "
                              "(a checked amplitude); "
                              "nothing was sent", limit="amplitude not set")
-        self._send_all([self._src("BURS:MODE TRIG"), self._src(f"BURS:NCYC {n}"),
+        at = [] if phase is None else self._phase_commands(phase)
+        self._send_all([self._src("BURS:MODE TRIG"), self._src(f"BURS:NCYC {n}"), *at,
                         self._trig_source(src, "BURS"), self._burst_state(True)])
         self.state["burst"] = {"ncycles": n, "trigger_source": src, "on": True}
+        if phase is not None:
+            self.state["burst"]["start_phase_deg"] = phase
+
+    def _phase_commands(self, phase_deg: float) -> list[str]:
+        """The burst start phase in degrees (Keysight: ``UNIT:ANGL DEG`` first, -360..360)."""
+        return ["UNIT:ANGL DEG", self._src(f"BURS:PHAS {_num(phase_deg)}")]
 
     def burst_off(self) -> None:
         """Disable burst mode."""
@@ -450,6 +466,10 @@ class RigolDG1000Z(FunctionGenerator):
 
     def _burst_state(self, on: bool) -> str:
         return self._src(f"BURS {'ON' if on else 'OFF'}")
+
+    def _phase_commands(self, phase_deg: float) -> list[str]:
+        # DG1000Z: degrees only, 0 to 360 (no UNIT:ANGL)
+        return [self._src(f"BURS:PHAS {_num(phase_deg % 360.0)}")]
 
     def _sync_commands(self) -> list[str]:
         # each channel has its own rear-panel sync (:OUTPut<n>:SYNC[:STATe], :POLarity)

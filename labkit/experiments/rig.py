@@ -11,7 +11,7 @@ channel) or a :class:`PromptSpot` (asks the person at the terminal).
 from __future__ import annotations
 
 import sys
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO, cast
 
 from labkit.errors import DriveNotOff, InputError, InstrumentError, LimitError
 from labkit.experiments import kinds
@@ -83,6 +83,16 @@ def _open(spec: InstrumentSpec, **extra: Any) -> Any:
     return inst
 
 
+def _open_plain(spec: InstrumentSpec) -> Any:
+    """The generator's driver on a new link that skips the handshake (only OFF is sent on it)."""
+    from labkit.drivers.registry import driver_class
+
+    cls = driver_class(spec.model)
+    plain: Any = type(cls.__name__, (cls,), {"connect_on_open": False})
+    settings = {k: v for k, v in spec.settings.items() if not k.startswith("max")}
+    return plain.open(spec.resource, name=spec.role, **settings)
+
+
 def _off_without_handshake(spec: InstrumentSpec, exc: InstrumentError, config: str) -> InstrumentError:
     """The generator failed while connecting: send its OFF on a fresh link that skips the handshake.
 
@@ -93,18 +103,14 @@ def _off_without_handshake(spec: InstrumentSpec, exc: InstrumentError, config: s
     """
     import time
 
-    from labkit.drivers.registry import driver_class
 
     if exc.command == "open":       # no link at all (nothing answers there): exit 3, as before
         return exc
-    cls = driver_class(spec.model)
-    plain: Any = type(cls.__name__, (cls,), {"connect_on_open": False})
-    settings = {k: v for k, v in spec.settings.items() if not k.startswith("max")}
     last: Exception = exc
     t0 = time.monotonic()
     while True:
         try:
-            with plain.open(spec.resource, name=spec.role, **settings) as fg:   # __exit__: safe_off, close
+            with _open_plain(spec) as fg:   # __exit__: safe_off, close
                 fg.safe_off()
             return exc
         except (InstrumentError, InputError) as again:
@@ -114,6 +120,20 @@ def _off_without_handshake(spec: InstrumentSpec, exc: InstrumentError, config: s
         time.sleep(0.2)
     return DriveNotOff("funcgen", f"{spec.model} at {spec.resource}", str(last),
                        original=f"the generator failed while connecting: {exc}", config=config)
+
+
+def _reopen_within(spec: InstrumentSpec, window_s: float) -> Any:
+    """A new connection to ``spec``'s instrument, tried until ``window_s`` has passed."""
+    import time
+
+    t0 = time.monotonic()
+    while True:
+        try:
+            return _open(spec)
+        except InstrumentError:
+            if time.monotonic() - t0 > window_s:
+                raise
+        time.sleep(0.1)
 
 
 def _claim(inst: Any, spec: InstrumentSpec) -> None:
@@ -150,6 +170,7 @@ class Rig:
         self.velocity_channel = cfg.scope.velocity_channel
         self.scale_mm_s_per_v = cfg.scale_mm_s_per_v
         self.velocity_delay_s = 0.0
+        self._trigger_source = "EXT"        # resolved per scope model when the scope opens
         self._spot = spot
         self._funcgen_limits: dict[str, float] = {}
         self.velocity_vpd = cfg.scope.velocity_volts_per_div or 2 * VIB_OUTPUT_MAX_V / VERTICAL_DIVS
@@ -157,6 +178,7 @@ class Rig:
         self._points: int | None = None
         self._at: str | None = None                  # where the laser points
         self._range_at: dict[str, float] = {}        # velocity V/div last used per spot
+        self.identities: dict[str, str] = {}          # role -> *IDN? at open (a reconnect must match it)
 
     guard: DriveGuard
     scope: Scope
@@ -188,6 +210,7 @@ class Rig:
             except InstrumentError as exc:      # the handshake failed: is its output off?
                 raise _off_without_handshake(spec, exc, cfg.path) from exc
             _claim(fg, spec)
+            self.identities["funcgen"] = str(fg.identity)
             self.guard = DriveGuard(fg, reopen=self.reopen_funcgen, where=f"{spec.model} at {spec.resource}",
                                     config=cfg.path)
             # A generator may come up with its output on from an earlier session: off first.
@@ -195,26 +218,16 @@ class Rig:
             fg.set_load()         # the declared load_ohm (INF: the PZT, an amplifier input), read back
             scope = _open(inst["scope"])
             _claim(scope, inst["scope"])
+            self.identities["scope"] = str(scope.identity)
             self.scope = scope
             # EXT where the scope has it, else the drive; EXT on a model without it: ConfigError, nothing set
-            trig = scope.trigger_source_for(cfg.scope.trigger_source, self.drive_channel)
-            scope.poll_s = 0.002       # completion polls: fine-grained (the record time is slept)
+            self._trigger_source = scope.trigger_source_for(cfg.scope.trigger_source, self.drive_channel)
             vib = self.vibrometer = _open(inst["vibrometer"])
             vib.scale_mm_s_per_v = cfg.scale_mm_s_per_v
             self.scale_mm_s_per_v = float(vib.scale_mm_s_per_v)
             # the decoder's output lags the velocity: every point's phase is corrected for it
             self.velocity_delay_s = float(vib.signal_delay_s)
-            scope.setup_channel(self.velocity_channel, self.velocity_vpd, 0.0, "DC")
-            # EXT: the generator's TTL sync (phase zero of the sine, start of a sweep)
-            offset_v = setup.drive[1] if setup.drive is not None else 0.0
-            level = 1.0 if trig == "EXT" else (offset_v if trig == f"CHAN{self.drive_channel}" else 0.0)
-            if trig == "EXT":
-                fg.enable_sync()      # sync on, from the drive channel, read back (docs/instruments.md)
-            scope.set_trigger(trig, level, "POS")     # NORMal sweep: no trigger, no record
-            # scope.averages records per point, read back (1: a scope left averaging would blend points)
-            scope.set_averaging(cfg.scope.averages)
-            if setup.drive is not None:
-                self.on_drive_amplitude(*setup.drive)
+            self._set_up_scope()
             if setup.wants_camera:
                 self.camera = self._open_camera()
             if self._spot is None:
@@ -223,6 +236,59 @@ class Rig:
             self.close()
             raise
         return self
+
+    def _set_up_scope(self) -> None:
+        """The scope's channels, trigger and averaging, and the generator's sync (after open or a reconnect)."""
+        scope, cfg, setup = self.scope, self.cfg, self.setup
+        scope.poll_s = 0.002       # completion polls: fine-grained (the record time is slept)
+        scope.setup_channel(self.velocity_channel, self.velocity_vpd, 0.0, "DC")
+        trig = self._trigger_source
+        # EXT: the generator's TTL sync (phase zero of the sine, start of a sweep)
+        offset_v = setup.drive[1] if setup.drive is not None else 0.0
+        level = 1.0 if trig == "EXT" else (offset_v if trig == f"CHAN{self.drive_channel}" else 0.0)
+        if trig == "EXT":
+            self.funcgen.enable_sync()      # sync on, from the drive channel, read back (docs/instruments.md)
+        scope.set_trigger(trig, level, "POS")     # NORMal sweep: no trigger, no record
+        # scope.averages records per point, read back (1: a scope left averaging would blend points)
+        scope.set_averaging(cfg.scope.averages)
+        self._points = self.drive_vpd = None
+        if setup.drive is not None:
+            self.on_drive_amplitude(*setup.drive)
+
+    def reconnect(self, role: str, window_s: float) -> None:
+        """Replace the lost link to ``role`` (funcgen or scope) within ``window_s`` seconds.
+
+        The instrument that answers must be the one the run locked (``*IDN?`` maker, model
+        and serial); the generator's output must read back off (its OFF is sent first, on the
+        new link); then the settings the run depends on are sent again. Raises
+        InstrumentError when no link came back in time or another instrument answered.
+        """
+        from labkit.experiments.locks import identity_key
+
+        spec = self.cfg.instruments[role]
+        if role == "funcgen":
+            self.guard.final_off(f"the {role}'s link was lost: reconnecting")    # reopens, OFF confirmed
+            new: Any = self.guard.funcgen
+        else:
+            new = _reopen_within(spec, window_s)
+        got, want = str(new.identity), self.identities[role]
+        if (identity_key(got) or got) != (identity_key(want) or want):
+            raise InstrumentError(f"another instrument answered at {spec.resource} after the link was lost: "
+                                  f"{got[:60]!r}, not {want[:60]!r}", instrument=role, command="*IDN?")
+        if role == "funcgen":
+            if not getattr(self.guard.funcgen, "connect_on_open", True):   # the OFF's link without handshake
+                raise InstrumentError("the generator answers the OFF but not its handshake",
+                                      instrument=role, command="*IDN?")
+            if self.guard.funcgen.output_on:
+                raise InstrumentError("the output reads on after the reconnect's OFF", instrument=role,
+                                      command="OUTP?")
+            self.guard.funcgen.set_load()
+            if self.cfg.scope.trigger_source == "EXT":
+                self.guard.funcgen.enable_sync()
+        else:
+            old, self.scope = self.scope, new
+            old.close()
+            self._set_up_scope()
 
     def _open_camera(self) -> Camera:
         spec = self.cfg.instruments.get("camera")
@@ -254,8 +320,17 @@ class Rig:
         self.scope.set_trigger_at_start(length_s)
 
     def reopen_funcgen(self) -> FunctionGenerator:
-        """A new connection to the generator (the old link was lost); the guard adopts it."""
-        return _open(self.cfg.instruments["funcgen"], **self._funcgen_limits)
+        """A new connection to the generator (the old link was lost); the guard adopts it.
+
+        When the handshake fails on it (an error queue that does not answer, say), a link
+        without the handshake is returned instead: the OFF must get through all the same."""
+        spec = self.cfg.instruments["funcgen"]
+        try:
+            return _open(spec, **self._funcgen_limits)
+        except InstrumentError as exc:
+            if exc.command == "open":       # nothing answers at that address
+                raise
+            return cast(FunctionGenerator, _open_plain(spec))
 
     def close(self) -> None:
         for name in ("camera", "vibrometer", "scope", "control", "guard"):

@@ -292,6 +292,28 @@ def check_room(path: str | Path, need_bytes: float, *, key: str = "--out") -> No
                        "free some space or write elsewhere", file=path, key=key)
 
 
+#: HDF5's chunk cache per dataset of a run file being written: the 256-row chunk being appended
+#: to (4 KiB for complex rows) and one more (the default, 8 MiB a dataset, kept every chunk the
+#: run wrote, and 64 KiB still filled over the first 4000 points: memory grew with every point)
+CHUNK_CACHE_BYTES = 8 * 1024
+#: HDF5's metadata cache of a run file being written, capped (its default grows towards 32 MiB,
+#: holding the global heap of every variable-length string written: status, location, events)
+METADATA_CACHE_BYTES = 256 * 1024
+
+
+def open_for_writing(path: str | Path, mode: str) -> Any:
+    """``h5py.File(path, mode)`` with both of HDF5's caches bounded, so memory stays flat per point."""
+    import h5py
+
+    f = h5py.File(path, mode, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=521)
+    mdc = f.id.get_mdc_config()
+    mdc.set_initial_size = True
+    mdc.initial_size = mdc.max_size = METADATA_CACHE_BYTES
+    mdc.min_size = METADATA_CACHE_BYTES // 2
+    f.id.set_mdc_config(mdc)
+    return f
+
+
 def _link_into_place(tmp: Path, path: Path) -> None:
     """``tmp`` becomes ``path`` (FileExistsError if ``path`` appeared meanwhile: never overwrite)."""
     try:
@@ -349,7 +371,9 @@ class RunFile:
         self._tables: dict[str, _Table] = {}
         self.full = False                    # a write was refused for want of room
         self.events_dropped = 0              # events not written for want of room
-        self.done: dict[int, str] = {}       # plan index -> status of finished points
+        # plan index -> status of the points finished when the file was opened (the plan's input;
+        # not added to per point: a long run's memory stays flat)
+        self.done: dict[int, str] = {}
         idx = f["points/index"][...]
         st = f["points/status"].asstr()[...] if len(idx) else []
         for i, s in zip(idx, st):
@@ -366,7 +390,6 @@ class RunFile:
         for it (:func:`reserve_space`) before anything is written, then linked into place
         complete: ``path`` is a valid run file from its first byte on disk.
         """
-        import h5py
 
         path = Path(path)
         if path.exists():
@@ -378,7 +401,7 @@ class RunFile:
         try:
             # the earliest file format on purpose: 1.10's superblock marks a file open for writing, and
             # a killed run's file would then be refused by every reader until someone runs h5clear
-            f = h5py.File(tmp, "w")
+            f = open_for_writing(tmp, "w")
         except OSError as exc:
             tmp.unlink(missing_ok=True)
             if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
@@ -440,14 +463,13 @@ class RunFile:
         InputError
             Not a run file of this kind, or written for a different config.
         """
-        import h5py
 
         from labkit.experiments import kinds
 
         path = Path(path)
         open_h5(path, "r", kind=kinds.of(cfg).file_kind).close()          # kind and schema checks, clear errors
         try:
-            f = h5py.File(path, "r+")
+            f = open_for_writing(path, "r+")
         except OSError as exc:
             from labkit.h5io import why_unreadable
 
@@ -566,7 +588,6 @@ class RunFile:
         self._floor("a point's row")
         self._table("points").append(dict(row, index=index))
         self.f.flush()
-        self.done[int(index)] = str(row.get("status", "ok"))
 
     def finish(self, status: str) -> None:
         """The final status (and end time); needs a quarter of the reserve (kept for it)."""

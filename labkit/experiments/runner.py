@@ -34,6 +34,7 @@ import math
 import os
 import sys
 import time
+from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, cast
@@ -48,6 +49,7 @@ from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, Si
 from labkit.experiments.rig import Rig
 from labkit.experiments.runfile import RunFile, WriteFailed
 from labkit.experiments.safety import (
+    RECONNECT_WINDOW_S,
     DriveGuard,
     Interlock,
     check_stop,
@@ -70,6 +72,28 @@ BURST_MARGIN_CYCLES = 2
 #: a point whose measured drive differs from the commanded one by more than this (relative) is
 #: flagged: the generator was changed or switched off outside the run, or its cable came loose
 DRIVE_TOLERANCE = 0.2
+
+
+#: points whose timing a runner keeps (the bench reads them; a long run keeps no more)
+TIMING_POINTS = 256
+#: dropped links a run replaces (each within safety.RECONNECT_WINDOW_S) before a drop ends it
+MAX_RECONNECTS = 3
+#: an idle level within this of 0 V counts as no DC on the load, V
+IDLE_TOLERANCE_V = 1e-6
+
+
+def burst_idle(amp_vpp: float, offset_v: float) -> tuple[float, float]:
+    """The burst start phase (deg) whose level is nearest 0 V, and that level (V).
+
+    A sine burst of whole cycles ends at its start phase and the output holds that level
+    until the next burst: ``offset_v + amp_vpp/2 * sin(phase)``. With ``|offset_v| <= amp_vpp/2``
+    (the in-chip drive's 2 V offset under 4 Vpp) it is 0 V; otherwise the nearest the sine comes.
+    """
+    half = amp_vpp / 2
+    if not half > 0:
+        return 0.0, offset_v
+    s = max(-1.0, min(1.0, -offset_v / half))
+    return math.degrees(math.asin(s)), offset_v + half * s
 
 
 class InterlockEnd(LimitError):
@@ -105,10 +129,13 @@ class Runner:
         self.record_s: float | None = None
         self.interlocks: list[dict[str, Any]] = []
         self.gain_um_per_vpp: dict[float, float] = {}       # shaker: tray response per drive volt
-        self.timing: list[dict[str, float]] = []            # per point: total, waited (for the bench)
+        # per point: total, waited (for the bench); the last TIMING_POINTS only (flat memory)
+        self.timing: deque[dict[str, float]] = deque(maxlen=TIMING_POINTS)
         # bounded drive: each acquisition is a finite burst (settle + dwell cycles), armed per point
         self.bounded = False
         self.burst_n: int | None = None          # cycles of the armed burst
+        self.burst_phase: float | None = None    # its start phase, deg (sets the level between bursts)
+        self.reconnects = 0                      # dropped links replaced so far (at most MAX_RECONNECTS)
         self.burst_end = 0.0                     # time.monotonic() when the last burst ends by itself
         self.record_delay: tuple[float, float] | None = None   # (record_s, delay_s) set on the scope
         self.drive_set_vpp: float | None = None  # amplitude commanded (for the measured-drive check)
@@ -177,7 +204,7 @@ class Runner:
                         self._move_spot(step.spot, drive_off=True)
                         continue
                     t0 = time.monotonic()
-                    self._point(step)
+                    self._point_reconnecting(step)
                     n_done += 1
                     bar.set_postfix_str(f"point {n_done}/{plan.points_total}", refresh=False)
                     bar.update(step.est_s)
@@ -255,11 +282,14 @@ class Runner:
             text = ("drive bounded: each acquisition is a burst of settle + dwell cycles "
                     f"(+{BURST_MARGIN_CYCLES}); the generator stops by itself at its end")
             offset = float(getattr(self.cfg, "offset_v", 0.0) or 0.0)
-            if offset:
-                text += f" (between bursts its output holds the {offset:g} V DC offset)"
-                _warn(f"between bursts the generator holds the {offset:g} V DC offset on the PZT (its output "
-                      "stays on); if this computer dies mid-run that DC stays until someone runs 'labkit off "
-                      f"{self.cfg.path}' or presses the generator's Output key (docs/faults.md)")
+            amp = float(getattr(self.cfg, "amp_vpp", 0.0) or 0.0)
+            phase, idle = burst_idle(amp, offset)
+            text += f"; between bursts the output idles at {idle:.3g} V (burst start phase {phase:g} deg)"
+            if abs(idle) > IDLE_TOLERANCE_V:
+                _warn(f"between bursts the generator holds {idle:.3g} V DC on the PZT (|offset_v| {abs(offset):g} V "
+                      f"> amp_vpp/2 = {amp / 2:g} V: no start phase reaches 0 V); if this computer dies mid-run "
+                      f"that DC stays until someone runs 'labkit off {self.cfg.path}' or presses the generator's "
+                      "Output key (docs/faults.md)")
         else:
             text = f"DRIVE NOT BOUNDED: {why}"
             if callable(getattr(fg, "burst_off", None)):
@@ -276,10 +306,11 @@ class Runner:
         if not self.bounded:
             return
         n = math.ceil((settle_s + hold_s) * freq_hz) + BURST_MARGIN_CYCLES
-        if n != self.burst_n:
+        phase = burst_idle(*(self.sine_set or (0.0, 0.0)))[0]
+        if (n, phase) != (self.burst_n, self.burst_phase):
             self._wait_burst_end()          # never re-arm a running burst
-            self.guard.funcgen.burst(n, trigger_source="BUS")
-            self.burst_n = n
+            self.guard.funcgen.burst(n, trigger_source="BUS", start_phase_deg=phase)
+            self.burst_n, self.burst_phase = n, phase
 
     def _wait_burst_end(self) -> None:
         """A trigger during a running burst is ignored by the generator: wait for its end."""
@@ -386,6 +417,52 @@ class Runner:
                 self.file.add_records(group, p.index, dt, arrays)
             self.file.end_point(p.index, rows | {"time_unix_s": time.time(), "duration_s": time.time() - t_start})
         self._live_point(p, rows, loc_rows)
+
+    def _point_reconnecting(self, p: Any) -> None:
+        """:meth:`_point`; a link dropped during it is replaced within the reconnect window and the
+        point measured again from the start (none of its rows were written: nothing is lost
+        or doubled). Past :data:`MAX_RECONNECTS` per run, or when the link does not come back
+        in time, the error ends the run as before (drive off, exit 3; 4 if OFF is unconfirmed)."""
+        while True:
+            try:
+                self._point(p)
+                return
+            except DriveNotOff:
+                raise
+            except InstrumentError as exc:
+                role = self._dropped_role(exc)
+                if role is None or self.reconnects >= MAX_RECONNECTS:
+                    raise
+                self.reconnects += 1
+                self._event(f"point {p.index}: the {role}'s link dropped ({exc}); reconnecting "
+                            f"(window {RECONNECT_WINDOW_S:g} s)")
+                try:
+                    if role != "funcgen":
+                        self.guard.off(f"the {role}'s link dropped")
+                    self.rig.reconnect(role, RECONNECT_WINDOW_S)
+                except InstrumentError as again:
+                    self._event(f"the {role} did not come back: {again}")
+                    raise exc from again
+                self._forget_settings()
+                self._event(f"the {role} is back (same *IDN?); point {p.index} measured again")
+
+    def _dropped_role(self, exc: InstrumentError) -> str | None:
+        """The role (funcgen, scope) whose link the peer closed, if ``exc`` came from one; else None."""
+        for role, inst in (("funcgen", self.guard.funcgen), ("scope", self.rig.scope)):
+            if exc.instrument != getattr(inst, "name", None):
+                continue
+            dropped = getattr(getattr(inst, "transport", None), "dropped", None)
+            return role if dropped is not None and dropped() else None
+        return None
+
+    def _forget_settings(self) -> None:
+        """After a reconnect nothing programmed is assumed: the next point sends it all again."""
+        self.sine_set = self.freq_set = self.record_s = self.record_delay = None
+        self.burst_n = self.burst_phase = None
+        self.burst_end = 0.0
+        m = self.cfg.method
+        if m.kind == "stepped":
+            self.rig.set_record_points(math.ceil(m.dwell_cycles * self.cfg.scope.samples_per_cycle))
 
     @contextlib.contextmanager
     def _writing(self, index: int) -> Iterator[None]:

@@ -417,6 +417,11 @@ class VirtualLab:
         self.burst_timeline.append((start_s, instrument, channel, end_s))
         self._log(instrument, "state", f"burst on channel {channel} from {start_s:.6f} s to {end_s:.6f} s")
 
+    def output_volts(self, channel: int = 1) -> float:
+        """The generator's ``channel`` output now, volts into its high-impedance load (0 when off)."""
+        with self.funcgen.lock:
+            return float(self.funcgen.drive(channel).voltage(np.array([time.monotonic()]))[0])
+
     def drive_idle_after_s(self, channel: int = 1) -> float:
         """Lab time (s) after which the generator's ``channel`` carries no signal; inf if it runs on.
 

@@ -169,9 +169,13 @@ class Drive:
             return self.offset_v + self.amp_v * np.sin(phase)
         phase = 2 * np.pi * self.freq_hz * (t - self.t_epoch) + self.phase_rad
         wave = _shape(self.func, phase)
+        # between bursts a sine holds the level of its burst start phase (BURSt:PHASe: N whole
+        # cycles end where they began; the 33220A/33500 guides: "the voltage level corresponding
+        # to the starting burst phase"); other shapes rest at the offset
+        idle = float(np.sin(self.burst_phase_rad)) if self.func == "SIN" else 0.0
         if self.burst and self.burst_gated:
             # gated bursts follow the rear-panel Ext Trig input: nothing is wired to it in the lab
-            return np.full_like(t, self.offset_v)
+            return np.full_like(t, self.offset_v + self.amp_v * idle)
         if self.burst:
             gate = np.zeros(t.shape, dtype=bool)
             length = self.burst_length_s()
@@ -181,7 +185,7 @@ class Drive:
             for s in self.starts(float(t.min()), float(t.max())):
                 sel = (t >= s) & (t < s + length)
                 local[sel] = 2 * np.pi * self.freq_hz * (t[sel] - s) + self.burst_phase_rad
-            wave = np.where(gate, _shape(self.func, local), 0.0)
+            wave = np.where(gate, _shape(self.func, local), idle)
         return self.offset_v + self.amp_v * wave
 
     def _sweep_phase(self, t: np.ndarray) -> np.ndarray:

@@ -348,7 +348,8 @@ def test_unconfirmed_off_is_loud_then_labkit_off_recovers(tmp_path, lab):
     with h5py.File(out, "r") as f:
         assert f.attrs["status"].endswith("DRIVE OFF NOT CONFIRMED")
         assert any("DRIVE OFF NOT CONFIRMED" in e for e in f["events/text"].asstr()[...])
-    assert lab.output_state("funcgen", 1) is True         # no OFF got through: it really is on
+    # the OFF went out on a link without the handshake, but no *OPC? came back: not confirmed, so
+    # exit 4 all the same (whether the generator obeyed is for the person, or labkit off, to find)
     done = subprocess.run([sys.executable, "-m", "labkit", "off", str(cfg)], cwd=REPO, capture_output=True,
                           text=True, timeout=60)
     assert done.returncode == 0, done.stderr

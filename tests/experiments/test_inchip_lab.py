@@ -92,8 +92,9 @@ def test_lost_instrument_leaves_output_off(tmp_path, instrument, match):
                       settle_s=0.01, dwell_cycles=10, timeout_s=0.5)
     out = tmp_path / "lost.h5"
     with VirtualLab(seed=2) as lab:
-        # the link drops in the middle of the third point (after the drive is on)
-        lab.inject_fault(instrument, "drop", after=5 if instrument == "scope" else 9, match=match)
+        # the link drops in the middle of the third point (after the drive is on), and every new
+        # link too: a lost instrument (a single drop is reconnected: test_reconnect.py)
+        lab.inject_fault(instrument, "drop", after=5 if instrument == "scope" else 9, match=match, count=10**6)
         with pytest.raises(InstrumentError) as err:
             run_session("inchip", cfg, out, lab=lab, quiet=True)
         assert instrument in str(err.value)

@@ -82,3 +82,33 @@ def test_create_refuses_to_overwrite(tmp_path):
     path.write_bytes(b"")
     with pytest.raises(InputError, match="already exists"):
         rf.RunFile.create(path, cfg, comparable(cfg), 1)
+
+
+def test_a_long_run_holds_bounded_caches_and_no_new_objects(tmp_path):
+    """Memory flat per point, by its causes (the RSS slope itself: bench/memory_bench.py): a run
+    file is written with HDF5's chunk cache and metadata cache bounded, the metadata cache stays
+    under its cap while thousands of points (and their strings) are written, and no HDF5
+    object is left open per point. With h5py's defaults the chunk cache was 8 MiB a dataset
+    and the metadata cache held 400 KB after these points (its cap 2 MiB, growing to 32 MiB)."""
+    cfg = load_inchip(INCHIP)
+    path = tmp_path / "run.h5"
+    with rf.RunFile.create(path, cfg, comparable(cfg), 3000) as run:
+        assert run.f.id.get_access_plist().get_cache()[2] == rf.CHUNK_CACHE_BYTES
+        assert run.f.id.get_mdc_config().max_size == rf.METADATA_CACHE_BYTES
+        _inchip_point(run, 0, "body", 300.0)
+        run.event("drive on")
+        opened = h5py.h5f.get_obj_count(run.f.id, h5py.h5f.OBJ_ALL)
+        for i in range(1, 3000):
+            _inchip_point(run, i, "body", 300.0 + i)
+            run.event("drive off (between points)")
+            assert run.f.id.get_mdc_size()[2] <= 1.1 * rf.METADATA_CACHE_BYTES     # HDF5 may overshoot a little
+        assert h5py.h5f.get_obj_count(run.f.id, h5py.h5f.OBJ_ALL) == opened
+        assert run.done == {}                       # what was finished at open, not a per-point record
+        chunks = []
+        run.f.visititems(lambda n, o: chunks.append(o.chunks[0] * o.dtype.itemsize)
+                         if isinstance(o, h5py.Dataset) and o.chunks else None)
+        # the chunk being appended to fits, and little more is kept (64 KiB still grew for 4000 points)
+        assert max(chunks) <= rf.CHUNK_CACHE_BYTES <= 2 * max(chunks)
+    with rf.RunFile.resume(path, cfg, comparable(cfg)) as run:
+        assert run.f.id.get_mdc_config().max_size == rf.METADATA_CACHE_BYTES
+        assert len(run.done) == 3000
