@@ -35,8 +35,8 @@ def _random_case(i: int) -> tuple[RobotParams, Shaker | PZT]:
     return p, sc
 
 
-#: PZT 1452 Hz / 17.5 V on a draw of the paper robot: 2.46 and 19.2 mm/s from starts 0.05 um apart at dt/16.
-CHAOTIC_CASE = 15
+#: Shaker 432 Hz / 97 um on a draw of the paper robot: -11.90 and -9.75 mm/s from starts 0.05 um apart at dt/16.
+CHAOTIC_CASE = 22
 
 
 def _within(v: float, ref: float) -> bool:
@@ -80,13 +80,11 @@ def test_modal_masses_heavier_than_the_robot_are_refused():
 
 # --------------------------------------------------------------------------- the control against dt -> 0
 
-@pytest.mark.parametrize("i", [1, 10, 13])
+@pytest.mark.parametrize("i", [1, 8, 10])
 def test_runs_off_at_the_default_step_are_refined_to_the_limit(i):
-    """PZT 1023 Hz / 26.8 V and 893 Hz / 16.7 V on two draws of the paper robot: at the
-    default step 6.6 % and 10 % off their dt/16 values. Shaker 950 Hz / 76 um on another:
-    1.98 mm/s at the default step, 0.001 at dt/16 (the coarse step makes the robot jump, and
-    starts 0.05 um apart scatter at h and h/2: not chaos, which would persist as dt -> 0).
-    At the default settings all within 3 % or 0.02 mm/s."""
+    """Draws of the paper robot whose default step is off its dt/16 value: PZT 1023 Hz / 26.8 V
+    (50.74 mm/s against 53.83, 5.7 %), and two shaker drives where the robot hops (0.3 s runs).
+    At the default settings, refined, all within 3 % or 0.02 mm/s of dt/16."""
     p, sc = _random_case(i)
     limit = _limit(p, sc, i)
     plain = simulate(p, sc, 0.3, seed=i, error_control="off").mean_speed_mm_s
@@ -130,7 +128,7 @@ def test_a_converged_run_carries_its_estimate_everywhere(tmp_path):
 # --------------------------------------------------------------------------- sweeps: a sample checked
 
 def test_a_sweep_checks_its_nominal_robot_and_reruns_the_draws_where_it_refined(tmp_path):
-    p, sc = _random_case(13)
+    p, sc = _random_case(1)
     s = sweep(p, sc, "voltage_v", [sc.voltage_v, 2.0], draws=2, duration_s=0.3, scheduler="serial", quiet=True)
     assert s.convergence.shape == (2, 2) and s.convergence[0, 0] == "refined"
     assert list(s.convergence[:, 1]) == ["sampled", "sampled"]
