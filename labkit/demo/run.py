@@ -325,7 +325,13 @@ def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = Fa
             run_scale = Scale(float(np.mean(mm)), float(max(np.std(mm), np.mean([d for _, d in scales]))),
                               "other videos of the run", {"videos": len(scales)})
             for p, video, track_path, _exc in unscaled:
-                summ = track_file(video, out=track_path, quiet=True, scale=run_scale).summary
+                try:
+                    summ = track_file(video, out=track_path, quiet=True, scale=run_scale).summary
+                except InputError as exc:
+                    # a robot that never moved is set aside like dust: no track, and the point is left
+                    # out of the speed comparison (its video and run point stay)
+                    notes.append(f"{video.name}: not tracked, the robot did not move in it ({exc.message})")
+                    continue
                 _record_track(p, track_path, summ)
                 notes.append(f"{video.name}: scaled by the other videos of the run "
                              f"({run_scale.mm_per_px:.5f} mm/px; the robot did not walk enough to measure it)")
