@@ -172,7 +172,7 @@ class Oscilloscope(ScpiInstrument):
         if src == "EXT" and not self.has_ext_trigger:
             from labkit.errors import ConfigError
             raise ConfigError(f"trigger_source = 'EXT', but the {self._model_name()} has no external trigger "
-                              "input; nothing was sent", key="scope.trigger_source",
+                              "input; nothing was set", key="scope.trigger_source",
                               expected=f"CHAN1..CHAN{self.n_channels} (or no setting: the drive channel; "
                                        "the generator's sync can go into a spare channel)")
         if src.startswith("CHAN") and src[4:].isdigit():
@@ -421,6 +421,10 @@ class RigolDS1000Z(Oscilloscope):
 
     def settings(self) -> dict[str, Any]:
         return {**super().settings(), "max_block_bytes": self.max_block_bytes}
+
+    #: the four-channel DS1000Z models (no EXT TRIG input): a config that names one is refused before
+    #: anything is sent when it asks for EXT (:mod:`labkit.experiments.config`)
+    NO_EXT_MODELS = ("DS1054Z", "DS1074Z", "DS1104Z")
 
     @property
     def has_ext_trigger(self) -> bool:

@@ -495,6 +495,9 @@ def _scope(t: Table, model: str = "") -> ScopeSetup:
     if d == v:
         raise t.error("velocity_channel", f"same channel as drive_channel ({d})", "a different scope channel")
     trig = t.string("trigger_source", default=None, choices=("EXT", "CHAN1", "CHAN2", "CHAN3", "CHAN4"))
+    if trig == "EXT" and _no_ext_input(model):
+        raise t.error("trigger_source", f"the {model} has no external trigger input",
+                      "CHAN1..CHAN4 (or no setting: the drive channel)")
     return ScopeSetup(d, v,
                       t.number("drive_volts_per_div", default=None, unit="V/div", minimum=0, exclusive_minimum=True),
                       t.number("velocity_volts_per_div", default=None, unit="V/div", minimum=0,
@@ -503,6 +506,14 @@ def _scope(t: Table, model: str = "") -> ScopeSetup:
                       t.number("samples_per_cycle", default=100.0, minimum=8, maximum=MAX_SAMPLES_PER_CYCLE),
                       t.integer("max_points", default=100_000, minimum=100, maximum=8_000_000),
                       *_acquisition(t, model))
+
+
+def _no_ext_input(model: str) -> bool:
+    """A scope model named in the config that has no EXT TRIG input (the four-channel DS1000Z)."""
+    from labkit.drivers.scope import RigolDS1000Z
+
+    name = "".join(ch for ch in str(model).upper() if ch.isalnum())
+    return name in RigolDS1000Z.NO_EXT_MODELS
 
 
 def _acquisition(t: Table, model: str) -> tuple[str, int]:

@@ -186,6 +186,24 @@ def test_averaging_takes_one_triggered_record_per_average_and_lowers_the_noise(l
     assert sc.query(":WAV:PRE?").split(",")[3] == "+16"
 
 
+def test_ext_on_a_config_naming_a_four_channel_ds1000z_sends_nothing(tmp_path):
+    """A config whose scope model is the DS1104Z itself and asks for EXT: exit 2 at the config's check,
+    one line naming scope.trigger_source, and not one byte reached any instrument."""
+    from clihelpers import run_cli
+
+    with VirtualLab(seed=16, funcgen_model="DG1062Z", scope_model="DS1104Z") as lab:
+        instruments = instruments_toml(lab.resources, scope_model="DS1104Z").replace('"33500B"', '"DG1000Z"')
+        text = stepped_inchip_toml(instruments, [800.0]).replace(
+            "velocity_channel = 2\n", 'velocity_channel = 2\ntrigger_source = "EXT"\n')
+        cfg = tmp_path / "inchip.toml"
+        cfg.write_text(text)
+        proc = run_cli("sweep", "inchip", str(cfg), "--out", str(tmp_path / "run.h5"), check=2, timeout=120)
+        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1 and "scope.trigger_source" in lines[0] and "DS1104Z has no external trigger" in lines[0]
+        assert not [x for x in lab.log if x[2] == "rx"], lab.log[:5]
+        assert not (tmp_path / "run.h5").exists()
+
+
 def test_ext_on_a_four_channel_ds1000z_is_refused_before_any_scope_setting(tmp_path):
     """The DS1104Z has no EXT input (DS :TRIGger:EDGe:SOURce: CHANnel1-4, AC): a config asking for EXT
     ends with one line naming scope.trigger_source, exit 2 (a run and labkit check alike); the scope
