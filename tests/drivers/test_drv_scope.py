@@ -126,7 +126,7 @@ def test_trigger_source_default_and_ext_per_model(cls, model, channels, default,
         with pytest.raises(LimitError, match="scope channel"):
             sc.set_trigger(f"CHAN{channels + 1}", 0.0)
         if not ext:
-            with pytest.raises(ConfigError, match=f"the {model} has no external trigger input; nothing was sent"):
+            with pytest.raises(ConfigError, match=f"the {model} has no external trigger input; nothing was set"):
                 sc.set_trigger("EXT", 1.0)
             with pytest.raises(ConfigError, match="scope.trigger_source"):
                 sc.trigger_source_for("EXT", 1)
