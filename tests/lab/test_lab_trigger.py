@@ -186,20 +186,28 @@ def test_averaging_takes_one_triggered_record_per_average_and_lowers_the_noise(l
     assert sc.query(":WAV:PRE?").split(",")[3] == "+16"
 
 
+def _ext_refused(lab: VirtualLab, tmp_path, scope_model: str):
+    """An in-chip config on the lab's DS1104Z (named ``scope_model`` in the config) asking for EXT:
+    the run exits 2 with one line naming scope.trigger_source. Returns the config's path and text."""
+    from clihelpers import run_cli
+
+    instruments = instruments_toml(lab.resources, scope_model=scope_model).replace('"33500B"', '"DG1000Z"')
+    text = stepped_inchip_toml(instruments, [800.0]).replace(
+        "velocity_channel = 2\n", 'velocity_channel = 2\ntrigger_source = "EXT"\n')
+    cfg = tmp_path / "inchip.toml"
+    cfg.write_text(text)
+    proc = run_cli("sweep", "inchip", str(cfg), "--out", str(tmp_path / "run.h5"), check=2, timeout=120)
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "scope.trigger_source" in lines[0] and "DS1104Z has no external trigger" in lines[0]
+    return cfg, text
+
+
 def test_ext_on_a_config_naming_a_four_channel_ds1000z_sends_nothing(tmp_path):
     """A config whose scope model is the DS1104Z itself and asks for EXT: exit 2 at the config's check,
     one line naming scope.trigger_source, and not one byte reached any instrument."""
-    from clihelpers import run_cli
 
     with VirtualLab(seed=16, funcgen_model="DG1062Z", scope_model="DS1104Z") as lab:
-        instruments = instruments_toml(lab.resources, scope_model="DS1104Z").replace('"33500B"', '"DG1000Z"')
-        text = stepped_inchip_toml(instruments, [800.0]).replace(
-            "velocity_channel = 2\n", 'velocity_channel = 2\ntrigger_source = "EXT"\n')
-        cfg = tmp_path / "inchip.toml"
-        cfg.write_text(text)
-        proc = run_cli("sweep", "inchip", str(cfg), "--out", str(tmp_path / "run.h5"), check=2, timeout=120)
-        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-        assert len(lines) == 1 and "scope.trigger_source" in lines[0] and "DS1104Z has no external trigger" in lines[0]
+        _ext_refused(lab, tmp_path, "DS1104Z")
         assert not [x for x in lab.log if x[2] == "rx"], lab.log[:5]
         assert not (tmp_path / "run.h5").exists()
 
@@ -211,14 +219,7 @@ def test_ext_on_a_four_channel_ds1000z_is_refused_before_any_scope_setting(tmp_p
     from clihelpers import run_cli
 
     with VirtualLab(seed=15, funcgen_model="DG1062Z", scope_model="DS1104Z") as lab:
-        instruments = instruments_toml(lab.resources, scope_model="DS1000Z").replace('"33500B"', '"DG1000Z"')
-        text = stepped_inchip_toml(instruments, [800.0]).replace(
-            "velocity_channel = 2\n", 'velocity_channel = 2\ntrigger_source = "EXT"\n')
-        cfg = tmp_path / "inchip.toml"
-        cfg.write_text(text)
-        proc = run_cli("sweep", "inchip", str(cfg), "--out", str(tmp_path / "run.h5"), check=2, timeout=120)
-        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-        assert len(lines) == 1 and "scope.trigger_source" in lines[0] and "DS1104Z has no external trigger" in lines[0]
+        cfg, text = _ext_refused(lab, tmp_path, "DS1000Z")
         sent = [text for _, inst, d, text in lab.log if inst == "scope" and d == "rx"]
         assert sent and all(t in ("*IDN?", ":SYST:ERR?", "*CLS") for t in sent), sent
         assert not any(on for _, inst, _, on in lab.output_timeline if inst == "funcgen")
