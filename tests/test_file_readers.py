@@ -28,7 +28,6 @@ EXEMPT: dict[str, str] = {
 
 #: Second readers of a kind that exist today: module -> the kind and where its reader is.
 PENDING: dict[str, str] = {
-    "labkit/sim/sweep.py": "sim_sweep: SweepResult.from_h5 beside labkit.files.kinds.read_sim_sweep",
     "analysis/tracking/output.py": "track: load_track_h5 beside labkit.files.kinds.read_track",
 }
 
@@ -95,3 +94,17 @@ def test_the_reader_layer_reads_every_kind_labkit_writes() -> None:
     source = (ROOT / "labkit" / "files" / "__init__.py").read_text(encoding="utf-8")
     for kind in H5_KINDS:
         assert f'"{kind}"' in source.split("def open_file", 1)[1], kind
+
+
+def test_every_kind_labkit_stamps_is_one_labkit_open_reads() -> None:
+    """Every ``stamp(f, "<kind>")`` in the tree (the writers' kind attribute) is a kind of H5_KINDS."""
+    from labkit.files import H5_KINDS
+
+    stamped = set()
+    for path in _modules():
+        for n in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(n, ast.Call) and getattr(n.func, "id", getattr(n.func, "attr", "")) == "stamp" \
+                    and len(n.args) > 1 and isinstance(n.args[1], ast.Constant):
+                stamped.add(n.args[1].value)
+    assert {"sim_sweep", "sim_regime_map", "track"} <= stamped, stamped      # the scanner finds the writers
+    assert stamped <= set(H5_KINDS), f"written but not read by labkit.open: {sorted(stamped - set(H5_KINDS))}"

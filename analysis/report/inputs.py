@@ -443,13 +443,9 @@ def load_sim(path: str | Path) -> SweepData | SimRunData:
     path = Path(path)
     kind = file_kind(path)
     if kind == "sim_sweep":
-        from labkit.sim.sweep import SweepResult
+        from labkit.files import read_sweep_result
 
-        try:
-            s = SweepResult.from_h5(path)
-        except KeyError as exc:
-            raise InputError(f"incomplete sweep file: {exc}", file=path) from None
-        return SweepData(str(path), s)
+        return SweepData(str(path), read_sweep_result(path))
     if kind == "sim_result":
         return _load_sim_result(path)
     raise InputError(f"this file holds {kind!r}", file=path, key="kind",

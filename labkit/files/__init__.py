@@ -16,12 +16,15 @@ simulated sweep (``.h5``)    ``sim_sweep``        :class:`~labkit.files.kinds.Si
 scenario points (``.h5``)    ``sim_points``       :class:`~labkit.files.kinds.SimSweep`
 scenario sweeps (``.h5``)    ``sim_sweep_set``    :class:`~labkit.files.kinds.SimSweepSet`
 scenario runs (``.h5``)      ``sim_ablations``    :class:`~labkit.files.kinds.SimRunSet`
+regime map (``.h5``)         ``sim_regime_map``   :class:`~labkit.files.regimes.SimRegimeMap`
 robot parameters (``.toml``) ``robot_params``     :class:`~labkit.files.kinds.RobotParameters`
 experiment config (``.toml``) ``config_inchip``,  :class:`~labkit.files.kinds.ExperimentConfig`
                              ``config_shaker``
 video (``.mkv``, ``.avi``)   ``video``            :class:`~labkit.files.kinds.Video`
 ===========================  ===================  ==========================================
 
+A simulated sweep is read back as the simulator's :class:`~labkit.sim.SweepResult` by
+:func:`~labkit.files.sweeps.read_sweep_result`.
 A table of measured speeds (CSV, or HDF5 datasets of any kind) is read by
 :func:`~labkit.files.speeds.read_speed_table`; :func:`file_kind` reads only an HDF5 file's ``kind``.
 
@@ -46,17 +49,20 @@ from labkit.files.kinds import (
     Track,
     Video,
 )
+from labkit.files.regimes import SimRegimeMap
 from labkit.files.runs import InchipRun, RunFile, ShakerRun, read_run_file
 from labkit.files.speeds import SpeedTable, read_speed_table
+from labkit.files.sweeps import read_sweep_result
 
 __all__ = ["open_file", "LabFile", "RunFile", "InchipRun", "ShakerRun", "Track", "ModalFit", "SimRun",
-           "SimSweep", "SimSweepSet", "SimRunSet", "RobotParameters", "ExperimentConfig", "Video",
-           "read_run_file", "SpeedTable", "read_speed_table", "file_kind", "VIDEO_SUFFIXES", "H5_KINDS"]
+           "SimSweep", "SimSweepSet", "SimRunSet", "SimRegimeMap", "RobotParameters", "ExperimentConfig", "Video",
+           "read_run_file", "SpeedTable", "read_speed_table", "read_sweep_result", "file_kind", "VIDEO_SUFFIXES",
+           "H5_KINDS"]
 
 VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4")
 #: the ``kind`` attributes of the HDF5 files labkit writes
 H5_KINDS = ("run_inchip", "run_shaker", "track", "modal_fit", "sim_result", "sim_sweep", "sim_points",
-            "sim_sweep_set", "sim_ablations")
+            "sim_sweep_set", "sim_ablations", "sim_regime_map")
 
 
 def file_kind(path: str | os.PathLike[str]) -> str:
@@ -110,6 +116,10 @@ def open_file(path: str | os.PathLike[str]) -> LabFile:
             return kinds.read_sim_sweep_set(p, f)
         elif kind == "sim_ablations":
             return kinds.read_sim_run_set(p, f)
+        elif kind == "sim_regime_map":
+            from labkit.files.regimes import read_sim_regime_map
+
+            return read_sim_regime_map(p, f)
         else:
             raise InputError(f"not a file labkit reads: kind {kind!r}", file=p, key="kind",
                              expected=", ".join(H5_KINDS))

@@ -185,7 +185,8 @@ class SweepResult:
                 "step_fraction": float(self.meta.get("step_fraction", 1.0)), "points": points}
 
     def to_h5(self, path: str | Path) -> Path:
-        """Write the sweep as an HDF5 file of kind ``"sim_sweep"``; returns the path."""
+        """Write the sweep as an HDF5 file of kind ``"sim_sweep"``; returns the path (read it back with
+        :func:`labkit.files.read_sweep_result`)."""
         import h5py
 
         from labkit.h5io import label_dimensions, stamp
@@ -228,22 +229,6 @@ class SweepResult:
         if self.flags is not None:
             put(g, "flags", self.flags.astype("S128"), "label", axes="point, draw",
                 description="validity flags per run, comma-separated (docs/model.md, Error control and validity)")
-
-    @classmethod
-    def from_h5(cls, path: str | Path) -> SweepResult:
-        """Read back a file written by :meth:`to_h5`."""
-        from labkit.h5io import get_json, open_h5
-
-        with open_h5(path, kind="sim_sweep") as f:
-            return cls(quantity=str(f.attrs["quantity"]), values=f["values"][()],
-                       speeds_mm_s=f["speeds_mm_s"][()], contact_fraction=f["contact_fraction"][()],
-                       patterns=f["patterns"][()].astype(str), impacts=f["impacts"][()],
-                       scenario=get_json(f, "scenario_json", {}), params_toml=str(f.attrs["params_toml"]),
-                       meta=get_json(f, "meta_json", {}),
-                       flags=f["flags"][()].astype(str) if "flags" in f else None,
-                       convergence=f["convergence"][()].astype(str) if "convergence" in f else None,
-                       step_error_mm_s=f["step_error_mm_s"][()] if "step_error_mm_s" in f else None,
-                       dt_s=f["dt_s"][()] if "dt_s" in f else None)
 
 
 # --------------------------------------------------------------------------- helpers

@@ -14,6 +14,7 @@ import h5py
 import numpy as np
 import pytest
 
+from labkit.errors import InputError
 from labkit.sim import PZT, Shaker, simulate
 from labkit.sim.presets import load
 from labkit.sim.regime import (
@@ -141,6 +142,34 @@ def test_cli_regime_map_h5(tmp_path):
         assert f.attrs["kind"] == "sim_regime_map"
         assert f["regime"][()].astype(str).tolist() == [["still"]]
         assert f["voltage_v"].attrs["units"] == "V" and np.isfinite(f["speed_mm_s"][()]).all()
+
+
+def test_cli_regime_map_read_back_by_labkit_open_and_info(tmp_path):
+    """The map the CLI writes is one kind ``labkit.open`` and ``labkit info`` read: the same regimes,
+    speeds and counts as the command printed, with the grid's units."""
+    import labkit
+
+    out = tmp_path / "map.h5"
+    js = last_json(run_cli("simulate", "regime-map", "shaker", "--params", "paper", "--freq-hz", "240",
+                           "--amp-um", "0.001,60", "--duration-s", "0.2", "--workers", "1", "--out", str(out),
+                           "--json"))
+    m = labkit.open(out)
+    assert type(m).__name__ == "SimRegimeMap" and m.kind == "sim_regime_map" and m.drive == "shaker"
+    assert m.regimes.tolist() == js["regimes"] == [["still", "jumping"]]
+    np.testing.assert_allclose(m.speeds_mm_s, js["speeds_mm_s"], rtol=1e-12)
+    assert m.flags.tolist() == js["flags"] and m.counts() == js["counts"]
+    assert m.level_name == "amp_um" and m.level.tolist() == [0.001, 60.0] and m.freq_hz.tolist() == [240.0]
+    assert m.units == {"freq_hz": "Hz", "amp_um": "um", "regime": "label", "speed_mm_s": "mm/s", "flags": "label"}
+    assert m.meta["duration_s"] == 0.2 and m.meta["params"] == "paper"
+    assert m.to_xarray()["regime"].sel(freq_hz=240.0, amp_um=60.0).item() == "jumping"
+    info = last_json(run_cli("info", str(out), "--json"))
+    assert info["content"]["kind"] == "sim_regime_map" and info["content"]["counts"] == js["counts"]
+
+    with h5py.File(out, "r+") as f:                 # a grid whose regimes lost a column: named
+        del f["regime"]
+        f["regime"] = np.array([[b"still"]])
+    with pytest.raises(InputError, match=r"regime.*\(1, 2\)"):
+        labkit.open(out)
 
 
 @pytest.mark.parametrize("args, named", [

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from labkit.errors import InputError
-from labkit.sim import PZT, RobotParams, Shaker, SweepResult, simulate, sweep
+from labkit.files import read_sweep_result
+from labkit.sim import PZT, RobotParams, Shaker, simulate, sweep
 from labkit.sim.core import default_dt
 from labkit.sim.uncertainty import DEFAULT_TABLE, check_table, draw_params
 
@@ -114,9 +115,17 @@ def test_to_h5_kind_units_and_params(tmp_path, params, small_sweep):
     for f in dataclasses.fields(params):
         if f.name != "provenance":
             assert getattr(back_params, f.name) == getattr(params, f.name), f.name
-    back = SweepResult.from_h5(path)
+    back = read_sweep_result(path)          # through labkit.open, the kind's one reader
     np.testing.assert_array_equal(back.patterns, small_sweep.patterns)
+    for name in ("values", "speeds_mm_s", "contact_fraction", "impacts", "flags", "convergence", "dt_s"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(small_sweep, name), err_msg=name)
+    assert back.meta == small_sweep.meta and back.scenario == small_sweep.scenario
     assert back.summary()["points"] == small_sweep.summary()["points"]
+    with h5py.File(tmp_path / "other.h5", "w") as f:       # another kind: named, not half-read
+        f.attrs["kind"] = "sim_points"
+        f["values"] = [1.0]
+    with pytest.raises(InputError, match="not a simulated sweep: kind 'sim_points'"):
+        read_sweep_result(tmp_path / "other.h5")
 
 
 def test_mass_sweep_pzt_and_shaker_mass_via_params(params):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from labkit.files import read_sweep_result
 from labkit.sim import RobotParams, Shaker, core, simulate
 from labkit.sim.result import SMALL_ANGLE_RAD, validity
 from tests.conftest import last_json, run_cli
@@ -57,7 +58,6 @@ def test_a_calm_run_has_no_flags_and_the_sweep_counts_them(tmp_path):
     sw = last_json(run_cli("simulate", "sweep", "shaker", "--params", "paper", "--freq-hz", "600,240",
                            "--amp-um", "60", "--duration-s", "0.5", "--workers", "1", "--out", str(out), "--json"))
     assert "small_angle" not in sw["points"][0]["flags"] and sw["points"][1]["flags"].get("small_angle") == 1
-    from labkit.sim.sweep import SweepResult
 
-    back = SweepResult.from_h5(out)
+    back = read_sweep_result(out)
     assert "small_angle" in back.flags[1, 0] and back.summary()["points"][1]["flags"] == sw["points"][1]["flags"]
