@@ -20,10 +20,17 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 from labkit.errors import InputError
 from labkit.outputs import atomic_output, check_output_dir, check_outputs
+
+if TYPE_CHECKING:
+    from labkit.sim.core import DtCheck
+    from labkit.sim.regime import EdgeReport, Regime
+    from labkit.sim.result import SimResult
+    from labkit.sim.sweep import SweepResult
 
 NAME = "simulate"
 HELP = "run the hybrid microrobot simulator: shaker or PZT runs, sweeps with Monte Carlo, named scenarios"
@@ -230,41 +237,41 @@ def _announce(args: argparse.Namespace) -> None:
 
 # --------------------------------------------------------------------------- run
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> dict[str, object]:
     _announce(args)
+    out: dict[str, object]
     if args.sim_command in ("shaker", "pzt"):
-        out = _run_single(args)
+        out = dict(_run_single(args))
     elif args.sim_command == "sweep":
-        out = _run_sweep(args)
+        out = dict(_run_sweep(args))
     elif args.sim_command == "modes":
-        out = _run_modes(args)
+        out = dict(_run_modes(args))
     elif args.sim_command == "regime-map":
         from labkit.commands.simulate_regime import run_regime_map
 
-        out = run_regime_map(args)
+        out = dict(run_regime_map(args))
     else:
-        out = _run_scenario(args)
+        out = dict(_run_scenario(args))
     out.setdefault("params", args.params)
     out["parameter_set"] = args.parameter_set
     return out
 
 
-def _run_modes(args: argparse.Namespace) -> dict[str, Any]:
-    from labkit.sim.modes import pinned_modes
+def _run_modes(args: argparse.Namespace) -> dict[str, object]:
+    from labkit.sim.modes import PAPER_FIG6, pinned_modes
 
     max_hz = number(args.max_hz, "--max-hz", positive=True)
     pm = pinned_modes(load_params(args.params), max_hz=max_hz)
-    summary = {"params": args.params, **pm.to_dict()}
+    summary: dict[str, object] = {"params": args.params, **pm.to_dict()}
     if not args.json:
-        print(f"modes on pinned feet ({summary['params']}); legs clamped at "
+        print(f"modes on pinned feet ({args.params}); legs clamped at "
               + ", ".join(f"{f:.0f}" for f in pm.leg_modes_hz) + " Hz")
         ky, kz = pm.foot_stiffness_n_m
         print(f"  one leg at its foot (body held): {ky:.3g} N/m lateral, {kz:.3g} N/m vertical; the rigid body "
               f"on six: heave {pm.heave_on_springs_hz:.0f} Hz")
         for m in pm.modes:
             print(f"  {m.freq_hz:8.1f} Hz  zeta {m.damping_ratio:.3f}  body {m.body_share:4.2f}  {m.kind}")
-        print("  paper Fig. 6 (out-of-chip): " + "; ".join(f"{f:.0f} Hz {w}" for f, w in
-                                                           ((x["freq_hz"], x["what"]) for x in summary["paper_fig6"])))
+        print("  paper Fig. 6 (out-of-chip): " + "; ".join(f"{f:.0f} Hz {w}" for f, w in PAPER_FIG6))
     return summary
 
 
@@ -276,7 +283,7 @@ def _scenario_from(kind: str, values: dict[str, float]):
     return PZT(freq_hz=values["freq_hz"], voltage_v=values["voltage_v"], mass_mg=values.get("mass_mg"))
 
 
-def _run_single(args: argparse.Namespace) -> dict[str, Any]:
+def _run_single(args: argparse.Namespace) -> dict[str, object]:
     from labkit.sim import simulate
     from labkit.sim.core import ablate
 
@@ -315,20 +322,20 @@ def _run_single(args: argparse.Namespace) -> dict[str, Any]:
         check = dt_check(params, scenario, duration_s, seed=seed, start_height_um=height_um)
         if r.validity is not None:
             r.validity.chaotic = bool(check["chaotic"])
-    summary: dict[str, Any] = {"kind": kind, **values, "duration_s": duration_s, "ablate": args.ablate,
-                               "seed": seed, "start_height_um": height_um}
+    summary: dict[str, object] = {"kind": kind, **values, "duration_s": duration_s, "ablate": args.ablate,
+                                  "seed": seed, "start_height_um": height_um}
     for key, value in _result_summary(r).items():
         summary.setdefault(key, value)
     if check is not None:
         summary["dt_check"] = check
-    add_regime(summary, r, RunTask(params, scenario, duration_s, seed), args, edge_keys)
+    reg, edges = add_regime(summary, r, RunTask(params, scenario, duration_s, seed), args, edge_keys)
     if args.out:
         with atomic_output(args.out) as tmp:
             r.to_h5(tmp)
-            _write_regime(tmp, summary)
+            _write_regime(tmp, reg, edges)
         summary["out"] = str(args.out)
     if not args.json:
-        _print_single(summary)
+        _print_single(SingleRun(kind, duration_s, r, reg, edges, check, args.out))
     return summary
 
 
@@ -361,14 +368,11 @@ class _StepProgress:
             self.bar.close()
 
 
-def _result_summary(r: Any) -> dict[str, Any]:
-    """mean speed, contact fractions, patterns and impacts of one SimResult."""
-    base = r.summary() if hasattr(r, "summary") else {}
-    out = {"mean_speed_mm_s": float(r.mean_speed_mm_s),
-           "contact_fraction": r.contact_fraction,
-           "patterns": [str(p) for p in r.patterns],
-           "impacts": [int(i) for i in r.impacts]}
-    for key, value in base.items():
+def _result_summary(r: SimResult) -> dict[str, object]:
+    """mean speed, contact fractions, patterns and impacts of one SimResult, then its summary."""
+    out: dict[str, object] = {"mean_speed_mm_s": float(r.mean_speed_mm_s), "contact_fraction": r.contact_fraction,
+                              "patterns": [str(p) for p in r.patterns], "impacts": [int(i) for i in r.impacts]}
+    for key, value in r.summary().items():
         out.setdefault(key, value)
     return out
 
@@ -380,7 +384,9 @@ def _fraction(text: str) -> float:
     return f
 
 
-def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
+def _run_sweep(args: argparse.Namespace) -> dict[str, object]:
+    """``labkit simulate sweep``: the sweep's summary (:class:`labkit.sim.sweep.SweepSummary`), the
+    ablation and the file written."""
     from labkit.sim import sweep
     from labkit.sim.core import ablate
 
@@ -416,18 +422,17 @@ def _run_sweep(args: argparse.Namespace) -> dict[str, Any]:
               accel_limit_g=None if accel is None else number(accel, "--accel-limit-g", positive=True),
               dt_check=bool(getattr(args, "dt_check", False)),
               step_fraction=_fraction(args.step_fraction), keys=OPTION_KEYS)
-    summary = s.summary()
-    summary["ablate"] = args.ablate
+    summary: dict[str, object] = {**s.summary(), "ablate": args.ablate}
     if args.out:
         with atomic_output(args.out) as tmp:
             s.to_h5(tmp)
         summary["out"] = str(args.out)
     if not args.json:
-        _print_sweep(summary)
+        _print_sweep(s, args.out)
     return summary
 
 
-def _run_scenario(args: argparse.Namespace) -> dict[str, Any]:
+def _run_scenario(args: argparse.Namespace) -> dict[str, object]:
     from labkit.sim.scenarios import run_scenario
 
     params = load_params(args.params)
@@ -454,61 +459,79 @@ def _run_scenario(args: argparse.Namespace) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- text output
 
-def _write_regime(path: Any, summary: dict[str, Any]) -> None:
+def _write_regime(path: Any, reg: Regime, edges: EdgeReport | None) -> None:
     """The run's regime (and edges, when searched) as ``regime_json`` / ``edges_json`` in its file."""
     import h5py
 
+    from labkit.commands.simulate_regime import regime_summary
     from labkit.h5io import put_json
 
     with h5py.File(path, "a") as f:
-        for key in ("regime", "edges"):
-            if key in summary:
-                put_json(f, f"{key}_json", summary[key])
+        put_json(f, "regime_json", regime_summary(reg))
+        if edges is not None:
+            put_json(f, "edges_json", edges.to_dict())
 
 
-def _print_single(s: dict[str, Any]) -> None:
-    print(f"{s['kind']} run, {s['duration_s']:g} s: mean speed {s['mean_speed_mm_s']:.3f} mm/s")
-    if "regime" in s:
-        print(f"  regime: {s['regime']['text']}")
-        for line in (s.get("edges") or {}).get("lines", []):
-            print(f"  {line}")
-    print("  patterns: " + ", ".join(s["patterns"]))
-    print("  impacts:  " + ", ".join(str(i) for i in s["impacts"]))
-    v = s.get("validity")
+@dataclass(frozen=True)
+class SingleRun:
+    """What ``labkit simulate shaker|pzt`` prints: the run, its regime, edges and dt check, the file written."""
+
+    kind: str
+    duration_s: float
+    result: SimResult
+    regime: Regime
+    edges: EdgeReport | None = None
+    dt_check: DtCheck | None = None
+    out: str | None = None
+
+
+def _print_single(run: SingleRun) -> None:
+    from labkit.sim.result import SMALL_ANGLE_RAD
+
+    r = run.result
+    print(f"{run.kind} run, {run.duration_s:g} s: mean speed {r.mean_speed_mm_s:.3f} mm/s")
+    print(f"  regime: {run.regime.text()}")
+    for line in run.edges.lines() if run.edges is not None else []:
+        print(f"  {line}")
+    print("  patterns: " + ", ".join(str(p) for p in r.patterns))
+    print("  impacts:  " + ", ".join(str(int(i)) for i in r.impacts))
+    v = r.validity
     if v is not None:
-        print("  validity: " + ("within the model's assumptions" if not v["flags"] else
-                                "LEFT the model's assumptions: " + ", ".join(v["flags"]))
-              + f" (tilt {v['max_tilt_rad']:.3g} rad, bound {v['small_angle_bound_rad']:g}; "
-                f"highest body gap {v['max_jump_um']:.4g} um)")
-    c = s.get("convergence")
-    if c is not None and c["step_error_mm_s"] is not None:
-        print(f"  step: {c['status']} at {c['dt_s']:.3g} s (default {c['default_dt_s']:.3g} s), step error "
-              f"{c['step_error_mm_s']:.3g} mm/s (tolerance {c['tolerance_mm_s']:.3g}; speeds at h, h/2 ...: "
-              + ", ".join(f"{v:.4g}" for v in c["speeds_per_step_mm_s"])
-              + f"); a start 0.05 um apart: {c['seed_spread_mm_s']:+.3g} mm/s")
-    if "dt_check" in s:
-        c = s["dt_check"]
-        d, q = c["default"], c["quarter"]
-        print(f"  dt check ({len(c['seeds'])} seeds): default step {c['dt_s']:.3g} s: {d['mean_mm_s']:.3f} "
+        print("  validity: " + ("within the model's assumptions" if not v.flags else
+                                "LEFT the model's assumptions: " + ", ".join(v.flags))
+              + f" (tilt {v.max_tilt_rad:.3g} rad, bound {SMALL_ANGLE_RAD:g}; "
+                f"highest body gap {v.max_jump_um:.4g} um)")
+    c = r.convergence
+    if c is not None and math.isfinite(c.error_mm_s):
+        print(f"  step: {c.status} at {c.dt_s:.3g} s (default {c.default_dt_s:.3g} s), step error "
+              f"{c.error_mm_s:.3g} mm/s (tolerance {c.tolerance_mm_s:.3g}; speeds at h, h/2 ...: "
+              + ", ".join(f"{x:.4g}" for x in c.speeds_mm_s)
+              + f"); a start 0.05 um apart: {c.seed_spread_mm_s:+.3g} mm/s")
+    if run.dt_check is not None:
+        d, q, k = run.dt_check["default"], run.dt_check["quarter"], run.dt_check
+        print(f"  dt check ({len(k['seeds'])} seeds): default step {k['dt_s']:.3g} s: {d['mean_mm_s']:.3f} "
               f"+- {d['sem_mm_s']:.3f} mm/s; quarter step: {q['mean_mm_s']:.3f} +- {q['sem_mm_s']:.3f} mm/s; "
-              f"difference {c['difference_mm_s']:+.3f} mm/s ({'converged' if c['converged'] else 'NOT converged'}"
-              f"{', chaotic: ensemble means compared' if c['chaotic'] else ''})")
-    if "out" in s:
-        print(f"  wrote {s['out']}")
+              f"difference {k['difference_mm_s']:+.3f} mm/s ({'converged' if k['converged'] else 'NOT converged'}"
+              f"{', chaotic: ensemble means compared' if k['chaotic'] else ''})")
+    if run.out:
+        print(f"  wrote {run.out}")
 
 
-def _print_sweep(s: dict[str, Any]) -> None:
-    q = s["quantity"]
-    print(f"sweep of {q} [{s['units']}], {s['draws']} draw(s) per point")
-    amp = "amp_um" in s["points"][0] if s["points"] else False
+def _print_sweep(s: SweepResult, out: str | None) -> None:
+    from labkit.sim.sweep import units_of
+
+    q = s.quantity
+    print(f"sweep of {q} [{units_of(q)}], {s.draws} draw(s) per point")
+    points = [s.point_summary(i) for i in range(len(s.values))]
+    amp = bool(points) and "amp_um" in points[0]
     print(f"  {q:>12}  mean mm/s   std mm/s  pattern" + ("          amp um" if amp else ""))
-    for p in s["points"]:
-        print(f"  {p[q]:12.4g}  {p['mean_speed_mm_s']:9.3f}  {p['std_speed_mm_s']:9.3f}  {p['dominant_pattern']:<15}"
-              + (f"  {p['amp_um']:7.3g}" if amp else "")
+    for i, p in enumerate(points):
+        flags, steps = s.flag_counts(i), s.convergence_counts(i)
+        print(f"  {s.values[i]:12.4g}  {s.mean_speed_mm_s[i]:9.3f}  {s.std_speed_mm_s[i]:9.3f}  "
+              f"{s.dominant_pattern(i):<15}" + (f"  {p['amp_um']:7.3g}" if amp else "")
               + (f"  quarter step {p['quarter_step_speed_mm_s']:.3f} mm/s"
                  f" ({'converged' if p['dt_converged'] else 'NOT converged'})" if "dt_converged" in p else "")
-              + ("  flags: " + ", ".join(f"{k} x{n}" for k, n in p["flags"].items()) if p.get("flags") else "")
-              + ("  step: " + ", ".join(f"{k} x{n}" for k, n in p["convergence"].items())
-                 if p.get("convergence") else ""))
-    if "out" in s:
-        print(f"  wrote {s['out']}")
+              + ("  flags: " + ", ".join(f"{k} x{n}" for k, n in flags.items()) if flags else "")
+              + ("  step: " + ", ".join(f"{k} x{n}" for k, n in steps.items()) if steps else ""))
+    if out:
+        print(f"  wrote {out}")

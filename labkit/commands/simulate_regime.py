@@ -7,10 +7,12 @@ import argparse
 from typing import TYPE_CHECKING, Any
 
 from labkit.errors import InputError
+from labkit.jsonutil import Json
 from labkit.outputs import atomic_outputs, check_outputs
 
 if TYPE_CHECKING:
-    from labkit.sim.regime import RunTask
+    from labkit.sim.regime import EdgeReport, Regime, RegimeMap, RunTask
+    from labkit.sim.result import SimResult
 
 MAP_SUFFIXES = (".h5", ".hdf5", ".csv")
 FIGURE_SUFFIXES = (".png", ".svg")
@@ -48,7 +50,7 @@ def _axis(text: str | None, default: str, option: str) -> list[float]:
     return parse_range(text, option) if is_range(text) else [number(text, option, positive=True)]
 
 
-def run_regime_map(args: argparse.Namespace) -> dict[str, Any]:
+def run_regime_map(args: argparse.Namespace) -> dict[str, Json]:
     """Check every input, run the map, write its file and figure."""
     from labkit.commands.simulate import OPTION_KEYS, integer, load_params, number
     from labkit.sim.regime import Grid, Runs, regime_map
@@ -81,19 +83,18 @@ def run_regime_map(args: argparse.Namespace) -> dict[str, Any]:
         if path:
             summary[key] = str(path)
     if not args.json:
-        _print_map(m, summary)
+        _print_map(m, [str(p) for p in (args.out, args.figure) if p])
     return summary
 
 
-def _print_map(m: Any, summary: dict[str, Any]) -> None:
+def _print_map(m: RegimeMap, written: list[str]) -> None:
     print(f"regime map ({m.kind}, {m.meta['duration_s']:g} s per point): "
           + ", ".join(f"{n} {r}" for r, n in m.counts().items() if n))
     print(f"  {'freq_hz':>8}  " + "  ".join(f"{v:>9.4g}" for v in m.level) + f"   <- {m.level_name}")
     for i, f in enumerate(m.freq_hz):
         print(f"  {f:8.4g}  " + "  ".join(f"{r:>9}" for r in m.regimes[i]))
-    for key in ("out", "figure"):
-        if key in summary:
-            print(f"  wrote {summary[key]}")
+    for path in written:
+        print(f"  wrote {path}")
 
 
 def edge_keys_of(args: argparse.Namespace, params: Any, scenario: Any) -> list[str] | None:
@@ -114,19 +115,26 @@ def edge_keys_of(args: argparse.Namespace, params: Any, scenario: Any) -> list[s
     return keys
 
 
-def add_regime(summary: dict[str, Any], r: Any, task: RunTask, args: argparse.Namespace,
-               keys: list[str] | None = None) -> None:
+def regime_summary(reg: Regime) -> dict[str, object]:
+    """A run's regime as its JSON shows it (:meth:`~labkit.sim.regime.Regime.to_dict` and the one-line text)."""
+    return {**reg.to_dict(), "text": reg.text()}
+
+
+def add_regime(summary: dict[str, object], r: SimResult, task: RunTask, args: argparse.Namespace,
+               keys: list[str] | None = None) -> tuple[Regime, EdgeReport | None]:
     """The run's regime into its summary, and with ``--edges`` its distance to every edge in ``keys``
-    (``task``: the run's robot, drive, duration and seed)."""
+    (``task``: the run's robot, drive, duration and seed); returns both (edges: None without ``--edges``)."""
     from labkit.sim.regime import EdgeSearch, Runs, classify_regime, find_edges
 
     reg = classify_regime(r)
-    summary["regime"] = {**reg.to_dict(), "text": reg.text()}
-    if getattr(args, "edges", False):
-        from labkit.commands.simulate import OPTION_KEYS
+    summary["regime"] = regime_summary(reg)
+    if not getattr(args, "edges", False):
+        return reg, None
+    from labkit.commands.simulate import OPTION_KEYS
 
-        # the edge runs start at rest at the default step: a run that did not is re-run that way first
-        plain = getattr(args, "dt_s", None) is None and getattr(args, "start_height_um", None) is None
-        runs = Runs(task.duration_s, task.seed, quiet=args.quiet, bound_keys=OPTION_KEYS)
-        summary["edges"] = find_edges(task.params, task.scenario, runs, EdgeSearch(keys=keys),
-                                      base=reg if plain else None).to_dict()
+    # the edge runs start at rest at the default step: a run that did not is re-run that way first
+    plain = getattr(args, "dt_s", None) is None and getattr(args, "start_height_um", None) is None
+    runs = Runs(task.duration_s, task.seed, quiet=args.quiet, bound_keys=OPTION_KEYS)
+    edges = find_edges(task.params, task.scenario, runs, EdgeSearch(keys=keys), base=reg if plain else None)
+    summary["edges"] = edges.to_dict()
+    return reg, edges

@@ -22,6 +22,8 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 
@@ -198,17 +200,7 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     InputError
         A drive, duration or step outside :func:`check_run`'s bounds, before anything runs.
     """
-    if not isinstance(params, RobotParams):
-        raise InputError(f"params must be a RobotParams, not {type(params).__name__}", key="params")
-    if not isinstance(scenario, (Shaker, PZT)):
-        raise InputError(f"scenario must be a Shaker or a PZT, not {type(scenario).__name__}", key="scenario")
-    if engine not in ENGINES:
-        raise InputError(f"unknown engine {engine!r}", key="engine", expected=" or ".join(ENGINES))
-    if not (duration_s > 0 and math.isfinite(duration_s)):
-        raise InputError(f"out of range: {duration_s!r}", key="duration_s", expected="a number in s, > 0")
-    if error_control not in ERROR_CONTROL:
-        raise InputError(f"unknown error control {error_control!r}", key="error_control",
-                         expected=" or ".join(ERROR_CONTROL))
+    _check_call(params, scenario, engine, duration_s, error_control)
     if error_control == "check" and engine == "numba" and dt_s is None:
         def rerun(step: float, sd: int | None) -> SimResult:
             return simulate(params, scenario, duration_s, step, record_dt_s, sd, ablation=ablation,
@@ -220,11 +212,65 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
                      error_control="off")
         return control(r, rerun)
     p = ablate(params, ablation)
+    st = _steps(scenario, duration_s, _step(p, scenario, duration_s, dt_s, keys), record_dt_s, transient_s)
+    mdl = M.build_model(p, scenario)
+    state, mode = _start(mdl, start_height_um, seed, jitter_um)
+    t0 = time.perf_counter()
+    out = run_model(mdl, state, mode, st.n_steps, st.dt, st.every, st.n_skip, engine=engine, ev_cap=EVENT_LOG_CAP,
+                    tail_steps=st.tail_steps, tail_every=st.tail_every, progress=progress)
+    wall = time.perf_counter() - t0
+    return unchecked(_result(p, scenario, mdl, out, duration_s, st.dt, st.every, st.n_steps, st.n_skip, engine, wall,
+                             seed, ablation))
+
+
+def _check_call(params: RobotParams, scenario: Shaker | PZT, engine: str, duration_s: float,
+                error_control: str) -> None:
+    """InputError naming the first of :func:`simulate`'s arguments of the wrong type or out of range."""
+    if not isinstance(params, RobotParams):
+        raise InputError(f"params must be a RobotParams, not {type(params).__name__}", key="params")
+    if not isinstance(scenario, (Shaker, PZT)):
+        raise InputError(f"scenario must be a Shaker or a PZT, not {type(scenario).__name__}", key="scenario")
+    if engine not in ENGINES:
+        raise InputError(f"unknown engine {engine!r}", key="engine", expected=" or ".join(ENGINES))
+    if not (duration_s > 0 and math.isfinite(duration_s)):
+        raise InputError(f"out of range: {duration_s!r}", key="duration_s", expected="a number in s, > 0")
+    if error_control not in ERROR_CONTROL:
+        raise InputError(f"unknown error control {error_control!r}", key="error_control",
+                         expected=" or ".join(ERROR_CONTROL))
+
+
+@dataclass(frozen=True)
+class Steps:
+    """How a run is stepped and sampled (:func:`simulate`'s plan, from its arguments).
+
+    ``dt``: the step (s); ``n_steps`` of it; a sample kept every ``every`` steps, and every
+    ``tail_every`` over the last ``tail_steps`` (a long run's end at the full rate); the first
+    ``n_skip`` steps are the start-up transient (left out of speed and contact statistics).
+    """
+
+    dt: float
+    n_steps: int
+    every: int
+    n_skip: int
+    tail_steps: int = 0
+    tail_every: int = 1
+
+
+def _step(p: RobotParams, scenario: Shaker | PZT, duration_s: float, dt_s: float | None,
+          keys: dict[str, str] | None) -> float:
+    """A run's step: ``dt_s`` or :func:`default_dt`, aligned (:func:`align_dt`) and within
+    :func:`check_run`'s bounds (InputError naming the bound)."""
     dt = default_dt(p, scenario) if dt_s is None else float(dt_s)
     if not (dt > 0 and dt <= duration_s):
         raise InputError(f"out of range: {dt_s!r}", key="dt_s", expected=f"a number in s, > 0, <= {duration_s}")
     dt = align_dt(dt, scenario)
     check_run(p, scenario, duration_s, dt, keys=keys)
+    return dt
+
+
+def _steps(scenario: Shaker | PZT, duration_s: float, dt: float, record_dt_s: float | None,
+           transient_s: float | None) -> Steps:
+    """The sampling and transient of a run at step ``dt`` (InputError naming one out of range)."""
     decimate = record_dt_s is None
     if record_dt_s is None:
         record_dt_s = min(RECORD_DT_MAX_S, 1.0 / (RECORD_PER_PERIOD * scenario.freq_hz))
@@ -242,8 +288,13 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     if transient_s is None:
         transient_s = min(TRANSIENT_MAX_S, TRANSIENT_FRACTION * duration_s)
     n_skip = min(int(round(transient_s / dt)), n_steps - 1)
+    return Steps(dt, n_steps, every, n_skip, tail_steps, tail_every)
 
-    mdl = M.build_model(p, scenario)
+
+def _start(mdl: M.Model, start_height_um: float | None, seed: int | None,
+           jitter_um: float) -> tuple[np.ndarray, np.ndarray]:
+    """The initial state and contact modes: resting on the feet and riding the tray, or at rest in
+    the air ``start_height_um`` above the resting gap; with a seed, the leg modes jittered."""
     if start_height_um is None:
         state = M.rest_state(mdl)
         # The robot starts riding the tray: resting on its feet and moving with the
@@ -265,14 +316,7 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
         rng = np.random.default_rng(seed)
         for k in range(18):
             state[M.S_Q + M.NB + k] += jitter_um * 1e-6 * rng.standard_normal()
-
-    t0 = time.perf_counter()
-    out = run_model(mdl, state, mode, n_steps, dt, every, n_skip, engine=engine, ev_cap=EVENT_LOG_CAP,
-                    tail_steps=tail_steps,
-                    tail_every=tail_every, progress=progress)
-    wall = time.perf_counter() - t0
-    return unchecked(_result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engine, wall, seed,
-                             ablation))
+    return state, mode
 
 
 def run_model(mdl: M.Model, state: np.ndarray, mode: np.ndarray, n_steps: int, dt: float, every: int = 1,
@@ -400,9 +444,33 @@ DT_CHECK_ABS_MM_S = STEP_TOL_ABS_MM_S
 DT_CHECK_SEEDS = 4
 
 
+class StepSpeeds(TypedDict):
+    """The speeds of :func:`dt_check`'s starts at one step, their mean, standard error and deviation (mm/s)."""
+
+    speeds_mm_s: list[float]
+    mean_mm_s: float
+    sem_mm_s: float
+    std_mm_s: float
+
+
+class DtCheck(TypedDict):
+    """:func:`dt_check`: the two steps, the seeds, the speeds at each, and the verdict."""
+
+    dt_s: float
+    quarter_dt_s: float
+    seeds: list[int]
+    default: StepSpeeds
+    quarter: StepSpeeds
+    chaotic: bool
+    difference_mm_s: float
+    tolerance_mm_s: float
+    allowance_mm_s: float
+    converged: bool
+
+
 def dt_check(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.0, *, seeds: int = DT_CHECK_SEEDS,
              seed: int = 0, ablation: str | None = None, engine: str = "numba",
-             start_height_um: float | None = None) -> dict:
+             start_height_um: float | None = None) -> DtCheck:
     """Is the default step converged for this run? Rerun at a quarter of it and compare.
 
     Runs ``seeds`` starts (seeds ``seed .. seed+seeds-1``, each leg mode jittered by
@@ -421,20 +489,19 @@ def dt_check(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
         raise InputError(f"need at least 2 seeds, got {seeds}", key="seeds", expected="an integer >= 2")
     p = ablate(params, ablation)
     dt = default_dt(p, scenario)
-    out: dict = {"dt_s": dt, "quarter_dt_s": align_dt(dt / 4, scenario), "seeds": list(range(seed, seed + seeds))}
-    for name, step in (("default", dt), ("quarter", dt / 4)):
+    starts = list(range(seed, seed + seeds))
+
+    def speeds(step: float) -> StepSpeeds:
         v = np.array([simulate(p, scenario, duration_s, dt_s=step, seed=s, engine=engine, error_control="off",
-                               start_height_um=start_height_um).mean_speed_mm_s for s in out["seeds"]])
-        out[name] = {"speeds_mm_s": [float(x) for x in v], "mean_mm_s": float(v.mean()),
-                     "sem_mm_s": float(v.std(ddof=1) / math.sqrt(len(v))), "std_mm_s": float(v.std(ddof=1))}
-    a, b = out["default"], out["quarter"]
+                               start_height_um=start_height_um).mean_speed_mm_s for s in starts])
+        return {"speeds_mm_s": [float(x) for x in v], "mean_mm_s": float(v.mean()),
+                "sem_mm_s": float(v.std(ddof=1) / math.sqrt(len(v))), "std_mm_s": float(v.std(ddof=1))}
+
+    a, b = speeds(dt), speeds(dt / 4)
     tol = max(DT_CHECK_REL * abs(b["mean_mm_s"]), DT_CHECK_ABS_MM_S)
-    out["chaotic"] = bool(max(a["std_mm_s"], b["std_mm_s"]) > tol)
     diff = a["mean_mm_s"] - b["mean_mm_s"]
-    out["difference_mm_s"] = float(diff)
-    out["tolerance_mm_s"] = float(tol)
     # the means must agree within the tolerance plus two standard errors of their difference
     allow = tol + 2 * math.hypot(a["sem_mm_s"], b["sem_mm_s"])
-    out["allowance_mm_s"] = float(allow)
-    out["converged"] = bool(abs(diff) <= allow)
-    return out
+    return {"dt_s": dt, "quarter_dt_s": align_dt(dt / 4, scenario), "seeds": starts, "default": a, "quarter": b,
+            "chaotic": bool(max(a["std_mm_s"], b["std_mm_s"]) > tol), "difference_mm_s": float(diff),
+            "tolerance_mm_s": float(tol), "allowance_mm_s": float(allow), "converged": bool(abs(diff) <= allow)}

@@ -5,6 +5,7 @@ worker processes); :func:`dataclasses.replace` changes a field.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -47,7 +48,11 @@ class Shaker:
     def kind(self) -> str:
         return "shaker"
 
-    def to_dict(self) -> dict:
+    def with_value(self, name: str, value: float) -> Shaker:
+        """This drive with one field (``freq_hz``, ``amp_um``) set to ``value`` (checked)."""
+        return dataclasses.replace(self, **{name: float(value)})
+
+    def to_dict(self) -> dict[str, float | str]:
         return {"kind": "shaker", "freq_hz": self.freq_hz, "amp_um": self.amp_um}
 
 
@@ -76,8 +81,12 @@ class PZT:
     def kind(self) -> str:
         return "pzt"
 
-    def to_dict(self) -> dict:
-        d = {"kind": "pzt", "freq_hz": self.freq_hz, "voltage_v": self.voltage_v}
+    def with_value(self, name: str, value: float) -> PZT:
+        """This drive with one field (``freq_hz``, ``voltage_v``, ``mass_mg``) set to ``value`` (checked)."""
+        return dataclasses.replace(self, **{name: float(value)})
+
+    def to_dict(self) -> dict[str, float | str]:
+        d: dict[str, float | str] = {"kind": "pzt", "freq_hz": self.freq_hz, "voltage_v": self.voltage_v}
         if self.mass_mg is not None:
             d["mass_mg"] = self.mass_mg
         return d

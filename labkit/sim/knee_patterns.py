@@ -7,7 +7,7 @@ simulator imports no analysis; :mod:`labkit.analysis.compare` re-exports it.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -34,9 +34,19 @@ def fundamental(t_s: np.ndarray, x: np.ndarray, freq_hz: float) -> dict[str, flo
     return {"amplitude": float(np.hypot(a, b)), "phase_rad": float(np.arctan2(b, a)), "offset": float(c)}
 
 
+class KneePattern(TypedDict):
+    """:func:`classify_knee_pattern`'s label, the two figures it rests on (None: not finite), and how."""
+
+    pattern: str
+    distortion: float | None
+    aperiodicity: float | None
+    knee_to_tray_amplitude: float | None
+    method: str
+
+
 def classify_knee_pattern(t_s: np.ndarray, knee_vz_mm_s: np.ndarray, tray_vz_mm_s: np.ndarray | None,
                           freq_hz: float, *, firm_distortion: float = 0.03,
-                          jump_aperiodicity: float = 0.3) -> dict[str, Any]:
+                          jump_aperiodicity: float = 0.3) -> KneePattern:
     """Label a measured knee velocity record as firm contact, partial contact or jumping.
 
     The paper's patterns (section 5.2), made operational (**choice**) from the
@@ -63,7 +73,7 @@ def classify_knee_pattern(t_s: np.ndarray, knee_vz_mm_s: np.ndarray, tray_vz_mm_
 
     Returns
     -------
-    dict
+    KneePattern
         ``pattern``, ``distortion``, ``aperiodicity``, ``knee_to_tray_amplitude``, ``method``.
     """
     t = np.asarray(t_s, float)

@@ -254,9 +254,33 @@ def _check_single_mass(params: RobotParams) -> None:
 def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
     """The coupled system for ``params`` driven by ``scenario`` (static equilibrium included)."""
     _check_single_mass(params)
+    m_b, inertia = _body(params, scenario)
+    legs = _legs(params)
+    rows = _contact_rows(legs)
+    mass, f_grav = _mass_matrix(legs, m_b, inertia, params.g_m_s2)
+    stiff, damp, f_act = _leg_forces(params, legs)
+    q_eq, lam_rest = _rest_on_feet(rows, stiff, f_grav)
+    # In free fall the legs are undeformed (M4: gravity and the attachment's acceleration
+    # cancel in every modal equation), so a robot released in the air starts there.
+    x_air = np.array([-q_eq[xi(j, i)] for j in range(6) for i in range(3)])
+    y_foot_eq = legs.yj + np.array([legs.cy @ q_eq[xi(j, 0):xi(j, 0) + 3] for j in range(6)]) \
+        + np.array([legs.att_y[j] @ q_eq[:NB] for j in range(6)])
+    ktf = np.array(params.knee_to_foot, float)
+    knee = np.zeros((6, NQ))
+    for j in range(6):
+        knee[j, :NB] = legs.att_z[j]
+        for i in range(3):
+            knee[j, xi(j, i)] = ktf[i] * legs.cz[i]
+    held = np.tile([0.0 if on else 1.0 for on in params.impact_modes[:3]], 6)
+    return Model(m_b=m_b, inertia=inertia, k=legs.k, b=legs.b, cz=legs.cz, cy=legs.cy, m_modal=legs.m_modal,
+                 xj=legs.xj, yj=legs.yj, zj=legs.zj, phase=legs.phase, mass=mass, stiff=stiff, damp=damp,
+                 f_const=f_grav - stiff * q_eq, f_act=f_act, rows=rows, knee=knee, held=held, y_foot_eq=y_foot_eq,
+                 x_air=x_air, lam_rest=lam_rest, scal=_scalars(params, scenario, float(held.sum())))
+
+
+def _body(params: RobotParams, scenario: Shaker | PZT) -> tuple[float, np.ndarray]:
+    """The body coordinates' mass (kg; a PZT payload rides on it) and its inertia about x, y, z."""
     mg = 1e-6  # mg -> kg
-    g = params.g_m_s2
-    leg_mass = params.leg_mass_mg * mg
     m_b = params.body_coordinate_mass_mg * mg         # M2: the model's masses add up to mass_mg
     if isinstance(scenario, PZT) and scenario.mass_mg is not None:
         # The payload rides on the body (the legs keep their mass).
@@ -268,41 +292,61 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
     L = params.body_length_mm * 1e-3
     W = params.body_width_mm * 1e-3
     # Thin plate: rotation about x (across the width) sees the length, etc.
-    inertia = np.array([m_b * L * L / 12, m_b * W * W / 12, m_b * (L * L + W * W) / 12])
+    return m_b, np.array([m_b * L * L / 12, m_b * W * W / 12, m_b * (L * L + W * W) / 12])
 
-    k = np.array(params.k_per_s2, float)
-    b = np.array(params.b_per_s, float)
+
+@dataclass(frozen=True)
+class _Legs:
+    """The legs' modes and where they stand: per mode (3,) ``k``, ``b``, the direction ``cz``, ``cy``
+    and the modal mass; per leg (6,) the attachment ``xj``, ``yj``, ``zj``, the tripod ``phase``, and
+    the attachment's kinematic rows ``att_z``, ``att_y`` (6 x NB, M1)."""
+
+    k: np.ndarray
+    b: np.ndarray
+    cz: np.ndarray
+    cy: np.ndarray
+    m_modal: np.ndarray
+    xj: np.ndarray
+    yj: np.ndarray
+    zj: np.ndarray
+    phase: np.ndarray
+    att_z: np.ndarray
+    att_y: np.ndarray
+
+
+def _legs(params: RobotParams) -> _Legs:
     r = np.array(params.ratio, float)
-    s = np.array(params.cy_sign, float)
     norm = np.sqrt(1 + r * r)
-    cz = 1 / norm                                     # model.md section 2
-    cy = s * r / norm
-    m_modal = np.full(3, params.modal_participation * leg_mass)
-
     w = params.leg_half_width_mm * 1e-3
     p = params.leg_pitch_mm * 1e-3
     xj = np.array([w, -w, w, -w, w, -w])
     yj = np.array([p, p, 0.0, 0.0, -p, -p])
     zj = np.full(6, params.leg_z_mm * 1e-3)
-    phase = np.array([1.0 if (n + 1) in TRIPOD_A else -1.0 for n in range(6)])
-
     # Attachment kinematics (M1): z_att = z_b + y_j phx - x_j phy, y_att = y_b - z_j phx + x_j phz.
-    att_z = np.zeros((6, NB))
-    att_y = np.zeros((6, NB))
+    att_z = np.array([(0.0, 1.0, yj[j], -xj[j], 0.0) for j in range(6)])
+    att_y = np.array([(1.0, 0.0, -zj[j], 0.0, xj[j]) for j in range(6)])
+    return _Legs(k=np.array(params.k_per_s2, float), b=np.array(params.b_per_s, float),
+                 cz=1 / norm, cy=np.array(params.cy_sign, float) * r / norm,       # model.md section 2
+                 m_modal=np.full(3, params.modal_participation * (params.leg_mass_mg * 1e-6)), xj=xj, yj=yj, zj=zj,
+                 phase=np.array([1.0 if (n + 1) in TRIPOD_A else -1.0 for n in range(6)]), att_z=att_z, att_y=att_y)
+
+
+def _contact_rows(legs: _Legs) -> np.ndarray:
+    """The contact rows as columns (NQ x NR): foot z, foot y, body z, body y (M1)."""
+    rows = np.zeros((NQ, NR))
     for j in range(6):
-        att_z[j] = (0.0, 1.0, yj[j], -xj[j], 0.0)
-        att_y[j] = (1.0, 0.0, -zj[j], 0.0, xj[j])
-    rows = np.zeros((NQ, NR))          # foot z, foot y, body z, body y (M1)
-    for j in range(6):
-        rows[:NB, j] = att_z[j]
-        rows[:NB, 6 + j] = att_y[j]
+        rows[:NB, j] = legs.att_z[j]
+        rows[:NB, 6 + j] = legs.att_y[j]
         for i in range(3):
-            rows[xi(j, i), j] = cz[i]
-            rows[xi(j, i), 6 + j] = cy[i]
+            rows[xi(j, i), j] = legs.cz[i]
+            rows[xi(j, i), 6 + j] = legs.cy[i]
     rows[1, K.ROW_BZ] = 1.0
     rows[0, K.ROW_BY] = 1.0
+    return rows
 
-    # Mass matrix (M2).
+
+def _mass_matrix(legs: _Legs, m_b: float, inertia: np.ndarray, g: float) -> tuple[np.ndarray, np.ndarray]:
+    """The mass matrix (M2) and the weights (M4) of the body and the modal masses."""
     mass = np.zeros((NQ, NQ))
     mass[0, 0] = mass[1, 1] = m_b
     mass[2, 2], mass[3, 3], mass[4, 4] = inertia
@@ -313,28 +357,35 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
             # M2: the modal mass is a point at the attachment displaced by C_i x_ij:
             # velocity U q' with U's rows y and z (2 x NQ)
             U = np.zeros((3, NQ))
-            U[0, :NB] = att_y[j]
-            U[1, :NB] = att_z[j]
-            U[0, xi(j, i)] = cy[i]
-            U[1, xi(j, i)] = cz[i]
+            U[0, :NB] = legs.att_y[j]
+            U[1, :NB] = legs.att_z[j]
+            U[0, xi(j, i)] = legs.cy[i]
+            U[1, xi(j, i)] = legs.cz[i]
             # ... and along x: x_att = z_j phy - y_j phz (the leg masses' share of the yaw and
             # roll inertia; x itself is no coordinate, M1)
-            U[2, :NB] = (0.0, 0.0, 0.0, zj[j], -yj[j])
-            mass += m_modal[i] * U.T @ U
-            f_grav += -g * m_modal[i] * U[1]                  # M4: its weight, vertical
-    mass = 0.5 * (mass + mass.T)
+            U[2, :NB] = (0.0, 0.0, 0.0, legs.zj[j], -legs.yj[j])
+            mass += legs.m_modal[i] * U.T @ U
+            f_grav += -g * legs.m_modal[i] * U[1]                  # M4: its weight, vertical
+    return 0.5 * (mass + mass.T), f_grav
+
+
+def _leg_forces(params: RobotParams, legs: _Legs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Diagonals of the modal springs and dampers, and the actuator's force per volt (M3, M4)."""
     stiff = np.zeros(NQ)
     damp = np.zeros(NQ)
     f_act = np.zeros(NQ)
-    g_act = k * np.array(params.act_um_per_v) * 1e-6       # static modal deflection per volt
+    g_act = legs.k * np.array(params.act_um_per_v) * 1e-6       # static modal deflection per volt
     for j in range(6):
         for i in range(3):
-            stiff[xi(j, i)] = m_modal[i] * k[i]
-            damp[xi(j, i)] = m_modal[i] * b[i]
-            f_act[xi(j, i)] = m_modal[i] * g_act[i] * phase[j]   # M4: internal force pair
+            stiff[xi(j, i)] = legs.m_modal[i] * legs.k[i]
+            damp[xi(j, i)] = legs.m_modal[i] * legs.b[i]
+            f_act[xi(j, i)] = legs.m_modal[i] * g_act[i] * legs.phase[j]   # M4: internal force pair
+    return stiff, damp, f_act
 
-    # Static equilibrium on six pinned feet (absolute coordinates, legs unstretched at 0):
-    #   K q = f_grav + R12 lam,  R12^T q = 0.
+
+def _rest_on_feet(rows: np.ndarray, stiff: np.ndarray, f_grav: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Static equilibrium on six pinned feet (absolute coordinates, legs unstretched at 0):
+    ``K q = f_grav + R12 lam``, ``R12^T q = 0``; returns q and the contact forces (NR,)."""
     R12 = rows[:, :12]
     kkt = np.zeros((NQ + 12, NQ + 12))
     kkt[:NQ, :NQ] = np.diag(stiff)
@@ -343,45 +394,25 @@ def build_model(params: RobotParams, scenario: Shaker | PZT) -> Model:
     # least squares: with cy_sign = 0 the lateral rows are dependent (their forces are then
     # the minimum-norm ones; the coordinates are unique)
     sol = np.linalg.lstsq(kkt, np.concatenate([f_grav, np.zeros(12)]), rcond=None)[0]
-    q_eq = sol[:NQ]
     lam_rest = np.zeros(NR)
     lam_rest[:12] = sol[NQ:]
-    f_const = f_grav - stiff * q_eq
-    # In free fall the legs are undeformed (M4: gravity and the attachment's acceleration
-    # cancel in every modal equation), so a robot released in the air starts there.
-    x_air = np.zeros(18)
-    for j in range(6):
-        for i in range(3):
-            x_air[3 * j + i] = -q_eq[xi(j, i)]
-    y_foot_eq = yj + np.array([cy @ q_eq[xi(j, 0):xi(j, 0) + 3] for j in range(6)]) \
-        + np.array([att_y[j] @ q_eq[:NB] for j in range(6)])
+    return sol[:NQ], lam_rest
 
-    ktf = np.array(params.knee_to_foot, float)
-    knee = np.zeros((6, NQ))
-    for j in range(6):
-        knee[j, :NB] = att_z[j]
-        for i in range(3):
-            knee[j, xi(j, i)] = ktf[i] * cz[i]
-    held = np.zeros(18)
-    for j in range(6):
-        for i in range(3):
-            held[3 * j + i] = 0.0 if params.impact_modes[i] else 1.0
 
+def _scalars(params: RobotParams, scenario: Shaker | PZT, n_held: float) -> dict[str, float]:
+    """The kernel's named scalars (films, contact, drive, tolerances; :meth:`Model.pack`)."""
     if isinstance(scenario, Shaker):
         kind, amp, freq, volt = 0, scenario.amp_um * 1e-6, scenario.freq_hz, 0.0
     else:
         kind, amp, freq, volt = 1, 0.0, scenario.freq_hz, scenario.voltage_v
-    scal = dict(H0=params.body_gap_um * 1e-6, HR=params.film_gap_nm * 1e-9, BGF=params.b_g_foot_n_m2_s,
+    return dict(H0=params.body_gap_um * 1e-6, HR=params.film_gap_nm * 1e-9, BGF=params.b_g_foot_n_m2_s,
                 BGP=pad_film_coefficient(params.foot_pad_um), HL=params.body_gap_um * 1e-6,
                 LAM=params.mean_free_path_nm * 1e-9,
                 BGB=params.b_g_body_n_m2_s, AD=params.a_drag_n_s2_m2, CAD=params.c_ad_n, CADT=params.c_ad_t_n_s,
                 CR=params.c_r, CRB=params.c_r_body, VSTICK=params.v_stick_mm_s * 1e-3,
                 MU=params.mu if math.isfinite(params.mu) else 1e308, BNS=1.0 if params.body_no_slip else 0.0,
                 KIND=kind, AMP=amp, OMEGA=2 * math.pi * freq, FREQ=freq, VOLT=volt, GAPTOL=0.0,
-                MAXEV=MAX_EVENTS_PER_STEP, NHELD=float(held.sum()), POSTOL=POS_TOL_M)
-    return Model(m_b=m_b, inertia=inertia, k=k, b=b, cz=cz, cy=cy, m_modal=m_modal, xj=xj, yj=yj, zj=zj,
-                 phase=phase, mass=mass, stiff=stiff, damp=damp, f_const=f_const, f_act=f_act, rows=rows,
-                 knee=knee, held=held, y_foot_eq=y_foot_eq, x_air=x_air, lam_rest=lam_rest, scal=scal)
+                MAXEV=MAX_EVENTS_PER_STEP, NHELD=n_held, POSTOL=POS_TOL_M)
 
 
 def rest_state(mdl: Model | None = None) -> np.ndarray:

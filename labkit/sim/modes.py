@@ -68,7 +68,7 @@ class PinnedModes:
         """Modes whose energy is mostly the body's, below the legs' lowest clamped mode."""
         return [m for m in self.modes if m.body_share >= share and m.freq_hz < self.first_leg_mode_hz()]
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, object]:
         return {"leg_modes_hz": list(self.leg_modes_hz), "foot_stiffness_n_m": list(self.foot_stiffness_n_m),
                 "heave_on_springs_hz": self.heave_on_springs_hz, "modes": [asdict(m) for m in self.modes],
                 "paper_fig6": [{"freq_hz": f, "what": w} for f, w in PAPER_FIG6]}

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -242,7 +243,7 @@ class RobotParams:
         """The parameter file's text (with a ``[provenance]`` table)."""
         import tomli_w
 
-        table: dict[str, Any] = self.to_dict()
+        table: dict[str, object] = dict(self.to_dict())
         prov = dict(self.provenance)
         prov.update(provenance or {})
         if prov:
@@ -258,7 +259,7 @@ class RobotParams:
         return path
 
     @classmethod
-    def from_dict(cls, table: dict[str, Any], *, file: str | Path | None = None) -> RobotParams:
+    def from_dict(cls, table: Mapping[str, object], *, file: str | Path | None = None) -> RobotParams:
         """Validated parameters from a TOML-like table; missing keys keep their defaults."""
         table = dict(table)
         prov = table.pop("provenance", {})

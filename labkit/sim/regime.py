@@ -12,15 +12,15 @@ docs/simulator.md, "Regimes and their edges".
 from __future__ import annotations
 
 import csv
-import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
 from labkit.errors import ConfigError, InputError
+from labkit.jsonutil import Json
 from labkit.sim.result import FLIGHT_MIN_UM
 
 if TYPE_CHECKING:
@@ -87,19 +87,37 @@ class RunFeatures:
     @classmethod
     def of(cls, r: SimResult) -> RunFeatures:
         """The features of a :class:`~labkit.sim.result.SimResult`."""
-        return cls.from_summary(r.summary(), body_motion_um(r.t_s, r.body_z_um, r.ground_z_um))
+        v = r.validity
+        return cls(speed_mm_s=float(r.mean_speed_mm_s), patterns=tuple(str(p) for p in r.patterns),
+                   body_motion_um=body_motion_um(r.t_s, r.body_z_um, r.ground_z_um),
+                   foot_periods=None if r.foot_periods is None else tuple(int(k) for k in r.foot_periods),
+                   max_height_um=None if r.max_height_um is None else tuple(float(h) for h in r.max_height_um),
+                   chaotic=None if v is None else v.chaotic, flags=() if v is None else tuple(v.flags))
 
     @classmethod
-    def from_summary(cls, s: dict[str, Any], body_motion: float | None = None) -> RunFeatures:
-        """The features of a run's summary (``SimResult.summary()``, a sim_result file's ``summary``)
-        and its body motion (:func:`body_motion_um`)."""
-        v = s.get("validity") or {}
-        periods, heights = s.get("foot_periods"), s.get("max_height_um")
-        return cls(speed_mm_s=float(s["mean_speed_mm_s"]), patterns=tuple(str(p) for p in s["patterns"]),
+    def from_summary(cls, s: Mapping[str, Json], body_motion: float | None = None) -> RunFeatures:
+        """The features of a run's summary as JSON (a sim_result file's ``summary``, the
+        :meth:`~labkit.sim.result.SimResult.summary` of a run) and its body motion (:func:`body_motion_um`)."""
+        v = s.get("validity")
+        v = v if isinstance(v, dict) else {}
+        periods, heights, chaotic = s.get("foot_periods"), s.get("max_height_um"), v.get("chaotic")
+        return cls(speed_mm_s=_num(s.get("mean_speed_mm_s")),
+                   patterns=tuple(str(p) for p in _seq(s.get("patterns"))),
                    body_motion_um=None if body_motion is None else float(body_motion),
-                   foot_periods=None if periods is None else tuple(int(k) for k in periods),
-                   max_height_um=None if heights is None else tuple(float(h) for h in heights),
-                   chaotic=v.get("chaotic"), flags=tuple(v.get("flags") or ()))
+                   foot_periods=None if periods is None else tuple(int(_num(k)) for k in _seq(periods)),
+                   max_height_um=None if heights is None else tuple(_num(h) for h in _seq(heights)),
+                   chaotic=chaotic if isinstance(chaotic, bool) else None,
+                   flags=tuple(str(f) for f in _seq(v.get("flags"))))
+
+
+def _num(value: Json) -> float:
+    """A JSON number as a float (NaN for anything else: ``null`` is how JSON writes NaN)."""
+    return float(value) if isinstance(value, (int, float)) else float("nan")
+
+
+def _seq(value: Json) -> list[Json]:
+    """A JSON array (``[]`` for anything else)."""
+    return value if isinstance(value, list) else []
 
 
 def body_motion_um(t_s: np.ndarray, body_z_um: np.ndarray, ground_z_um: np.ndarray) -> float:
@@ -108,6 +126,18 @@ def body_motion_um(t_s: np.ndarray, body_z_um: np.ndarray, ground_z_um: np.ndarr
     late = t >= t[0] + 0.5 * (t[-1] - t[0])
     rel = np.asarray(body_z_um, float)[late] - np.asarray(ground_z_um, float)[late]
     return float(np.ptp(rel)) if rel.size else 0.0
+
+
+class RegimeDict(TypedDict):
+    """:meth:`Regime.to_dict` (``labkit simulate shaker --json``'s ``regime``, a run file's ``regime_json``)."""
+
+    regime: str
+    speed_mm_s: float
+    feet: dict[str, int]
+    body_motion_um: float | None
+    aperiodic: bool
+    chaotic: bool | None
+    flags: list[str]
 
 
 @dataclass(frozen=True)
@@ -134,7 +164,7 @@ class Regime:
         extra = f" [{', '.join(self.flags)}]" if self.flags else ""
         return f"{self.regime} ({feet}; {self.speed_mm_s:.3g} mm/s){extra}"
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> RegimeDict:
         return {"regime": self.regime, "speed_mm_s": float(self.speed_mm_s), "feet": dict(self.feet),
                 "body_motion_um": self.body_motion_um,
                 "aperiodic": bool(self.aperiodic), "chaotic": self.chaotic, "flags": self.flags}
@@ -261,17 +291,19 @@ class RegimeMap:
     speeds_mm_s: np.ndarray
     flags: np.ndarray
     params_toml: str = ""
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: dict[str, Json] = field(default_factory=dict)
 
     def counts(self) -> dict[str, int]:
         """How many points fell in each regime."""
         return {r: int(np.count_nonzero(self.regimes == r)) for r in REGIMES}
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, Json]:
+        """JSON-able: the grid (the level under its name, ``amp_um`` or ``voltage_v``), regimes, speeds,
+        flags, counts and meta."""
         return {"kind": self.kind, "freq_hz": [float(f) for f in self.freq_hz],
                 self.level_name: [float(v) for v in self.level], "regimes": self.regimes.tolist(),
                 "speeds_mm_s": self.speeds_mm_s.tolist(), "flags": self.flags.tolist(),
-                "counts": self.counts(), "meta": self.meta}
+                "counts": dict(self.counts()), "meta": self.meta}
 
     def to_h5(self, path: str | Path) -> Path:
         """Write kind ``sim_regime_map``: the grid, regimes, speeds and flags with their units."""
@@ -331,7 +363,7 @@ class RegimeMap:
         ax.set_xlabel("drive frequency (Hz)")
         ax.set_ylabel("tray amplitude (um)" if self.kind == "shaker" else "PZT voltage (V)")
         if self.kind == "shaker" and len(yi) > 1:
-            g = float(self.meta.get("g_m_s2", 9.81))
+            g = _num(self.meta.get("g_m_s2", 9.81))
             lift = g / (2 * np.pi * self.freq_hz) ** 2 * 1e6
             ax.plot(xi, np.interp(lift, self.level, yi, left=np.nan, right=np.nan), "k--", lw=1,
                     label="(2 pi f)^2 A = g")
@@ -370,7 +402,8 @@ def regime_map(params: RobotParams, grid: Grid, runs: Runs = Runs()) -> RegimeMa
         runs.check(t.params, t.scenario)          # every point, before any process starts
     regs = runs.run_all(tasks, "regime map")
     shape = (fs.size, ls.size)
-    meta = {"duration_s": float(duration_s), "seed": int(seed), "mass_mg": mass_mg, "g_m_s2": float(params.g_m_s2),
+    meta: dict[str, Json] = {"duration_s": float(duration_s), "seed": int(seed), "mass_mg": mass_mg,
+            "g_m_s2": float(params.g_m_s2),
             "still_speed_mm_s": STILL_SPEED_MM_S, "still_motion_um": STILL_MOTION_UM, "min_feet": MIN_FEET,
             "classifier": "labkit.sim.regime.classify_regime"}
     return RegimeMap(kind=kind, level_name=level_name, freq_hz=fs, level=ls,
@@ -401,14 +434,13 @@ def scaled(params: RobotParams, scenario: Shaker | PZT, key: str,
     if key == DRIVE_KEY:
         name = "amp_um" if hasattr(scenario, "amp_um") else "voltage_v"
         value = float(getattr(scenario, name))
-        drive: dict[str, Any] = {name: value * factor}
-        return None if value == 0 else (params, dataclasses.replace(scenario, **drive))
+        return None if value == 0 else (params, scenario.with_value(name, value * factor))
     check_table(params, {key: 0.0})          # a key that is neither a field nor derived: ConfigError
     legs = 6 * params.leg_mass_mg
     if key in ("body_mass_mg", "leg_mass_mg"):
         body = params.body_mass_mg * (factor if key == "body_mass_mg" else 1.0)
         legs *= factor if key == "leg_mass_mg" else 1.0
-        changes: dict[str, Any] = {"body_mass_mg": body, "mass_mg": body + legs}
+        changes: dict[str, float | tuple[float, ...]] = {"body_mass_mg": body, "mass_mg": body + legs}
     else:
         value = getattr(params, key)
         if isinstance(value, (tuple, list)):
@@ -422,6 +454,18 @@ def scaled(params: RobotParams, scenario: Shaker | PZT, key: str,
         return params.replace(**changes), scenario
     except (ConfigError, InputError, ValueError):
         return None
+
+
+class EdgeDict(TypedDict):
+    """:meth:`Edge.to_dict`."""
+
+    key: str
+    direction: int
+    within: float | None
+    clear: float
+    regime: str | None
+    speed_mm_s: float | None
+    note: str
 
 
 @dataclass
@@ -441,8 +485,22 @@ class Edge:
     speed_mm_s: float | None = None
     note: str = ""
 
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+    def to_dict(self) -> EdgeDict:
+        return {"key": self.key, "direction": self.direction, "within": self.within, "clear": self.clear,
+                "regime": self.regime, "speed_mm_s": self.speed_mm_s, "note": self.note}
+
+
+class EdgeReportDict(TypedDict):
+    """:meth:`EdgeReport.to_dict` (``labkit simulate shaker --edges --json``'s ``edges``)."""
+
+    base: RegimeDict
+    steps: list[float]
+    lines: list[str]
+    resolved: bool
+    seed_runs: list[RegimeDict]
+    nearest: dict[str, float | None]
+    edges: list[EdgeDict]
+    meta: dict[str, Json]
 
 
 @dataclass
@@ -452,7 +510,7 @@ class EdgeReport:
     base: Regime
     edges: list[Edge]
     steps: tuple[float, ...]
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: dict[str, Json] = field(default_factory=dict)
     #: The base run again with other seeds (a slightly different random start, same parameters).
     seed_runs: list[Regime] = field(default_factory=list)
 
@@ -495,7 +553,7 @@ class EdgeReport:
             out.append(f"no edge within {100 * max(self.steps):.3g} %: " + ", ".join(LABELS.get(k, k) for k in none))
         return out
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> EdgeReportDict:
         return {"base": self.base.to_dict(), "steps": list(self.steps), "lines": self.lines(),
                 "resolved": self.resolved, "seed_runs": [r.to_dict() for r in self.seed_runs],
                 "nearest": {k: e.within for k, e in self.nearest().items()},
@@ -545,7 +603,7 @@ def find_edges(params: RobotParams, scenario: Shaker | PZT, runs: Runs = Runs(du
         at.probe(edges, [(e, step) for e in edges if e.within is None and not e.note])
     for _ in range(int(bisections)):
         at.probe(edges, [(e, 0.5 * (e.clear + e.within)) for e in edges if e.within is not None])
-    meta = {"duration_s": float(duration_s), "seed": int(seed), "scenario": scenario.to_dict(),
+    meta: dict[str, Json] = {"duration_s": float(duration_s), "seed": int(seed), "scenario": dict(scenario.to_dict()),
             "speed_change_rel": SPEED_CHANGE_REL, "speed_change_abs_mm_s": SPEED_CHANGE_ABS_MM_S,
             "bisections": int(bisections)}
     return EdgeReport(base, edges, steps, meta, seed_runs=regs)

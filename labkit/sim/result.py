@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -33,6 +33,63 @@ ON_FILM_FRACTION = 0.1
 #: ... and a jump is "beyond the legs' reach" when the body's underside rises more than this
 #: many body lengths above the ground (the robot tumbles; nothing in the model can land it).
 JUMP_BODY_LENGTHS = 1.0
+
+
+class ValiditySummary(TypedDict):
+    """:meth:`Validity.summary`."""
+
+    flags: list[str]
+    max_tilt_rad: float
+    small_angle_bound_rad: float
+    body_edge_gap_um: float
+    edge_tolerance_um: float
+    body_on_film_feet_up_fraction: float
+    max_jump_um: float
+    jump_limit_um: float
+    events_lost: int
+    steps_event_capped: int
+    chaotic: bool | None
+    not_converged: bool
+
+
+class ConvergenceSummary(TypedDict):
+    """:meth:`Convergence.summary` (NaN written as None)."""
+
+    status: str
+    dt_s: float
+    default_dt_s: float
+    step_error_mm_s: float | None
+    tolerance_mm_s: float | None
+    seed_spread_mm_s: float | None
+    measured_s: list[float]
+    halvings: int
+    speeds_per_step_mm_s: list[float]
+    wall_s: float
+
+
+class SimResultSummary(TypedDict):
+    """:meth:`SimResult.summary`: a run's key figures (a ``sim_result`` file's ``summary_json``)."""
+
+    scenario: dict[str, float | str]
+    engine: str
+    duration_s: float
+    dt_s: float
+    record_dt_s: float
+    transient_s: float
+    n_steps: int
+    wall_s: float
+    mean_speed_mm_s: float
+    contact_fraction: dict[str, dict[str, float]]
+    impacts: list[int]
+    body_impacts: int
+    patterns: list[str]
+    max_flight_s: list[float]
+    max_height_um: list[float] | None
+    foot_periods: list[int] | None
+    seed: int | None
+    ablation: str | None
+    validity: ValiditySummary | None
+    convergence: ConvergenceSummary | None
 
 
 @dataclass
@@ -86,7 +143,7 @@ class Validity:
             out.append("not_converged")
         return out
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> ValiditySummary:
         """JSON-able: every figure and ``flags``."""
         return {"flags": self.flags, "max_tilt_rad": float(self.max_tilt_rad),
                 "small_angle_bound_rad": SMALL_ANGLE_RAD, "body_edge_gap_um": float(self.body_edge_gap_um),
@@ -129,7 +186,7 @@ class Convergence:
     speeds_mm_s: tuple[float, ...] = ()
     wall_s: float = 0.0
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> ConvergenceSummary:
         """JSON-able: every figure (NaN as None)."""
         def num(x: float) -> float | None:
             return None if not math.isfinite(x) else float(x)
@@ -142,7 +199,7 @@ class Convergence:
 
 
 def validity(params: RobotParams, body_gap_um: np.ndarray, angles_rad: np.ndarray, contact: np.ndarray,
-             counters: dict) -> Validity:
+             counters: dict[str, int]) -> Validity:
     """:class:`Validity` of a run from its samples (gap under the body's centre, um; angles
     phi_x, phi_y, phi_z; contact modes, 0 = air) and the kernel's counters."""
     tilt_x = np.abs(angles_rad[:, 0])
@@ -240,23 +297,23 @@ class SimResult:
     knee_vz_mm_s: np.ndarray
     ground_z_um: np.ndarray
     mean_speed_mm_s: float
-    contact_fraction: dict
+    contact_fraction: dict[str, dict[str, float]]
     impacts: np.ndarray
     body_impacts: int
-    patterns: list
+    patterns: list[str]
     max_flight_s: np.ndarray
     events: np.ndarray
     n_steps: int
     wall_s: float
     seed: int | None = None
     ablation: str | None = None
-    counters: dict = field(default_factory=dict)
+    counters: dict[str, int] = field(default_factory=dict)
     max_height_um: np.ndarray | None = None
-    foot_periods: list | None = None
+    foot_periods: list[int] | None = None
     validity: Validity | None = None
     convergence: Convergence | None = None
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> SimResultSummary:
         """JSON-able key figures."""
         return {
             "scenario": self.scenario.to_dict(),

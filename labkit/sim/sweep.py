@@ -21,14 +21,16 @@ Draw 0 is always the nominal robot; draws ``1..n-1`` are perturbed. With
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
 from labkit.errors import InputError
+from labkit.jsonutil import Json
 
 #: Contact modes in the order of the last axis of ``contact_fraction``.
 CONTACT_MODES = ("air", "adhesion", "rest")
@@ -44,6 +46,7 @@ _SUFFIX_UNITS = {"_hz": "Hz", "_um": "um", "_v": "V", "_mg": "mg", "_s": "s", "_
 if TYPE_CHECKING:
     from labkit.sim.excitation import PZT, Shaker
     from labkit.sim.params import RobotParams
+    from labkit.sim.result import SimResult
 
 
 def units_of(name: str) -> str:
@@ -52,6 +55,24 @@ def units_of(name: str) -> str:
         if name.endswith(suffix):
             return _SUFFIX_UNITS[suffix]
     return "1"
+
+
+def _number(value: Json) -> float:
+    """A JSON number as a float (NaN for anything else: ``null`` is how JSON writes NaN)."""
+    return float(value) if isinstance(value, (int, float)) else float("nan")
+
+
+class SweepSummary(TypedDict):
+    """:meth:`SweepResult.summary` (``labkit simulate sweep --json``, the file's ``summary_json``)."""
+
+    quantity: str
+    units: str
+    draws: int
+    scenario: dict[str, Json]
+    duration_s: Json
+    seed: Json
+    step_fraction: float
+    points: list[dict[str, Json]]
 
 
 @dataclass
@@ -98,9 +119,9 @@ class SweepResult:
     contact_fraction: np.ndarray
     patterns: np.ndarray
     impacts: np.ndarray
-    scenario: dict[str, Any] = field(default_factory=dict)
+    scenario: dict[str, Json] = field(default_factory=dict)
     params_toml: str = ""
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: dict[str, Json] = field(default_factory=dict)
     flags: np.ndarray | None = None
     convergence: np.ndarray | None = None
     step_error_mm_s: np.ndarray | None = None
@@ -151,38 +172,45 @@ class SweepResult:
         counts = self.pattern_counts(point)
         return max(PATTERNS, key=lambda p: counts[p])
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> SweepSummary:
         """A JSON-able summary: one entry per point with mean and spread."""
-        points = []
-        for i, value in enumerate(self.values):
-            s = self.speeds_mm_s[i]
-            frac = self.contact_fraction[i].mean(axis=(0, 1))
-            points.append({
-                self.quantity: float(value),
-                "mean_speed_mm_s": float(s.mean()),
-                "std_speed_mm_s": float(self.std_speed_mm_s[i]),
-                "min_speed_mm_s": float(s.min()),
-                "max_speed_mm_s": float(s.max()),
-                "nominal_speed_mm_s": float(s[0]),
-                "contact_fraction": {m: float(f) for m, f in zip(CONTACT_MODES, frac)},
-                "patterns": self.pattern_counts(i),
-                "dominant_pattern": self.dominant_pattern(i),
-                "flags": self.flag_counts(i),
-                "convergence": self.convergence_counts(i),
-                "step_error_mm_s": None if self.step_error_mm_s is None or not np.isfinite(self.step_error_mm_s[i, 0])
-                else float(self.step_error_mm_s[i, 0]),
-                "dt_s": None if self.dt_s is None else [float(x) for x in self.dt_s[i]],
-            })
-            if "amp_um" in self.meta and self.quantity != "amp_um":
-                points[-1]["amp_um"] = float(self.meta["amp_um"][i])
-            if "dt_check" in self.meta:
-                c = self.meta["dt_check"]
-                points[-1]["quarter_step_speed_mm_s"] = float(c["quarter_speed_mm_s"][i])
-                points[-1]["dt_converged"] = bool(c["converged"][i])
         return {"quantity": self.quantity, "units": units_of(self.quantity),
                 "draws": self.draws, "scenario": self.scenario,
                 "duration_s": self.meta.get("duration_s"), "seed": self.meta.get("seed"),
-                "step_fraction": float(self.meta.get("step_fraction", 1.0)), "points": points}
+                "step_fraction": _number(self.meta.get("step_fraction", 1.0)),
+                "points": [self.point_summary(i) for i in range(len(self.values))]}
+
+    def point_summary(self, i: int) -> dict[str, Json]:
+        """One point of :meth:`summary`: the swept value (under the quantity's name), the speeds over the
+        draws, contact fractions, patterns, flags and step control; the amplitude an acceleration limit
+        left and the dt check's result when the sweep has them."""
+        s = self.speeds_mm_s[i]
+        frac = self.contact_fraction[i].mean(axis=(0, 1))
+        err = None if self.step_error_mm_s is None else float(self.step_error_mm_s[i, 0])
+        point: dict[str, Json] = {
+            self.quantity: float(self.values[i]),
+            "mean_speed_mm_s": float(s.mean()),
+            "std_speed_mm_s": float(self.std_speed_mm_s[i]),
+            "min_speed_mm_s": float(s.min()),
+            "max_speed_mm_s": float(s.max()),
+            "nominal_speed_mm_s": float(s[0]),
+            "contact_fraction": {m: float(f) for m, f in zip(CONTACT_MODES, frac)},
+            "patterns": dict(self.pattern_counts(i)),
+            "dominant_pattern": self.dominant_pattern(i),
+            "flags": dict(self.flag_counts(i)),
+            "convergence": dict(self.convergence_counts(i)),
+            "step_error_mm_s": err if err is not None and np.isfinite(err) else None,
+            "dt_s": None if self.dt_s is None else [float(x) for x in self.dt_s[i]],
+        }
+        amp = self.meta.get("amp_um")
+        if isinstance(amp, list) and self.quantity != "amp_um":
+            point["amp_um"] = _number(amp[i])
+        check = self.meta.get("dt_check")
+        if isinstance(check, dict):
+            quarter, converged = check.get("quarter_speed_mm_s"), check.get("converged")
+            point["quarter_step_speed_mm_s"] = _number(quarter[i]) if isinstance(quarter, list) else float("nan")
+            point["dt_converged"] = bool(converged[i]) if isinstance(converged, list) else False
+        return point
 
     def to_h5(self, path: str | Path) -> Path:
         """Write the sweep as an HDF5 file of kind ``"sim_sweep"``; returns the path (read it back with
@@ -233,7 +261,7 @@ class SweepResult:
 
 # --------------------------------------------------------------------------- helpers
 
-def scenario_dict(scenario: Any) -> dict[str, Any]:
+def scenario_dict(scenario: Any) -> dict[str, Json]:
     """A scenario as a JSON-able dict with its type (``{"type": "shaker", ...}``)."""
     is_instance = dataclasses.is_dataclass(scenario) and not isinstance(scenario, type)
     fields = dataclasses.asdict(scenario) if is_instance else dict(vars(scenario))
@@ -252,8 +280,7 @@ def apply_value(params: RobotParams, scenario: Shaker | PZT, quantity: str,
 
     if dataclasses.is_dataclass(scenario) and not isinstance(scenario, type) \
             and quantity in {f.name for f in dataclasses.fields(scenario)}:
-        changes: dict[str, Any] = {quantity: float(value)}
-        return params, dataclasses.replace(scenario, **changes)
+        return params, scenario.with_value(quantity, float(value))
     if quantity == "mass_mg":
         extra = float(value) - params.mass_mg
         return params.replace(mass_mg=float(value), body_mass_mg=params.body_mass_mg + extra), scenario
@@ -301,50 +328,116 @@ def _task_seed(seed: int, draw: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(draw)]).generate_state(1)[0])
 
 
-def run_point(task: tuple) -> dict[str, Any]:
+@dataclass(frozen=True)
+class PointTask:
+    """One (point, draw) run of a sweep (picklable): the nominal robot and base scenario, the swept
+    ``quantity`` set to ``value``, the ``draw`` (0: nominal) and how the run is made. ``quarter``: the
+    dt check's run at a quarter of the step; ``fraction``: of the default step; ``control``:
+    :func:`labkit.sim.simulate`'s ``error_control`` (``"check"`` or ``"off"``)."""
+
+    params: RobotParams
+    scenario: Shaker | PZT
+    quantity: str
+    value: float
+    draw: int
+    seed: int
+    duration_s: float
+    table: dict[str, float]
+    accel_limit_g: float | None = None
+    quarter: bool = False
+    fraction: float = 1.0
+    control: str = "check"
+
+
+def run_point(task: PointTask) -> RunRow:
     """Run one (point, draw) task: draw the parameters, apply the value, simulate.
 
-    A module-level function so the executor can pickle it by reference. The task's
-    ``control`` is ``simulate``'s ``error_control`` (``"check"`` or ``"off"``).
+    A module-level function so the executor can pickle it by reference.
     """
     from labkit.sim import simulate
     from labkit.sim.uncertainty import draw_params
 
-    params, scenario, quantity, value, draw, seed, duration_s, table, accel_limit_g, quarter, fraction, control = task
-    task_seed = _task_seed(seed, draw)
-    if draw > 0:
-        params = draw_params(params, np.random.default_rng(task_seed), table)
-    params, scenario = apply_value(params, scenario, quantity, value)
-    scenario = limit_acceleration(scenario, accel_limit_g)
+    params, scenario = task.params, task.scenario
+    task_seed = _task_seed(task.seed, task.draw)
+    if task.draw > 0:
+        params = draw_params(params, np.random.default_rng(task_seed), task.table)
+    params, scenario = apply_value(params, scenario, task.quantity, task.value)
+    scenario = limit_acceleration(scenario, task.accel_limit_g)
     dt_s = None
-    if quarter or fraction != 1.0:   # the dt check: the same run at a quarter of the sweep's step
+    if task.quarter or task.fraction != 1.0:   # the dt check: the same run at a quarter of the sweep's step
         from labkit.sim.core import align_dt, default_dt
 
-        dt_s = align_dt(default_dt(params, scenario) * fraction * (0.25 if quarter else 1.0), scenario)
-    r = simulate(params, scenario, duration_s=duration_s, seed=task_seed, dt_s=dt_s, error_control=control)
+        dt_s = align_dt(default_dt(params, scenario) * task.fraction * (0.25 if task.quarter else 1.0), scenario)
+    r = simulate(params, scenario, duration_s=task.duration_s, seed=task_seed, dt_s=dt_s, error_control=task.control)
     return result_row(r)
 
 
-def result_row(r: Any) -> dict[str, Any]:
+@dataclass(frozen=True)
+class RunRow:
+    """The small, picklable part of a :class:`~labkit.sim.result.SimResult` a sweep keeps.
+
+    ``contact_fraction``: feet x :data:`CONTACT_MODES`; ``patterns``, ``impacts``: per foot;
+    ``flags``: the validity flags joined by commas; ``convergence``, ``step_error_mm_s``,
+    ``halvings``: what the step control did; ``dt_s``: the step used.
+    """
+
+    speed_mm_s: float
+    contact_fraction: np.ndarray
+    patterns: tuple[str, ...]
+    impacts: np.ndarray
+    flags: str = ""
+    convergence: str = "unchecked"
+    step_error_mm_s: float = float("nan")
+    halvings: int = 0
+    dt_s: float = float("nan")
+
+
+def result_row(r: SimResult) -> RunRow:
     """The small, picklable part of a SimResult a sweep keeps."""
     frac = np.zeros((6, len(CONTACT_MODES)))
     cf = r.contact_fraction
-    for j, foot in enumerate(_feet(cf)):
+    for j, foot in enumerate(list(cf)[:6]):
         modes = cf[foot]
         for m, name in enumerate(CONTACT_MODES):
             frac[j, m] = float(modes.get(name, modes.get(name.upper(), 0.0)))
-    conv = getattr(r, "convergence", None)
-    return {"speed_mm_s": float(r.mean_speed_mm_s), "contact_fraction": frac,
-            "patterns": [str(p) for p in r.patterns], "impacts": np.asarray(r.impacts, dtype=int),
-            "flags": ",".join(r.validity.flags) if getattr(r, "validity", None) is not None else "",
-            "convergence": conv.status if conv is not None else "unchecked",
-            "step_error_mm_s": float(conv.error_mm_s) if conv is not None else float("nan"),
-            "halvings": int(conv.halvings) if conv is not None else 0, "dt_s": float(r.dt_s)}
+    conv = r.convergence
+    return RunRow(speed_mm_s=float(r.mean_speed_mm_s), contact_fraction=frac,
+                  patterns=tuple(str(p) for p in r.patterns), impacts=np.asarray(r.impacts, dtype=int),
+                  flags=",".join(r.validity.flags) if r.validity is not None else "",
+                  convergence=conv.status if conv is not None else "unchecked",
+                  step_error_mm_s=float(conv.error_mm_s) if conv is not None else float("nan"),
+                  halvings=int(conv.halvings) if conv is not None else 0, dt_s=float(r.dt_s))
 
 
-def _feet(cf: Any) -> list:
-    keys = list(cf.keys()) if isinstance(cf, dict) else list(range(len(cf)))
-    return keys[:6]
+@dataclass(frozen=True)
+class RunTable:
+    """Runs stacked over (points, draws): the arrays of a :class:`SweepResult`."""
+
+    speeds_mm_s: np.ndarray
+    contact_fraction: np.ndarray
+    patterns: np.ndarray
+    impacts: np.ndarray
+    flags: np.ndarray
+    convergence: np.ndarray
+    step_error_mm_s: np.ndarray
+    dt_s: np.ndarray
+
+    @classmethod
+    def of(cls, rows: Sequence[RunRow], points: int, draws: int) -> RunTable:
+        """The rows of ``points x draws`` runs, point-major, as arrays."""
+        shape = (points, draws)
+
+        def labels(values: Sequence[object], extra: tuple[int, ...] = ()) -> np.ndarray:
+            return np.array(values, dtype=object).reshape(shape + extra).astype(str)
+
+        return cls(speeds_mm_s=np.array([r.speed_mm_s for r in rows], float).reshape(shape),
+                   contact_fraction=np.array([r.contact_fraction for r in rows]).reshape(
+                       shape + (6, len(CONTACT_MODES))),
+                   patterns=labels([list(r.patterns) for r in rows], (6,)),
+                   impacts=np.array([r.impacts for r in rows]).reshape(shape + (6,)),
+                   flags=labels([r.flags for r in rows]), convergence=labels([r.convergence for r in rows]),
+                   step_error_mm_s=np.array([r.step_error_mm_s for r in rows], float).reshape(shape),
+                   dt_s=np.array([r.dt_s for r in rows], float).reshape(shape))
 
 
 # --------------------------------------------------------------------------- sweep
@@ -414,7 +507,6 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
     -------
     SweepResult
     """
-    from labkit.executor import map_tasks
     from labkit.sim.uncertainty import DEFAULT_TABLE, check_table
 
     grid = np.asarray([float(v) for v in values], dtype=float)
@@ -423,55 +515,61 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
     _check_options(int(draws), duration_s, step_fraction, accel_limit_g, error_control)
     table = dict(DEFAULT_TABLE if table is None else table)
     check_table(params, table)
-    # Fail on a bad quantity before any process starts.
-    apply_value(params, base_scenario, quantity, grid[0])
     n_draws = max(1, int(draws))
-    fraction = float(step_fraction)
-    check_points(params, base_scenario, quantity, grid, duration_s, accel_limit_g, fraction, keys=keys)
-    common = (int(seed), float(duration_s), table, accel_limit_g)
-    tasks: list[tuple] = [(params, base_scenario, quantity, float(v), d, *common, False, fraction,
-                           _control(error_control, d)) for v in grid for d in range(n_draws)]
-    n_main = len(tasks)
-    if dt_check:
-        tasks += [(params, base_scenario, quantity, float(v), 0, *common, True, fraction, "off") for v in grid]
-    rows = map_tasks(run_point, tasks, scheduler=scheduler, workers=workers,
-                     desc=f"sweep {quantity}", quiet=quiet)
-    quarter_rows, rows = rows[n_main:], rows[:n_main]
+    proto = PointTask(params, base_scenario, quantity, float(grid[0]), 0, int(seed), float(duration_s), table,
+                      accel_limit_g, False, float(step_fraction))
+    apply_value(params, base_scenario, quantity, grid[0])       # a bad quantity fails before any process starts
+    check_points(params, base_scenario, quantity, grid, duration_s, accel_limit_g, float(step_fraction), keys=keys)
+    tasks = [dataclasses.replace(proto, value=float(v), draw=d, control=_control(error_control, d))
+             for v in grid for d in range(n_draws)]
+    checks = [dataclasses.replace(proto, value=float(v), quarter=True, control="off") for v in grid] if dt_check else []
+    run = functools.partial(_run_batch, scheduler=scheduler, workers=workers, quiet=quiet)
+    rows = run(tasks + checks, f"sweep {quantity}")
+    quarter_rows, rows = rows[len(tasks):], rows[:len(tasks)]
     if error_control == "sample" and n_draws > 1:
-        _refine_sampled(rows, tasks[:n_main], n_draws,
-                        lambda again: map_tasks(run_point, again, scheduler=scheduler, workers=workers,
-                                                desc="sweep: refined points", quiet=quiet))
-    shape = (len(grid), n_draws)
-    speeds = np.array([r["speed_mm_s"] for r in rows]).reshape(shape)
-    frac = np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, len(CONTACT_MODES)))
-    patterns = np.array([r["patterns"] for r in rows], dtype=object).reshape(shape + (6,)).astype(str)
-    impacts = np.array([r["impacts"] for r in rows]).reshape(shape + (6,))
-    flags = np.array([r.get("flags", "") for r in rows], dtype=object).reshape(shape).astype(str)
-    conv = np.array([r["convergence"] for r in rows], dtype=object).reshape(shape).astype(str)
-    err = np.array([r["step_error_mm_s"] for r in rows], float).reshape(shape)
-    steps = np.array([r["dt_s"] for r in rows], float).reshape(shape)
-    meta = {"seed": int(seed), "draws": n_draws, "duration_s": float(duration_s),
-            "uncertainty_table": table, "scheduler": scheduler or "local",
-            "draw_0": "nominal", "seeding": "SeedSequence([seed, draw]) per draw, same at every point",
-            "task_seeds": [_task_seed(seed, d) for d in range(n_draws)]}
-    meta["error_control"] = error_control
-    if fraction != 1.0:
-        meta["step_fraction"] = fraction
+        rows = _refine_sampled(rows, tasks, n_draws, lambda again: run(again, "sweep: refined points"))
+    t = RunTable.of(rows, len(grid), n_draws)
+    meta = _sweep_meta(proto, n_draws, scheduler, error_control)
     if dt_check:
-        from labkit.sim.errorcontrol import agree
-
-        q = np.array([r["speed_mm_s"] for r in quarter_rows])
-        diff = speeds[:, 0] - q
-        meta["dt_check"] = {"quarter_speed_mm_s": [float(x) for x in q], "difference_mm_s": [float(x) for x in diff],
-                            "converged": [bool(x) for x in agree(speeds[:, 0], q)]}
+        meta["dt_check"] = _dt_check_meta(t.speeds_mm_s[:, 0], quarter_rows)
     if accel_limit_g is not None and hasattr(base_scenario, "amp_um"):
         meta["accel_limit_g"] = float(accel_limit_g)
         meta["amp_um"] = [float(limit_acceleration(apply_value(params, base_scenario, quantity, v)[1],
                                                    accel_limit_g).amp_um) for v in grid]
-    return SweepResult(quantity=quantity, values=grid, speeds_mm_s=speeds, contact_fraction=frac,
-                       patterns=patterns, impacts=impacts, scenario=scenario_dict(base_scenario),
-                       params_toml=params.to_toml_text(), meta=meta, flags=flags, convergence=conv,
-                       step_error_mm_s=err, dt_s=steps)
+    return SweepResult(quantity=quantity, values=grid, speeds_mm_s=t.speeds_mm_s, contact_fraction=t.contact_fraction,
+                       patterns=t.patterns, impacts=t.impacts, scenario=scenario_dict(base_scenario),
+                       params_toml=params.to_toml_text(), meta=meta, flags=t.flags, convergence=t.convergence,
+                       step_error_mm_s=t.step_error_mm_s, dt_s=t.dt_s)
+
+
+def _run_batch(batch: list[PointTask], desc: str, *, scheduler: str | None, workers: int | None,
+               quiet: bool) -> list[RunRow]:
+    """Run tasks through :func:`labkit.executor.map_tasks` (local processes, serial or Dask)."""
+    from labkit.executor import map_tasks
+
+    return map_tasks(run_point, batch, scheduler=scheduler, workers=workers, desc=desc, quiet=quiet)
+
+
+def _dt_check_meta(nominal_mm_s: np.ndarray, quarter_rows: list[RunRow]) -> dict[str, Json]:
+    """The dt check of a sweep's ``meta``: the nominal robot's speed at a quarter step, the difference,
+    and whether they agree (:func:`labkit.sim.errorcontrol.agree`) at every point."""
+    from labkit.sim.errorcontrol import agree
+
+    q = np.array([r.speed_mm_s for r in quarter_rows])
+    return {"quarter_speed_mm_s": [float(x) for x in q], "difference_mm_s": [float(x) for x in nominal_mm_s - q],
+            "converged": [bool(x) for x in agree(nominal_mm_s, q)]}
+
+
+def _sweep_meta(proto: PointTask, n_draws: int, scheduler: str | None, error_control: str) -> dict[str, Json]:
+    """A sweep's ``meta``: seeding, duration, uncertainty table, scheduler, error control, step fraction."""
+    meta: dict[str, Json] = {
+        "seed": proto.seed, "draws": n_draws, "duration_s": proto.duration_s,
+        "uncertainty_table": {k: float(v) for k, v in proto.table.items()}, "scheduler": scheduler or "local",
+        "draw_0": "nominal", "seeding": "SeedSequence([seed, draw]) per draw, same at every point",
+        "task_seeds": [_task_seed(proto.seed, d) for d in range(n_draws)], "error_control": error_control}
+    if proto.fraction != 1.0:
+        meta["step_fraction"] = proto.fraction
+    return meta
 
 
 def _control(mode: str, draw: int) -> str:
@@ -498,25 +596,17 @@ def _check_options(draws: int, duration_s: float, step_fraction: float, accel_li
                          expected=", ".join(ERROR_CONTROL))
 
 
-def _refine_sampled(rows: list[dict], tasks: list[tuple], n_draws: int,
-                    run: Callable[[list[tuple]], list[dict]]) -> None:
+def _refine_sampled(rows: list[RunRow], tasks: list[PointTask], n_draws: int,
+                    run: Callable[[list[PointTask]], list[RunRow]]) -> list[RunRow]:
     """Sampled error control: at every point whose nominal robot was refined (it halved its
-    step and then agreed with half of it), rerun the other draws at that step (in place in
-    ``rows``); elsewhere they keep the default step. Their status: ``sampled``."""
-    redo: list[int] = []
-    for i in range(0, len(rows), n_draws):
-        nominal = rows[i]
-        for k in range(i + 1, i + n_draws):
-            rows[k]["convergence"] = "sampled"
-        if nominal["convergence"] == "refined":
-            redo += list(range(i + 1, i + n_draws))
-    if not redo:
-        return
-    again = []
-    for k in redo:
-        t = list(tasks[k])
-        t[10] = t[10] / 2 ** rows[k - k % n_draws]["halvings"]
-        again.append(tuple(t))
-    for k, row in zip(redo, run(again)):
-        row["convergence"] = "sampled"
-        rows[k] = row
+    step and then agreed with half of it), rerun the other draws at that step; elsewhere they
+    keep the default step. Their status: ``sampled``. Returns the rows, those draws replaced."""
+    out = [r if k % n_draws == 0 else dataclasses.replace(r, convergence="sampled") for k, r in enumerate(rows)]
+    redo = [k for i in range(0, len(rows), n_draws) if rows[i].convergence == "refined"
+            for k in range(i + 1, i + n_draws)]
+    if redo:
+        again = [dataclasses.replace(tasks[k], fraction=tasks[k].fraction / 2 ** rows[k - k % n_draws].halvings)
+                 for k in redo]
+        for k, row in zip(redo, run(again)):
+            out[k] = dataclasses.replace(row, convergence="sampled")
+    return out

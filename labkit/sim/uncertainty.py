@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -118,7 +118,7 @@ def draw_params(params: RobotParams, rng: np.random.Generator,
     """
     table = dict(DEFAULT_TABLE if table is None else table)
     check_table(params, table)
-    changes: dict[str, Any] = {}
+    changes: dict[str, float | tuple[float, ...]] = {}
     factor: dict[str, float] = {}
     for key in sorted(table):
         sigma = float(table[key])

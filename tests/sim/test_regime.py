@@ -8,6 +8,7 @@ jumping "at higher amplitudes").
 from __future__ import annotations
 
 import csv
+import json
 import math
 
 import h5py
@@ -15,6 +16,7 @@ import numpy as np
 import pytest
 
 from labkit.errors import InputError
+from labkit.jsonutil import to_jsonable
 from labkit.sim import PZT, Shaker, simulate
 from labkit.sim.presets import load
 from labkit.sim.regime import (
@@ -46,10 +48,11 @@ def test_tiny_drive_is_still_small_drive_firm_high_g_jumping():
     assert regs[1.0].body_motion_um > STILL_MOTION_UM
     assert regs[60.0].regime == "jumping" and regs[60.0].feet["jumping"] >= 3
     assert max(runs[60.0].max_height_um) > 2 * 60.0      # far above the tray's own motion
-    # the classifier reads the summary a file stores the same way
-    r = runs[60.0]
-    again = RunFeatures.from_summary(r.summary(), RunFeatures.of(r).body_motion_um)
-    assert classify_regime(again) == regs[60.0]
+    # the classifier reads the summary a file stores (JSON) the same way as the run itself
+    for r in runs.values():
+        stored = json.loads(json.dumps(to_jsonable(r.summary())))
+        again = RunFeatures.from_summary(stored, RunFeatures.of(r).body_motion_um)
+        assert again == RunFeatures.of(r) and classify_regime(again) == classify_regime(r)
 
 
 def test_pzt_tiny_voltage_still():

@@ -33,7 +33,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -47,6 +47,9 @@ from labkit.sim.paper.observations import (
     observations,
 )
 from labkit.sim.params import RobotParams
+
+if TYPE_CHECKING:
+    from labkit.sim.scenarios.runs import ScenarioRow
 
 #: The default ensemble: 6 drawn robots x 2 s x seeds 0, 1, 2 (18 robots).
 DEFAULT_DRAWS = 6
@@ -134,7 +137,7 @@ class EnsembleRuns:
     scenario and one result row per (point, robot), robots ordered nominal first, then seed-major."""
 
     plans: dict[str, Any]
-    rows: dict[str, list[dict[str, Any]]]
+    rows: dict[str, list[ScenarioRow]]
     robots: list[tuple[int, int]]
     settings: dict[str, Any]
     wall_s: float
@@ -255,13 +258,13 @@ def score_runs(runs: EnsembleRuns) -> EnsembleScore:
         got = _measure(PAPER[name].measure, plan.points, runs.rows[name], (len(runs.robots), n_seeds, draws))
         members[name], pooled[name] = got["members"], got["pooled"]
         scores += [_score(o, got) for o in observations(name)]
-    cpu = sum(float(r.get("cpu_s", 0.0)) for rows in runs.rows.values() for r in rows)
+    cpu = sum(r.cpu_s for rows in runs.rows.values() for r in rows)
     return EnsembleScore(scores=scores, settings=runs.settings, cpu_s=cpu, wall_s=runs.wall_s,
                          runs=sum(len(r) for r in runs.rows.values()), member_metrics=members,
                          pooled_metrics=pooled)
 
 
-def _measure(measure: Any, points: Sequence[Any], rows: Sequence[dict[str, Any]],
+def _measure(measure: Any, points: Sequence[Any], rows: Sequence[ScenarioRow],
              shape: tuple[int, int, int]) -> dict[str, Any]:
     """Metrics of the nominal robot, each seed's ensemble, the pooled ensemble and each drawn robot
     (``shape``: robots in all, seeds, drawn robots per seed)."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from labkit.errors import InputError
 from labkit.sim.paper.observations import ObservationCheck
@@ -14,6 +14,15 @@ from labkit.sim.scenarios.plots import Plot, save_figure
 #: Run sizes: ``quick`` few points and short runs (for the paper scenarios: the
 #: calibration's size), ``full`` the scenario's documented size.
 SIZES = ("quick", "full")
+
+
+class ExecutorKw(TypedDict):
+    """Where a scenario's runs go: keywords of :func:`labkit.sim.sweep` and :func:`run_points`."""
+
+    scheduler: str | None
+    workers: int | None
+    seed: int
+    quiet: bool
 
 
 @dataclass(frozen=True)
@@ -34,7 +43,7 @@ class RunOptions:
     def quick(self) -> bool:
         return self.size == "quick"
 
-    def executor_kw(self) -> dict[str, Any]:
+    def executor_kw(self) -> ExecutorKw:
         """``scheduler``, ``workers``, ``seed``, ``quiet`` as keywords of :func:`labkit.sim.sweep`."""
         return {"scheduler": self.scheduler, "workers": self.workers, "seed": self.seed, "quiet": self.quiet}
 
@@ -51,7 +60,7 @@ class Outcome:
 
     finding: str
     checks: dict[str, bool]
-    numbers: dict[str, Any]
+    numbers: dict[str, object]
     observations: list[ObservationCheck] = field(default_factory=list)
     plot: Plot | None = None
     write_data: Callable[[Path], Any] | None = None
@@ -75,7 +84,7 @@ class ScenarioResult:
     size: str
     finding: str
     checks: dict[str, bool]
-    numbers: dict[str, Any]
+    numbers: dict[str, object]
     observations: list[ObservationCheck] = field(default_factory=list)
     figure: str | None = None
     data: str | None = None
@@ -102,11 +111,11 @@ class ScenarioResult:
         """The pass/fail line of every observation."""
         return [c.line() for c in self.observations]
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, object]:
         """A JSON-able dict: name, title, expectation, size, finding, checks, the numbers, observations, files."""
-        out: dict[str, Any] = {"name": self.name, "title": self.title, "expectation": self.expectation,
-                               "quick": self.quick, "size": self.size, "finding": self.finding,
-                               "checks": dict(self.checks)}
+        out: dict[str, object] = {"name": self.name, "title": self.title, "expectation": self.expectation,
+                                "quick": self.quick, "size": self.size, "finding": self.finding,
+                                "checks": dict(self.checks)}
         for k, v in self.numbers.items():
             out.setdefault(k, v)
         if self.observations:

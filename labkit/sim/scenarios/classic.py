@@ -19,25 +19,45 @@ are the ``paper-*`` scenarios of :mod:`labkit.sim.scenarios.paper`.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
+from labkit.jsonutil import Json
 from labkit.sim.core import ablate
 from labkit.sim.params import RobotParams
 from labkit.sim.scenarios.base import Outcome, RunOptions, register
 from labkit.sim.scenarios.io import write_runs, write_sweep_set
 from labkit.sim.scenarios.metrics import band, fig8_checks, foot_rise_um, run_info
 from labkit.sim.scenarios.plots import sweep_plot, trace_plot
+from labkit.sim.sweep import SweepResult
 
 #: The RobotParams field holding the adhesion force at first contact (N).
 ADHESION_FIELD = "c_ad_n"
 
 
-def _points(s: Any) -> list[dict[str, Any]]:
-    return [{s.quantity: p[s.quantity], "mean_speed_mm_s": p["mean_speed_mm_s"],
-             "std_speed_mm_s": p["std_speed_mm_s"], "dominant_pattern": p["dominant_pattern"]}
-            for p in s.summary()["points"]]
+class Fig8Table(TypedDict):
+    """A sweep judged by Fig. 8's tests (:func:`labkit.sim.scenarios.metrics.fig8_checks`) and its points."""
+
+    checks: dict[str, bool]
+    points: list[dict[str, Json]]
+
+
+class Fig8Numbers(Fig8Table):
+    """``shaker-speed``'s numbers per sweep: the speeds in the bands Fig. 8 speaks of."""
+
+    peak_speed_150_300_hz_mm_s: float
+    max_speed_500_1800_hz_mm_s: float
+    speed_240_hz_mm_s: float
+
+
+def _points(s: SweepResult) -> list[dict[str, Json]]:
+    keys = (s.quantity, "mean_speed_mm_s", "std_speed_mm_s", "dominant_pattern")
+    return [{k: p[k] for k in keys} for p in s.summary()["points"]]
+
+
+def _fig8_table(s: SweepResult) -> Fig8Table:
+    return {"checks": fig8_checks(s.values, s.mean_speed_mm_s), "points": _points(s)}
 
 
 @register("shaker-speed", "speed vs shaker frequency at 25 um (paper Fig. 8)",
@@ -52,12 +72,11 @@ def shaker_speed(params: RobotParams, opts: RunOptions) -> Outcome:
     s = sweep(params, Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz", freqs.tolist(), **kw)
     capped = sweep(params, Shaker(freq_hz=240.0, amp_um=25.0), "freq_hz", freqs.tolist(),
                    accel_limit_g=ACCEL_LIMIT_G, **kw)
-    out: dict[str, Any] = {}
+    out: dict[str, Fig8Numbers] = {}
     for key, sw in (("amp_25_um", s), (f"capped_{ACCEL_LIMIT_G:g}_g", capped)):
         out[key] = {"peak_speed_150_300_hz_mm_s": band(sw.values, sw.mean_speed_mm_s, 150, 300),
                     "max_speed_500_1800_hz_mm_s": band(sw.values, sw.mean_speed_mm_s, 500, 1800),
-                    "speed_240_hz_mm_s": float(np.interp(240.0, sw.values, sw.mean_speed_mm_s)),
-                    "checks": fig8_checks(sw.values, sw.mean_speed_mm_s), "points": _points(sw)}
+                    "speed_240_hz_mm_s": float(np.interp(240.0, sw.values, sw.mean_speed_mm_s)), **_fig8_table(sw)}
     a, c = out["amp_25_um"], out[f"capped_{ACCEL_LIMIT_G:g}_g"]
     return Outcome(
         numbers={**out, "accel_limit_g": ACCEL_LIMIT_G}, checks=a["checks"],
@@ -269,9 +288,8 @@ def adhesion(params: RobotParams, opts: RunOptions) -> Outcome:
                 ax.legend(fontsize=6, ncol=2, title="adhesion", title_fontsize=6)
         fig.tight_layout()
 
-    table: dict[str, dict[str, dict[str, Any]]] = {
-        law: {f"{v * 1e6:g}": {"checks": fig8_checks(sweeps[(law, v)].values, sweeps[(law, v)].mean_speed_mm_s),
-                               "points": _points(sweeps[(law, v)])} for v in values} for law in laws}
+    table: dict[str, dict[str, Fig8Table]] = {
+        law: {f"{v * 1e6:g}": _fig8_table(sweeps[(law, v)]) for v in values} for law in laws}
     good = {law: [k for k, t in rows.items() if all(t["checks"].values())] for law, rows in table.items()}
     return Outcome(
         numbers={"field": name, "by_law_and_adhesion_un": table, "values_reproducing_fig8_un": good},

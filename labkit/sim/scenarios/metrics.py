@@ -1,7 +1,7 @@
 """Measures of single runs and of speed curves, shared by the scenarios."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -68,11 +68,23 @@ def contact_summary(r: SimResult) -> dict[str, float]:
     """Mean over feet of the fraction of time in each contact mode."""
     from labkit.sim.sweep import CONTACT_MODES, result_row
 
-    frac = result_row(r)["contact_fraction"].mean(axis=0)
+    frac = result_row(r).contact_fraction.mean(axis=0)
     return {m: float(f) for m, f in zip(CONTACT_MODES, frac)}
 
 
-def run_info(r: SimResult, freq_hz: float | None = None) -> dict[str, Any]:
+class RunInfo(TypedDict):
+    """:func:`run_info`: what a single scenario run reports."""
+
+    mean_speed_mm_s: float
+    patterns: list[str]
+    contact_fraction: dict[str, float]
+    impacts: list[int]
+    leg_motion_um: float
+    foot_rise_um: float
+    aperiodicity: float
+
+
+def run_info(r: SimResult, freq_hz: float | None = None) -> RunInfo:
     """The numbers a single scenario run reports."""
     return {"mean_speed_mm_s": float(r.mean_speed_mm_s), "patterns": [str(p) for p in r.patterns],
             "contact_fraction": contact_summary(r), "impacts": [int(i) for i in r.impacts],

@@ -340,14 +340,14 @@ def evaluate(name: str, params: RobotParams, opts: RunOptions,
 
 
 def _outcome(name: str, ps: PointSet, metrics: dict[str, float], axis: str, plot: Plot,
-             extra: dict[str, Any] | None = None, size_in: tuple[float, float] = (7.0, 4.6)) -> Outcome:
+             extra: dict[str, object] | None = None, size_in: tuple[float, float] = (7.0, 4.6)) -> Outcome:
     checks = check(name, metrics)
     n = tally(checks)
     finding = (f"{n[MET]}/{len(checks)} paper observations met"
                + (f", {n[NOT_APPLICABLE]} not applicable (not in the claim's regime: "
                   f"{', '.join(c.id for c in checks if not c.applicable)})" if n[NOT_APPLICABLE] else "")
                + (f"; not met: {', '.join(c.id for c in checks if c.state == NOT_MET)}" if n[NOT_MET] else ""))
-    numbers = {"metrics": metrics, "points": ps.points(axis), "draws": ps.draws,
+    numbers: dict[str, object] = {"metrics": metrics, "points": ps.points(axis), "draws": ps.draws,
                "duration_s": ps.meta.get("duration_s"), **(extra or {})}
     return Outcome(finding=finding, checks={c.id: c.passed for c in checks}, numbers=numbers,
                    observations=checks, plot=plot, write_data=ps.to_h5,

@@ -18,13 +18,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from labkit.jsonutil import Json
 from labkit.sim.excitation import PZT, Shaker
 from labkit.sim.params import RobotParams
-from labkit.sim.sweep import SweepResult
+from labkit.sim.sweep import RunRow, SweepResult
 
 
 @dataclass(frozen=True)
@@ -53,7 +53,21 @@ def task_seed(seed: int, draw: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(draw)]).generate_state(1)[0])
 
 
-def run_task(task: Task) -> dict[str, Any]:
+@dataclass(frozen=True)
+class ScenarioRow:
+    """What :func:`run_task` keeps of one run: the sweep's row (:class:`~labkit.sim.sweep.RunRow`), the
+    paper scenarios' measures (:mod:`labkit.sim.scenarios.metrics`; ``measures`` by the names of
+    ``RUN_MEASURES``) and the CPU time it took."""
+
+    run: RunRow
+    foot_rise_um: float
+    leg_motion_um: float
+    aperiodicity: float
+    measures: dict[str, float] = field(default_factory=dict)
+    cpu_s: float = 0.0
+
+
+def run_task(task: Task) -> ScenarioRow:
     """Simulate one task and keep its small measures (a module-level function: pickled by reference)."""
     import time
 
@@ -68,10 +82,8 @@ def run_task(task: Task) -> dict[str, Any]:
     if task.draw > 0:
         params = draw_params(params, np.random.default_rng(seed), task.table)
     r = simulate(params, task.point.drive, duration_s=task.duration_s, seed=seed, ablation=task.point.ablation)
-    row = result_row(r)
-    row.update(foot_rise_um=foot_rise_um(r), leg_motion_um=leg_motion_um(r), aperiodicity=leg_aperiodicity(r))
-    row.update(run_measures(r), cpu_s=time.process_time() - t0)
-    return row
+    return ScenarioRow(result_row(r), foot_rise_um(r), leg_motion_um(r), leg_aperiodicity(r), run_measures(r),
+                       time.process_time() - t0)
 
 
 @dataclass
@@ -83,7 +95,7 @@ class PointSet(SweepResult):
     foot_rise_um: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
     leg_motion_um: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
     aperiodicity: np.ndarray = field(default_factory=lambda: np.zeros((0, 1)))
-    drives: list[dict[str, Any]] = field(default_factory=list)
+    drives: list[dict[str, Json]] = field(default_factory=list)
     #: Further per-run measures (point x draw) by name (labkit.sim.scenarios.metrics.RUN_MEASURES).
     extra: dict[str, np.ndarray] = field(default_factory=dict)
 
@@ -93,9 +105,9 @@ class PointSet(SweepResult):
         total = sum(counts.values())
         return counts.get(pattern, 0) / total if total else float("nan")
 
-    def points(self, name: str) -> list[dict[str, Any]]:
+    def points(self, name: str) -> list[dict[str, Json]]:
         """One JSON-able row per point: the coordinate (as ``name``), speeds, pattern, drive."""
-        rows = []
+        rows: list[dict[str, Json]] = []
         for i, x in enumerate(self.values):
             rows.append({name: float(x), "mean_speed_mm_s": float(self.mean_speed_mm_s[i]),
                          "std_speed_mm_s": float(self.std_speed_mm_s[i]),
@@ -131,27 +143,27 @@ def make_tasks(points: Sequence[Point], draws: int, duration_s: float, seed: int
     return [Task(p, d, int(seed), float(duration_s), table) for p in points for d in range(n)]
 
 
-def collect(points: Sequence[Point], rows: Sequence[dict[str, Any]], draws: int,
-            meta: dict[str, Any] | None = None, quantity: str = "x") -> PointSet:
+def collect(points: Sequence[Point], rows: Sequence[ScenarioRow], draws: int,
+            meta: dict[str, Json] | None = None, quantity: str = "x") -> PointSet:
     """Assemble the rows of :func:`make_tasks`'s tasks (in order) into a :class:`PointSet`."""
     from labkit.sim.scenarios.metrics import RUN_MEASURES
-    from labkit.sim.sweep import scenario_dict
+    from labkit.sim.sweep import RunTable, scenario_dict
 
     shape = (len(points), max(1, int(draws)))
+    t = RunTable.of([r.run for r in rows], *shape)
 
-    def arr(key: str) -> np.ndarray:
-        return np.array([r[key] for r in rows], dtype=float).reshape(shape)
+    def arr(values: list[float]) -> np.ndarray:
+        return np.array(values, dtype=float).reshape(shape)
 
-    return PointSet(quantity=quantity, values=np.array([p.x for p in points], float), speeds_mm_s=arr("speed_mm_s"),
-                    contact_fraction=np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, 3)),
-                    patterns=np.array([r["patterns"] for r in rows], dtype=object).reshape(shape + (6,)).astype(str),
-                    impacts=np.array([r["impacts"] for r in rows]).reshape(shape + (6,)),
+    return PointSet(quantity=quantity, values=np.array([p.x for p in points], float), speeds_mm_s=t.speeds_mm_s,
+                    contact_fraction=t.contact_fraction, patterns=t.patterns, impacts=t.impacts,
                     params_toml=points[0].params.to_toml_text() if points else "", meta=dict(meta or {}),
-                    foot_rise_um=arr("foot_rise_um"), leg_motion_um=arr("leg_motion_um"),
-                    aperiodicity=arr("aperiodicity"),
-                    convergence=np.array([r["convergence"] for r in rows], dtype=object).reshape(shape).astype(str),
-                    step_error_mm_s=arr("step_error_mm_s"), dt_s=arr("dt_s"),
-                    extra={k: arr(k) for k in RUN_MEASURES if rows and all(k in r for r in rows)},
+                    foot_rise_um=arr([r.foot_rise_um for r in rows]),
+                    leg_motion_um=arr([r.leg_motion_um for r in rows]),
+                    aperiodicity=arr([r.aperiodicity for r in rows]),
+                    convergence=t.convergence, step_error_mm_s=t.step_error_mm_s, dt_s=t.dt_s,
+                    extra={k: arr([r.measures[k] for r in rows]) for k in RUN_MEASURES
+                           if rows and all(k in r.measures for r in rows)},
                     drives=[scenario_dict(p.drive) | ({"ablation": p.ablation} if p.ablation else {})
                             for p in points])
 
