@@ -112,7 +112,7 @@ class Model:
     y_foot_eq: np.ndarray         # (6,) lateral foot position at rest (body frame origin)
     x_air: np.ndarray             # (18,) modal deviations of the in-air equilibrium
     lam_rest: np.ndarray          # (NR,) contact forces at rest
-    scal: dict
+    scal: dict[str, float]        # the kernel's named scalars (_scalars)
 
     @property
     def kind(self) -> int:

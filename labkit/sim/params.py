@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import ConfigError
+from labkit.jsonutil import Json
 
 G_M_S2 = 9.81
 #: A leg mode's modal mass referred to the foot, as a share of the leg's mass, for a uniform
@@ -152,7 +153,7 @@ class RobotParams:
     v_stick_mm_s: float = 0.01
     impact_modes: tuple[float, float, float] = (1.0, 1.0, 1.0)
     g_m_s2: float = G_M_S2
-    provenance: dict = field(default_factory=dict, compare=False, hash=False, repr=False)
+    provenance: dict[str, Json] = field(default_factory=dict, compare=False, hash=False, repr=False)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
@@ -239,7 +240,7 @@ class RobotParams:
             out[f.name] = list(v) if isinstance(v, tuple) else v
         return out
 
-    def to_toml_text(self, provenance: dict | None = None) -> str:
+    def to_toml_text(self, provenance: Mapping[str, Json] | None = None) -> str:
         """The parameter file's text (with a ``[provenance]`` table)."""
         import tomli_w
 
@@ -252,7 +253,7 @@ class RobotParams:
                 "# defaults = Qu, Choi, Oldham 2017 Tables 1-2 + docs/model.md choices.\n\n")
         return head + tomli_w.dumps(table)
 
-    def to_toml(self, path: str | Path, provenance: dict | None = None) -> Path:
+    def to_toml(self, path: str | Path, provenance: Mapping[str, Json] | None = None) -> Path:
         """Write the parameter file (``[provenance]`` merged from ``self.provenance`` and the argument)."""
         path = Path(path)
         path.write_text(self.to_toml_text(provenance), encoding="utf-8")
