@@ -45,11 +45,12 @@ def scaled(params: RobotParams, name: str, factor: float) -> tuple[RobotParams, 
 
 
 def tasks(params: RobotParams, amp_um: float, robots: int, seed: int, duration_s: float,
-          nominal: bool) -> list[tuple[Any, ...]]:
-    """:func:`labkit.sim.sweep.run_point` tasks: draw 0 the nominal robot, 1..robots drawn ones."""
+          nominal: bool, control: str = "check") -> list[tuple[Any, ...]]:
+    """:func:`labkit.sim.sweep.run_point` tasks: draw 0 the nominal robot, 1..robots drawn ones;
+    ``control`` is ``simulate``'s error control (its default, ``"check"``, as every scenario run)."""
     first = 0 if nominal else 1
     sc = Shaker(FREQ_HZ, amp_um)
-    return [(params, sc, "amp_um", amp_um, d, seed, duration_s, None, None, False, 1.0)
+    return [(params, sc, "amp_um", amp_um, d, seed, duration_s, None, None, False, 1.0, control)
             for d in range(first, robots + 1)]
 
 
@@ -64,7 +65,7 @@ def stats(speeds: list[float]) -> dict[str, Any]:
 def speed(args: argparse.Namespace, params: RobotParams) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for seed in args.seeds:
-        rows = map_tasks(run_point, tasks(params, AMP_UM, args.robots, seed, args.duration, True),
+        rows = map_tasks(run_point, tasks(params, AMP_UM, args.robots, seed, args.duration, True, args.control),
                          workers=args.workers, quiet=True)
         sp = [abs(r["speed_mm_s"]) for r in rows]
         out[str(seed)] = {"nominal": round(sp[0], 3), "drawn": stats(sp[1:])}
@@ -76,7 +77,7 @@ def smooth(args: argparse.Namespace, params: RobotParams) -> dict[str, Any]:
     batch: list[tuple[Any, ...]] = []
     for name, f in variants:
         p, amp = (params, AMP_UM) if name == "base" else scaled(params, name, f)
-        batch += tasks(p, amp, args.robots, args.seed, args.duration, False)
+        batch += tasks(p, amp, args.robots, args.seed, args.duration, False, args.control)
     rows = map_tasks(run_point, batch, workers=args.workers, quiet=True)
     n = args.robots
     means = [statistics.fmean(abs(r["speed_mm_s"]) for r in rows[k * n:(k + 1) * n]) for k in range(len(variants))]
@@ -101,6 +102,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=2.0)
     ap.add_argument("--step", type=float, default=0.05)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--control", choices=("check", "off"), default="check",
+                    help="simulate's error control per run (default check, as the scenarios run)")
     args = ap.parse_args()
     params = load(args.params)
     t0 = time.perf_counter()
