@@ -102,7 +102,7 @@ def test_ensemble_score_counts_the_pooled_verdict_and_the_share_of_robots():
     inside -> half the share term, (2/3 - 1/2) / (2/3) / 2; pooled 0 with none inside -> the
     whole share term and half the tanh of the violation (2 mm/s below, in units of 4 mm/s, plus
     the margin); an observation outside its regime costs NOT_APPLICABLE_COST, never 0."""
-    from labkit.sim.paper.ensemble import EnsembleScore
+    from labkit.sim.paper.ensemble import EnsembleScore, EnsembleSettings
     from labkit.sim.paper.fit import NOT_APPLICABLE_COST, OBJECTIVE_MARGIN, ensemble_score
     from labkit.sim.paper.observations import NOT_APPLICABLE, observations, violation
 
@@ -110,7 +110,8 @@ def test_ensemble_score_counts_the_pooled_verdict_and_the_share_of_robots():
     ablation = next(x for x in observations() if x.when is not None)
 
     def cost(*scores):
-        return ensemble_score(EnsembleScore(scores=list(scores), settings={}, cpu_s=0.0, wall_s=0.0, runs=0))
+        settings = EnsembleSettings(draws=12, duration_s=1.0, seeds=(0,))
+        return ensemble_score(EnsembleScore(scores=list(scores), settings=settings, cpu_s=0.0, wall_s=0.0, runs=0))
 
     ok = cost(_scored(o, 4.0, 1.0))
     assert ok.cost == 0.0 and ok.violations == {o.id: 0.0} and ok.share_met == {o.id: 1.0}
