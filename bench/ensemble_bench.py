@@ -8,6 +8,11 @@
 per draw seed: median, mean, sd, range and how many lie in the paper's band 2-6 mm/s (Fig. 8 at
 240 Hz, ``fig8_speed_240hz`` of ``labkit/sim/paper/observations.toml``).
 
+Per seed it also lists each drawn robot's adhesion at first contact over the largest pull on its
+feet standing on the tray (``adhesion_over_pull``, :func:`labkit.sim.paper.release.stuck_pull`:
+the linear robot's, an upper bound; the simulated robot stays down from ~0.8 of it) and how many
+robots it holds down (``held_by_adhesion``, ratio >= 1).
+
 ``smooth``: the mean |speed| of the same drawn ensemble with one uncertain parameter of the
 nominal robot moved by -``step`` and +``step`` (relative) before the draws (common random
 numbers: every variant's robots carry the same draw factors), and the largest relative change
@@ -62,13 +67,34 @@ def stats(speeds: list[float]) -> dict[str, Any]:
             "speeds": [round(s, 3) for s in speeds]}
 
 
+def adhesion_ratios(params: RobotParams, robots: int, seed: int) -> list[float]:
+    """Each drawn robot's adhesion at first contact over the pull its feet feel standing on the
+    tray (:func:`labkit.sim.paper.release.stuck_pull`, an upper bound): above 1 it cannot leave
+    the tray (drawn as :func:`labkit.sim.sweep.run_point` draws them)."""
+    import numpy as np
+
+    from labkit.sim.paper.release import stuck_pull
+    from labkit.sim.scenarios.runs import task_seed
+    from labkit.sim.uncertainty import draw_params
+
+    out = []
+    for d in range(1, robots + 1):
+        p = draw_params(params, np.random.default_rng(task_seed(seed, d)))
+        out.append(round(p.c_ad_n / stuck_pull(p, FREQ_HZ, AMP_UM).threshold_n, 3))
+    return out
+
+
 def speed(args: argparse.Namespace, params: RobotParams) -> dict[str, Any]:
-    out: dict[str, Any] = {}
+    from labkit.sim.paper.release import stuck_pull
+
+    out: dict[str, Any] = {"nominal_threshold_n": stuck_pull(params, FREQ_HZ, AMP_UM).threshold_n}
     for seed in args.seeds:
         rows = map_tasks(run_point, tasks(params, AMP_UM, args.robots, seed, args.duration, True, args.control),
                          workers=args.workers, quiet=True)
         sp = [abs(r["speed_mm_s"]) for r in rows]
-        out[str(seed)] = {"nominal": round(sp[0], 3), "drawn": stats(sp[1:])}
+        ratio = adhesion_ratios(params, args.robots, seed)
+        out[str(seed)] = {"nominal": round(sp[0], 3), "drawn": stats(sp[1:]), "adhesion_over_pull": ratio,
+                          "held_by_adhesion": sum(r >= 1.0 for r in ratio)}
     return out
 
 
