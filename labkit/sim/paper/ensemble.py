@@ -50,6 +50,7 @@ from labkit.sim.params import RobotParams
 
 if TYPE_CHECKING:
     from labkit.sim.paper.observations import Observation
+    from labkit.sim.paper.shaker import ShakerLaw, TableLaw
     from labkit.sim.scenarios.paper import Plan
     from labkit.sim.scenarios.runs import Point, PointSet
 
@@ -213,7 +214,7 @@ class EnsembleScore:
                                  observations=[s.to_dict() for s in self.scores])
 
 
-def _finite(x: Any) -> float | None:
+def _finite(x: float | None) -> float | None:
     return float(x) if x is not None and math.isfinite(float(x)) else None
 
 
@@ -247,7 +248,7 @@ class EnsembleSpec:
     seeds: Sequence[int] = DEFAULT_SEEDS
     size: str = "quick"
     scenarios: Sequence[str] | None = None
-    tray_law: Any = None
+    tray_law: ShakerLaw | TableLaw | None = None
     table: dict[str, float] | None = None
 
 
