@@ -203,9 +203,9 @@ def _paper_sensitivity(args: argparse.Namespace, free: list[str] | None, runner:
     if not runner.quiet:
         print(f"sensitivity around {js['params']} (cost {sens.base_cost:.3f}); x{sens.factor:g} steps")
         for r in sens.rows:
-            print(f"  {r.parameter:>20} {r.direction:>4} -> cost {r.cost:7.3f}"
-                  + (f"; loses {', '.join(r.lost)}" if r.lost else "")
-                  + (f"; gains {', '.join(r.gained)}" if r.gained else ""))
+            print(f"  {r['parameter']:>20} {r['direction']:>4} -> cost {r['cost']:7.3f}"
+                  + (f"; loses {', '.join(r['lost'])}" if r["lost"] else "")
+                  + (f"; gains {', '.join(r['gained'])}" if r["gained"] else ""))
         print(f"wrote {out}, {png}")
     done: SensitivityOutput = {"out": str(out), "figure": str(png), **js}
     return done
@@ -271,16 +271,16 @@ def _sensitivity_figure(sens: Sensitivity, params: str, path: Path) -> None:
 
     ids = list(sens.base)
     rows = sens.rows
-    d = np.array([[np.tanh(r.violations[i]) - np.tanh(sens.base[i]) for i in ids] for r in rows])
+    d = np.array([[np.tanh(r["violations"][i]) - np.tanh(sens.base[i]) for i in ids] for r in rows])
     fig, ax = plt.subplots(figsize=(9.0, 0.28 * len(rows) + 2.4), dpi=100)
     try:
         im = ax.imshow(d, cmap="RdBu_r", vmin=-1.0, vmax=1.0, aspect="auto")
         ax.set_xticks(range(len(ids)), ids, rotation=60, ha="right", fontsize=6)
-        ax.set_yticks(range(len(rows)), [f"{r.parameter} {r.direction}" for r in rows], fontsize=6)
+        ax.set_yticks(range(len(rows)), [f"{r['parameter']} {r['direction']}" for r in rows], fontsize=6)
         for y, r in enumerate(rows):
             for x, i in enumerate(ids):
-                if i in r.lost or i in r.gained:
-                    ax.text(x, y, "x" if i in r.lost else "o", ha="center", va="center", fontsize=6)
+                if i in r["lost"] or i in r["gained"]:
+                    ax.text(x, y, "x" if i in r["lost"] else "o", ha="center", va="center", fontsize=6)
         fig.colorbar(im, ax=ax, label="change of tanh(violation) (red: worse)")
         ax.set_title(f"one-at-a-time sensitivity around {params} (x{sens.factor:g}; "
                      "x: observation lost, o: gained)", fontsize=8)

@@ -630,7 +630,8 @@ def _rank_corr(V: np.ndarray, ids: list[str]) -> dict[str, dict[str, float]]:
 # --------------------------------------------------------------------------- sensitivity
 
 class SensitivityRowJSON(TypedDict):
-    """One step of :func:`sensitivity` (JSON)."""
+    """One step of :func:`sensitivity`: a parameter moved one way, the violations, and the
+    observations lost and gained (a JSON record)."""
 
     parameter: str
     direction: str
@@ -653,23 +654,6 @@ class SensitivityJSON(TypedDict, total=False):
 
 
 @dataclass(frozen=True)
-class SensitivityRow:
-    """One parameter moved one way: the violations, and the observations lost and gained."""
-
-    parameter: str
-    direction: str
-    value: float
-    cost: float
-    violations: dict[str, float]
-    lost: list[str]
-    gained: list[str]
-
-    def to_json(self) -> SensitivityRowJSON:
-        return SensitivityRowJSON(parameter=self.parameter, direction=self.direction, value=self.value,
-                                  cost=self.cost, violations=self.violations, lost=self.lost, gained=self.gained)
-
-
-@dataclass(frozen=True)
 class Sensitivity:
     """The outcome of :func:`sensitivity`."""
 
@@ -677,12 +661,11 @@ class Sensitivity:
     base_cost: float
     base_values: dict[str, float]
     factor: float
-    rows: list[SensitivityRow]
+    rows: list[SensitivityRowJSON]
 
     def to_json(self, params: str) -> SensitivityJSON:
         return SensitivityJSON(base=self.base, base_cost=self.base_cost, base_values=self.base_values,
-                               factor=self.factor, rows=[r.to_json() for r in self.rows],
-                               params=params)
+                               factor=self.factor, rows=self.rows, params=params)
 
 
 def sensitivity(params: RobotParams, reference: RobotParams | None = None, *, factor: float = 2.0,
@@ -714,7 +697,7 @@ def sensitivity(params: RobotParams, reference: RobotParams | None = None, *, fa
     rows = []
     for (n, d, x), m in zip(variants, mets[1:]):
         viol = violations(m, obs)
-        rows.append(SensitivityRow(parameter=n, direction=d, value=x, cost=objective(m, obs), violations=viol,
-                                   lost=[k for k in viol if base[k] == 0 and viol[k] > 0],
-                                   gained=[k for k in viol if base[k] > 0 and viol[k] == 0]))
+        rows.append(SensitivityRowJSON(parameter=n, direction=d, value=x, cost=objective(m, obs), violations=viol,
+                                       lost=[k for k in viol if base[k] == 0 and viol[k] > 0],
+                                       gained=[k for k in viol if base[k] > 0 and viol[k] == 0]))
     return Sensitivity(base=base, base_cost=objective(mets[0], obs), base_values=base_vals, factor=factor, rows=rows)
