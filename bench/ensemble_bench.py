@@ -168,7 +168,8 @@ def law(args: argparse.Namespace) -> dict[str, Any]:
     (a, b), *_ = np.linalg.lstsq(np.vstack([np.ones(walk.sum()), np.log(f[walk])]).T, v[walk], rcond=None)
     scatter = float(np.std(v[walk] - a - b * np.log(f[walk])))
     rng = np.random.default_rng(0)
-    n, sigma, lo, hi = 200_000, DEFAULT_TABLE["c_ad_n"], *BAND_MM_S
+    sigma = DEFAULT_TABLE["c_ad_n"] if args.sigma is None else args.sigma
+    n, lo, hi = 200_000, *BAND_MM_S
     share = {}
     for c in args.nominal_un:
         fd = c * np.exp(sigma * rng.standard_normal(n))
@@ -199,6 +200,8 @@ def main() -> None:
     ap.add_argument("--runs", nargs="+", default=[], help="law: JSON outputs of `speed` (each names its --params)")
     ap.add_argument("--nominal-un", type=float, nargs="+", default=[1.8, 2.0, 2.25, 2.5, 2.75, 3.0, 3.5],
                     help="law: nominal adhesions (uN) to draw ensembles at")
+    ap.add_argument("--sigma", type=float, default=None,
+                    help="law: the adhesion's log-normal spread to draw with (default: the Monte Carlo table's)")
     ap.add_argument("--held-ratio", type=float, default=0.85,
                     help="law: adhesion / standing pull above which a robot stays down (the simulator: 0.8-0.85)")
     args = ap.parse_args()
