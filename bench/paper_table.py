@@ -101,7 +101,7 @@ def main() -> None:
             # keeps the seeds it finished
             part = run_ensemble(params, EnsembleSpec(draws=args.draws, duration_s=args.duration_s, seeds=[seed],
                                                      size=args.size), workers=args.workers)
-            part.settings = replace(part.settings, params=args.params)
+            part = replace(part, settings=replace(part.settings, params=args.params))
             if args.save_runs:
                 with open(f"{args.save_runs}.seed{seed}", "wb") as fh:
                     pickle.dump(part, fh)

@@ -227,7 +227,7 @@ class CalibrationSummary(TypedDict):
     measured: list[str]
 
 
-@dataclass
+@dataclass(frozen=True)
 class Calibration:
     """The outcome of :func:`calibrate`; ``settings`` the options used, with the start point of the
     local fit, the bounds and the scan's size (:meth:`summary`)."""

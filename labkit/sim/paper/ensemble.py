@@ -176,7 +176,7 @@ class EnsembleScoreJSON(TypedDict):
     observations: list[ObservationScoreJSON]
 
 
-@dataclass
+@dataclass(frozen=True)
 class EnsembleScore:
     """The result of :func:`score_ensemble`: one :class:`ObservationScore` per observation."""
 
@@ -218,7 +218,7 @@ def _finite(x: float | None) -> float | None:
     return float(x) if x is not None and math.isfinite(float(x)) else None
 
 
-@dataclass
+@dataclass(frozen=True)
 class EnsembleRuns:
     """The simulations of an ensemble (:func:`run_ensemble`), before scoring: the plan of every
     scenario and one result row per (point, robot), robots ordered nominal first, then seed-major."""

@@ -397,7 +397,7 @@ class PaperCalibrationSummary(TypedDict):
     bounds: dict[str, list[float | str]]
 
 
-@dataclass
+@dataclass(frozen=True)
 class PaperCalibration:
     """The outcome of :func:`calibrate_paper`."""
 
