@@ -21,6 +21,7 @@ import json
 import pickle
 import shlex
 import sys
+from dataclasses import replace
 
 from labkit.sim.paper.ensemble import (
     EnsembleScore,
@@ -54,8 +55,8 @@ def _row(s: ObservationScore) -> str:
 def markdown(e: EnsembleScore, command: str) -> str:
     """The docs/simulator.md table of an ensemble score, with its command and totals."""
     st = e.settings
-    lines = [f"Made by `{command}` ({st['robots']} drawn robots: {st['draws']} per seed x seeds "
-             f"{', '.join(map(str, st['seeds']))}, {st['duration_s']:g} s runs, {st['size']} point grids; "
+    lines = [f"Made by `{command}` ({st.robots} drawn robots: {st.draws} per seed x seeds "
+             f"{', '.join(map(str, st.seeds))}, {st.duration_s:g} s runs, {st.size} point grids; "
              f"{e.runs} runs, {e.cpu_s:.0f} CPU s, {e.wall_s:.0f} s wall).", "",
              "| observation | source | paper (pass band) | nominal robot | ensemble (pooled) | "
              "robots: mean ± sd | ensemble verdict | per seed |", "|---|---|---|---|---|---|---|---|"]
@@ -64,7 +65,7 @@ def markdown(e: EnsembleScore, command: str) -> str:
     lines += ["", "| | met | not met | not applicable |", "|---|---|---|---|",
               f"| ensemble (pooled) | {ens['met']} | {ens['not met']} | {ens['not applicable']} |",
               f"| nominal robot | {nom['met']} | {nom['not met']} | {nom['not applicable']} |",
-              f"| per seed ({', '.join(map(str, st['seeds']))}) | {' / '.join(map(str, e.seed_counts()))} | | |"]
+              f"| per seed ({', '.join(map(str, st.seeds))}) | {' / '.join(map(str, e.seed_counts()))} | | |"]
     return "\n".join(lines)
 
 
@@ -100,7 +101,7 @@ def main() -> None:
             # keeps the seeds it finished
             part = run_ensemble(params, EnsembleSpec(draws=args.draws, duration_s=args.duration_s, seeds=[seed],
                                                      size=args.size), workers=args.workers)
-            part.settings["params"] = args.params
+            part = replace(part, settings=replace(part.settings, params=args.params))
             if args.save_runs:
                 with open(f"{args.save_runs}.seed{seed}", "wb") as fh:
                     pickle.dump(part, fh)

@@ -6,7 +6,7 @@ import pytest
 
 from clihelpers import last_json, run_cli
 from labkit.errors import InputError
-from labkit.sim.calibrate import Observations, calibrate, parse_names, set_values, speed_task
+from labkit.sim.calibrate import FitOptions, Observations, Runner, calibrate, parse_names, set_values, speed_task
 
 # The deliberately changed parameter: the hip (lateral) mode's stiffness, +10 %. The paper
 # ties shaker locomotion to that mode, and the speed below it varies smoothly with it.
@@ -23,7 +23,7 @@ def _with_k0(p, scale):
 
 
 def _measured(params, freq=FREQ_HZ, amp=AMP_UM):
-    return np.array([speed_task((params, f, a, DURATION_S, 0))["speed_mm_s"] for f, a in zip(freq, amp)])
+    return np.array([speed_task((params, f, a, DURATION_S, 0)).speed_mm_s for f, a in zip(freq, amp)])
 
 
 @pytest.mark.slow
@@ -44,12 +44,12 @@ def test_recovers_a_changed_parameter():
     # the change must show in the data well beyond the error bars, or the test proves nothing
     assert np.max(np.abs(meas - start)) > 3 * STD_MM_S, (meas, start)
     obs = Observations(FREQ_HZ, AMP_UM, meas, np.full(FREQ_HZ.size, STD_MM_S))
-    cal = calibrate(p0, [NAME], obs, duration_s=DURATION_S, scan=6, min_std_mm_s=STD_MM_S / 4,
-                    bounds={NAME: (0.8 * k0, 1.25 * k0)}, scheduler="serial", quiet=True)
+    options = FitOptions(duration_s=DURATION_S, scan=6, min_std_mm_s=STD_MM_S / 4, bounds={NAME: (0.8 * k0, 1.25 * k0)})
+    cal = calibrate(p0, [NAME], obs, options, Runner(scheduler="serial", quiet=True))
     fitted, std = cal.fitted[0] / k0, cal.std[0] / k0
     assert abs(fitted - TRUE_SCALE) <= 3 * std, (fitted, std)     # recovered within its uncertainty
     assert 0 < std < 0.05                                          # an uncertainty that says something
-    assert cal.after["rms_error_mm_s"] < 0.2 * cal.before["rms_error_mm_s"]
+    assert cal.after.rms_error_mm_s < 0.2 * cal.before.rms_error_mm_s
     assert cal.params.k_per_s2[0] == pytest.approx(cal.fitted[0])
     assert cal.params.k_per_s2[1:] == p0.k_per_s2[1:]
     assert cal.n_sims > 0 and cal.summary()["parameters"][NAME]["initial"] == k0

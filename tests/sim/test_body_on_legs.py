@@ -1,12 +1,11 @@
 """The body on its legs (docs/model.md M13): the legs' stiffness at the foot from their modes,
 checked against the Euler-Bernoulli cantilever (its characteristic equation and the static tip
 compliance L^3 / (3 E I), closed forms labkit does not compute), and the ensemble scorer of the
-paper calibration (labkit.sim.paper.fit.ensemble_cost) on hand-made metrics."""
+paper calibration (labkit.sim.paper.fit.ensemble_score) on hand-made ensemble verdicts."""
 from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from labkit.sim import RobotParams
@@ -84,35 +83,47 @@ def _obs():
     return [o for o in observations() if o.id == "fig8_speed_240hz"]
 
 
-def test_ensemble_cost_counts_the_median_and_the_share_of_robots():
-    """Band 2-6 mm/s at 240 Hz (Fig. 8): robots at 3, 4, 5 -> met, cost 0; 3 of 6 inside with the
-    median inside -> half the share term; all at 0 -> the whole share term and the median's."""
-    from labkit.sim.paper.fit import OBJECTIVE_MARGIN, ensemble_cost
-    from labkit.sim.paper.observations import violation
+def _scored(o, pooled, share, state="met"):
+    """An ObservationScore of ``o`` as labkit.sim.paper.ensemble makes it (pooled value, share of
+    the robots in the regime meeting it, the pooled verdict)."""
+    from labkit.sim.paper.ensemble import ObservationScore
+    from labkit.sim.paper.observations import NOT_APPLICABLE, violation
 
-    obs = _obs()
-    metric = obs[0].metric
-    ok = ensemble_cost([{metric: v} for v in (3.0, 4.0, 5.0)], obs)
-    assert ok.cost == 0.0 and ok.violations[obs[0].id] == 0.0 and ok.share_met[obs[0].id] == 1.0
-    half = ensemble_cost([{metric: v} for v in (0.0, 0.0, 3.5, 3.5, 3.5, 9.0)], obs)
-    assert half.violations[obs[0].id] == 0.0 and half.share_met[obs[0].id] == 0.5
-    assert half.cost == pytest.approx(0.5 * (2 / 3 - 0.5) / (2 / 3))
-    none = ensemble_cost([{metric: 0.0}] * 4, obs)
-    assert none.violations[obs[0].id] == pytest.approx(0.5)            # 2 mm/s below, in units of 4 mm/s
-    assert none.cost == pytest.approx(0.5 + 0.5 * math.tanh(violation(obs[0], 0.0, OBJECTIVE_MARGIN)))
+    viol = None if state == NOT_APPLICABLE else violation(o, pooled)
+    return ObservationScore(id=o.id, scenario=o.scenario, metric=o.metric, band=o.band, source=o.source,
+                            paper_value=o.paper_value, nominal=pooled, nominal_state=state, ensemble=pooled,
+                            state=state, mean=pooled, spread=0.0, median=pooled, robots=12, met_share=share,
+                            per_seed=[pooled], per_seed_states=[state], violation=viol)
 
 
-def test_ensemble_members_share_their_draws_between_candidates():
-    """Common random numbers: two candidates that differ in adhesion get robots drawn with the same
-    factors (each member's body mass ratio to its nominal is the same)."""
-    from labkit.sim.paper.fit import ensemble_members
+def test_ensemble_score_counts_the_pooled_verdict_and_the_share_of_robots():
+    """The calibration's cost over an ensemble, on labkit.sim.paper.ensemble's verdicts. Band 2-6
+    mm/s at 240 Hz (Fig. 8): pooled 4 with every robot inside -> 0; pooled 3.5 with half of them
+    inside -> half the share term, (2/3 - 1/2) / (2/3) / 2; pooled 0 with none inside -> the
+    whole share term and half the tanh of the violation (2 mm/s below, in units of 4 mm/s, plus
+    the margin); an observation outside its regime costs NOT_APPLICABLE_COST, never 0."""
+    from labkit.sim.paper.ensemble import EnsembleScore, EnsembleSettings
+    from labkit.sim.paper.fit import NOT_APPLICABLE_COST, OBJECTIVE_MARGIN, ensemble_score
+    from labkit.sim.paper.observations import NOT_APPLICABLE, observations, violation
 
-    a = ensemble_members(RobotParams.preset("paper"), 3, seed=0)
-    b = ensemble_members(RobotParams.preset("paper").replace(c_ad_n=1e-6), 3, seed=0)
-    assert len(a) == 4 and a[0] == RobotParams.preset("paper")
-    ra = np.array([m.body_mass_mg for m in a]) / a[0].body_mass_mg
-    rb = np.array([m.body_mass_mg for m in b]) / b[0].body_mass_mg
-    assert ra == pytest.approx(rb) and np.ptp(ra) > 0
+    o = _obs()[0]
+    ablation = next(x for x in observations() if x.when is not None)
+
+    def cost(*scores):
+        settings = EnsembleSettings(draws=12, duration_s=1.0, seeds=(0,))
+        return ensemble_score(EnsembleScore(scores=list(scores), settings=settings, cpu_s=0.0, wall_s=0.0, runs=0))
+
+    ok = cost(_scored(o, 4.0, 1.0))
+    assert ok.cost == 0.0 and ok.violations == {o.id: 0.0} and ok.share_met == {o.id: 1.0}
+    half = cost(_scored(o, 3.5, 0.5))
+    assert half.violations[o.id] == 0.0 and half.cost == pytest.approx(0.5 * (2 / 3 - 0.5) / (2 / 3))
+    none = cost(_scored(o, 0.0, 0.0, "not met"))
+    assert none.violations[o.id] == pytest.approx(0.5)
+    assert none.cost == pytest.approx(0.5 + 0.5 * math.tanh(violation(o, 0.0, OBJECTIVE_MARGIN)))
+    outside = _scored(ablation, 0.2, None, NOT_APPLICABLE)
+    both = cost(_scored(o, 4.0, 1.0), outside)
+    assert both.cost == NOT_APPLICABLE_COST and both.violations[ablation.id] == NOT_APPLICABLE_COST
+    assert both.nominal_violations == {o.id: 0.0, ablation.id: NOT_APPLICABLE_COST}
 
 
 def test_simulate_runs_the_paper_set_by_default_and_says_so_first():

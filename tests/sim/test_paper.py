@@ -238,6 +238,10 @@ def test_cli_bad_params_and_calibrate_modes(tmp_path):
     assert "--paper" in proc.stderr
     proc = run_cli("calibrate", "--paper", "--free", "gravity", "--out", str(tmp_path / "x.toml"), check=2)
     assert "gravity" in proc.stderr and "c_ad_n" in proc.stderr
+    proc = run_cli("calibrate", "--paper", "--paper-ensemble", "2", "--paper-duration-s", "0", "--out",
+                   str(tmp_path / "x.toml"), check=2)
+    assert "--paper-duration-s" in proc.stderr and proc.stderr.count("\n") == 1
+    assert not (tmp_path / "x.toml").exists()
 
 
 def test_scales_are_relative_to_the_published_set_whatever_the_start():

@@ -135,7 +135,7 @@ def test_ensemble_pools_the_scenarios_robots(tmp_path):
              for s in (0, 1)]
     merged = score_runs(merge_runs(parts))
     assert [x.to_dict() for x in merged.scores] == [x.to_dict() for x in e.scores]
-    assert merged.member_metrics == e.member_metrics and merged.settings["seeds"] == [0, 1]
+    assert merged.member_metrics == e.member_metrics and merged.settings.seeds == (0, 1)
     s = e.by_id()["fig14_moves_near_438hz"]
     direct = run_scenario("paper-fig14", p, None, quick=True, draws=1, duration_s=0.2, seed=0, workers=1,
                           quiet=True)
@@ -154,26 +154,27 @@ def test_ensemble_pools_the_scenarios_robots(tmp_path):
 def test_ensemble_score_counts_not_applicable_robots_out():
     """Robots outside the claim's regime neither meet nor fail it: the robots' mean and share met
     are over the robots in the regime; a pooled ensemble outside it is not applicable, not met."""
-    from labkit.sim.paper.ensemble import _score
+    from labkit.sim.paper.ensemble import Measured, _score
 
     o = next(o for o in observations("paper-ablations") if o.id == "ablation_squeeze_slows")
 
     def m(gain, regime):
         return {o.metric: gain, o.when: float(regime)}
 
-    got = {"nominal": m(1.0, 0), "pooled": m(0.2, 1), "seeds": [m(0.2, 1), m(-1.0, 0)],
-           "members": [m(0.5, 1), m(-0.5, 1), m(9.0, 0), m(0.3, 1)]}
+    got = Measured(nominal=m(1.0, 0), pooled=m(0.2, 1), seeds=[m(0.2, 1), m(-1.0, 0)],
+                   members=[m(0.5, 1), m(-0.5, 1), m(9.0, 0), m(0.3, 1)])
     s = _score(o, got)
     assert s.nominal_state == NOT_APPLICABLE and s.state == "met"
     assert s.per_seed_states == ["met", NOT_APPLICABLE]
     assert s.robots == 3 and s.mean == pytest.approx(0.1) and s.met_share == pytest.approx(2 / 3)
     assert s.median == pytest.approx(0.3)
     assert s.violation == 0.0
-    from labkit.sim.paper.ensemble import EnsembleScore
+    from labkit.sim.paper.ensemble import EnsembleScore, EnsembleSettings
 
-    out = replace(_score(o, {**got, "pooled": m(1.0, 0)}), id="outside")
+    out = replace(_score(o, replace(got, pooled=m(1.0, 0))), id="outside")
     assert out.state == NOT_APPLICABLE and out.violation is None
-    e = EnsembleScore(scores=[s, out], settings={"seeds": [0, 1]}, cpu_s=0.0, wall_s=0.0, runs=0)
+    settings = EnsembleSettings(draws=2, duration_s=1.0, seeds=(0, 1))
+    e = EnsembleScore(scores=[s, out], settings=settings, cpu_s=0.0, wall_s=0.0, runs=0)
     assert list(e.violations(not_applicable=0.7).values()) == [0.0, 0.7]
     assert e.count() == {"met": 1, "not met": 0, "not applicable": 1} and e.seed_counts() == [2, 0]
 

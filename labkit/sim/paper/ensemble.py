@@ -31,9 +31,9 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -49,7 +49,13 @@ from labkit.sim.paper.observations import (
 from labkit.sim.params import RobotParams
 
 if TYPE_CHECKING:
-    from labkit.sim.scenarios.runs import ScenarioRow
+    from labkit.sim.paper.observations import Observation
+    from labkit.sim.paper.shaker import ShakerLaw, TableLaw
+    from labkit.sim.scenarios.paper import Plan
+    from labkit.sim.scenarios.runs import Point, PointSet, ScenarioRow
+
+#: A scenario's measure: its runs -> its metrics (:data:`labkit.sim.scenarios.paper.PAPER`).
+Measure = Callable[["PointSet"], dict[str, float]]
 
 #: The default ensemble: 6 drawn robots x 2 s x seeds 0, 1, 2 (18 robots).
 DEFAULT_DRAWS = 6
@@ -86,16 +92,96 @@ class ObservationScore:
     def met(self) -> bool:
         return self.state == MET
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+    def to_dict(self) -> ObservationScoreJSON:
+        return ObservationScoreJSON(
+            id=self.id, scenario=self.scenario, metric=self.metric, band=self.band, source=self.source,
+            paper_value=self.paper_value, nominal=self.nominal, nominal_state=self.nominal_state,
+            ensemble=self.ensemble, state=self.state, mean=self.mean, spread=self.spread, median=self.median,
+            robots=self.robots, met_share=self.met_share, per_seed=list(self.per_seed),
+            per_seed_states=list(self.per_seed_states), violation=self.violation)
 
 
-@dataclass
+class ObservationScoreJSON(TypedDict):
+    """:class:`ObservationScore` as JSON."""
+
+    id: str
+    scenario: str
+    metric: str
+    band: str
+    source: str
+    paper_value: float | None
+    nominal: float | None
+    nominal_state: str
+    ensemble: float | None
+    state: str
+    mean: float | None
+    spread: float | None
+    median: float | None
+    robots: int
+    met_share: float | None
+    per_seed: list[float | None]
+    per_seed_states: list[str]
+    violation: float | None
+
+
+@dataclass(frozen=True)
+class EnsembleSettings:
+    """What an ensemble ran: drawn robots per seed, seconds per run, the seeds, the scenarios'
+    point grids and names, the drawn robots in all, the tray law, where it ran; ``params``: the
+    set's name or file, when the caller records it."""
+
+    draws: int
+    duration_s: float
+    seeds: tuple[int, ...]
+    size: str = "quick"
+    scenarios: tuple[str, ...] = ()
+    robots: int = 0
+    tray_law: str = ""
+    scheduler: str = "local"
+    workers: int | None = None
+    params: str | None = None
+
+    def to_dict(self) -> EnsembleSettingsJSON:
+        return EnsembleSettingsJSON(draws=self.draws, duration_s=self.duration_s, seeds=list(self.seeds),
+                                    size=self.size, scenarios=list(self.scenarios), robots=self.robots,
+                                    tray_law=self.tray_law, scheduler=self.scheduler, workers=self.workers,
+                                    params=self.params)
+
+
+class EnsembleSettingsJSON(TypedDict):
+    """:class:`EnsembleSettings` as JSON."""
+
+    draws: int
+    duration_s: float
+    seeds: list[int]
+    size: str
+    scenarios: list[str]
+    robots: int
+    tray_law: str
+    scheduler: str
+    workers: int | None
+    params: str | None
+
+
+class EnsembleScoreJSON(TypedDict):
+    """:meth:`EnsembleScore.to_dict` (the bench's JSON)."""
+
+    settings: EnsembleSettingsJSON
+    cpu_s: float
+    wall_s: float
+    runs: int
+    met: dict[str, int]
+    nominal_met: dict[str, int]
+    seed_met: list[int]
+    observations: list[ObservationScoreJSON]
+
+
+@dataclass(frozen=True)
 class EnsembleScore:
     """The result of :func:`score_ensemble`: one :class:`ObservationScore` per observation."""
 
     scores: list[ObservationScore]
-    settings: dict[str, Any]
+    settings: EnsembleSettings
     cpu_s: float
     wall_s: float
     runs: int
@@ -110,7 +196,7 @@ class EnsembleScore:
 
     def seed_counts(self) -> list[int]:
         """Observations met by each seed's ensemble of ``draws`` robots."""
-        n = len(self.settings["seeds"])
+        n = len(self.settings.seeds)
         return [sum(s.per_seed_states[k] == MET for s in self.scores) for k in range(n)]
 
     def by_id(self) -> dict[str, ObservationScore]:
@@ -121,25 +207,27 @@ class EnsembleScore:
         observation outside its regime (a calibration objective must not reward leaving a regime)."""
         return {s.id: not_applicable if s.violation is None else s.violation for s in self.scores}
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"settings": self.settings, "cpu_s": round(self.cpu_s, 1), "wall_s": round(self.wall_s, 1),
-                "runs": self.runs, "met": self.count("ensemble"), "nominal_met": self.count("nominal"),
-                "seed_met": self.seed_counts(), "observations": [s.to_dict() for s in self.scores]}
+    def to_dict(self) -> EnsembleScoreJSON:
+        return EnsembleScoreJSON(settings=self.settings.to_dict(), cpu_s=round(self.cpu_s, 1),
+                                 wall_s=round(self.wall_s, 1), runs=self.runs, met=self.count("ensemble"),
+                                 nominal_met=self.count("nominal"), seed_met=self.seed_counts(),
+                                 observations=[s.to_dict() for s in self.scores])
 
 
-def _finite(x: Any) -> float | None:
+def _finite(x: float | None) -> float | None:
     return float(x) if x is not None and math.isfinite(float(x)) else None
 
 
-@dataclass
+@dataclass(frozen=True)
 class EnsembleRuns:
     """The simulations of an ensemble (:func:`run_ensemble`), before scoring: the plan of every
     scenario and one result row per (point, robot), robots ordered nominal first, then seed-major."""
 
-    plans: dict[str, Any]
+    plans: dict[str, Plan]
+    #: :func:`labkit.sim.scenarios.runs.run_task`'s rows, per scenario.
     rows: dict[str, list[ScenarioRow]]
     robots: list[tuple[int, int]]
-    settings: dict[str, Any]
+    settings: EnsembleSettings
     wall_s: float
 
 
@@ -160,7 +248,7 @@ class EnsembleSpec:
     seeds: Sequence[int] = DEFAULT_SEEDS
     size: str = "quick"
     scenarios: Sequence[str] | None = None
-    tray_law: Any = None
+    tray_law: ShakerLaw | TableLaw | None = None
     table: dict[str, float] | None = None
 
 
@@ -215,9 +303,9 @@ def run_ensemble(params: RobotParams, spec: EnsembleSpec = EnsembleSpec(), *, sc
     for name in names:
         n = len(plans[name].points) * len(robots)
         out[name], start = rows[start:start + n], start + n
-    settings = {"draws": int(draws), "duration_s": float(duration_s), "seeds": [int(s) for s in seeds],
-                "size": size, "scenarios": names, "robots": len(robots) - 1,
-                "tray_law": law.describe()["law"], "scheduler": scheduler or "local", "workers": workers}
+    settings = EnsembleSettings(draws=int(draws), duration_s=float(duration_s), seeds=tuple(int(s) for s in seeds),
+                                size=size, scenarios=tuple(names), robots=len(robots) - 1,
+                                tray_law=law.describe()["law"], scheduler=scheduler or "local", workers=workers)
     return EnsembleRuns(plans=plans, rows=out, robots=robots, settings=settings, wall_s=time.perf_counter() - t0)
 
 
@@ -229,8 +317,9 @@ def merge_runs(parts: Sequence[EnsembleRuns]) -> EnsembleRuns:
     first = parts[0]
     same = ("draws", "duration_s", "size", "scenarios")
     for p in parts[1:]:
-        if any(p.settings[k] != first.settings[k] for k in same):
-            raise InputError(f"runs differ in {[k for k in same if p.settings[k] != first.settings[k]]}",
+        differ = [k for k in same if getattr(p.settings, k) != getattr(first.settings, k)]
+        if differ:
+            raise InputError(f"runs differ in {differ}",
                              key="runs", expected="runs of one ensemble (same draws, duration, size, scenarios)")
     robots = [first.robots[0]] + [r for p in parts for r in p.robots[1:]]
     rows = {}
@@ -242,8 +331,8 @@ def merge_runs(parts: Sequence[EnsembleRuns]) -> EnsembleRuns:
                 m = len(p.robots)
                 merged += p.rows[name][i * m + 1:(i + 1) * m]
         rows[name] = merged
-    seeds = [s for p in parts for s in p.settings["seeds"]]
-    settings = {**first.settings, "seeds": seeds, "robots": len(robots) - 1}
+    seeds = tuple(s for p in parts for s in p.settings.seeds)
+    settings = replace(first.settings, seeds=seeds, robots=len(robots) - 1)
     return EnsembleRuns(plans=first.plans, rows=rows, robots=robots, settings=settings,
                         wall_s=sum(p.wall_s for p in parts))
 
@@ -253,10 +342,10 @@ def score_runs(runs: EnsembleRuns) -> EnsembleScore:
     from labkit.sim.scenarios.paper import PAPER
 
     scores, members, pooled = [], {}, {}
-    n_seeds, draws = len(runs.settings["seeds"]), runs.settings["draws"]
+    n_seeds, draws = len(runs.settings.seeds), runs.settings.draws
     for name, plan in runs.plans.items():
         got = _measure(PAPER[name].measure, plan.points, runs.rows[name], (len(runs.robots), n_seeds, draws))
-        members[name], pooled[name] = got["members"], got["pooled"]
+        members[name], pooled[name] = got.members, got.pooled
         scores += [_score(o, got) for o in observations(name)]
     cpu = sum(r.cpu_s for rows in runs.rows.values() for r in rows)
     return EnsembleScore(scores=scores, settings=runs.settings, cpu_s=cpu, wall_s=runs.wall_s,
@@ -264,8 +353,19 @@ def score_runs(runs: EnsembleRuns) -> EnsembleScore:
                          pooled_metrics=pooled)
 
 
-def _measure(measure: Any, points: Sequence[Any], rows: Sequence[ScenarioRow],
-             shape: tuple[int, int, int]) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Measured:
+    """One scenario's metrics over an ensemble: the nominal robot's, the pooled drawn robots', each
+    seed's ensemble's and each drawn robot's."""
+
+    nominal: dict[str, float]
+    pooled: dict[str, float]
+    seeds: list[dict[str, float]]
+    members: list[dict[str, float]]
+
+
+def _measure(measure: Measure, points: Sequence[Point], rows: Sequence[ScenarioRow],
+             shape: tuple[int, int, int]) -> Measured:
     """Metrics of the nominal robot, each seed's ensemble, the pooled ensemble and each drawn robot
     (``shape``: robots in all, seeds, drawn robots per seed)."""
     from labkit.sim.scenarios.runs import collect
@@ -279,15 +379,15 @@ def _measure(measure: Any, points: Sequence[Any], rows: Sequence[ScenarioRow],
         return measure(collect(points, picked, len(robots)))
 
     drawn = list(range(1, n_robots))
-    return {"nominal": metrics_of([0]), "pooled": metrics_of(drawn),
-            "seeds": [metrics_of(drawn[s * draws:(s + 1) * draws]) for s in range(n_seeds)],
-            "members": [metrics_of([k]) for k in drawn]}
+    return Measured(nominal=metrics_of([0]), pooled=metrics_of(drawn),
+                    seeds=[metrics_of(drawn[s * draws:(s + 1) * draws]) for s in range(n_seeds)],
+                    members=[metrics_of([k]) for k in drawn])
 
 
-def _score(o: Any, got: dict[str, Any]) -> ObservationScore:
-    nominal, pooled = check_one(o, got["nominal"]), check_one(o, got["pooled"])
-    seeds: list[ObservationCheck] = [check_one(o, m) for m in got["seeds"]]
-    robots = [check_one(o, m) for m in got["members"]]
+def _score(o: Observation, got: Measured) -> ObservationScore:
+    nominal, pooled = check_one(o, got.nominal), check_one(o, got.pooled)
+    seeds: list[ObservationCheck] = [check_one(o, m) for m in got.seeds]
+    robots = [check_one(o, m) for m in got.members]
     applicable = [c for c in robots if c.state != NOT_APPLICABLE]
     vals = np.array([c.value for c in applicable if c.value is not None and math.isfinite(c.value)], float)
     return ObservationScore(

@@ -31,11 +31,11 @@ parameter                bounds                why these bounds
 stiffness at the foot follows from their mass and Table 2's frequencies. A search may still
 name it in ``free`` (:data:`EXTRA_FREE`), for studies.
 
-The ensemble objective (``ensemble > 0``): every candidate is scored over its nominal robot and
-``ensemble`` robots drawn from the Monte Carlo table (:data:`labkit.sim.uncertainty.DEFAULT_TABLE`,
-the same draw factors for every candidate: common random numbers) by :func:`ensemble_cost`
-(a small local scorer, meant to be swapped for the project's ensemble scorer: any callable
-``list of per-robot metrics -> (cost, violations)``).
+The ensemble objective (``SearchSettings.ensemble > 0``): every candidate is scored over its
+nominal robot and ``ensemble`` robots drawn from the Monte Carlo table
+(:data:`labkit.sim.uncertainty.DEFAULT_TABLE`; the same draw factors for every candidate: common
+random numbers) by the project's ensemble scorer, :func:`labkit.sim.paper.ensemble.score_ensemble`
+(pooled verdicts: met / not met / not applicable), turned into a cost by :func:`ensemble_score`.
 
 The search (:func:`calibrate_paper`), all simulations through
 :func:`labkit.executor.map_tasks` (common random numbers: every candidate runs
@@ -62,15 +62,21 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
 from labkit.errors import InputError
-from labkit.sim.paper.observations import Observation, observations, violation
+from labkit.sim.calibrate import Runner
+from labkit.sim.paper.observations import NOT_APPLICABLE, Observation, observations, violation
 from labkit.sim.paper.shaker import PAPER_SHAKER, ShakerLaw
 from labkit.sim.params import RobotParams
+
+if TYPE_CHECKING:
+    from labkit.sim.paper.ensemble import EnsembleScore
+    from labkit.sim.scenarios.paper import Plan
+    from labkit.sim.scenarios.runs import Task
 
 
 @dataclass(frozen=True)
@@ -144,7 +150,8 @@ def apply(base: RobotParams, values: dict[str, float], reference: RobotParams | 
     sensitivity pass the published set, so the scales and their bounds mean the same
     whatever robot a search starts from)."""
     reference = base if reference is None else reference
-    ch: dict[str, Any] = {}
+    ch: dict[str, float | tuple[float, ...]] = {}
+    signs = list(base.cy_sign)
     for name, v in values.items():
         if name == "squeeze_scale":
             ch["b_g_body_n_m2_s"] = reference.b_g_body_n_m2_s * v
@@ -152,7 +159,6 @@ def apply(base: RobotParams, values: dict[str, float], reference: RobotParams | 
         elif name == "act_scale":
             ch["act_um_per_v"] = tuple(a * v for a in reference.act_um_per_v)
         elif name.startswith("cy_sign["):
-            signs = list(ch.get("cy_sign", base.cy_sign))
             signs[int(name[8])] = 1.0 if v > 0 else -1.0
             ch["cy_sign"] = tuple(signs)
         elif name == "c_r":
@@ -177,8 +183,8 @@ def evaluate_many(param_sets: Sequence[RobotParams], *, seed: int = 0, scheduler
     from labkit.sim.scenarios.runs import collect, make_tasks, run_task
 
     opts = RunOptions(size="quick", seed=seed)
-    jobs: list[tuple[int, str, Any, int, int]] = []
-    tasks: list[Any] = []
+    jobs: list[tuple[int, str, Plan, int, int]] = []
+    tasks: list[Task] = []
     for k, p in enumerate(param_sets):
         for name in SCENARIO_NAMES:
             plan = PAPER[name].plan(p, opts, _law())
@@ -229,75 +235,169 @@ def cost_of(viol: dict[str, float]) -> float:
     return float(sum(math.tanh(v) for v in viol.values()))
 
 
-# --------------------------------------------------------------------------- the ensemble
+# --------------------------------------------------------------------------- scores
 
-#: What an ensemble objective asks of each observation beside its median: this share of the
-#: robots meeting it (the paper's operating point: 2/3 of the drawn robots inside the band).
+#: What the ensemble objective asks of each observation beside the pooled verdict: this share of
+#: the robots in the claim's regime meeting it (the paper's operating point: 2/3 of the drawn
+#: robots inside the band).
 ENSEMBLE_SHARE = 2.0 / 3.0
+#: The objective's cost of an observation the pooled ensemble is not in the regime of (a
+#: calibration must not reward leaving a claim's regime): as much as one missed by far.
+NOT_APPLICABLE_COST = 1.0
 
 
-@dataclass
-class EnsembleScore:
-    """One candidate scored over its robots: the cost, and per observation the violation of the
-    ensemble's median metric (met / not met, no margin), the medians, and the share of robots
-    meeting it."""
+@dataclass(frozen=True)
+class CandidateScore:
+    """One candidate scored: the objective ``cost`` and, per observation, its violation (0 when
+    met, no margin; over an ensemble the pooled ensemble's, :data:`NOT_APPLICABLE_COST` outside
+    the claim's regime), the metrics it was judged on (over an ensemble the pooled ones), and over
+    an ensemble the share of robots in the regime meeting each observation and the nominal
+    robot's violations."""
 
     cost: float
     violations: dict[str, float]
     metrics: dict[str, float]
+    share_met: dict[str, float] | None = None
+    nominal_violations: dict[str, float] | None = None
+
+    def to_json(self) -> CandidateScoreJSON:
+        out = CandidateScoreJSON(cost=self.cost, violations=self.violations, metrics=self.metrics)
+        if self.share_met is not None:
+            out["share_met"] = self.share_met
+        if self.nominal_violations is not None:
+            out["nominal_violations"] = self.nominal_violations
+        return out
+
+
+class _CandidateScoreJSON(TypedDict):
+    cost: float
+    violations: dict[str, float]
+    metrics: dict[str, float]
+
+
+class CandidateScoreJSON(_CandidateScoreJSON, total=False):
+    """:class:`CandidateScore` as JSON (the calibration's side file)."""
+
     share_met: dict[str, float]
+    nominal_violations: dict[str, float]
 
 
-#: A scorer: per-robot metrics (the nominal robot first) -> the candidate's score.
-Scorer = Callable[[Sequence[dict[str, float]], Sequence[Observation]], EnsembleScore]
+def nominal_score(metrics: dict[str, float], obs: Sequence[Observation]) -> CandidateScore:
+    """The nominal robot's score: :func:`objective` (with the margin), violations without it."""
+    return CandidateScore(cost=objective(metrics, obs), violations=violations(metrics, obs), metrics=dict(metrics))
 
 
-def ensemble_members(params: RobotParams, robots: int, seed: int,
-                     table: dict[str, float] | None = None) -> list[RobotParams]:
-    """``params`` and ``robots`` robots drawn from it (:func:`labkit.sim.uncertainty.draw_params`,
-    draw ``d`` seeded as the sweeps seed it, so every candidate gets the same draw factors)."""
-    from labkit.sim.scenarios.runs import task_seed
-    from labkit.sim.uncertainty import draw_params
+def ensemble_score(score: EnsembleScore) -> CandidateScore:
+    """The objective over an ensemble, on the verdicts of :mod:`labkit.sim.paper.ensemble`.
 
-    return [params] + [draw_params(params, np.random.default_rng(task_seed(seed, d)), table)
-                       for d in range(1, int(robots) + 1)]
-
-
-def ensemble_medians(per_robot: Sequence[dict[str, float]]) -> dict[str, float]:
-    """The median over the robots of every metric (robots where it is undefined left out; none: NaN)."""
-    keys = sorted({k for m in per_robot for k in m})
-    out = {}
-    for k in keys:
-        vals = [float(m[k]) for m in per_robot if m.get(k) is not None and math.isfinite(float(m[k]))]
-        out[k] = float(np.median(vals)) if vals else float("nan")
-    return out
-
-
-def ensemble_cost(per_robot: Sequence[dict[str, float]], obs: Sequence[Observation]) -> EnsembleScore:
-    """The local ensemble scorer: per observation, half the ``tanh`` of the violation of the robots'
-    median metric (bands narrowed by :data:`OBJECTIVE_MARGIN`) plus half the share of robots not
-    meeting it beyond ``1 -`` :data:`ENSEMBLE_SHARE`, scaled to 1: 0 when the median and at least
-    that share are inside, at most 1 (a smoothed count of the observations the ensemble misses)."""
-    med = ensemble_medians(per_robot)
+    Per observation: half the ``tanh`` of the pooled ensemble's violation (bands narrowed by
+    :data:`OBJECTIVE_MARGIN`) plus half the share of the robots in the claim's regime that do not
+    meet it beyond ``1 -`` :data:`ENSEMBLE_SHARE`, scaled to 1; :data:`NOT_APPLICABLE_COST` when
+    the pooled ensemble is not in the claim's regime. 0 when the ensemble meets the observation
+    and 2/3 of its robots do: a smoothed count of the observations the ensemble misses.
+    """
+    by_id = {o.id: o for o in observations()}
     cost = 0.0
-    viol: dict[str, float] = {}
     share: dict[str, float] = {}
-    for o in obs:
-        met = [violation(o, m.get(o.metric)) == 0.0 for m in per_robot]
-        share[o.id] = sum(met) / max(1, len(met))
-        miss = max(0.0, ENSEMBLE_SHARE - share[o.id]) / ENSEMBLE_SHARE
-        cost += 0.5 * math.tanh(violation(o, _finite(med.get(o.metric)), OBJECTIVE_MARGIN)) + 0.5 * miss
-        viol[o.id] = violation(o, _finite(med.get(o.metric)))
-    return EnsembleScore(cost=float(cost), violations=viol, metrics=med, share_met=share)
-
-
-def _finite(v: float | None) -> float | None:
-    return v if v is not None and math.isfinite(v) else None
+    nominal: dict[str, float] = {}
+    for s in score.scores:
+        o = by_id[s.id]
+        share[s.id] = 0.0 if s.met_share is None else float(s.met_share)
+        nominal[s.id] = NOT_APPLICABLE_COST if s.nominal_state == NOT_APPLICABLE else violation(o, s.nominal)
+        if s.violation is None:
+            cost += NOT_APPLICABLE_COST
+            continue
+        miss = max(0.0, ENSEMBLE_SHARE - share[s.id]) / ENSEMBLE_SHARE
+        cost += 0.5 * math.tanh(violation(o, s.ensemble, OBJECTIVE_MARGIN)) + 0.5 * miss
+    metrics = {k: float(v) for m in score.pooled_metrics.values() for k, v in m.items()
+               if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    return CandidateScore(cost=float(cost), violations=score.violations(NOT_APPLICABLE_COST), metrics=metrics,
+                          share_met=share, nominal_violations=nominal)
 
 
 # --------------------------------------------------------------------------- the search
 
-@dataclass
+#: The default :class:`~labkit.sim.calibrate.Runner`: local processes, quiet.
+LOCAL = Runner()
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """How :func:`calibrate_paper` searches.
+
+    ``scan``, ``rounds``, ``zoom``, ``polish``: Sobol points of the first scan; zoom rounds (each
+    ``scan // 2`` points, a box ``zoom`` times narrower per round); Nelder-Mead evaluations.
+    ``slack``: the near-optimal set, objective <= best + slack (the spread reported). ``seed``:
+    of the simulations (common random numbers), of the drawn robots and of the Sobol samples.
+    ``ensemble > 0``: score every candidate over its nominal robot and ``ensemble`` robots drawn
+    from the Monte Carlo table, each run ``ensemble_duration_s`` (:func:`ensemble_score`); 0:
+    the nominal robot alone at the scenarios' quick size (:func:`objective`).
+    """
+
+    scan: int = 32
+    rounds: int = 2
+    zoom: float = 3.0
+    polish: int = 30
+    slack: float = 0.25
+    seed: int = 0
+    ensemble: int = 0
+    ensemble_duration_s: float = 1.0
+
+
+def score_candidates(sets: Sequence[RobotParams], settings: SearchSettings, runner: Runner) -> list[CandidateScore]:
+    """Score parameter sets: over an ensemble (:func:`labkit.sim.paper.ensemble.score_ensemble`,
+    seed ``settings.seed``: the same drawn robots for every set) or the nominal robot alone."""
+    if settings.ensemble <= 0:
+        mets = evaluate_many(sets, seed=settings.seed, scheduler=runner.scheduler, workers=runner.workers,
+                             quiet=runner.quiet)
+        obs = observations()
+        return [nominal_score(m, obs) for m in mets]
+    from labkit.sim.paper.ensemble import EnsembleSpec, score_ensemble
+
+    spec = EnsembleSpec(draws=settings.ensemble, duration_s=settings.ensemble_duration_s, seeds=(settings.seed,))
+    return [ensemble_score(score_ensemble(p, spec, scheduler=runner.scheduler, workers=runner.workers,
+                                          quiet=runner.quiet)) for p in sets]
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One evaluated candidate of the search: its stage, free values, box coordinates and score."""
+
+    stage: str
+    values: dict[str, float]
+    unit: tuple[float, ...]
+    score: CandidateScore
+
+    def to_json(self) -> EvaluationJSON:
+        return EvaluationJSON(stage=self.stage, values=self.values, unit=list(self.unit), **self.score.to_json())
+
+
+class EvaluationJSON(CandidateScoreJSON):
+    """:class:`Evaluation` as JSON (one entry of the side file's ``history``)."""
+
+    stage: str
+    values: dict[str, float]
+    unit: list[float]
+
+
+class PaperCalibrationSummary(TypedDict):
+    """:meth:`PaperCalibration.summary` (JSON: the command's output and side file)."""
+
+    fitted: dict[str, float]
+    start: dict[str, float]
+    spread_near_optimal: dict[str, list[float]]
+    before: CandidateScoreJSON
+    after: CandidateScoreJSON
+    met: list[str]
+    not_met: list[str]
+    never_met_together: list[list[str]]
+    violation_rank_correlation: dict[str, dict[str, float]]
+    met_by_share_of_samples: dict[str, float]
+    evaluations: int
+    settings: dict[str, float | int | str | None]
+    bounds: dict[str, list[float | str]]
+
+
+@dataclass(frozen=True)
 class PaperCalibration:
     """The outcome of :func:`calibrate_paper`."""
 
@@ -306,60 +406,73 @@ class PaperCalibration:
     fitted: dict[str, float]
     spread: dict[str, tuple[float, float]]
     params: RobotParams
-    before: dict[str, Any]
-    after: dict[str, Any]
+    before: CandidateScore
+    after: CandidateScore
     never_together: list[tuple[str, str]]
     correlation: dict[str, dict[str, float]]
     met_by_share: dict[str, float]
-    history: list[dict[str, Any]] = field(default_factory=list)
-    settings: dict[str, Any] = field(default_factory=dict)
+    history: list[Evaluation] = field(default_factory=list)
+    settings: SearchSettings = SearchSettings()
+    runner: Runner = LOCAL
+    wall_s: float = 0.0
 
     @property
     def met(self) -> list[str]:
-        return [k for k, v in self.after["violations"].items() if v == 0.0]
+        return [k for k, v in self.after.violations.items() if v == 0.0]
 
     @property
     def not_met(self) -> list[str]:
-        return [k for k, v in self.after["violations"].items() if v > 0.0]
+        return [k for k, v in self.after.violations.items() if v > 0.0]
 
-    def summary(self) -> dict[str, Any]:
-        return {"fitted": self.fitted, "start": self.start,
-                "spread_near_optimal": {k: list(v) for k, v in self.spread.items()},
-                "before": self.before, "after": self.after, "met": self.met, "not_met": self.not_met,
-                "never_met_together": [list(p) for p in self.never_together],
-                "violation_rank_correlation": self.correlation, "met_by_share_of_samples": self.met_by_share,
-                "evaluations": len(self.history), "settings": self.settings,
-                "bounds": {f.name: [f.lo, f.hi, "log" if f.log else f.kind] for f in self.free}}
+    def settings_table(self) -> dict[str, float | int | str | None]:
+        """The search's settings and where it ran, flat (JSON / TOML)."""
+        return {**asdict(self.settings), "size": "quick", "scheduler": self.runner.scheduler or "local",
+                "workers": self.runner.workers, "wall_s": round(self.wall_s, 1),
+                "free": ",".join(f.name for f in self.free)}
 
-    def provenance(self) -> dict[str, Any]:
-        """The ``[provenance]`` table of the ``paper`` preset."""
-        n = int(self.settings.get("ensemble") or 0)
-        return {"preset": "paper",
-                "summary": (f"calibrated to the paper's observations over {n + 1} robots: the nominal and {n} drawn"
-                            if n else "calibrated to the paper's observations, nominal robot"),
-                "source": "labkit.sim.paper.fit.calibrate_paper: the published set (Tables 1-2) with the "
-                          "unmeasured parameters calibrated to the paper's observations "
-                          "(labkit/sim/paper/observations.toml) on the paper's shaker law",
-                "method": "Sobol scan + zoom rounds + Nelder-Mead on " + (
-                    f"the ensemble cost (nominal robot + {self.settings.get('ensemble')} robots drawn from the "
-                    "Monte Carlo table; per observation 0.5 tanh(violation of the robots' median) + 0.5 x the "
-                    f"share of robots short of {ENSEMBLE_SHARE:.2f} meeting it)" if self.settings.get("ensemble")
-                    else "sum(tanh(observation violation)) of the nominal robot") + ", bands "
-                          f"narrowed by {OBJECTIVE_MARGIN:g} of their scale in the objective, "
-                          "paper scenarios at their quick size, common random numbers",
-                "settings": {k: v for k, v in self.settings.items() if v is not None},
-                "fitted": self.fitted,
-                "near_optimal_low": {k: v[0] for k, v in self.spread.items()},
-                "near_optimal_high": {k: v[1] for k, v in self.spread.items()},
-                "bounds_low": {f.name: f.lo for f in self.free},
-                "bounds_high": {f.name: f.hi for f in self.free},
-                "observations_met": self.met, "observations_not_met": self.not_met,
-                **({"observations_met_by": "the ensemble: its robots' median metric in the band",
-                    "observations_met_nominal": [k for k, v in self.after["nominal_violations"].items() if v == 0]}
-                   if "nominal_violations" in self.after else {}),
-                "cost_before": self.before["cost"], "cost_after": self.after["cost"],
-                "never_met_together": [f"{a} / {b}" for a, b in self.never_together],
-                "evaluations": len(self.history)}
+    def summary(self) -> PaperCalibrationSummary:
+        return PaperCalibrationSummary(
+            fitted=self.fitted, start=self.start, spread_near_optimal={k: list(v) for k, v in self.spread.items()},
+            before=self.before.to_json(), after=self.after.to_json(), met=self.met, not_met=self.not_met,
+            never_met_together=[list(p) for p in self.never_together], violation_rank_correlation=self.correlation,
+            met_by_share_of_samples=self.met_by_share, evaluations=len(self.history),
+            settings=self.settings_table(),
+            bounds={f.name: [f.lo, f.hi, "log" if f.log else f.kind] for f in self.free})
+
+    def method(self) -> str:
+        """The objective in words (the preset's provenance)."""
+        n = self.settings.ensemble
+        what = (f"the ensemble cost of labkit.sim.paper.ensemble (nominal robot + {n} robots drawn from the Monte "
+                f"Carlo table, {self.settings.ensemble_duration_s:g} s runs; per observation 0.5 tanh(violation of "
+                f"the pooled ensemble) + 0.5 x the share of robots short of {ENSEMBLE_SHARE:.2f} meeting it, "
+                f"{NOT_APPLICABLE_COST:g} when not applicable)" if n
+                else "sum(tanh(observation violation)) of the nominal robot")
+        return (f"Sobol scan + zoom rounds + Nelder-Mead on {what}, bands narrowed by {OBJECTIVE_MARGIN:g} of "
+                "their scale in the objective, paper scenarios at their quick size, common random numbers")
+
+    def provenance(self) -> dict[str, object]:
+        """The ``[provenance]`` table of the ``paper`` preset (TOML)."""
+        n = self.settings.ensemble
+        out: dict[str, object] = {
+            "preset": "paper",
+            "summary": (f"calibrated to the paper's observations over {n + 1} robots: the nominal and {n} drawn"
+                        if n else "calibrated to the paper's observations, nominal robot"),
+            "source": "labkit.sim.paper.fit.calibrate_paper: the published set (Tables 1-2) with the unmeasured "
+                      "parameters calibrated to the paper's observations (labkit/sim/paper/observations.toml) "
+                      "on the paper's shaker law",
+            "method": self.method(),
+            "settings": {k: v for k, v in self.settings_table().items() if v is not None},
+            "fitted": self.fitted,
+            "near_optimal_low": {k: v[0] for k, v in self.spread.items()},
+            "near_optimal_high": {k: v[1] for k, v in self.spread.items()},
+            "bounds_low": {f.name: f.lo for f in self.free}, "bounds_high": {f.name: f.hi for f in self.free},
+            "observations_met": self.met, "observations_not_met": self.not_met}
+        if self.after.nominal_violations is not None:
+            out["observations_met_by"] = "the pooled ensemble (labkit.sim.paper.ensemble)"
+            out["observations_met_nominal"] = [k for k, v in self.after.nominal_violations.items() if v == 0]
+        out.update(cost_before=self.before.cost, cost_after=self.after.cost,
+                   never_met_together=[f"{a} / {b}" for a, b in self.never_together], evaluations=len(self.history))
+        return out
 
 
 def _free_params(free: Sequence[str] | None) -> list[Free]:
@@ -372,21 +485,95 @@ def _free_params(free: Sequence[str] | None) -> list[Free]:
     return [known[n] for n in names]
 
 
-def _scored(mets: list[dict[str, float]], obs: Sequence[Observation], scorer: Any) -> dict[str, Any]:
-    """One candidate's metrics, violations and cost: over its ensemble (nominal first) when it has
-    drawn robots, else the nominal robot's."""
-    if len(mets) > 1:
-        sc = (scorer or ensemble_cost)(mets, obs)
-        return dict(metrics=sc.metrics, violations=sc.violations, cost=sc.cost, share_met=sc.share_met,
-                    nominal_violations=violations(mets[0], obs))
-    return dict(metrics=mets[0], violations=violations(mets[0], obs), cost=objective(mets[0], obs))
+class _Search:
+    """The state of one search: the box, the scorer's settings and every evaluation so far."""
+
+    def __init__(self, base: RobotParams, fr: list[Free], settings: SearchSettings, runner: Runner,
+                 say: Callable[[str], None]) -> None:
+        self.base, self.fr, self.s, self.runner, self.say = base, fr, settings, runner, say
+        self.ref = RobotParams()
+        self.history: list[Evaluation] = []
+
+    def values_of(self, u: np.ndarray) -> dict[str, float]:
+        return {f.name: f.from_unit(x) for f, x in zip(self.fr, u)}
+
+    def run(self, us: Sequence[np.ndarray], stage: str) -> list[float]:
+        """Score box points; returns their costs."""
+        sets = [apply(self.base, self.values_of(u), self.ref) for u in us]
+        scores = score_candidates(sets, self.s, self.runner)
+        for u, sc in zip(us, scores):
+            self.history.append(Evaluation(stage, self.values_of(u), tuple(float(x) for x in u), sc))
+        return [sc.cost for sc in scores]
+
+    @property
+    def best(self) -> Evaluation:
+        return min(self.history, key=lambda h: h.score.cost)
+
+    def start_and_scan(self) -> None:
+        u0 = np.array([f.to_unit(min(max(current(self.base, self.ref, f), f.lo), f.hi)) for f in self.fr])
+        self.say(f"start: cost {self.run([u0], 'start')[0]:.3f}")
+        cands = [np.asarray(c, float) for c in _sobol(len(self.fr), int(self.s.scan), self.s.seed)]
+        self.run(cands, "scan")
+        self.say(f"scan: {len(cands)} points, best cost {self.best.score.cost:.3f}")
+
+    def zoom_rounds(self) -> None:
+        half = 0.5
+        signs = [i for i, f in enumerate(self.fr) if f.kind == "sign"]
+        for r in range(int(self.s.rounds)):
+            half /= self.s.zoom
+            centre = np.array(self.best.unit)
+            lo, hi = np.clip(centre - half, 0, 1), np.clip(centre + half, 0, 1)
+            cands = [lo + s * (hi - lo) for s in _sobol(len(self.fr), int(self.s.scan) // 2, self.s.seed + 1 + r)]
+            for c in cands:
+                c[signs] = centre[signs]
+            self.run(cands, f"zoom{r + 1}")
+            self.say(f"zoom {r + 1}: best cost {self.best.score.cost:.3f}")
+
+    def polish(self) -> None:
+        """Nelder-Mead on the continuous parameters from the best point (signs fixed)."""
+        from scipy.optimize import minimize
+
+        cont = [i for i, f in enumerate(self.fr) if f.kind != "sign"]
+        if self.s.polish <= 0 or self.best.score.cost <= 0 or not cont:
+            return
+        fixed = np.array(self.best.unit)
+
+        def fun(x: np.ndarray) -> float:
+            u = fixed.copy()
+            u[cont] = np.clip(x, 0, 1)
+            return self.run([u], "polish")[0]
+
+        x0 = fixed[cont]
+        step = 0.5 / self.s.zoom ** max(1, self.s.rounds)
+        simplex = [x0] + [np.clip(x0 + np.eye(len(cont))[i] * step * (1 if x0[i] < 0.5 else -1), 0, 1)
+                          for i in range(len(cont))]
+        minimize(fun, x0, method="Nelder-Mead",
+                 options={"maxfev": int(self.s.polish), "initial_simplex": np.array(simplex), "xatol": 1e-3,
+                          "fatol": 1e-4})
+        self.say(f"polish: best cost {self.best.score.cost:.3f}")
+
+    def result(self, wall_s: float) -> PaperCalibration:
+        """The outcome: the best point, the near-optimal spread, what was never met together."""
+        best, first = self.best, self.history[0]
+        near = [h for h in self.history if h.score.cost <= best.score.cost + self.s.slack]
+        spread = {f.name: (float(min(h.values[f.name] for h in near)), float(max(h.values[f.name] for h in near)))
+                  for f in self.fr}
+        ids = list(first.score.violations)
+        V = np.array([[h.score.violations[i] for i in ids] for h in self.history])
+        met = V == 0
+        never = [(a, b) for ia, a in enumerate(ids) for ib, b in enumerate(ids) if ia < ib
+                 and met[:, ia].any() and met[:, ib].any() and not (met[:, ia] & met[:, ib]).any()]
+        return PaperCalibration(
+            free=self.fr, start=dict(first.values), fitted=dict(best.values), spread=spread,
+            params=apply(self.base, best.values, self.ref), before=first.score, after=best.score,
+            never_together=never, correlation=_rank_corr(V, ids),
+            met_by_share={i: float(met[:, k].mean()) for k, i in enumerate(ids)}, history=self.history,
+            settings=self.s, runner=self.runner, wall_s=wall_s)
 
 
-def calibrate_paper(start: RobotParams | None = None, *, free: Sequence[str] | None = None, scan: int = 32,
-                    rounds: int = 2, zoom: float = 3.0, polish: int = 30, slack: float = 0.25, seed: int = 0,
-                    scheduler: str | None = None, workers: int | None = None, quiet: bool = True,
-                    log: Callable[[str], None] | None = None, ensemble: int = 0,
-                    scorer: Scorer | None = None) -> PaperCalibration:
+def calibrate_paper(start: RobotParams | None = None, settings: SearchSettings = SearchSettings(), *,
+                    free: Sequence[str] | None = None, runner: Runner = LOCAL,
+                    log: Callable[[str], None] | None = None) -> PaperCalibration:
     """Search the free parameters for the set that best meets the paper's observations.
 
     Parameters
@@ -396,104 +583,22 @@ def calibrate_paper(start: RobotParams | None = None, *, free: Sequence[str] | N
         the free parameters of a copy of it. The scales (``squeeze_scale``,
         ``act_scale``) and their bounds are relative to the published set
         (Tables 1-2), whatever the start.
+    settings:
+        The search and its objective (:class:`SearchSettings`; ``ensemble > 0``: over drawn robots).
     free:
         Names of :data:`FREE` to fit (default all).
-    scan, rounds, zoom, polish:
-        Sobol points of the first scan; zoom rounds (each ``scan // 2`` points,
-        a box ``zoom`` times narrower per round); Nelder-Mead evaluations.
-    slack:
-        The near-optimal set: objective <= best + slack (the spread reported).
-    seed:
-        Seeds of the simulations (common random numbers), of the drawn robots and of the Sobol samples.
-    ensemble, scorer:
-        ``ensemble > 0``: score every candidate over its nominal robot and ``ensemble`` drawn
-        robots (:func:`ensemble_members`) with ``scorer`` (default :func:`ensemble_cost`);
-        0: the nominal robot alone, :func:`objective`.
+    runner:
+        Where the simulations run (:class:`Runner`).
+    log:
+        Called with one line per stage.
     """
-    from scipy.optimize import minimize
-
     t0 = time.perf_counter()
-    base = RobotParams() if start is None else start
-    ref = RobotParams()
-    fr = _free_params(free)
-    obs = observations()
-    history: list[dict[str, Any]] = []
-    say = log or (lambda _m: None)
-
-    def values_of(u: np.ndarray) -> dict[str, float]:
-        return {f.name: f.from_unit(x) for f, x in zip(fr, u)}
-
-    def run(us: list[np.ndarray], stage: str) -> list[float]:
-        sets = [apply(base, values_of(u), ref) for u in us]
-        n = 1 + max(0, int(ensemble))
-        members = [m for p in sets for m in (ensemble_members(p, n - 1, seed) if n > 1 else [p])]
-        mets = evaluate_many(members, seed=seed, scheduler=scheduler, workers=workers, quiet=quiet)
-        costs = []
-        for k, u in enumerate(us):
-            entry: dict[str, Any] = {"stage": stage, "values": values_of(u), "unit": [float(x) for x in u]}
-            entry.update(_scored(mets[k * n:(k + 1) * n], obs, scorer))
-            history.append(entry)
-            costs.append(entry["cost"])
-        return costs
-
-    u_start = np.array([f.to_unit(min(max(current(base, ref, f), f.lo), f.hi)) for f in fr])
-    start_cost = run([u_start], "start")[0]
-    say(f"start: cost {start_cost:.3f}")
-    cands = [np.asarray(c, float) for c in _sobol(len(fr), int(scan), seed)]
-    run(cands, "scan")
-    best = min(history, key=lambda h: h["cost"])
-    say(f"scan: {len(cands)} points, best cost {best['cost']:.3f}")
-    half = 0.5
-    signs = [i for i, f in enumerate(fr) if f.kind == "sign"]
-    for r in range(int(rounds)):
-        half /= zoom
-        centre = np.array(best["unit"])
-        lo, hi = np.clip(centre - half, 0, 1), np.clip(centre + half, 0, 1)
-        sample = _sobol(len(fr), int(scan) // 2, seed + 1 + r)
-        cands = [lo + s * (hi - lo) for s in sample]
-        for c in cands:
-            c[signs] = centre[signs]
-        run(cands, f"zoom{r + 1}")
-        best = min(history, key=lambda h: h["cost"])
-        say(f"zoom {r + 1}: best cost {best['cost']:.3f}")
-    cont = [i for i, f in enumerate(fr) if f.kind != "sign"]
-    if polish > 0 and best["cost"] > 0 and cont:
-        fixed = np.array(best["unit"])
-
-        def fun(x: np.ndarray) -> float:
-            u = fixed.copy()
-            u[cont] = np.clip(x, 0, 1)
-            return run([u], "polish")[0]
-
-        x0 = fixed[cont]
-        simplex = [x0] + [np.clip(x0 + np.eye(len(cont))[i] * (0.5 / zoom ** max(1, rounds)) *
-                                  (1 if x0[i] < 0.5 else -1), 0, 1) for i in range(len(cont))]
-        minimize(fun, x0, method="Nelder-Mead",
-                 options={"maxfev": int(polish), "initial_simplex": np.array(simplex), "xatol": 1e-3, "fatol": 1e-4})
-        best = min(history, key=lambda h: h["cost"])
-        say(f"polish: best cost {best['cost']:.3f}")
-    fitted = dict(best["values"])
-    near = [h for h in history if h["cost"] <= best["cost"] + slack]
-    spread = {f.name: (float(min(h["values"][f.name] for h in near)), float(max(h["values"][f.name] for h in near)))
-              for f in fr}
-    ids = [o.id for o in obs]
-    V = np.array([[h["violations"][i] for i in ids] for h in history])
-    met = V == 0
-    never = [(a, b) for ia, a in enumerate(ids) for ib, b in enumerate(ids) if ia < ib
-             and met[:, ia].any() and met[:, ib].any() and not (met[:, ia] & met[:, ib]).any()]
-    corr = _rank_corr(V, ids)
-    first = history[0]
-    return PaperCalibration(
-        free=fr, start={k: float(v) for k, v in first["values"].items()}, fitted=fitted, spread=spread,
-        params=apply(base, fitted, ref), before={"cost": first["cost"], "violations": first["violations"],
-                                           "metrics": first["metrics"]},
-        after={"cost": best["cost"], "violations": best["violations"], "metrics": best["metrics"],
-               **({k: best[k] for k in ("share_met", "nominal_violations") if k in best})},
-        never_together=never, correlation=corr,
-        met_by_share={i: float(met[:, k].mean()) for k, i in enumerate(ids)}, history=history,
-        settings={"scan": scan, "rounds": rounds, "zoom": zoom, "polish": polish, "slack": slack, "seed": seed,
-                  "size": "quick", "ensemble": int(ensemble), "scheduler": scheduler or "local", "workers": workers,
-                  "wall_s": round(time.perf_counter() - t0, 1), "free": [f.name for f in fr]})
+    search = _Search(RobotParams() if start is None else start, _free_params(free), settings, runner,
+                     log or (lambda _m: None))
+    search.start_and_scan()
+    search.zoom_rounds()
+    search.polish()
+    return search.result(time.perf_counter() - t0)
 
 
 def _sobol(d: int, n: int, seed: int) -> np.ndarray:
@@ -522,9 +627,49 @@ def _rank_corr(V: np.ndarray, ids: list[str]) -> dict[str, dict[str, float]]:
     return out
 
 
+# --------------------------------------------------------------------------- sensitivity
+
+class SensitivityRowJSON(TypedDict):
+    """One step of :func:`sensitivity`: a parameter moved one way, the violations, and the
+    observations lost and gained (a JSON record)."""
+
+    parameter: str
+    direction: str
+    value: float
+    cost: float
+    violations: dict[str, float]
+    lost: list[str]
+    gained: list[str]
+
+
+class SensitivityJSON(TypedDict, total=False):
+    """:class:`Sensitivity` as JSON (the command's output file)."""
+
+    base: dict[str, float]
+    base_cost: float
+    base_values: dict[str, float]
+    factor: float
+    rows: list[SensitivityRowJSON]
+    params: str
+
+
+@dataclass(frozen=True)
+class Sensitivity:
+    """The outcome of :func:`sensitivity`."""
+
+    base: dict[str, float]
+    base_cost: float
+    base_values: dict[str, float]
+    factor: float
+    rows: list[SensitivityRowJSON]
+
+    def to_json(self, params: str) -> SensitivityJSON:
+        return SensitivityJSON(base=self.base, base_cost=self.base_cost, base_values=self.base_values,
+                               factor=self.factor, rows=self.rows, params=params)
+
+
 def sensitivity(params: RobotParams, reference: RobotParams | None = None, *, factor: float = 2.0,
-                free: Sequence[str] | None = None, seed: int = 0, scheduler: str | None = None,
-                workers: int | None = None, quiet: bool = True) -> dict[str, Any]:
+                free: Sequence[str] | None = None, seed: int = 0, runner: Runner = LOCAL) -> Sensitivity:
     """One-at-a-time sensitivity of every observation's violation around ``params``.
 
     Each continuous free parameter is moved down and up by ``factor`` (log
@@ -546,14 +691,13 @@ def sensitivity(params: RobotParams, reference: RobotParams | None = None, *, fa
         variants.append((f.name, "down", max(f.lo, v / factor)))
         variants.append((f.name, "up", min(f.hi, v * factor)))
     sets = [params] + [apply(params, {**base_vals, n: x}, ref) for n, _, x in variants]
-    mets = evaluate_many(sets, seed=seed, scheduler=scheduler, workers=workers, quiet=quiet)
+    mets = evaluate_many(sets, seed=seed, scheduler=runner.scheduler, workers=runner.workers, quiet=runner.quiet)
     obs = observations()
     base = violations(mets[0], obs)
     rows = []
     for (n, d, x), m in zip(variants, mets[1:]):
         viol = violations(m, obs)
-        rows.append({"parameter": n, "direction": d, "value": x, "cost": objective(m, obs), "violations": viol,
-                     "lost": [k for k in viol if base[k] == 0 and viol[k] > 0],
-                     "gained": [k for k in viol if base[k] > 0 and viol[k] == 0]})
-    return {"base": base, "base_cost": objective(mets[0], obs), "base_values": base_vals, "factor": factor,
-            "rows": rows}
+        rows.append(SensitivityRowJSON(parameter=n, direction=d, value=x, cost=objective(m, obs), violations=viol,
+                                       lost=[k for k in viol if base[k] == 0 and viol[k] > 0],
+                                       gained=[k for k in viol if base[k] > 0 and viol[k] == 0]))
+    return Sensitivity(base=base, base_cost=objective(mets[0], obs), base_values=base_vals, factor=factor, rows=rows)

@@ -18,7 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from labkit.errors import ConfigError
 
@@ -142,11 +142,25 @@ class ObservationCheck:
         regime = f" [not applicable: {self.when} = 0]" if self.state == NOT_APPLICABLE else ""
         return f"{verdict}  {self.id}: {self.metric} = {v}  (paper: {self.band}; {self.source}){regime}"
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> ObservationCheckJSON:
         viol = self.violation if math.isfinite(self.violation) else None
-        return {"id": self.id, "metric": self.metric, "value": self.value, "passed": self.passed,
-                "state": self.state, "band": self.band, "source": self.source, "violation": viol,
-                "when": self.when}
+        return ObservationCheckJSON(id=self.id, metric=self.metric, value=self.value, passed=self.passed,
+                                    state=self.state, band=self.band, source=self.source, violation=viol,
+                                    when=self.when)
+
+
+class ObservationCheckJSON(TypedDict):
+    """:meth:`ObservationCheck.to_dict` (JSON in scenario results)."""
+
+    id: str
+    metric: str
+    value: float | None
+    passed: bool
+    state: str
+    band: str
+    source: str
+    violation: float | None
+    when: str | None
 
 
 def tally(checks: Sequence[ObservationCheck]) -> dict[str, int]:

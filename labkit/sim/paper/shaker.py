@@ -62,7 +62,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Any
+from pathlib import Path
+from typing import TypedDict
 
 from labkit import specs
 from labkit.errors import InputError
@@ -142,10 +143,40 @@ class ShakerLaw:
         w = 2 * math.pi * float(freq_hz)
         return self.amp_um(freq_hz, drive_vpp) * 1e-6 * w * w / G0_M_S2
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> ShakerLawDescription:
         """The law's settings (for scenario results and parameter provenance)."""
-        return {"law": "constant drive: mass-controlled 4809 on a 2718, 2nd-order suspension, envelope cap",
-                **asdict(self)}
+        return ShakerLawDescription(
+            law="constant drive: mass-controlled 4809 on a 2718, 2nd-order suspension, envelope cap",
+            ref_freq_hz=self.ref_freq_hz, ref_amp_um=self.ref_amp_um, ref_drive_vpp=self.ref_drive_vpp,
+            suspension_hz=self.suspension_hz, suspension_damping_ratio=self.suspension_damping_ratio,
+            force_peak_n=self.force_peak_n, moving_mass_kg=self.moving_mass_kg, tray_mass_kg=self.tray_mass_kg,
+            stroke_peak_mm=self.stroke_peak_mm, velocity_peak_m_s=self.velocity_peak_m_s)
+
+
+class ShakerLawDescription(TypedDict):
+    """:meth:`ShakerLaw.describe` (JSON in scenario results)."""
+
+    law: str
+    ref_freq_hz: float
+    ref_amp_um: float
+    ref_drive_vpp: float
+    suspension_hz: float
+    suspension_damping_ratio: float
+    force_peak_n: float
+    moving_mass_kg: float
+    tray_mass_kg: float
+    stroke_peak_mm: float
+    velocity_peak_m_s: float
+
+
+class TableLawDescription(TypedDict):
+    """:meth:`TableLaw.describe` (JSON in scenario results)."""
+
+    law: str
+    source: str
+    ref_drive_vpp: float
+    freq_hz: list[float]
+    amp_um: list[float]
 
 
 #: The paper's shaker: 25 um at 240 Hz and 8 V p-p, 4809 suspension and envelope.
@@ -189,17 +220,16 @@ class TableLaw:
         v = self.ref_drive_vpp if drive_vpp is None else float(drive_vpp)
         return math.exp(la[k] + t * (la[k + 1] - la[k])) * v / self.ref_drive_vpp
 
-    def describe(self) -> dict[str, Any]:
-        return {"law": "table", "source": self.source, "ref_drive_vpp": self.ref_drive_vpp,
-                "freq_hz": list(self.freqs_hz), "amp_um": list(self.amps_um)}
+    def describe(self) -> TableLawDescription:
+        """The table and its source (for scenario results)."""
+        return TableLawDescription(law="table", source=self.source, ref_drive_vpp=self.ref_drive_vpp,
+                                   freq_hz=list(self.freqs_hz), amp_um=list(self.amps_um))
 
 
 def load_tray_law(path: str) -> TableLaw:
     """A :class:`TableLaw` from a CSV file (columns ``freq_hz,amp_um``, ``#`` comments, one optional
     header line; the drive in a ``# drive_vpp = X`` comment, default 8) or a TOML file
     (``freq_hz = [...]``, ``amp_um = [...]``, optional ``drive_vpp``). Errors name the file."""
-    from pathlib import Path
-
     p = Path(path)
     if not p.is_file():
         raise InputError(f"no such file: {p}", key="tray law", expected="a CSV or TOML file of freq_hz, amp_um")
@@ -231,7 +261,7 @@ def load_tray_law(path: str) -> TableLaw:
     return TableLaw(tuple(freqs), tuple(amps), drive, str(p))
 
 
-def _number(text: str, path: Any, line: int) -> float:
+def _number(text: str, path: Path, line: int) -> float:
     try:
         return float(text)
     except ValueError:
