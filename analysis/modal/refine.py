@@ -239,7 +239,8 @@ def _gram_normals(theta, channels, m, powers) -> list[tuple[np.ndarray, np.ndarr
     B, E, F = _basis_ef(channels[0].w, lam, powers)
     Z = np.empty((E.shape[0], 4 * m + q), dtype=complex, order="F")
     Z[:, :m], Z[:, m:2 * m], Z[:, 2 * m:2 * m + q] = E, F, B[:, 2 * m::2]
-    Z[:, 2 * m + q:3 * m + q], Z[:, 3 * m + q:] = E * E, F * F
+    np.multiply(E, E, out=Z[:, 2 * m + q:3 * m + q])
+    np.multiply(F, F, out=Z[:, 3 * m + q:])
     gram = zherk(1.0, Z, trans=2)                              # upper triangle of Z^H Z
     gram = gram + np.triu(gram, 1).conj().T
     i = np.arange(m)
@@ -362,6 +363,12 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
 
     ``fixed_freq`` / ``fixed_damping`` (boolean per mode) hold those values at
     their starting values (poles chosen by hand); their variances are zero.
+
+    Channels that share their lines with weights constant over them get their
+    normal equations from one Gram matrix (:func:`_gram_normals`).  Once a step
+    lowers the cost by less than the noise variance, the next is taken from the
+    explicit Jacobian, which the covariance then reuses: when that step converges
+    (cost changed by less than ``tol``), the covariance is the last iterate but one's.
     """
     m = lam0.size
     n_lin = 2 * m + 2 * len(powers)
@@ -612,10 +619,28 @@ def _covariance(A: np.ndarray, stacks: list[tuple[np.ndarray, np.ndarray]], cost
     meat = np.zeros((P, P))
     for k, (J, res) in enumerate(stacks):            # real and imaginary rows together
         idx = np.r_[np.arange(2 * m), 2 * m + k * n_lin + np.arange(n_lin)]
-        lev = np.clip(np.einsum("ij,ij->i", J @ inv[np.ix_(idx, idx)], J), 0.0, 0.99)
+        lev = np.clip(_leverages(J, inv[np.ix_(idx, idx)]), 0.0, 0.99)
         J *= (res / (1.0 - lev))[:, None]            # in place: the rows weighted for the meat
         meat[np.ix_(idx, idx)] += J.T @ J
     return inv @ meat @ inv
+
+
+def _leverages(J: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """``diag(J S J^T)`` for a symmetric positive semi-definite ``S``: ``|J L|^2`` by rows with the
+    Cholesky factor ``S = L L^T`` (a triangular product, half the work of ``J S``), or ``J S`` itself
+    where ``S`` is singular (a direction the pseudo-inverse cut)."""
+    from scipy.linalg import LinAlgError, cholesky
+    from scipy.linalg.blas import dtrmm
+
+    d = np.sqrt(np.abs(np.diag(S)))
+    d[d == 0] = 1.0
+    try:
+        L = cholesky(S / np.outer(d, d), lower=True) * d[:, None]
+    except LinAlgError:
+        return np.einsum("ij,ij->i", J @ S, J)
+    X = dtrmm(1.0, L, np.asfortranarray(J), side=1, lower=1)      # J L, column-major as BLAS wants it
+    X *= X
+    return X.sum(axis=1)
 
 
 def model_variance(channels: Sequence[Channel], ref: Refined, powers: Sequence[int],

@@ -102,3 +102,19 @@ def test_gram_normal_equations_equal_the_explicit_ones():
         np.testing.assert_allclose(g1, g2, rtol=1e-8, atol=1e-10 * np.max(np.abs(g2)))
     uneven = [Channel(c.name, c.w, c.H, c.weight * np.linspace(1, 2, c.w.size)) for c in ch]
     assert not _gram_ok(uneven)
+
+
+def test_leverages_by_cholesky_equal_the_quadratic_form():
+    """diag(J S J^T) by the Cholesky factor of S equals the direct form, and S singular (a direction
+    the pseudo-inverse cut, a held parameter) falls back to it; the leverages of the full normal
+    matrix sum to the number of parameters."""
+    from labkit.analysis.modal.refine import _leverages
+
+    rng = np.random.default_rng(0)
+    J = np.asfortranarray(rng.standard_normal((400, 12)) * np.logspace(-3, 3, 12))
+    S = np.linalg.inv(J.T @ J)
+    direct = np.einsum("ij,ij->i", J @ S, J)
+    np.testing.assert_allclose(_leverages(J, S), direct, rtol=1e-9, atol=1e-15)
+    assert abs(_leverages(J, S).sum() - 12) < 1e-9
+    S[0, :] = S[:, 0] = 0.0
+    np.testing.assert_allclose(_leverages(np.ascontiguousarray(J), S), np.einsum("ij,ij->i", J @ S, J), rtol=1e-12)
