@@ -69,7 +69,7 @@ from labkit.analysis.frf import KINDS
 from labkit.analysis.modal import sdof as modal_sdof
 from labkit.analysis.modal.lscf import Stabilisation, choose_poles, modal_to_pole, pole_to_modal, stabilisation
 from labkit.analysis.modal.noise import misfit_to_noise, noise_variance
-from labkit.analysis.modal.refine import Channel, Refined, basis, model_variance, refine, residues_ls
+from labkit.analysis.modal.refine import Channel, Refined, _same_grid, basis, model_variance, refine, residues_ls
 from labkit.errors import InputError as _InputError
 
 __all__ = ["Mode", "ModalFit", "fit_modes", "FitInputError", "METHODS", "DEFAULT_RESIDUALS", "BACKGROUNDS",
@@ -156,13 +156,28 @@ class ModalFit:
     def model(self, freq_hz: Any, location: int | str = 0) -> np.ndarray:
         """The fitted FRF at ``freq_hz`` for a location (index or name)."""
         k = self.locations.index(location) if isinstance(location, str) else int(location)
+        return self._models(np.asarray(freq_hz, dtype=float), [k])[0]
+
+    def _models(self, freq_hz: np.ndarray, ks: Sequence[int]) -> list[np.ndarray]:
+        """The fitted FRFs of locations ``ks`` at the same lines (the basis computed once)."""
         lam = modal_to_pole(np.array([m.freq_hz for m in self.modes]),
                             np.array([m.damping_ratio for m in self.modes]))
-        p = [v for m in self.modes for v in (m.amplitude[k].real, m.amplitude[k].imag)]
-        p += [v for c in self.residual_terms[k] for v in (c.real, c.imag)]
-        w = 2 * np.pi * np.asarray(freq_hz, dtype=float)
-        out = basis(w, lam, self.residual_powers) @ np.asarray(p, dtype=float)
-        return out * np.exp(-1j * w * self.delay_s) if self.delay_s else out
+        w = 2 * np.pi * freq_hz
+        B = basis(w, lam, self.residual_powers)
+        out = []
+        for k in ks:
+            p = [v for m in self.modes for v in (m.amplitude[k].real, m.amplitude[k].imag)]
+            p += [v for c in self.residual_terms[k] for v in (c.real, c.imag)]
+            h = B @ np.asarray(p, dtype=float)
+            out.append(h * np.exp(-1j * w * self.delay_s) if self.delay_s else h)
+        return out
+
+    def fitted(self) -> list[np.ndarray]:
+        """Each location's fitted FRF at its own lines (the basis once when they share them)."""
+        f0 = self.freq_hz[0]
+        if all(f is f0 or (f.shape == f0.shape and np.array_equal(f, f0)) for f in self.freq_hz):
+            return self._models(f0, range(len(self.locations)))
+        return [self.model(f, k) for k, f in enumerate(self.freq_hz)]
 
     def shapes(self) -> np.ndarray:
         """Mode shapes: complex residues, ``(modes, locations)`` (see :mod:`labkit.analysis.modal.shapes`)."""
@@ -278,9 +293,24 @@ class _Ctx:
     f_ref: float                      # Hz per normalised unit (messages, rescaling)
     covariance: str
     warnings: list[str]
+    noise_cache: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
     def hz(self, f: float) -> str:
         return f"{f * self.f_ref:.5g} Hz"
+
+    def noise(self, c: Channel) -> np.ndarray:
+        """A location's noise variance (:func:`noise_variance`), computed once per FRF."""
+        hit = self.noise_cache.get(id(c))
+        if hit is None or hit[0] is not c.H:
+            hit = (c.H, noise_variance(c.H))
+            self.noise_cache[id(c)] = hit
+        return hit[1]
+
+    def models(self, lam: np.ndarray, lins: Sequence[np.ndarray]) -> list[np.ndarray]:
+        """Each location's model for poles ``lam`` and linear parameters ``lins`` (the basis once
+        when the locations share their lines)."""
+        shared = basis(self.chans[0].w, lam, self.powers) if _same_grid(self.chans) else None
+        return [(basis(c.w, lam, self.powers) if shared is None else shared) @ p for c, p in zip(self.chans, lins)]
 
 
 def fit_modes(freq_hz: Any, frf: Any, n_modes: int | None = None, band_hz: tuple[float, float] | None = None,
@@ -539,18 +569,19 @@ def _misfits(ctx: _Ctx, ref: Refined) -> np.ndarray:
     when a location's ratio against the noise alone is above :data:`MISFIT_WARN`.
     """
     lam = _poles(ref)
-    models = [basis(c.w, lam, ctx.powers) @ p for c, p in zip(ctx.chans, ref.lin)]
+    models = ctx.models(lam, ref.lin)
     n_par = [p.size + 2 * lam.size / len(ctx.chans) for p in ref.lin]
-    out = np.array([misfit_to_noise(c.H, mod, n) for c, mod, n in zip(ctx.chans, models, n_par)])
+    out = np.array([misfit_to_noise(c.H, mod, n, noise_var=ctx.noise(c))
+                    for c, mod, n in zip(ctx.chans, models, n_par)])
     if out.max() > MISFIT_WARN:
-        out = np.array([misfit_to_noise(c.H, mod, n, model_var=mv)
+        out = np.array([misfit_to_noise(c.H, mod, n, model_var=mv, noise_var=ctx.noise(c))
                         for c, mod, n, mv in zip(ctx.chans, models, n_par, _model_variance(ctx, ref))])
     return out
 
 
 def _model_variance(ctx: _Ctx, ref: Refined) -> list[np.ndarray]:
     """Per location, the fitted model's variance at each line from the noise."""
-    return model_variance(ctx.chans, ref, ctx.powers, [noise_variance(c.H) for c in ctx.chans])
+    return model_variance(ctx.chans, ref, ctx.powers, [ctx.noise(c) for c in ctx.chans])
 
 
 #: Lags over which correlated residuals are looked for (a fraction of the lines, at most this many).
@@ -570,7 +601,7 @@ def _correlation_factor(ctx: _Ctx, ref: Refined) -> float:
     lam = _poles(ref)
     worst = 1.0
     for c, p, mv in zip(ctx.chans, ref.lin, _model_variance(ctx, ref)):
-        u = (basis(c.w, lam, ctx.powers) @ p - c.H) / np.sqrt(noise_variance(c.H) + mv)
+        u = (basis(c.w, lam, ctx.powers) @ p - c.H) / np.sqrt(ctx.noise(c) + mv)
         u = u - u.mean()
         norm = float(np.sum(np.abs(u) ** 2))
         tau = 1.0
@@ -616,7 +647,7 @@ def _residual_peaks(ctx: _Ctx, lam: np.ndarray, n_peaks: int) -> list[tuple[floa
             r = basis(c.w, lam, ctx.powers) @ p - c.H
         else:
             r = -c.H
-        v = noise_variance(c.H)
+        v = ctx.noise(c)
         e += np.interp(f_grid, c.w, np.abs(r) ** 2 / v)
     if e.size < 5:
         return []
@@ -691,8 +722,8 @@ def _grow_while_misfit(ctx: _Ctx, ref: Refined) -> Refined:
 def _screen(ctx: _Ctx, lam: np.ndarray) -> float:
     """The worst misfit with poles ``lam`` held and only the residues fitted (linear, cheap)."""
     lin = residues_ls(ctx.chans, lam, ctx.powers)
-    return max(misfit_to_noise(c.H, basis(c.w, lam, ctx.powers) @ p, p.size + 2 * lam.size / len(ctx.chans))
-               for c, p in zip(ctx.chans, lin))
+    return max(misfit_to_noise(c.H, mod, p.size + 2 * lam.size / len(ctx.chans), noise_var=ctx.noise(c))
+               for c, p, mod in zip(ctx.chans, lin, ctx.models(lam, lin)))
 
 
 def _candidates(ctx: _Ctx, lam: np.ndarray, worst: float) -> list[tuple[complex, bool]]:
@@ -903,9 +934,8 @@ def _judge(fit: ModalFit) -> None:
     q = []
     m = len(fit.modes)
     n_params = 2 * m / max(len(fit.locations), 1) + 2 * m + 2 * len(fit.residual_powers)
-    for k, loc in enumerate(fit.locations):
+    for k, (loc, model) in enumerate(zip(fit.locations, fit.fitted())):
         H = fit.frf[k]
-        model = fit.model(fit.freq_hz[k], k)
         r = model - H
         nr = float(np.sqrt(np.sum(np.abs(r) ** 2) / np.sum(np.abs(H) ** 2)))
         fit.nrmse[loc] = nr

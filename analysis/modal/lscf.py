@@ -12,6 +12,7 @@ the whole stabilisation diagram costs one pass over the data.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -91,34 +92,50 @@ def _mapping(channels) -> tuple[float, float]:
 ZOOM = 0.8
 
 
+def _powers(w: np.ndarray, n: int, wc: float, dt: float) -> np.ndarray:
+    """``E[k, i] = z_k^i`` for ``i = 0..n``, ``z = exp(j (w - wc) dt)``: successive products (one complex
+    multiply per entry, not an exp), re-anchored every 16 powers."""
+    E = np.empty((w.size, n + 1), dtype=complex)
+    E[:, 0] = 1.0
+    if n > 0:
+        z = np.exp(1j * (w - wc) * dt)
+        for i in range(1, n + 1):
+            E[:, i] = np.exp(1j * (w - wc) * dt * i) if i % 16 == 0 else E[:, i - 1] * z
+    return E
+
+
 def _blocks(channels: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], n_max: int, wc: float, dt: float):
-    """Reduced normal matrix pieces R_o, S_o, T_o (complex) for order ``n_max``."""
+    """Reduced normal matrix pieces R_o, S_o, T_o (complex) for order ``n_max``, each stacked over
+    the channels ``o``.
+
+    With ``X = diag(wt) E`` and ``Y = -diag(H wt) E`` (``E[k, i] = z_k^i``, ``|z_k| = 1``) every
+    block is ``E^H diag(d) E``, whose entry ``(i, j)`` is the moment ``sum_k d_k z_k^(j - i)``: a
+    Toeplitz matrix of ``2 n + 1`` moments, O(lines x order) instead of O(lines x order^2).
+    """
+    from scipy.linalg import toeplitz
+
     out = []
-    powers = np.arange(n_max + 1)
+    E, w_prev = np.zeros((0, 0), complex), np.zeros(0)
     for w, H, wt in channels:
-        E = np.empty((w.size, powers.size), dtype=complex)           # (N, n+1): z_k^i
-        E[:, 0] = 1.0
-        if powers.size > 1:
-            # successive products (one complex multiply per entry, not an exp), re-anchored every 16 powers
-            z = np.exp(1j * (w - wc) * dt)
-            for i in range(1, powers.size):
-                E[:, i] = np.exp(1j * (w - wc) * dt * i) if i % 16 == 0 else E[:, i - 1] * z
-        X = E * wt[:, None]
-        Y = E * -(H * wt)[:, None]
-        XH = X.conj().T
-        out.append((XH @ X, XH @ Y, Y.conj().T @ Y))
-    return out
+        if not (w is w_prev or (w.shape == w_prev.shape and np.array_equal(w, w_prev))):
+            E, w_prev = _powers(w, n_max, wc, dt), w
+        w2 = wt.astype(float) ** 2
+        D = np.column_stack([w2, -H * w2, np.abs(H) ** 2 * w2])          # R, S, T
+        up = D.T @ E                                                     # moments z^l, l = 0..n
+        down = D.T @ E.conj()                                            # moments z^-l
+        out.append(tuple(toeplitz(down[i], up[i]) for i in range(3)))
+    # stacked over channels, (channels, n + 1, n + 1) each: one batched solve per order
+    return tuple(np.array([o[i] for o in out]) for i in range(3))
 
 
 def _poles_for_order(blocks, n: int, wc: float, dt: float) -> np.ndarray:
     m = n + 1
-    M = np.zeros((m, m), dtype=complex)
-    for R, S, T in blocks:
-        Rn, Sn, Tn = R[:m, :m], S[:m, :m], T[:m, :m]
-        try:
-            M += Tn - Sn.conj().T @ np.linalg.solve(Rn, Sn)
-        except np.linalg.LinAlgError:
-            M += Tn - Sn.conj().T @ np.linalg.lstsq(Rn, Sn, rcond=None)[0]
+    Rn, Sn, Tn = (b[:, :m, :m] for b in blocks)
+    try:
+        X = np.linalg.solve(Rn, Sn)
+    except np.linalg.LinAlgError:
+        X = np.array([np.linalg.lstsq(r, s, rcond=None)[0] for r, s in zip(Rn, Sn)])
+    M = np.sum(Tn - np.conj(np.swapaxes(Sn, 1, 2)) @ X, axis=0)
     # Constraint: highest coefficient = 1.
     alpha = np.ones(m, dtype=complex)
     alpha[:n] = np.linalg.lstsq(M[:n, :n], -M[:n, n], rcond=None)[0]
@@ -158,7 +175,7 @@ def stabilisation(channels, n_max: int, band_hz: tuple[float, float], *, n_min: 
     wc, dt = _mapping(channels)
     reuse = {} if previous is None else previous.poles_by_order
     blocks = _blocks(channels, n_max, wc, dt) if any(int(n) not in reuse for n in
-                                                     range(n_min, n_max + 1, step)) else []
+                                                     range(n_min, n_max + 1, step)) else ()
     band_w = (2 * np.pi * band_hz[0], 2 * np.pi * band_hz[1])
     width_hz = band_hz[1] - band_hz[0]
     orders = np.arange(n_min, n_max + 1, step)
@@ -210,29 +227,34 @@ def choose_poles(stab: Stabilisation, n_modes: int | None, *, band_hz: tuple[flo
     f, z, o = f[ix], z[ix], o[ix]
     clusters: list[list[int]] = []
     stats: list[tuple[float, float]] = []           # per cluster: mean frequency and damping (running)
+    seen: list[set[int]] = []                       # per cluster: the orders it holds
+    f_l, z_l, o_l = f.tolist(), z.tolist(), o.tolist()
     # Join a pole to the nearest open cluster of similar frequency *and* damping (a spurious,
     # heavily damped pole next to a light mode starts its own cluster instead of splitting the
     # mode's), at most one pole per order in a cluster.
-    for i in range(f.size):
+    log3 = float(np.log(3.0))
+    for i, (fi, zi, oi) in enumerate(zip(f_l, z_l, o_l)):
         best, best_d = -1, np.inf
         for k in range(len(clusters) - 1, -1, -1):
             fc, zc = stats[k]
             scale = min(fc, width)
-            if (f[i] - fc) / scale > 2 * max(cluster_tol, 0.5 * max(zc, z[i]) * fc / scale):
+            if (fi - fc) / scale > 2 * max(cluster_tol, 0.5 * max(zc, zi) * fc / scale):
                 break                                   # clusters further down are further away
-            tol = max(cluster_tol, 0.25 * min(zc, z[i]) * fc / scale)
-            d = abs(f[i] - fc) / scale
-            similar = abs(np.log(max(z[i], 1e-12) / max(zc, 1e-12))) < np.log(3.0)
-            if d < tol and similar and d < best_d and o[i] not in o[clusters[k]]:
+            tol = max(cluster_tol, 0.25 * min(zc, zi) * fc / scale)
+            d = abs(fi - fc) / scale
+            similar = abs(math.log(max(zi, 1e-12) / max(zc, 1e-12))) < log3
+            if d < tol and similar and d < best_d and oi not in seen[k]:
                 best, best_d = k, d
         if best >= 0:
             clusters[best].append(i)
+            seen[best].add(oi)
             n = len(clusters[best])
             fc, zc = stats[best]
-            stats[best] = (fc + (f[i] - fc) / n, zc + (z[i] - zc) / n)
+            stats[best] = (fc + (fi - fc) / n, zc + (zi - zc) / n)
         else:
             clusters.append([i])
-            stats.append((float(f[i]), float(z[i])))
+            seen.append({oi})
+            stats.append((float(fi), float(zi)))
     # Poles within 1 % (of the frequency or of the band's width) of a band edge, or whose half-power
     # band reaches past it, stand in for modes outside the band.
     def inside(c: list[int]) -> bool:

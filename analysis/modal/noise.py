@@ -39,15 +39,17 @@ def noise_variance(H: np.ndarray, *, window: int = WINDOW) -> np.ndarray:
 
 
 def misfit_to_noise(H: np.ndarray, model: np.ndarray, n_params: float = 0.0,
-                    model_var: np.ndarray | None = None) -> float:
+                    model_var: np.ndarray | None = None, noise_var: np.ndarray | None = None) -> float:
     """``sqrt(mean(|model - H|^2 / (s^2 + u^2)))`` with ``s^2`` from :func:`noise_variance` and ``u^2``
     the model's own variance at each line (``model_var``, from the parameters' covariance; 0 if not
     given), corrected for the ``n_params`` real parameters fitted to this FRF; about 1 when the
     model fits to the noise.  With ``u^2``, quiet lines whose residual is the loud lines' noise carried
-    by the parameters (relative noise) do not read as misfit."""
+    by the parameters (relative noise) do not read as misfit.  ``noise_var``: ``noise_variance(H)``
+    when the caller has it already."""
     H = np.asarray(H, dtype=complex)
     r2 = np.abs(np.asarray(model) - H) ** 2
-    v = noise_variance(H) + (0.0 if model_var is None else np.asarray(model_var, dtype=float))
+    v = (noise_variance(H) if noise_var is None else np.asarray(noise_var, dtype=float)) + (
+        0.0 if model_var is None else np.asarray(model_var, dtype=float))
     n_real = 2 * H.size
     corr = n_real / max(n_real - n_params, 1.0)
     return float(np.sqrt(np.mean(r2 / v) * corr))

@@ -93,6 +93,29 @@ def residues_ls(channels: Sequence[Channel], lam: np.ndarray, powers: Sequence[i
     return out
 
 
+def _start_residues(channels: Sequence[Channel], lam: np.ndarray, powers: Sequence[int]) -> list[np.ndarray]:
+    """Residues to start the refinement from: :func:`residues_ls` by the scaled normal equations
+    (a fifth of the time; the iteration polishes them) where those are well conditioned."""
+    if not _gram_ok(channels):
+        return residues_ls(channels, lam, powers)
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+    B = basis(channels[0].w, lam, powers)
+    X = np.concatenate([B.real, B.imag])
+    G = X.T @ X
+    d = np.sqrt(np.diag(G))
+    d[d == 0] = 1.0
+    try:
+        L = cho_factor(G / np.outer(d, d))
+    except LinAlgError:
+        return residues_ls(channels, lam, powers)
+    if np.min(np.abs(np.diag(L[0]))) < 1e-5:            # cond(X) above ~1e5: least squares proper
+        return residues_ls(channels, lam, powers)
+    rhs = X.T @ np.column_stack([_ri(c.H) for c in channels])
+    p = cho_solve(L, rhs / d[:, None]) / d[:, None]
+    return [p[:, k].copy() for k in range(len(channels))]
+
+
 def model(w: np.ndarray, lam: np.ndarray, p: np.ndarray, powers: Sequence[int]) -> np.ndarray:
     """Evaluate the model of one channel with real parameter vector ``p`` (see :func:`basis`)."""
     return basis(np.asarray(w, dtype=float), lam, powers) @ p
@@ -120,16 +143,18 @@ def _unpack(theta: np.ndarray, m: int, n_lin: int, n_ch: int):
     return fz[:, 0], fz[:, 1], lins
 
 
+def _poles_and_derivatives(f: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """Poles of ``(f, zeta)`` (damping clipped into (0, 1)) and ``(d lam / d f, d lam / d zeta)``."""
+    z = np.clip(z, 1e-13, 0.999)
+    sq = np.sqrt(np.clip(1 - z ** 2, 1e-12, None))
+    return modal_to_pole(f, z), (2 * np.pi * (-z + 1j * sq), 2 * np.pi * f * (-1 - 1j * z / sq))
+
+
 def _channel_terms(theta, channels, m, powers, want_jac=True):
     """Per channel: weighted complex residual and complex Jacobian blocks (poles, own linear part)."""
     n_lin = 2 * m + 2 * len(powers)
     f, z, lins = _unpack(theta, m, n_lin, len(channels))
-    z = np.clip(z, 1e-13, 0.999)
-    lam = modal_to_pole(f, z)
-    wn = 2 * np.pi * f
-    sq = np.sqrt(np.clip(1 - z ** 2, 1e-12, None))
-    dlam_df = 2 * np.pi * (-z + 1j * sq)
-    dlam_dz = wn * (-1 - 1j * z / sq)
+    lam, (dlam_df, dlam_dz) = _poles_and_derivatives(f, z)
     out = []
     shared = _same_grid(channels)             # common lines: the pole terms once, not per channel
     for k, ch in enumerate(channels):
@@ -163,13 +188,24 @@ def _normal(terms, m: int, n_lin: int):
     the Jacobian is block-arrow shaped (poles shared, linear parts per channel),
     so only the small blocks are formed.
     """
-    P = 2 * m + n_lin * len(terms)
+    return _assemble_normal(_explicit_normals(terms), m, n_lin)
+
+
+def _explicit_normals(terms) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per channel ``(r, G, g)``: the residual, ``X^T X`` and ``X^T r`` of ``X = [Jp, B]`` real-stacked."""
+    out = []
+    for r, Jp, B in terms:
+        J, rs = _stacked(Jp, B, r)                            # real-stacked: half the work of Re(J^H J)
+        out.append((r, J.T @ J, J.T @ rs))
+    return out
+
+
+def _assemble_normal(normals, m: int, n_lin: int) -> tuple[np.ndarray, np.ndarray]:
+    """The full normal matrix and gradient from the per-channel blocks of :func:`_explicit_normals`."""
+    P = 2 * m + n_lin * len(normals)
     A = np.zeros((P, P))
     g = np.zeros(P)
-    for k, (r, Jp, B) in enumerate(terms):
-        X = _stacked(Jp, B, r)                                # real-stacked: half the work of Re(J^H J)
-        Gx = X.T @ X
-        G, gk = Gx[:-1, :-1], Gx[:-1, -1]
+    for k, (_, G, gk) in enumerate(normals):
         sl = slice(2 * m + k * n_lin, 2 * m + (k + 1) * n_lin)
         A[:2 * m, :2 * m] += G[:2 * m, :2 * m]
         A[:2 * m, sl] = G[:2 * m, 2 * m:]
@@ -180,30 +216,85 @@ def _normal(terms, m: int, n_lin: int):
     return A, g
 
 
-def _stacked(Jp: np.ndarray, B: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """``[[Re Jp, Re B, Re r], [Im Jp, Im B, Im r]]`` as one real array (filled in place, no copies)."""
+def _gram_ok(channels: Sequence[Channel]) -> bool:
+    """Common lines and a weight constant over the lines of each channel: :func:`_gram_normals` applies."""
+    return _same_grid(channels) and all(np.all(c.weight == c.weight[0]) for c in channels)
+
+
+def _gram_normals(theta, channels, m, powers) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """:func:`_explicit_normals` without forming any channel's Jacobian (common lines, constant weights).
+
+    Every column of every channel's complex Jacobian is a combination of the same ``4 m + q``
+    columns ``Z = [E, F, (j w)^q, E^2, F^2]`` (``E = 1 / (j w - lam)``, ``F = 1 / (j w - conj lam)``):
+    ``X_k = Z C_k`` with small complex coefficients ``C_k``.  So ``Re(X_k^H X_k) = Re(C_k^H (Z^H Z) C_k)``
+    and one Gram matrix ``Z^H Z`` serves all channels.  The gradients use the residuals
+    themselves (``Re(C_k^H (Z^H r_k))``), so the fixed point is that of the explicit form.
+    """
+    from scipy.linalg.blas import zherk
+
+    q = len(powers)
+    n_lin = 2 * m + 2 * q
+    f, z, lins = _unpack(theta, m, n_lin, len(channels))
+    lam, dlams = _poles_and_derivatives(f, z)
+    B, E, F = _basis_ef(channels[0].w, lam, powers)
+    Z = np.empty((E.shape[0], 4 * m + q), dtype=complex, order="F")
+    Z[:, :m], Z[:, m:2 * m], Z[:, 2 * m:2 * m + q] = E, F, B[:, 2 * m::2]
+    np.multiply(E, E, out=Z[:, 2 * m + q:3 * m + q])
+    np.multiply(F, F, out=Z[:, 3 * m + q:])
+    gram = zherk(1.0, Z, trans=2)                              # upper triangle of Z^H Z
+    gram = gram + np.triu(gram, 1).conj().T
+    i = np.arange(m)
+    CB = np.zeros((4 * m + q, n_lin), dtype=complex)          # B = Z CB (shared)
+    CB[i, 2 * i], CB[i, 2 * i + 1] = 1.0, 1j
+    CB[m + i, 2 * i], CB[m + i, 2 * i + 1] = 1.0, -1j
+    CB[2 * m + np.arange(q), 2 * m + 2 * np.arange(q)] = 1.0
+    CB[2 * m + np.arange(q), 2 * m + 2 * np.arange(q) + 1] = 1j
+    out = []
+    for ch, p in zip(channels, lins):
+        c = float(ch.weight[0])
+        r = (B @ p - ch.H) * c
+        R = p[0:2 * m:2] + 1j * p[1:2 * m:2]
+        C = np.zeros((4 * m + q, 2 * m + n_lin), dtype=complex)
+        for col, dlam in enumerate(dlams):
+            a = c * R * dlam
+            C[2 * m + q + i, 2 * i + col] = a
+            C[3 * m + q + i, 2 * i + col] = np.conj(a)
+        C[:, 2 * m:] = c * CB
+        zr = (Z.T @ r.conj()).conj()                            # Z^H r without a conjugated copy of Z
+        out.append((r, (C.conj().T @ gram @ C).real, (C.conj().T @ zr).real))
+    return out
+
+
+def _normals(theta, channels, m, powers) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per channel ``(r, J^T J, J^T r)`` (real-stacked), by the cheapest exact route."""
+    if _gram_ok(channels):
+        return _gram_normals(theta, channels, m, powers)
+    return _explicit_normals(_channel_terms(theta, channels, m, powers))
+
+
+def _stacked(Jp: np.ndarray, B: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``[[Re Jp, Re B], [Im Jp, Im B]]`` as one contiguous real array (filled in place) and ``[Re r; Im r]``."""
     n, a, b = r.size, Jp.shape[1], B.shape[1]
-    X = np.empty((2 * n, a + b + 1))
+    X = np.empty((2 * n, a + b))
     X[:n, :a], X[n:, :a] = Jp.real, Jp.imag
-    X[:n, a:a + b], X[n:, a:a + b] = B.real, B.imag
-    X[:n, -1], X[n:, -1] = r.real, r.imag
-    return X
+    X[:n, a:], X[n:, a:] = B.real, B.imag
+    return X, np.concatenate([r.real, r.imag])
 
 
-def _blocks(terms, free_p: np.ndarray):
+def _blocks(normals, free_p: np.ndarray):
     """The normal equations in blocks, scaled to unit diagonal: the shared (free) pole parameters
-    ``(G_pp, g_p, d_p)`` and per channel ``(G_pl, G_ll, g_l, d_l)`` (see :func:`_lm_step`)."""
+    ``(G_pp, g_p, d_p)`` and per channel ``(G_pl, G_ll, g_l, d_l)`` (see :func:`_lm_step`), from the
+    per-channel ``(r, G, g)`` of :func:`_normals`."""
     chans = []
     P = int(np.sum(free_p))
     G_pp = np.zeros((P, P))
     g_p = np.zeros(P)
-    for r, Jp, B in terms:
-        # Real-stacked rows [Re; Im]: one real symmetric product, half the work of Re(J^H J) in complex.
-        X = _stacked(Jp[:, free_p], B, r)
-        G = X.T @ X
+    sel = np.concatenate([free_p, np.ones(normals[0][1].shape[0] - free_p.size, bool)]) if normals else free_p
+    for _, Gf, gf in normals:
+        G, gk = Gf[np.ix_(sel, sel)], gf[sel]
         G_pp += G[:P, :P]
-        g_p += G[:P, -1]
-        chans.append((G[:P, P:-1], G[P:-1, P:-1], G[P:-1, -1]))
+        g_p += gk[:P]
+        chans.append((G[:P, P:], G[P:, P:], gk[P:]))
     d_p = np.sqrt(np.diag(G_pp))
     d_p[d_p == 0] = 1.0
     out = []
@@ -272,12 +363,18 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
 
     ``fixed_freq`` / ``fixed_damping`` (boolean per mode) hold those values at
     their starting values (poles chosen by hand); their variances are zero.
+
+    Channels that share their lines with weights constant over them get their
+    normal equations from one Gram matrix (:func:`_gram_normals`).  Once a step
+    lowers the cost by less than the noise variance, the next is taken from the
+    explicit Jacobian, which the covariance then reuses: when that step converges
+    (cost changed by less than ``tol``), the covariance is the last iterate but one's.
     """
     m = lam0.size
     n_lin = 2 * m + 2 * len(powers)
     f0, z0 = pole_to_modal(lam0)
     z0 = np.clip(z0, 1e-10, 0.95)
-    lins = residues_ls(channels, lam0, powers)
+    lins = _start_residues(channels, lam0, powers)
     theta = np.concatenate([np.column_stack([f0, z0]).ravel(), *lins])
     free = np.ones(theta.size, dtype=bool)
     if fixed_freq is not None:
@@ -301,14 +398,17 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
         return _finish(theta, channels, m, n_lin, powers, covariance, bool(sol.success), int(sol.nfev), free)
     elif solver != "normal":
         raise ValueError(f"solver must be 'normal' or 'scipy', not {solver!r}")
-    terms = _channel_terms(theta, channels, m, powers)
-    cost = _cost(terms)
+    normals = _normals(theta, channels, m, powers)
+    cost = _cost(normals)
     mu = 1e-3
     success = False
     n_iter = 0
     free_p = free[:2 * m]
+    small = theta.size <= BLOCK_COVARIANCE_ABOVE
+    dof = max(sum(2 * c.w.size for c in channels) - theta.size, 1)
+    at = None                                           # the explicit terms the covariance will use
     for n_iter in range(1, max_iter + 1):  # noqa: B007 -- the count is reported after the loop
-        blocks = _blocks(terms, free_p)
+        blocks = _blocks(normals, free_p)
         improved = False
         while mu < 1e12:
             step = np.zeros(theta.size)
@@ -332,14 +432,19 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
             success = True                              # no downhill step left: at the minimum
             break
         rel = (cost - t_cost) / max(cost, 1e-300)
+        near = cost - t_cost < t_cost / dof
         small_step = np.all(np.abs(step) <= tol * 100 * (np.abs(theta) + 1e-12))
         theta, cost = trial, t_cost
         mu = max(mu / 10, 1e-12)
-        terms = _channel_terms(theta, channels, m, powers)
         if rel < tol or small_step:
             success = True
             break
-    return _finish(theta, channels, m, n_lin, powers, covariance, success, n_iter, free, terms)
+        # A step that lowered the cost by less than the noise variance moved the estimate by about its
+        # standard uncertainty or less: the next one is then typically the last, and the explicit
+        # Jacobian the covariance needs gives its normal equations too (one evaluation, not two).
+        at = _explicit(theta, channels, m, powers) if near and small else None
+        normals = _normals(theta, channels, m, powers) if at is None else at[2]
+    return _finish(theta, channels, m, n_lin, powers, covariance, success, n_iter, free, at, cost)
 
 
 #: Above this many parameters the covariance is computed by blocks (many locations: a scan).  Below,
@@ -348,23 +453,83 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
 BLOCK_COVARIANCE_ABOVE = 300
 
 
-def _finish(theta, channels, m, n_lin, powers, covariance, success, n_iter, free=None, terms=None) -> Refined:
-    if terms is None:
-        terms = _channel_terms(theta, channels, m, powers)
+def _explicit(theta, channels, m, powers):
+    """Each channel's terms (:func:`_channel_terms`), real-stacked ``(J, r)`` (:func:`_stacked`) and
+    normal equations from them: the normal matrix and the sandwich both use the stacked ``J``."""
+    if _gram_ok(channels):
+        return _explicit_shared(theta, channels, m, powers)
+    terms = _channel_terms(theta, channels, m, powers)
+    stacks = [_stacked(Jp, B, r) for r, Jp, B in terms]
+    return terms, stacks, [(r, J.T @ J, J.T @ rs) for (r, _, _), (J, rs) in zip(terms, stacks)]
+
+
+def _explicit_shared(theta, channels, m, powers):
+    """:func:`_explicit` for common lines and constant weights (:func:`_gram_ok`), from real arrays
+    shared by all channels.
+
+    With ``P = E^2 + F^2`` and ``Q = E^2 - F^2``, a channel's pole column ``E^2 a + F^2 conj(a)``
+    stacks as ``W [Re a; Im a]`` with ``W = [[Re P, -Im Q], [Im P, Re Q]]``, and its basis block is
+    the shared ``Bs = [Re B; Im B]`` times its weight ``c``.  So ``J_k = [W, Bs] M_k`` with a small
+    ``M_k``: one product ``W C_k`` per channel builds ``J_k``, and ``J_k^T J_k = M_k^T G M_k`` with
+    the Gram matrix ``G`` of ``[W, Bs]`` computed once.
+    """
+    n_lin = 2 * m + 2 * len(powers)
+    f, z, lins = _unpack(theta, m, n_lin, len(channels))
+    lam, dlams = _poles_and_derivatives(f, z)
+    B, E, F = _basis_ef(channels[0].w, lam, powers)
+    E2, F2 = E * E, F * F
+    n = E.shape[0]
+    WB = np.empty((2 * n, 2 * m + n_lin), order="F")    # column blocks contiguous
+    P = E2 + F2
+    WB[:n, :m], WB[n:, :m] = P.real, P.imag
+    P = E2 - F2
+    WB[:n, m:2 * m], WB[n:, m:2 * m] = -P.imag, P.real
+    WB[:n, 2 * m:], WB[n:, 2 * m:] = B.real, B.imag
+    G = WB.T @ WB
+    i = np.arange(m)
+    terms, stacks, normals = [], [], []
+    for ch, p in zip(channels, lins):
+        c = float(ch.weight[0])
+        r = (B @ p - ch.H) * c
+        R = p[0:2 * m:2] + 1j * p[1:2 * m:2]
+        M = np.zeros((2 * m + n_lin, 2 * m + n_lin))
+        for col, dlam in enumerate(dlams):
+            a = c * R * dlam
+            M[i, 2 * i + col], M[m + i, 2 * i + col] = a.real, a.imag
+        M[2 * m:, 2 * m:] = c * np.eye(n_lin)
+        J = np.empty_like(WB)
+        np.matmul(WB[:, :2 * m], M[:2 * m, :2 * m], out=J[:, :2 * m])
+        np.multiply(WB[:, 2 * m:], c, out=J[:, 2 * m:])
+        rs = np.concatenate([r.real, r.imag])
+        terms.append((r, None, None))
+        stacks.append((J, rs))
+        normals.append((r, M.T @ G @ M, J.T @ rs))
+    return terms, stacks, normals
+
+
+def _finish(theta, channels, m, n_lin, powers, covariance, success, n_iter, free=None, at=None,
+            cost=None) -> Refined:
+    """The result at ``theta``, its covariance from ``at`` (:func:`_explicit`, possibly of the last
+    iterate but one, whose step changed the cost by under ``tol``: the same to that order) or
+    computed here; ``cost``: the cost at ``theta`` when known."""
+    small = theta.size <= BLOCK_COVARIANCE_ABOVE
     n_obs = sum(2 * c.w.size for c in channels)
     dof = max(n_obs - int(np.sum(free)) if free is not None else n_obs - theta.size, 1)
-    if theta.size <= BLOCK_COVARIANCE_ABOVE:
-        A, _ = _normal(terms, m, n_lin)
+    if small:
+        terms, stacks, normals = _explicit(theta, channels, m, powers) if at is None else at
+        ssr = _cost(terms) if cost is None else float(cost)
+        A, _ = _assemble_normal(normals, m, n_lin)
         if free is not None and not free.all():
             # Held parameters: no variance, and no part in the others' (rows and columns zeroed).
             A = A * np.outer(free, free)
-        cov = _covariance(A, terms, m, n_lin, dof, covariance)
+        cov = _covariance(A, stacks, ssr, m, n_lin, dof, covariance)
     else:
+        terms = _channel_terms(theta, channels, m, powers)
+        ssr = _cost(terms)
         free_p = np.ones(2 * m, bool) if free is None else np.asarray(free[:2 * m], bool)
         cov = _covariance_blocks(terms, m, n_lin, free_p, dof, covariance)
     f, z, lin = _unpack(theta, m, n_lin, len(channels))
-    return Refined(f.copy(), z.copy(), [np.array(x) for x in lin], cov, theta, _cost(terms), dof, success,
-                   n_iter)
+    return Refined(f.copy(), z.copy(), [np.array(x) for x in lin], cov, theta, ssr, dof, success, n_iter)
 
 
 def _pinv_sym(A: np.ndarray) -> np.ndarray:
@@ -441,23 +606,41 @@ def _covariance_blocks(terms, m: int, n_lin: int, free_p: np.ndarray, dof: int, 
     return cov
 
 
-def _covariance(A: np.ndarray, terms, m: int, n_lin: int, dof: int, kind: str) -> np.ndarray:
+def _covariance(A: np.ndarray, stacks: list[tuple[np.ndarray, np.ndarray]], cost: float, m: int, n_lin: int,
+                dof: int, kind: str) -> np.ndarray:
+    """The parameter covariance from the normal matrix ``A``; for the sandwich each channel's
+    real-stacked ``J`` and ``r`` (:func:`_stacked`; ``J`` is overwritten)."""
     inv = _pinv_sym(A)
     if kind != "sandwich":
-        return inv * _cost(terms) / dof
+        return inv * cost / dof
     # HC3: each residual inflated by 1 / (1 - leverage); plain HC0 under-covers
     # when the few lines near a sharp peak carry most of the information.
     P = A.shape[0]
     meat = np.zeros((P, P))
-    for k, (r, Jp, B) in enumerate(terms):
+    for k, (J, res) in enumerate(stacks):            # real and imaginary rows together
         idx = np.r_[np.arange(2 * m), 2 * m + k * n_lin + np.arange(n_lin)]
-        J = np.hstack([Jp, B])
-        sub = inv[np.ix_(idx, idx)]
-        for part, res in ((J.real, r.real), (J.imag, r.imag)):
-            lev = np.clip(np.sum((part @ sub) * part, axis=1), 0.0, 0.99)
-            Jr = part * (res / (1.0 - lev))[:, None]
-            meat[np.ix_(idx, idx)] += Jr.T @ Jr
+        lev = np.clip(_leverages(J, inv[np.ix_(idx, idx)]), 0.0, 0.99)
+        J *= (res / (1.0 - lev))[:, None]            # in place: the rows weighted for the meat
+        meat[np.ix_(idx, idx)] += J.T @ J
     return inv @ meat @ inv
+
+
+def _leverages(J: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """``diag(J S J^T)`` for a symmetric positive semi-definite ``S``: ``|J L|^2`` by rows with the
+    Cholesky factor ``S = L L^T`` (a triangular product, half the work of ``J S``), or ``J S`` itself
+    where ``S`` is singular (a direction the pseudo-inverse cut)."""
+    from scipy.linalg import LinAlgError, cholesky
+    from scipy.linalg.blas import dtrmm
+
+    d = np.sqrt(np.abs(np.diag(S)))
+    d[d == 0] = 1.0
+    try:
+        L = cholesky(S / np.outer(d, d), lower=True) * d[:, None]
+    except LinAlgError:
+        return np.einsum("ij,ij->i", J @ S, J)
+    X = dtrmm(1.0, L, np.asfortranarray(J), side=1, lower=1)      # J L, column-major as BLAS wants it
+    X *= X
+    return X.sum(axis=1)
 
 
 def model_variance(channels: Sequence[Channel], ref: Refined, powers: Sequence[int],

@@ -56,7 +56,7 @@ def test_analytic_jacobian_and_residual_covariance():
 def test_block_covariance_equals_the_dense_one(monkeypatch):
     """The covariance by blocks (Schur complement; linear in the locations) is the dense formula's."""
     import labkit.analysis.modal.refine as modal_refine
-    from labkit.analysis.modal.refine import _covariance, _normal
+    from labkit.analysis.modal.refine import _cost, _covariance, _normal, _stacked
 
     monkeypatch.setattr(modal_refine, "BLOCK_COVARIANCE_ABOVE", 0)          # blocks even for this small case
 
@@ -70,6 +70,51 @@ def test_block_covariance_equals_the_dense_one(monkeypatch):
             free = np.ones(ref.theta.size, bool)
             if fixed is not None:
                 free[0:2 * m:2] = ~fixed
-            dense = _covariance(A * np.outer(free, free), terms, m, n_lin, ref.dof, kind)
+            stacks = [_stacked(Jp, B, r) for r, Jp, B in terms]
+            dense = _covariance(A * np.outer(free, free), stacks, _cost(terms), m, n_lin, ref.dof, kind)
             np.testing.assert_allclose(ref.cov, dense, rtol=0, atol=1e-10 * np.max(np.abs(dense)))
             np.testing.assert_allclose(np.sqrt(np.diag(ref.cov))[free], np.sqrt(np.diag(dense))[free], rtol=1e-8)
+
+
+def test_gram_normal_equations_equal_the_explicit_ones():
+    """The normal equations from one shared Gram matrix (common lines, constant weights), and the
+    Jacobians built from shared real arrays, are those of each channel's explicit Jacobian."""
+    from labkit.analysis.modal.refine import _explicit_normals, _explicit_shared, _gram_normals, _gram_ok, _stacked
+
+    ch = _channels(2) + _channels(3)[:1]
+    assert _gram_ok(ch)
+    m = 2
+    ref = refine(ch, modal_to_pole(FN * 1.001, ZETA), POWERS, band_hz=(200, 2000))
+    th = ref.theta * (1 + 1e-4 * np.sin(np.arange(ref.theta.size)))       # off the optimum: a gradient
+    got = _gram_normals(th, ch, m, POWERS)
+    want = _explicit_normals(_channel_terms(th, ch, m, POWERS))
+    for (r1, G1, g1), (r2, G2, g2) in zip(got, want):
+        np.testing.assert_array_equal(r1, r2)
+        np.testing.assert_allclose(G1, G2, rtol=1e-9, atol=1e-12 * np.max(np.abs(G2)))
+        np.testing.assert_allclose(g1, g2, rtol=1e-8, atol=1e-10 * np.max(np.abs(g2)))
+    _, stacks, normals = _explicit_shared(th, ch, m, POWERS)
+    for (_, G1, g1), (J1, rs1), (r2, Jp, B), (_, G2, g2) in zip(normals, stacks, _channel_terms(th, ch, m, POWERS),
+                                                              want):
+        J2, rs2 = _stacked(Jp, B, r2)
+        np.testing.assert_array_equal(rs1, rs2)
+        np.testing.assert_allclose(J1, J2, rtol=1e-12, atol=1e-13 * np.max(np.abs(J2)))
+        np.testing.assert_allclose(G1, G2, rtol=1e-9, atol=1e-12 * np.max(np.abs(G2)))
+        np.testing.assert_allclose(g1, g2, rtol=1e-8, atol=1e-10 * np.max(np.abs(g2)))
+    uneven = [Channel(c.name, c.w, c.H, c.weight * np.linspace(1, 2, c.w.size)) for c in ch]
+    assert not _gram_ok(uneven)
+
+
+def test_leverages_by_cholesky_equal_the_quadratic_form():
+    """diag(J S J^T) by the Cholesky factor of S equals the direct form, and S singular (a direction
+    the pseudo-inverse cut, a held parameter) falls back to it; the leverages of the full normal
+    matrix sum to the number of parameters."""
+    from labkit.analysis.modal.refine import _leverages
+
+    rng = np.random.default_rng(0)
+    J = np.asfortranarray(rng.standard_normal((400, 12)) * np.logspace(-3, 3, 12))
+    S = np.linalg.inv(J.T @ J)
+    direct = np.einsum("ij,ij->i", J @ S, J)
+    np.testing.assert_allclose(_leverages(J, S), direct, rtol=1e-9, atol=1e-15)
+    assert abs(_leverages(J, S).sum() - 12) < 1e-9
+    S[0, :] = S[:, 0] = 0.0
+    np.testing.assert_allclose(_leverages(np.ascontiguousarray(J), S), np.einsum("ij,ij->i", J @ S, J), rtol=1e-12)
