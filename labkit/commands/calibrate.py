@@ -13,10 +13,10 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from labkit.errors import InputError
-from labkit.jsonutil import to_jsonable
+from labkit.jsonutil import Json, to_jsonable
 from labkit.outputs import atomic_outputs, check_outputs
 
 if TYPE_CHECKING:       # the library is imported when a command runs, not when the parser is built
@@ -153,7 +153,7 @@ def _run_measured(args: argparse.Namespace) -> CalibrateOutput:
     summary: CalibrateOutput = {"out": str(out), "details": str(side), **cal.summary()}
     # both written to temporary names, then renamed together: old files survive any failed write
     with atomic_outputs([out, side]) as (tmp, tmp_side):
-        cal.params.to_toml(tmp, provenance=prov)
+        cal.params.to_toml(tmp, provenance=cast("dict[str, Json]", prov))
         side_js = {k: v for k, v in summary.items() if k != "details"}
         tmp_side.write_text(json.dumps(to_jsonable(side_js, finite=True), indent=1), encoding="utf-8")
     if not args.json:
@@ -237,7 +237,7 @@ def _paper_fit(args: argparse.Namespace, free: list[str] | None, runner: Runner)
     prov["start_params"] = args.params or "published"
     summary = cal.summary()
     with atomic_outputs([out, side]) as (tmp, tmp_side):
-        cal.params.replace(provenance={}).to_toml(tmp, provenance=prov)
+        cal.params.replace(provenance={}).to_toml(tmp, provenance=cast("dict[str, Json]", prov))
         side_js = {"out": str(out), **summary, "history": [h.to_json() for h in cal.history]}
         tmp_side.write_text(json.dumps(to_jsonable(side_js, finite=True), indent=1), encoding="utf-8")
     if not runner.quiet:
