@@ -29,7 +29,6 @@ EXEMPT: dict[str, str] = {
 #: Second readers of a kind that exist today: module -> the kind and where its reader is.
 PENDING: dict[str, str] = {
     "labkit/sim/sweep.py": "sim_sweep: SweepResult.from_h5 beside labkit.files.kinds.read_sim_sweep",
-    "analysis/tracking/output.py": "track: load_track_h5 beside labkit.files.kinds.read_track",
 }
 
 

@@ -69,6 +69,20 @@ class Track(LabFile):
     def t_s(self) -> np.ndarray:
         return self.columns["t_s"]
 
+    @property
+    def mm_per_px(self) -> float | None:
+        """The image scale the positions were converted with (None if the file does not say)."""
+        return _number(self.attrs.get("mm_per_px"))
+
+    @property
+    def lost_frames(self) -> int:
+        """Frames without a position (the file's ``lost_frames``, else the rows with no ``x_mm``)."""
+        n = _number(self.attrs.get("lost_frames"))
+        if n is not None:
+            return int(n)
+        x = self.columns.get("x_mm")
+        return 0 if x is None else int(np.count_nonzero(~np.isfinite(x)))
+
     def summary(self) -> TrackSummary:
         speed: float | str = self.mean_speed_mm_s
         ci: list[float] | str = list(self.speed_ci_mm_s)
@@ -76,7 +90,7 @@ class Track(LabFile):
             speed = ci = "not in this CSV (older labkit; the track's .h5 file holds it)"
         return {**super().summary(), "frames": int(self.t_s.size), "mean_speed_mm_s": speed,
                 "speed_ci_mm_s": ci, "source_video": self.source_video,
-                "mm_per_px": _number(self.attrs.get("mm_per_px"))}
+                "mm_per_px": self.mm_per_px}
 
     def to_xarray(self) -> xarray.Dataset:
         """Per-frame columns over ``t_s``; the smoothed path as ``smoothed_*`` over ``t_smoothed_s``."""
