@@ -219,7 +219,6 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     tol = tolerances if isinstance(tolerances, Tolerances) else Tolerances.from_mapping(tolerances)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    software = f"labkit {__version__}"
     typed = command
     command = prov.report_command(out, runs, tracks, fit, sims, params)
     knee = KneeOptions(knee_drives, simulate_knee, knee_duration_s, leg, scheduler, workers, quiet)
@@ -230,22 +229,9 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     # every file goes to a staging folder first: a failure anywhere leaves an old report whole
     with staged_dir(out, names) as stage:
         sections = run_sections(replace(read, out=stage))
-        rows = [Row(**r, section=s.id) for s in sections for r in s.rows]
-        sections.append(_agreement_section(rows, tol, sections))
-        details = Details()
-        for s in sections:
-            details.update(s.details)
-        inputs = prov.file_records(f for s in sections if s.status == "ok" for f in s.files)
-        for f in inputs:
-            f["shown_as"] = prov.display_path(f["path"], out)
-        for s in sections:
-            s.verdict = _section_verdict(s)
-            if s.status == "ok":
-                s.provenance = prov.section_provenance(s.files, inputs=inputs, notes=s.notes)
-
-        created = utc_now()
+        rows, details, inputs = _judge(sections, tol, out)
         headline = _headline(fit_data, details, sections)
-        meta: prov.ReportMeta = {"created_utc": created, "software": software, "command": command,
+        meta: prov.ReportMeta = {"created_utc": utc_now(), "software": f"labkit {__version__}", "command": command,
                 "command_as_given": typed, "input_files": inputs,
                 "inputs": {"runs": list(map(str, runs)), "tracks": list(map(str, tracks)), "fit": fit,
                            "sims": list(map(str, sims)), "params": params},
@@ -255,25 +241,52 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
         for s in sections:
             s.figures = [(figs.FigureFiles(out / f.png.name, out / f.svg.name, f.data), cap, key)
                          for f, cap, key in s.figures]
-        payload = {"meta": meta, "headline": headline, "agreement": rows,
-                   "sections": {s.id: {"status": s.status, "verdict": s.verdict, "provenance": s.provenance}
-                                for s in sections},
-                   "details": details}
-        (stage / "agreement.json").write_text(json.dumps(_jsonable(payload), indent=1), encoding="utf-8")
-        (stage / "figure_data.json").write_text(
-            json.dumps(_jsonable({key: {"png": str(f.png), "svg": str(f.svg), "caption": cap, **f.data}
-                                  for s in sections for f, cap, key in s.figures}), indent=1), encoding="utf-8")
+        _write_data(stage, {"meta": meta, "headline": headline, "agreement": rows,
+                            "sections": {s.id: {"status": s.status, "verdict": s.verdict, "provenance": s.provenance}
+                                         for s in sections},
+                            "details": details}, sections)
         names += sorted(p.name for p in stage.iterdir())
     # figures of an earlier report in this folder that this one did not draw would mislead: remove them
     for old in out.glob("fig_*.*"):
         if old.suffix in (".png", ".svg") and old.name not in names:
             old.unlink()
-    html_path, agreement_path, figure_data_path = out / "report.html", out / "agreement.json", out / "figure_data.json"
+    return _report_summary(out, sections, rows, details, headline)
+
+
+def _judge(sections: list[Section], tol: Tolerances, out: Path) -> tuple[list[Row], Details, list[prov.InputRecord]]:
+    """Add the agreement section, give every section its verdict and provenance; return the judged
+    rows, the sections' details merged, and the input files' records (shown relative to ``out``)."""
+    rows = [Row(**r, section=s.id) for s in sections for r in s.rows]
+    sections.append(_agreement_section(rows, tol, sections))
+    details = Details()
+    for s in sections:
+        details.update(s.details)
+    inputs = prov.file_records(f for s in sections if s.status == "ok" for f in s.files)
+    for f in inputs:
+        f["shown_as"] = prov.display_path(f["path"], out)
+    for s in sections:
+        s.verdict = _section_verdict(s)
+        if s.status == "ok":
+            s.provenance = prov.section_provenance(s.files, inputs=inputs, notes=s.notes)
+    return rows, details, inputs
+
+
+def _write_data(stage: Path, payload: Mapping[str, Any], sections: list[Section]) -> None:
+    """``agreement.json`` (``payload``) and ``figure_data.json`` (every figure's numbers) into ``stage``."""
+    (stage / "agreement.json").write_text(json.dumps(_jsonable(payload), indent=1), encoding="utf-8")
+    (stage / "figure_data.json").write_text(
+        json.dumps(_jsonable({key: {"png": str(f.png), "svg": str(f.svg), "caption": cap, **f.data}
+                              for s in sections for f, cap, key in s.figures}), indent=1), encoding="utf-8")
+
+
+def _report_summary(out: Path, sections: list[Section], rows: list[Row], details: Details,
+                    headline: dict[str, HeadlineEntry]) -> ReportSummary:
+    """What :func:`build_report` returns (``labkit report --json``)."""
     mc = details.get("speed_mc_mean_rms_error_mm_s")
     nominal = headline.get("speed_rms_error_nominal_mm_s")
-    return {"html": str(html_path), "figures": [str(f.png) for s in sections for f, _, _ in s.figures],
+    return {"html": str(out / "report.html"), "figures": [str(f.png) for s in sections for f, _, _ in s.figures],
             "svgs": [str(f.svg) for s in sections for f, _, _ in s.figures],
-            "agreement_json": str(agreement_path), "figure_data_json": str(figure_data_path),
+            "agreement_json": str(out / "agreement.json"), "figure_data_json": str(out / "figure_data.json"),
             "sections": {s.id: s.status for s in sections},
             "verdicts": {s.id: s.verdict["result"] for s in sections},
             "missing": {s.id: s.message for s in sections if s.status != "ok"},
