@@ -3,12 +3,24 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from labkit.errors import InputError
 from labkit.outputs import atomic_output, check_outputs
 
 NAME = "track"
+
+
+class _VideoOptions(TypedDict):
+    """How the video is read and searched, the same for tracking and for a preview (the options as given)."""
+
+    roi: str | None
+    mask: str | None
+    min_contrast: float | None
+    fps: float | None
+    timestamps: str | None
+    bayer: str
+    robot_size_mm: str | None
 HELP = "track the robot in a top-view video: path, heading, speed with confidence interval"
 
 
@@ -99,7 +111,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                          expected="a share between 0 and 1, e.g. 0.1")
     if args.max_speed_mm_s is not None and not args.max_speed_mm_s > 0:
         raise InputError(f"bad speed limit {args.max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
-    common = dict(roi=args.roi, mask=args.mask, min_contrast=args.min_contrast, fps=args.fps,
+    common = _VideoOptions(roi=args.roi, mask=args.mask, min_contrast=args.min_contrast, fps=args.fps,
                   timestamps=args.timestamps, bayer=args.bayer, robot_size_mm=args.robot_size_mm)
     if args.preview is not None:
         return _preview(args, scale, common)
@@ -145,7 +157,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     return result
 
 
-def _preview(args: argparse.Namespace, scale: Any, common: dict[str, Any]) -> dict[str, Any]:
+def _preview(args: argparse.Namespace, scale: Any, common: _VideoOptions) -> dict[str, Any]:
     from labkit.analysis.tracking.preview import preview_frame
 
     if args.out or args.overlay:

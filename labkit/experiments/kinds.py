@@ -53,7 +53,7 @@ class ExperimentKind:
     load: Callable[[str | Path], Any]
     plan: Callable[[Any, Iterable[int]], Plan]
     preflight: Callable[[Any], None]
-    run_attrs: Callable[[Any], dict[str, Any]]
+    run_attrs: Callable[[Any], dict[str, str | float]]
     layout: Callable[[Any], tuple[Fields, dict[str, Fields]]]
     rig_setup: Callable[[Any], RigSetup]
     point_bytes: Callable[[Any], float]     # about how much one point adds to the run file
@@ -73,7 +73,7 @@ def _inchip_preflight(cfg: InchipConfig) -> None:
     """The PZT limit is checked while loading the config; nothing else to predict."""
 
 
-def _inchip_attrs(cfg: InchipConfig) -> dict[str, Any]:
+def _inchip_attrs(cfg: InchipConfig) -> dict[str, str | float]:
     return {"drive_amp_vpp": cfg.amp_vpp, "drive_offset_v": cfg.offset_v, "pzt_max_v": cfg.pzt_max_v,
             "method": cfg.method.kind}
 
@@ -165,7 +165,7 @@ def _shaker_preflight(cfg: ShakerConfig) -> None:
                                               f"at {f:g} Hz") from None
 
 
-def _shaker_attrs(cfg: ShakerConfig) -> dict[str, Any]:
+def _shaker_attrs(cfg: ShakerConfig) -> dict[str, str | float]:
     return {"robot_spot": cfg.robot_spot, "amplitude_kind": cfg.amplitude_kind,
             "amplifier_json": json.dumps({"gain_db": cfg.gain_db, "attenuator_db": cfg.attenuator_db,
                                           "current_limit_a": cfg.current_limit_a,
