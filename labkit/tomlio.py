@@ -9,7 +9,8 @@ import tomli_w
 
 from labkit.errors import ConfigError, InputError
 
-_MISSING = object()
+#: "no default given" (a key without one is required); :class:`labkit.experiments.tomlcheck.Table` shares it
+MISSING = object()
 
 
 def load_toml(path: str | Path) -> tuple[dict[str, Any], str]:
@@ -44,7 +45,7 @@ def dump_toml(table: dict[str, Any], path: str | Path, header: str = "") -> None
 
 
 def get_number(table: dict[str, Any], key: str, *, file: str | Path | None = None,
-               prefix: str = "", default: Any = _MISSING, unit: str = "",
+               prefix: str = "", default: Any = MISSING, unit: str = "",
                minimum: float | None = None, maximum: float | None = None,
                exclusive_minimum: bool = False) -> float:
     """Fetch ``table[key]`` as a float and check its range; errors name file and key.
@@ -53,7 +54,7 @@ def get_number(table: dict[str, Any], key: str, *, file: str | Path | None = Non
     """
     name = f"{prefix}.{key}" if prefix else key
     if key not in table:
-        if default is _MISSING:
+        if default is MISSING:
             raise ConfigError("missing", file=file, key=name,
                               expected=_expect(unit, minimum, maximum, exclusive_minimum))
         return default
