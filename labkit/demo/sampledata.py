@@ -42,6 +42,7 @@ from labkit.outputs import staged_dir
 if TYPE_CHECKING:
     from labkit.analysis.modal.robot import FitSummary
     from labkit.jsonutil import Json
+    from labkit.tomlio import TomlValue
 
 GENERATOR = "labkit sample-data"
 VIDEO_FREQ_HZ = 240.0
@@ -137,8 +138,8 @@ def generate(out: str | Path = "sample_data", *, configs: str | Path | None = No
             **summary}
 
 
-def _generate(out: Path, inchip_cfg: Path, shaker_cfg: Path, inchip_table: dict[str, Any],
-              shaker_table: dict[str, Any], seed: int, quiet: bool, say: Callable[[str], None]) -> SampleHeadline:
+def _generate(out: Path, inchip_cfg: Path, shaker_cfg: Path, inchip_table: dict[str, TomlValue],
+              shaker_table: dict[str, TomlValue], seed: int, quiet: bool, say: Callable[[str], None]) -> SampleHeadline:
     """Write every file of :data:`OUTPUTS` into ``out`` (the staging folder); return the headline numbers."""
     from labkit.demo.run import demo_robots, fit_and_assign, inchip_run, refined_grid
     from labkit.experiments.config import load_inchip
@@ -270,13 +271,15 @@ def _relabel_params(path: Path, tmp: Path, tag: str) -> None:
                     encoding="utf-8")
 
 
-def _one_point_shaker(table: dict[str, Any], path: Path, name: str, tag: str) -> Path:
+def _one_point_shaker(table: dict[str, TomlValue], path: Path, name: str, tag: str) -> Path:
     import copy
 
     from labkit.tomlio import dump_toml
 
     t = copy.deepcopy(table)
-    grid = t.setdefault("grid", {})
+    grid = t.get("grid")
+    if not isinstance(grid, dict):
+        grid = t["grid"] = {}
     grid.pop("drive_vpp", None)
     grid["freq_hz"] = [VIDEO_FREQ_HZ]
     grid["tray_amp_um"] = [VIDEO_AMP_UM]
@@ -294,7 +297,7 @@ def _drive_of(run: Path) -> float:
 
 
 def film(lab: Any, path: Path, freq_hz: float, drive_vpp: float, duration_s: float,
-         shaker_table: dict[str, Any]) -> dict[str, Json]:
+         shaker_table: dict[str, TomlValue]) -> dict[str, Json]:
     """Drive the shaker at ``drive_vpp`` through the real generator driver and film with the lab's camera.
 
     The amplifier's input cap (declared in the shaker config) is the
@@ -304,11 +307,14 @@ def film(lab: Any, path: Path, freq_hz: float, drive_vpp: float, duration_s: flo
     from labkit.drivers.registry import open_instrument
     from labkit.drivers.shaker import Amplifier2718
     from labkit.lab.client import LabCamera, LabControl
+    from labkit.tomlio import get_number
 
-    amp = shaker_table.get("amplifier", {})
-    cap = Amplifier2718(gain_db=amp.get("gain_db", 20.0), attenuator_db=amp.get("attenuator_db", 0.0),
-                        current_limit_a=amp.get("current_limit_a", 1.0),
-                        max_input_vrms=amp.get("max_input_vrms")).max_input_vpp
+    amp = shaker_table.get("amplifier")
+    table = amp if isinstance(amp, dict) else {}
+    cap = Amplifier2718(gain_db=get_number(table, "gain_db", default=20.0),
+                        attenuator_db=get_number(table, "attenuator_db", default=0.0),
+                        current_limit_a=get_number(table, "current_limit_a", default=1.0),
+                        max_input_vrms=get_number(table, "max_input_vrms", default=None)).max_input_vpp
     control = LabControl(lab.resources["control"])
     try:
         control.set_setup("shaker")

@@ -398,7 +398,12 @@ def format_record(rec: Record) -> str | None:
         head += f" {f:9.2f} Hz"
     if rec.get("status") != "ok":
         return f"{head}  {rec.get('status')}: {rec.get('reason')}"
-    parts = [head]
+    return "  ".join([head, *_point_parts(rec)])
+
+
+def _point_parts(rec: Record) -> list[str]:
+    """The measured values of a good point's row: response, quality, range, and the flags."""
+    parts = []
     if "tray_amp_um" in rec:
         want = rec.get("tray_amp_request_um")
         parts.append(f"tray {rec['tray_amp_um'] or math.nan:.3g} um" + (f" (want {want:g})" if want else ""))
@@ -415,8 +420,7 @@ def format_record(rec: Record) -> str | None:
     if pct.get("velocity") is not None:
         parts.append(f"vel {pct['velocity']:.0f}% FS")
     flags = [f"{k} OVER" for k, v in _object(rec.get("over")).items() if v]
-    flags += [f"{k} under" for k, v in _object(rec.get("under")).items() if v]
-    return "  ".join(parts + flags)
+    return parts + flags + [f"{k} under" for k, v in _object(rec.get("under")).items() if v]
 
 
 #: False inside :func:`no_console_rows` (the demo and the sample data print their own stages)

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import ConfigError
-from labkit.tomlio import MISSING, get_number
+from labkit.tomlio import MISSING, TomlValue, get_number
 
 __all__ = ["Table", "get_number"]
 
@@ -23,7 +23,7 @@ _MISSING = MISSING
 class Table:
     """A view of one TOML table: ``data`` plus where it sits (``file``, dotted ``prefix``)."""
 
-    def __init__(self, data: dict[str, Any], file: str | Path | None, prefix: str = "") -> None:
+    def __init__(self, data: dict[str, TomlValue], file: str | Path | None, prefix: str = "") -> None:
         self.data = data
         self.file = None if file is None else str(file)
         self.prefix = prefix

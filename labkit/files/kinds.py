@@ -27,6 +27,8 @@ from labkit.files.base import (
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
+    from labkit.tomlio import TomlValue
+
 
 def _columns(g: Any, n: int | None = None) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     import h5py
@@ -603,20 +605,24 @@ class ExperimentConfig(LabFile):
 
     experiment: str = "?"
     text: str = field(default="", repr=False)
-    table: dict[str, Any] = field(default_factory=dict, repr=False)
+    table: dict[str, TomlValue] = field(default_factory=dict, repr=False)
 
     @property
     def instruments(self) -> dict[str, str]:
         """Role -> model of the ``[instruments.<role>]`` tables."""
-        inst = self.table.get("instruments", {})
+        inst = self.table.get("instruments")
+        if not isinstance(inst, dict):
+            return {}
         return {k: str(v.get("model", "?")) for k, v in inst.items() if isinstance(v, dict)}
 
     def summary(self) -> ConfigSummary:
         out: ConfigSummary = {**super().summary(), "experiment": self.experiment, "instruments": self.instruments,
                               "tables": sorted(k for k, v in self.table.items() if isinstance(v, dict))}
         for key in SHOWN_TABLES:
-            if isinstance(self.table.get(key), dict):
-                out[key] = self.table[key]
+            if isinstance(shown := self.table.get(key), dict):
+                from labkit.jsonutil import to_jsonable
+
+                out[key] = to_jsonable(shown)
         return out
 
     def to_xarray(self) -> xarray.Dataset:
@@ -625,7 +631,7 @@ class ExperimentConfig(LabFile):
         return xr.Dataset(attrs={"kind": self.kind, "file": str(self.path), "config_toml": self.text})
 
 
-def read_config(path: Path, table: dict[str, Any], raw: str) -> ExperimentConfig:
+def read_config(path: Path, table: dict[str, TomlValue], raw: str) -> ExperimentConfig:
     shaker = any(k in table for k in ("grid", "shaker", "amplifier", "tray_control"))
     experiment = "shaker" if shaker else "inchip"
     return ExperimentConfig(path, f"config_{experiment}", 0, {}, {}, experiment, raw, table)
