@@ -380,8 +380,6 @@ def _minima(f: np.ndarray, mag: np.ndarray) -> list[list[float]]:
 
 
 def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
-    from labkit.analysis.report.model import rebuild_model
-
     out, inchip, fit, tol = inp.out, inp.inchip, inp.fit, inp.tol
     title = "Frequency responses with the fitted model (paper Fig. 5/6)"
     groups = {k: g for k, g in (fit.groups.items() if fit else []) if g.locations}
@@ -402,30 +400,10 @@ def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     sec.files += [r.file for r in inchip]
     for name, g in groups.items():
         modes = g.modes
-        fine: dict[str, ri.Frf] = {}
-        lines_only = []
-        for loc, d in g.locations.items():
-            fm = (rebuild_model(d.freq_hz, d.model_frf, [m.freq_hz for m in modes],
-                                [np.nan if m.damping_ratio is None else m.damping_ratio for m in modes])
-                  if d.model_frf is not None and modes else None)
-            if fm is None:
-                lines_only.append(loc)
-                continue
-            fine[loc] = ri.Frf(fm.freq_hz, fm.frf)
-            sec.notes[f"model {name}/{loc}"] = (f"pole-residue model rebuilt on {fm.freq_hz.size} log-spaced lines "
-                                                f"(residual powers {list(fm.residual_powers)}, reproduces the stored "
-                                                f"model to {fm.rebuild_error:.1e})")
+        fine, lines_only = _fine_models(sec, name, g)
         ff = figs.frf_figure(g.locations, modes, out / f"fig_frf_{name}", fine=fine, units=g.units,
                              title=GROUP_TITLES.get(name, name))
-        assert "locations" in ff.data       # an FRF figure's data
-        for loc, d in g.locations.items():
-            entry = ff.data["locations"][loc]
-            if loc in fine:
-                mag = np.abs(fine[loc].frf)
-                entry["fit_minima"] = _minima(fine[loc].freq_hz, mag)
-                entry["fit_maxima"] = [[a, -b] for a, b in _minima(fine[loc].freq_hz, -mag)]
-            if d.model_frf is not None:
-                entry["lines_model_minima"] = _minima(np.asarray(d.freq_hz), np.abs(d.model_frf))
+        _mark_extrema(ff, g, fine)
         caption = (f"{GROUP_TITLES.get(name, name)}: measured lines (markers, one colour per location) and the "
                    f"fitted model ({g.method}) on a fine grid (lines); modes marked with frequency and damping "
                    f"ratio, ± one standard uncertainty.")
@@ -444,6 +422,41 @@ def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
                              f"≥ {tol.fit_quality_min:g}", verdict(q, at_least=tol.fit_quality_min),
                              n=len(g.locations), text=format_value(q, 6)))
     return sec
+
+
+def _fine_models(sec: Section, name: str, g: ri.FitGroup) -> tuple[dict[str, ri.Frf], list[str]]:
+    """The fitted model of each location of group ``name`` rebuilt on a fine grid (noted in ``sec``), and
+    the locations whose model could not be rebuilt (shown at the measured lines only)."""
+    from labkit.analysis.report.model import rebuild_model
+
+    modes = g.modes
+    fine: dict[str, ri.Frf] = {}
+    lines_only = []
+    for loc, d in g.locations.items():
+        fm = (rebuild_model(d.freq_hz, d.model_frf, [m.freq_hz for m in modes],
+                            [np.nan if m.damping_ratio is None else m.damping_ratio for m in modes])
+              if d.model_frf is not None and modes else None)
+        if fm is None:
+            lines_only.append(loc)
+            continue
+        fine[loc] = ri.Frf(fm.freq_hz, fm.frf)
+        sec.notes[f"model {name}/{loc}"] = (f"pole-residue model rebuilt on {fm.freq_hz.size} log-spaced lines "
+                                            f"(residual powers {list(fm.residual_powers)}, reproduces the stored "
+                                            f"model to {fm.rebuild_error:.1e})")
+    return fine, lines_only
+
+
+def _mark_extrema(ff: figs.FigureFiles, g: ri.FitGroup, fine: Mapping[str, ri.Frf]) -> None:
+    """Record the model's minima and maxima per location in the FRF figure's data (figure_data.json)."""
+    assert "locations" in ff.data       # an FRF figure's data
+    for loc, d in g.locations.items():
+        entry = ff.data["locations"][loc]
+        if loc in fine:
+            mag = np.abs(fine[loc].frf)
+            entry["fit_minima"] = _minima(fine[loc].freq_hz, mag)
+            entry["fit_maxima"] = [[a, -b] for a, b in _minima(fine[loc].freq_hz, -mag)]
+        if d.model_frf is not None:
+            entry["lines_model_minima"] = _minima(np.asarray(d.freq_hz), np.abs(d.model_frf))
 
 
 def _stab_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
