@@ -543,33 +543,44 @@ def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
         sec.notes["verdict_note"] = "no simulated sweep to judge"
     if have_meas and curves:
         assert measured is not None
-        for c in curves:
-            # compare only points measured at the sweep's tray amplitude (or of unknown amplitude)
-            amp = float(c.sweep.scenario.get("amp_um", np.nan))
-            mask = ~np.isfinite(measured.amp_um) | ~np.isfinite(amp) | \
-                (np.abs(measured.amp_um - amp) <= 0.1 * abs(amp))
-            m = measured.select(mask)
-            if not m.freq_hz.size:
-                msgs.append(f"No measured point at the tray amplitude of {c.file} ({amp:.3g} um).")
-                continue
-            _judge_speed(sec, m, c, tol, band)
-            sec.pairs += _sweep_pattern_pairs(m, c)
-    note = ""
-    judged = sec.details.get("speed", {})
-    if judged:
-        first = next(iter(judged.values()))
-        nom, cov = first.nominal, first.coverage
-        note = (f"nominal robot: RMS error {format_value(nom.rms_error_mm_s, 3)} mm/s "
-                f"(relative {format_value(nom.relative_rms_error, 2)}, tolerance "
-                f"\u2264 {tol.speed_relative_rms_max:g})\n"
-                f"{band} band holds {sum(q.inside_band for q in nom.points)} of {cov.n} measured points; "
-                f"median percentile in the draws {format_value(cov.median_percentile, 3)} (50 if unbiased)")
-    ff = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed", note=note)
+        msgs += _judge_curves(sec, measured, curves, tol, band)
+    ff = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed", note=_speed_note(sec, tol, band))
     sec.figure(ff, f"Measured speed (markers, 95 % confidence interval) against the simulated nominal robot "
                    f"(line) and the Monte Carlo {band} band over draws; below, the leg pattern (simulated: the "
                    f"dominant one over draws and feet; measured: where a knee record or label gives it).")
     sec.message = " ".join(msgs)
     return sec
+
+
+def _judge_curves(sec: Section, measured: ri.MeasuredSpeeds, curves: list[ri.SimCurve], tol: Tolerances,
+                  band: str) -> list[str]:
+    """Judge the measured speeds against each simulated sweep, only the points measured at the sweep's tray
+    amplitude (or of unknown amplitude); the messages for sweeps no point was measured for."""
+    msgs = []
+    for c in curves:
+        amp = float(c.sweep.scenario.get("amp_um", np.nan))
+        mask = ~np.isfinite(measured.amp_um) | ~np.isfinite(amp) | (np.abs(measured.amp_um - amp) <= 0.1 * abs(amp))
+        m = measured.select(mask)
+        if not m.freq_hz.size:
+            msgs.append(f"No measured point at the tray amplitude of {c.file} ({amp:.3g} um).")
+            continue
+        _judge_speed(sec, m, c, tol, band)
+        sec.pairs += _sweep_pattern_pairs(m, c)
+    return msgs
+
+
+def _speed_note(sec: Section, tol: Tolerances, band: str) -> str:
+    """The speed figure's note: the first judged sweep's nominal RMS error and band coverage ("" if none)."""
+    judged = sec.details.get("speed", {})
+    if not judged:
+        return ""
+    first = next(iter(judged.values()))
+    nom, cov = first.nominal, first.coverage
+    return (f"nominal robot: RMS error {format_value(nom.rms_error_mm_s, 3)} mm/s "
+            f"(relative {format_value(nom.relative_rms_error, 2)}, tolerance "
+            f"\u2264 {tol.speed_relative_rms_max:g})\n"
+            f"{band} band holds {sum(q.inside_band for q in nom.points)} of {cov.n} measured points; "
+            f"median percentile in the draws {format_value(cov.median_percentile, 3)} (50 if unbiased)")
 
 
 def _judge_speed(sec: Section, m: ri.MeasuredSpeeds, c: ri.SimCurve, tol: Tolerances, band: str) -> None:
