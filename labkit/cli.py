@@ -15,7 +15,7 @@ import json
 import logging
 import pkgutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from types import ModuleType
 from typing import Any
 
@@ -92,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def emit_json(summary: dict[str, Any]) -> None:
+def emit_json(summary: Mapping[str, object]) -> None:
     """Print the summary as one JSON line (NaN becomes null so any parser reads it)."""
     from labkit.jsonutil import to_jsonable  # imported late: numpy is slow to import
 

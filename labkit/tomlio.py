@@ -1,15 +1,21 @@
 """Reading and writing TOML with errors that name the file, the key and what was expected."""
 from __future__ import annotations
 
+import datetime as dt
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias
 
 import tomli_w
 
 from labkit.errors import ConfigError, InputError
 
-_MISSING = object()
+#: a TOML value as :mod:`tomllib` parses it (a table: ``dict[str, TomlValue]``; ``dt.date`` includes datetimes)
+TomlValue: TypeAlias = "str | int | float | bool | dt.date | dt.time | list[TomlValue] | dict[str, TomlValue]"
+
+#: "no default given" (a key without one is required); :class:`labkit.experiments.tomlcheck.Table` shares it
+MISSING = object()
 
 
 def load_toml(path: str | Path) -> tuple[dict[str, Any], str]:
@@ -35,7 +41,7 @@ def load_toml(path: str | Path) -> tuple[dict[str, Any], str]:
         raise ConfigError(f"not valid TOML: {exc}", file=path) from None
 
 
-def dump_toml(table: dict[str, Any], path: str | Path, header: str = "") -> None:
+def dump_toml(table: Mapping[str, object], path: str | Path, header: str = "") -> None:
     """Write ``table`` as TOML, with an optional comment header."""
     text = tomli_w.dumps(table)
     if header:
@@ -43,8 +49,8 @@ def dump_toml(table: dict[str, Any], path: str | Path, header: str = "") -> None
     Path(path).write_text(text, encoding="utf-8")
 
 
-def get_number(table: dict[str, Any], key: str, *, file: str | Path | None = None,
-               prefix: str = "", default: Any = _MISSING, unit: str = "",
+def get_number(table: Mapping[str, TomlValue], key: str, *, file: str | Path | None = None,
+               prefix: str = "", default: Any = MISSING, unit: str = "",
                minimum: float | None = None, maximum: float | None = None,
                exclusive_minimum: bool = False) -> float:
     """Fetch ``table[key]`` as a float and check its range; errors name file and key.
@@ -53,7 +59,7 @@ def get_number(table: dict[str, Any], key: str, *, file: str | Path | None = Non
     """
     name = f"{prefix}.{key}" if prefix else key
     if key not in table:
-        if default is _MISSING:
+        if default is MISSING:
             raise ConfigError("missing", file=file, key=name,
                               expected=_expect(unit, minimum, maximum, exclusive_minimum))
         return default

@@ -212,6 +212,8 @@ def test_quick_demo_report_verdicts_agree_with_its_own_tables(quick_demo):
     cwd, _, s = quick_demo
     html = (cwd / s["files"]["report_html"]).read_text()
     rows = json.loads((cwd / s["files"]["agreement_json"]).read_text())["agreement"]
+    # no absolute path on the page (the demo's own folder included): inputs are named relative to it
+    assert str(cwd) not in html and str(cwd.resolve()) not in html and "/tmp/" not in html
     # each section's verdict: FAIL exactly when one of its judged rows fails
     verdicts = json.loads((cwd / s["files"]["agreement_json"]).read_text())["sections"]
     for sid, sec in verdicts.items():

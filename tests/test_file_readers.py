@@ -27,9 +27,7 @@ EXEMPT: dict[str, str] = {
 }
 
 #: Second readers of a kind that exist today: module -> the kind and where its reader is.
-PENDING: dict[str, str] = {
-    "analysis/tracking/output.py": "track: load_track_h5 beside labkit.files.kinds.read_track",
-}
+PENDING: dict[str, str] = {}
 
 
 def _modules() -> Iterator[Path]:

@@ -30,13 +30,18 @@ carry only the ``freq_hz`` scales (the rest opens as ``phony_dim``); they read t
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from labkit.errors import InputError
+from labkit.jsonutil import Json
+
+if TYPE_CHECKING:
+    from labkit.analysis.modal.fit import ModalFit
 
 __all__ = ["RunChannels", "label_fit_dimensions", "read_run", "read_frf", "write_fit_h5", "write_uff"]
 
@@ -163,7 +168,7 @@ def read_frf(path: str | Path, *, min_quality: float = 0.0, kind: str | None = N
     return out
 
 
-def write_uff(path: str | Path, fits: dict[str, Any]) -> Path:
+def write_uff(path: str | Path, fits: dict[str, ModalFit]) -> Path:
     """The fitted modes as UFF 55 and the fitted FRFs as UFF 58.
 
     See :func:`labkit.analysis.modal.formats.write_uff`.
@@ -173,8 +178,8 @@ def write_uff(path: str | Path, fits: dict[str, Any]) -> Path:
     return _write(path, fits)
 
 
-def write_fit_h5(path: str | Path, fits: dict[str, Any], runs: dict[str, list[str]],
-                 assignment: dict[str, Any], summary: dict[str, Any]) -> Path:
+def write_fit_h5(path: str | Path, fits: dict[str, ModalFit], runs: dict[str, list[str]],
+                 assignment: Mapping[str, Json], summary: Mapping[str, Json]) -> Path:
     """Write the ``modal_fit`` file (layout in the module docstring)."""
     import h5py
 

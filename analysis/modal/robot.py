@@ -20,18 +20,93 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from labkit.analysis.modal import assign as ma
 from labkit.analysis.modal.fit import ModalFit, fit_modes
 from labkit.analysis.modal.io import RunChannels, read_frf, runs_json, write_fit_h5
 from labkit.errors import InputError
+from labkit.jsonutil import Json
 
-__all__ = ["RobotFit", "fit_robot", "GROUP_KIND", "output_paths", "modes_only"]
+__all__ = ["RobotFit", "fit_robot", "GROUP_KIND", "output_paths", "modes_only", "FitSummary", "FitFiles",
+           "FitPaths", "FittedModeRow", "FitResult"]
 
 #: FRF kind fitted for each group of run files (``"frf"``: the file's own kind).
 GROUP_KIND = {"inchip": "mobility", "shaker": "transmissibility"}
 _GROUP_ORDER = ("inchip", "shaker", "frf")
+
+
+class FittedModeRow(TypedDict):
+    """One fitted mode as :attr:`RobotFit.listing` lists it (``labkit fit --json``'s ``fitted_modes``)."""
+
+    index: int
+    group: str
+    freq_hz: float
+    freq_hz_std: float
+    damping_ratio: float
+    damping_ratio_std: float
+    dominant_location: str
+    in_band: bool
+    assigned_to: int | None
+
+
+class FitSummary(TypedDict):
+    """:meth:`RobotFit.summary`: what ``labkit fit --json`` prints besides the paths written."""
+
+    fitted_modes: list[FittedModeRow]
+    assignment: dict[str, int | None]
+    assignment_rule: str
+    modal_freq_hz: list[float]
+    modal_damping_ratio: list[float]
+    quality: dict[str, float]
+    nrmse: dict[str, dict[str, float]]
+    misfit_to_noise: dict[str, dict[str, float]]
+    dominant_mode: dict[str, dict[str, int]]
+    mac: dict[str, list[list[float]]]
+    warnings: list[str]
+    modes_only: bool
+
+
+class FitFiles(TypedDict):
+    """The files :meth:`RobotFit.write` wrote (paths as text)."""
+
+    out: str
+    fit_file: str
+    figures: list[str]
+    uff_file: str | None
+
+
+class FitResult(FitFiles, FitSummary):
+    """``labkit fit --json``: the files written and the fit's summary."""
+
+
+@dataclass(frozen=True)
+class FitPaths:
+    """The files :meth:`RobotFit.write` writes for a parameter file (:func:`output_paths`)."""
+
+    out: Path
+    fit_file: Path
+    figures: dict[tuple[str, str], Path]
+    uff_file: Path | None
+
+    def all(self) -> list[Path]:
+        """Every path, the parameter file first."""
+        return [self.out, self.fit_file, *([self.uff_file] if self.uff_file is not None else []),
+                *self.figures.values()]
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """How :func:`fit_robot` fitted (kept for :meth:`RobotFit.reassign` and the provenance)."""
+
+    method: str = "lscf"
+    covariance: str = "sandwich"
+    band_hz: tuple[float, float] | None = None
+    n_modes: int | None = None
+    min_quality: float = 0.0
+    poles_hz: Sequence[float | tuple[float, float]] | None = None
+    background: str | None = None
+    modes_only: bool = False
 
 
 @dataclass
@@ -65,15 +140,15 @@ class RobotFit:
 
     fits: dict[str, ModalFit]
     runs: list[RunChannels]
-    listing: list[dict[str, Any]]
+    listing: list[FittedModeRow]
     mapping: dict[int, ma.FittedMode | None]
     params: Any                     # labkit.sim.RobotParams (imported lazily: the simulator is heavy)
-    provenance: dict[str, Any]
+    provenance: dict[str, Json]
     assign_text: str | None
     warnings: list[str] = field(default_factory=list)
     modes_only: bool = False
     _base: tuple[Any, str] = field(default=(None, ""), repr=False)
-    _options: dict[str, Any] = field(default_factory=dict, repr=False)
+    _options: FitOptions = field(default_factory=FitOptions, repr=False)
     _read_warnings: list[str] = field(default_factory=list, repr=False)
 
     def reassign(self, assign: str | None) -> RobotFit:
@@ -88,7 +163,7 @@ class RobotFit:
             out.setdefault(r.group, []).append(r)
         return out
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> FitSummary:
         """The JSON-able summary ``labkit fit --json`` prints (without the paths written)."""
         return {"fitted_modes": self.listing,
                 "assignment": {str(s): (None if v is None else v.index) for s, v in self.mapping.items()},
@@ -103,7 +178,7 @@ class RobotFit:
                 "warnings": list(self.warnings), "modes_only": self.modes_only}
 
     def write(self, out: str | Path, *, figures: bool = True, force: bool = False,
-              uff: bool = False) -> dict[str, Any]:
+              uff: bool = False) -> FitFiles:
         """Write the parameter file, ``<stem>.fit.h5``, figures (and ``<stem>.fit.uff`` with ``uff``).
 
         Every output is checked before anything is written (exit 2 when one
@@ -114,11 +189,10 @@ class RobotFit:
         from labkit.outputs import atomic_outputs, check_outputs
 
         paths = output_paths(out, figures=figures, fits=self.fits, uff=uff)
-        check_outputs([paths["out"], paths["fit_file"], paths["uff_file"], *paths["figures"].values()],
-                      force=force)
-        prov = dict(self.provenance, created_utc=utc_now(), fit_file=Path(paths["fit_file"]).name)
-        figs = list(paths["figures"].items()) if figures else []
-        targets = [paths["out"], paths["fit_file"], *([paths["uff_file"]] if paths["uff_file"] is not None else []),
+        check_outputs(paths.all(), force=force)
+        prov = dict(self.provenance, created_utc=utc_now(), fit_file=paths.fit_file.name)
+        figs = list(paths.figures.items()) if figures else []
+        targets = [paths.out, paths.fit_file, *([paths.uff_file] if paths.uff_file is not None else []),
                    *(p for _, p in figs)]
         # every file to a temporary name first, all renamed at the end: a failure leaves every old file
         with atomic_outputs(targets) as temps:
@@ -129,7 +203,7 @@ class RobotFit:
                 self.params.to_toml(tmp_out, provenance=prov)
             write_fit_h5(tmp_fit, self.fits, runs_json(self.runs), ma.as_dict(self.mapping),
                          {g: f.summary() for g, f in self.fits.items()})
-            if paths["uff_file"] is not None:
+            if paths.uff_file is not None:
                 from labkit.analysis.modal.io import write_uff
 
                 write_uff(rest.pop(0), self.fits)
@@ -146,11 +220,11 @@ class RobotFit:
                         assert f.stabilisation is not None
                         plot_stabilisation(f.stabilisation, tmp, fit=f)
         written = [str(p) for _, p in figs]
-        return {"out": str(paths["out"]), "fit_file": str(paths["fit_file"]), "figures": written,
-                "uff_file": None if paths["uff_file"] is None else str(paths["uff_file"])}
+        return {"out": str(paths.out), "fit_file": str(paths.fit_file), "figures": written,
+                "uff_file": None if paths.uff_file is None else str(paths.uff_file)}
 
 
-def _write_modes_toml(path: str | Path, listing: list[dict[str, Any]], provenance: dict[str, Any]) -> None:
+def _write_modes_toml(path: str | Path, listing: list[FittedModeRow], provenance: dict[str, Json]) -> None:
     """The fitted modes as a TOML table ``[[modes]]`` (not a robot parameter file)."""
     import tomli_w
 
@@ -162,7 +236,7 @@ def _write_modes_toml(path: str | Path, listing: list[dict[str, Any]], provenanc
 
 
 def output_paths(out: str | Path, *, figures: bool, fits: dict[str, ModalFit] | None = None,
-                 groups: Sequence[str] = (), uff: bool = False) -> dict[str, Any]:
+                 groups: Sequence[str] = (), uff: bool = False) -> FitPaths:
     """The files :meth:`RobotFit.write` writes for parameter file ``out`` (figures per group)."""
     out = Path(out)
     if out.suffix.lower() != ".toml":
@@ -175,8 +249,7 @@ def output_paths(out: str | Path, *, figures: bool, fits: dict[str, ModalFit] | 
             figs[(g, "frf")] = Path(f"{stem}.fit.{g}.frf.png")
             if fits is None or fits[g].stabilisation is not None:
                 figs[(g, "stabilisation")] = Path(f"{stem}.fit.{g}.stabilisation.png")
-    return {"out": out, "fit_file": Path(f"{stem}.fit.h5"), "figures": figs,
-            "uff_file": Path(f"{stem}.fit.uff") if uff else None}
+    return FitPaths(out, Path(f"{stem}.fit.h5"), figs, Path(f"{stem}.fit.uff") if uff else None)
 
 
 def fit_robot(runs: Sequence[str | Path | RunChannels], *, base: Any = None, assign: str | None = None,
@@ -257,9 +330,8 @@ def fit_robot(runs: Sequence[str | Path | RunChannels], *, base: Any = None, ass
         fits[group] = fit
         warnings += [f"{group}: {w}" for w in fit.warnings]
 
-    options = {"method": method, "covariance": covariance, "band_hz": band_hz, "n_modes": n_modes,
-               "min_quality": min_quality, "poles_hz": poles_hz, "background": background,
-               "modes_only": modes_only(chans, assign)}
+    options = FitOptions(method, covariance, band_hz, n_modes, min_quality, poles_hz, background,
+                         modes_only(chans, assign))
     return _assign(fits, chans, warnings, base_p, base_name, assign, options)
 
 
@@ -270,7 +342,7 @@ def modes_only(chans: Sequence[RunChannels], assign: str | None) -> bool:
 
 
 def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: list[str], base_p: Any,
-            base_name: str, assign: str | None, options: dict[str, Any]) -> RobotFit:
+            base_name: str, assign: str | None, options: FitOptions) -> RobotFit:
     """Number the fitted modes, assign them to the simulator's, build parameters and provenance."""
     spec = ma.parse_assign(assign)
     warnings = list(read_warnings)
@@ -284,7 +356,7 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
         for i, m in enumerate(fit.modes):
             fitted.append(ma.FittedMode(len(fitted) + 1, group, m.freq_hz, m.damping_ratio))
             where.append((group, i))
-    only = bool(options.get("modes_only"))
+    only = options.modes_only
     mapping = ma.assign(fitted, base_p.modal_freq_hz, ma.parse_assign("none") if only else spec)
     if only:
         warnings.append("no labkit run among the inputs and no --assign: wrote the fitted modes only, not a "
@@ -292,7 +364,7 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
     elif all(v is None for v in mapping.values()):
         warnings.append("no fitted mode assigned to the simulator: every mode keeps the base value "
                         "(use --assign, e.g. --assign 1=#1)")
-    listing = []
+    listing: list[FittedModeRow] = []
     for fm, (group, i) in zip(fitted, where):
         m = fits[group].modes[i]
         listing.append({"index": fm.index, "group": group, "freq_hz": m.freq_hz, "freq_hz_std": m.freq_hz_std,
@@ -302,7 +374,7 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
                                             None)})
     new_f = list(base_p.modal_freq_hz)
     new_z = list(base_p.modal_damping_ratio)
-    modes_prov: dict[str, Any] = {}
+    modes_prov: dict[str, Json] = {}
     for sim in (1, 2, 3):
         fm_or_none = mapping[sim]
         if fm_or_none is None:
@@ -315,21 +387,21 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
         new_f[sim - 1], new_z[sim - 1] = item["freq_hz"], item["damping_ratio"]
         modes_prov[str(sim)] = _mode_provenance(item, fits[group], i, groups[group])
     params = base_p.with_modes(freq_hz=tuple(new_f), damping_ratio=tuple(new_z))
-    method, covariance = options["method"], options["covariance"]
-    provenance = {
+    method, covariance = options.method, options.covariance
+    provenance: dict[str, Json] = {
         "source": "labkit fit",
         "runs": [r.path for r in chans],
         "method": method, "covariance": covariance,
-        "band_hz": list(options["band_hz"]) if options["band_hz"] else "full",
-        "n_modes": options["n_modes"] if options["n_modes"] else "auto",
-        "min_quality": options["min_quality"],
+        "band_hz": list(options.band_hz) if options.band_hz else "full",
+        "n_modes": options.n_modes if options.n_modes else "auto",
+        "min_quality": options.min_quality,
         "assignment_rule": ma.describe(assign),
         "assignment": {str(s): ("base (not fitted)" if v is None else f"#{v.index} {v.group} {v.freq_hz:.6g} Hz")
                        for s, v in mapping.items()},
         "quality": {g: f.quality for g, f in fits.items()},
-        "nrmse": {g: f.nrmse for g, f in fits.items()},
-        "misfit_to_noise": {g: f.misfit_to_noise for g, f in fits.items()},
-        "fitted_modes": [{k: v for k, v in it.items() if v is not None} for it in listing],
+        "nrmse": {g: _per_location(f.nrmse) for g, f in fits.items()},
+        "misfit_to_noise": {g: _per_location(f.misfit_to_noise) for g, f in fits.items()},
+        "fitted_modes": [{k: v for k, v in it.items() if isinstance(v, (str, int, float))} for it in listing],
         "modes": modes_prov,
         "uncertainty": ("standard uncertainties (1 sigma) from the nonlinear refinement's covariance "
                         f"({covariance})" if method == "lscf" else
@@ -337,10 +409,10 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
                         "(noise only, not the bias from neighbouring modes)")
         + "; k and b propagated with the f-zeta covariance",
     }
-    if options["poles_hz"]:
-        provenance["poles_hz"] = [p if isinstance(p, (int, float)) else list(p) for p in options["poles_hz"]]
-    if options["background"]:
-        provenance["background"] = options["background"]
+    if options.poles_hz:
+        provenance["poles_hz"] = [p if isinstance(p, (int, float)) else list(p) for p in options.poles_hz]
+    if options.background:
+        provenance["background"] = options.background
     if only:
         provenance["written"] = "fitted modes only (no labkit run, no --assign)"
     return RobotFit(fits, chans, listing, mapping, params, provenance, assign, warnings, only,
@@ -350,7 +422,12 @@ def _assign(fits: dict[str, ModalFit], chans: list[RunChannels], read_warnings: 
 
 
 
-def _mode_provenance(item: dict[str, Any], fit: ModalFit, i: int, runs: list[RunChannels]) -> dict[str, Any]:
+def _per_location(values: dict[str, float]) -> dict[str, Json]:
+    """A per-location number table as a JSON object."""
+    return {loc: v for loc, v in values.items()}
+
+
+def _mode_provenance(item: FittedModeRow, fit: ModalFit, i: int, runs: list[RunChannels]) -> dict[str, Json]:
     """The provenance of one simulator mode taken from a fit, with k and b and their uncertainties."""
     f, sf = item["freq_hz"], item["freq_hz_std"]
     z, sz = item["damping_ratio"], item["damping_ratio_std"]
@@ -363,7 +440,7 @@ def _mode_provenance(item: dict[str, Any], fit: ModalFit, i: int, runs: list[Run
     # b = 4 pi zeta f: var = (4 pi f)^2 var(zeta) + (4 pi zeta)^2 var(f) + 2 (4 pi)^2 f zeta cov(f, zeta)
     vb = (4 * math.pi * f * sz) ** 2 + (4 * math.pi * z * sf) ** 2 + 2 * (4 * math.pi) ** 2 * f * z * cfz
     return {"source": "fit", "fitted_index": item["index"], "group": item["group"],
-            "runs": [r.path for r in runs], "locations": fit.locations, "method": fit.method,
+            "runs": [r.path for r in runs], "locations": [loc for loc in fit.locations], "method": fit.method,
             "freq_hz": f, "freq_hz_std": sf, "damping_ratio": z, "damping_ratio_std": sz,
             "k_per_s2": k, "k_per_s2_std": sk, "b_per_s": b, "b_per_s_std": math.sqrt(max(vb, 0.0)),
             "dominant_location": item["dominant_location"], "fit_quality": fit.quality}

@@ -219,7 +219,6 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     tol = tolerances if isinstance(tolerances, Tolerances) else Tolerances.from_mapping(tolerances)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    software = f"labkit {__version__}"
     typed = command
     command = prov.report_command(out, runs, tracks, fit, sims, params)
     knee = KneeOptions(knee_drives, simulate_knee, knee_duration_s, leg, scheduler, workers, quiet)
@@ -230,22 +229,9 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
     # every file goes to a staging folder first: a failure anywhere leaves an old report whole
     with staged_dir(out, names) as stage:
         sections = run_sections(replace(read, out=stage))
-        rows = [Row(**r, section=s.id) for s in sections for r in s.rows]
-        sections.append(_agreement_section(rows, tol, sections))
-        details = Details()
-        for s in sections:
-            details.update(s.details)
-        inputs = prov.file_records(f for s in sections if s.status == "ok" for f in s.files)
-        for f in inputs:
-            f["shown_as"] = prov.display_path(f["path"], out)
-        for s in sections:
-            s.verdict = _section_verdict(s)
-            if s.status == "ok":
-                s.provenance = prov.section_provenance(s.files, inputs=inputs, notes=s.notes)
-
-        created = utc_now()
+        rows, details, inputs = _judge(sections, tol, out)
         headline = _headline(fit_data, details, sections)
-        meta: prov.ReportMeta = {"created_utc": created, "software": software, "command": command,
+        meta: prov.ReportMeta = {"created_utc": utc_now(), "software": f"labkit {__version__}", "command": command,
                 "command_as_given": typed, "input_files": inputs,
                 "inputs": {"runs": list(map(str, runs)), "tracks": list(map(str, tracks)), "fit": fit,
                            "sims": list(map(str, sims)), "params": params},
@@ -255,25 +241,52 @@ def build_report(out_dir: str | Path, *, runs: Sequence[str] = (), tracks: Seque
         for s in sections:
             s.figures = [(figs.FigureFiles(out / f.png.name, out / f.svg.name, f.data), cap, key)
                          for f, cap, key in s.figures]
-        payload = {"meta": meta, "headline": headline, "agreement": rows,
-                   "sections": {s.id: {"status": s.status, "verdict": s.verdict, "provenance": s.provenance}
-                                for s in sections},
-                   "details": details}
-        (stage / "agreement.json").write_text(json.dumps(_jsonable(payload), indent=1), encoding="utf-8")
-        (stage / "figure_data.json").write_text(
-            json.dumps(_jsonable({key: {"png": str(f.png), "svg": str(f.svg), "caption": cap, **f.data}
-                                  for s in sections for f, cap, key in s.figures}), indent=1), encoding="utf-8")
+        _write_data(stage, {"meta": meta, "headline": headline, "agreement": rows,
+                            "sections": {s.id: {"status": s.status, "verdict": s.verdict, "provenance": s.provenance}
+                                         for s in sections},
+                            "details": details}, sections)
         names += sorted(p.name for p in stage.iterdir())
     # figures of an earlier report in this folder that this one did not draw would mislead: remove them
     for old in out.glob("fig_*.*"):
         if old.suffix in (".png", ".svg") and old.name not in names:
             old.unlink()
-    html_path, agreement_path, figure_data_path = out / "report.html", out / "agreement.json", out / "figure_data.json"
+    return _report_summary(out, sections, rows, details, headline)
+
+
+def _judge(sections: list[Section], tol: Tolerances, out: Path) -> tuple[list[Row], Details, list[prov.InputRecord]]:
+    """Add the agreement section, give every section its verdict and provenance; return the judged
+    rows, the sections' details merged, and the input files' records (shown relative to ``out``)."""
+    rows = [Row(**r, section=s.id) for s in sections for r in s.rows]
+    sections.append(_agreement_section(rows, tol, sections))
+    details = Details()
+    for s in sections:
+        details.update(s.details)
+    inputs = prov.file_records(f for s in sections if s.status == "ok" for f in s.files)
+    for f in inputs:
+        f["shown_as"] = prov.display_path(f["path"], out)
+    for s in sections:
+        s.verdict = _section_verdict(s)
+        if s.status == "ok":
+            s.provenance = prov.section_provenance(s.files, inputs=inputs, notes=s.notes)
+    return rows, details, inputs
+
+
+def _write_data(stage: Path, payload: Mapping[str, Any], sections: list[Section]) -> None:
+    """``agreement.json`` (``payload``) and ``figure_data.json`` (every figure's numbers) into ``stage``."""
+    (stage / "agreement.json").write_text(json.dumps(_jsonable(payload), indent=1), encoding="utf-8")
+    (stage / "figure_data.json").write_text(
+        json.dumps(_jsonable({key: {"png": str(f.png), "svg": str(f.svg), "caption": cap, **f.data}
+                              for s in sections for f, cap, key in s.figures}), indent=1), encoding="utf-8")
+
+
+def _report_summary(out: Path, sections: list[Section], rows: list[Row], details: Details,
+                    headline: dict[str, HeadlineEntry]) -> ReportSummary:
+    """What :func:`build_report` returns (``labkit report --json``)."""
     mc = details.get("speed_mc_mean_rms_error_mm_s")
     nominal = headline.get("speed_rms_error_nominal_mm_s")
-    return {"html": str(html_path), "figures": [str(f.png) for s in sections for f, _, _ in s.figures],
+    return {"html": str(out / "report.html"), "figures": [str(f.png) for s in sections for f, _, _ in s.figures],
             "svgs": [str(f.svg) for s in sections for f, _, _ in s.figures],
-            "agreement_json": str(agreement_path), "figure_data_json": str(figure_data_path),
+            "agreement_json": str(out / "agreement.json"), "figure_data_json": str(out / "figure_data.json"),
             "sections": {s.id: s.status for s in sections},
             "verdicts": {s.id: s.verdict["result"] for s in sections},
             "missing": {s.id: s.message for s in sections if s.status != "ok"},
@@ -367,8 +380,6 @@ def _minima(f: np.ndarray, mag: np.ndarray) -> list[list[float]]:
 
 
 def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
-    from labkit.analysis.report.model import rebuild_model
-
     out, inchip, fit, tol = inp.out, inp.inchip, inp.fit, inp.tol
     title = "Frequency responses with the fitted model (paper Fig. 5/6)"
     groups = {k: g for k, g in (fit.groups.items() if fit else []) if g.locations}
@@ -389,30 +400,10 @@ def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
     sec.files += [r.file for r in inchip]
     for name, g in groups.items():
         modes = g.modes
-        fine: dict[str, ri.Frf] = {}
-        lines_only = []
-        for loc, d in g.locations.items():
-            fm = (rebuild_model(d.freq_hz, d.model_frf, [m.freq_hz for m in modes],
-                                [np.nan if m.damping_ratio is None else m.damping_ratio for m in modes])
-                  if d.model_frf is not None and modes else None)
-            if fm is None:
-                lines_only.append(loc)
-                continue
-            fine[loc] = ri.Frf(fm.freq_hz, fm.frf)
-            sec.notes[f"model {name}/{loc}"] = (f"pole-residue model rebuilt on {fm.freq_hz.size} log-spaced lines "
-                                                f"(residual powers {list(fm.residual_powers)}, reproduces the stored "
-                                                f"model to {fm.rebuild_error:.1e})")
+        fine, lines_only = _fine_models(sec, name, g)
         ff = figs.frf_figure(g.locations, modes, out / f"fig_frf_{name}", fine=fine, units=g.units,
                              title=GROUP_TITLES.get(name, name))
-        assert "locations" in ff.data       # an FRF figure's data
-        for loc, d in g.locations.items():
-            entry = ff.data["locations"][loc]
-            if loc in fine:
-                mag = np.abs(fine[loc].frf)
-                entry["fit_minima"] = _minima(fine[loc].freq_hz, mag)
-                entry["fit_maxima"] = [[a, -b] for a, b in _minima(fine[loc].freq_hz, -mag)]
-            if d.model_frf is not None:
-                entry["lines_model_minima"] = _minima(np.asarray(d.freq_hz), np.abs(d.model_frf))
+        _mark_extrema(ff, g, fine)
         caption = (f"{GROUP_TITLES.get(name, name)}: measured lines (markers, one colour per location) and the "
                    f"fitted model ({g.method}) on a fine grid (lines); modes marked with frequency and damping "
                    f"ratio, ± one standard uncertainty.")
@@ -431,6 +422,41 @@ def _frf_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
                              f"≥ {tol.fit_quality_min:g}", verdict(q, at_least=tol.fit_quality_min),
                              n=len(g.locations), text=format_value(q, 6)))
     return sec
+
+
+def _fine_models(sec: Section, name: str, g: ri.FitGroup) -> tuple[dict[str, ri.Frf], list[str]]:
+    """The fitted model of each location of group ``name`` rebuilt on a fine grid (noted in ``sec``), and
+    the locations whose model could not be rebuilt (shown at the measured lines only)."""
+    from labkit.analysis.report.model import rebuild_model
+
+    modes = g.modes
+    fine: dict[str, ri.Frf] = {}
+    lines_only = []
+    for loc, d in g.locations.items():
+        fm = (rebuild_model(d.freq_hz, d.model_frf, [m.freq_hz for m in modes],
+                            [np.nan if m.damping_ratio is None else m.damping_ratio for m in modes])
+              if d.model_frf is not None and modes else None)
+        if fm is None:
+            lines_only.append(loc)
+            continue
+        fine[loc] = ri.Frf(fm.freq_hz, fm.frf)
+        sec.notes[f"model {name}/{loc}"] = (f"pole-residue model rebuilt on {fm.freq_hz.size} log-spaced lines "
+                                            f"(residual powers {list(fm.residual_powers)}, reproduces the stored "
+                                            f"model to {fm.rebuild_error:.1e})")
+    return fine, lines_only
+
+
+def _mark_extrema(ff: figs.FigureFiles, g: ri.FitGroup, fine: Mapping[str, ri.Frf]) -> None:
+    """Record the model's minima and maxima per location in the FRF figure's data (figure_data.json)."""
+    assert "locations" in ff.data       # an FRF figure's data
+    for loc, d in g.locations.items():
+        entry = ff.data["locations"][loc]
+        if loc in fine:
+            mag = np.abs(fine[loc].frf)
+            entry["fit_minima"] = _minima(fine[loc].freq_hz, mag)
+            entry["fit_maxima"] = [[a, -b] for a, b in _minima(fine[loc].freq_hz, -mag)]
+        if d.model_frf is not None:
+            entry["lines_model_minima"] = _minima(np.asarray(d.freq_hz), np.abs(d.model_frf))
 
 
 def _stab_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
@@ -517,33 +543,44 @@ def _speed_section(inp: ReportInputs, done: Mapping[str, Section]) -> Section:
         sec.notes["verdict_note"] = "no simulated sweep to judge"
     if have_meas and curves:
         assert measured is not None
-        for c in curves:
-            # compare only points measured at the sweep's tray amplitude (or of unknown amplitude)
-            amp = float(c.sweep.scenario.get("amp_um", np.nan))
-            mask = ~np.isfinite(measured.amp_um) | ~np.isfinite(amp) | \
-                (np.abs(measured.amp_um - amp) <= 0.1 * abs(amp))
-            m = measured.select(mask)
-            if not m.freq_hz.size:
-                msgs.append(f"No measured point at the tray amplitude of {c.file} ({amp:.3g} um).")
-                continue
-            _judge_speed(sec, m, c, tol, band)
-            sec.pairs += _sweep_pattern_pairs(m, c)
-    note = ""
-    judged = sec.details.get("speed", {})
-    if judged:
-        first = next(iter(judged.values()))
-        nom, cov = first.nominal, first.coverage
-        note = (f"nominal robot: RMS error {format_value(nom.rms_error_mm_s, 3)} mm/s "
-                f"(relative {format_value(nom.relative_rms_error, 2)}, tolerance "
-                f"\u2264 {tol.speed_relative_rms_max:g})\n"
-                f"{band} band holds {sum(q.inside_band for q in nom.points)} of {cov.n} measured points; "
-                f"median percentile in the draws {format_value(cov.median_percentile, 3)} (50 if unbiased)")
-    ff = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed", note=note)
+        msgs += _judge_curves(sec, measured, curves, tol, band)
+    ff = figs.speed_figure(measured if have_meas else None, curves, out / "fig_speed", note=_speed_note(sec, tol, band))
     sec.figure(ff, f"Measured speed (markers, 95 % confidence interval) against the simulated nominal robot "
                    f"(line) and the Monte Carlo {band} band over draws; below, the leg pattern (simulated: the "
                    f"dominant one over draws and feet; measured: where a knee record or label gives it).")
     sec.message = " ".join(msgs)
     return sec
+
+
+def _judge_curves(sec: Section, measured: ri.MeasuredSpeeds, curves: list[ri.SimCurve], tol: Tolerances,
+                  band: str) -> list[str]:
+    """Judge the measured speeds against each simulated sweep, only the points measured at the sweep's tray
+    amplitude (or of unknown amplitude); the messages for sweeps no point was measured for."""
+    msgs = []
+    for c in curves:
+        amp = float(c.sweep.scenario.get("amp_um", np.nan))
+        mask = ~np.isfinite(measured.amp_um) | ~np.isfinite(amp) | (np.abs(measured.amp_um - amp) <= 0.1 * abs(amp))
+        m = measured.select(mask)
+        if not m.freq_hz.size:
+            msgs.append(f"No measured point at the tray amplitude of {c.file} ({amp:.3g} um).")
+            continue
+        _judge_speed(sec, m, c, tol, band)
+        sec.pairs += _sweep_pattern_pairs(m, c)
+    return msgs
+
+
+def _speed_note(sec: Section, tol: Tolerances, band: str) -> str:
+    """The speed figure's note: the first judged sweep's nominal RMS error and band coverage ("" if none)."""
+    judged = sec.details.get("speed", {})
+    if not judged:
+        return ""
+    first = next(iter(judged.values()))
+    nom, cov = first.nominal, first.coverage
+    return (f"nominal robot: RMS error {format_value(nom.rms_error_mm_s, 3)} mm/s "
+            f"(relative {format_value(nom.relative_rms_error, 2)}, tolerance "
+            f"\u2264 {tol.speed_relative_rms_max:g})\n"
+            f"{band} band holds {sum(q.inside_band for q in nom.points)} of {cov.n} measured points; "
+            f"median percentile in the draws {format_value(cov.median_percentile, 3)} (50 if unbiased)")
 
 
 def _judge_speed(sec: Section, m: ri.MeasuredSpeeds, c: ri.SimCurve, tol: Tolerances, band: str) -> None:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from labkit.analysis.tracking.speed import SpeedResult
-from labkit.analysis.tracking.tracker import QUALITY_LABELS, QUALITY_LOST, QUALITY_OK, Scale, Track
+from labkit.analysis.tracking.tracker import QUALITY_LABELS, QUALITY_LOST, QUALITY_OK, Track
 
 
 def summary(track: Track, speed: SpeedResult | None) -> dict[str, Any]:
@@ -105,28 +105,6 @@ def save_track_h5(path: str | Path, track: Track, speed: SpeedResult | None) -> 
             put(g, "turn_rate_rad_s", speed.turn_rate_rad_s, "rad/s")
         label_dimensions(f)         # t_s as the coordinate (xarray, HDFView)
     return path
-
-
-def load_track_h5(path: str | Path) -> Track:
-    """Read a track file back (any ``schema_version`` up to ours)."""
-    from labkit.h5io import get_json, open_h5
-
-    with open_h5(path, kind="track") as f:
-        t = f["t_s"][()]
-        s = float(f.attrs["mm_per_px"])
-        fw, fh = (int(v) for v in f.attrs["frame_size_px"])
-        scale = Scale(s, float(f.attrs["mm_per_px_std"]), str(f.attrs["scale_method"]),
-                      get_json(f, "scale_detail_json", {}))
-        return Track(t_s=t, u_px=f["u_px"][()], v_px=f["v_px"][()], heading_rad=f["heading_rad"][()],
-                     quality=f["quality"][()], area_px=f["area_px"][()], frame_size=(fw, fh),
-                     roi=_roi4(f.attrs["roi_px"]), scale=scale,
-                     source=str(f.attrs["source_video"]), timestamps_source=str(f.attrs["timestamps_source"]),
-                     heading_sense=str(f.attrs["heading_sense"]))
-
-
-def _roi4(v: Any) -> tuple[int, int, int, int]:
-    x, y, w, h = (int(a) for a in v)
-    return (x, y, w, h)
 
 
 def save_track_csv(path: str | Path, track: Track, speed: SpeedResult | None = None) -> Path:

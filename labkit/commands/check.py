@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from labkit.jsonutil import Json
 
 NAME = "check"
 HELP = "check a rig's wiring before a run (identities, sync/trigger, drive, vibrometer, output off); exit 0 if no FAIL"
@@ -15,7 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                              "config's resources")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> dict[str, Json]:
     from labkit.experiments.bench import CheckFailed, run_check
 
     report = run_check(args.config, lab="served" if args.lab else False)

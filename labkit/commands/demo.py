@@ -9,7 +9,10 @@ virtual robot's, measured against simulated speeds).
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from labkit.demo.results import DemoSummary
 
 NAME = "demo"
 HELP = "run the whole toolkit on the virtual lab: sweep, fit, shaker + video, track, simulate, report"
@@ -25,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                         help="replace the output folder of an earlier `labkit demo`")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> DemoSummary:
     if not args.quiet:      # at once, before the imports and the virtual lab's start (seconds)
         import sys
 

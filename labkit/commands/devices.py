@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from labkit.jsonutil import Json
 
 NAME = "devices"
 HELP = "list the instrument resources each back-end can see (USB-TMC, VXI-11, HiSLIP, serial, virtual labs)"
@@ -13,7 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                           "no instrument is sent anything. Then: labkit identify --all")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> dict[str, Json]:
     from labkit.experiments.discovery import list_devices
 
     found = list_devices()

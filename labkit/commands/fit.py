@@ -21,9 +21,12 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from typing import Any
+from typing import TYPE_CHECKING
 
 from labkit.errors import InputError
+
+if TYPE_CHECKING:
+    from labkit.analysis.modal.robot import FitResult
 
 NAME = "fit"
 HELP = ("fit resonances (with uncertainties) of in-chip / shaker run files (or UFF 58, CSV, Touchstone FRFs) "
@@ -101,7 +104,7 @@ def _poles(text: str | None) -> list[float | tuple[float, float]] | None:
     return out
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> FitResult:
     from labkit.analysis.modal.robot import fit_robot, output_paths
     from labkit.cli import require_file
     from labkit.outputs import check_outputs
@@ -117,8 +120,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     # Outputs checked before any work (figures: one per group that may be fitted).
     paths = output_paths(args.out, figures=not args.no_figures, groups=("inchip", "shaker", "frf"),
                          uff=args.uff)
-    check_outputs([paths["out"], paths["fit_file"], paths["uff_file"], *paths["figures"].values()],
-                  force=args.force)
+    check_outputs(paths.all(), force=args.force)
     for r in args.runs:
         require_file(r, "input file")
     rf = fit_robot(args.runs, base=args.base, assign=args.assign, n_modes=args.n_modes, band_hz=band,
@@ -127,13 +129,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     written = rf.write(args.out, figures=not args.no_figures, force=args.force, uff=args.uff)
     for w in rf.warnings:
         print(f"labkit fit: warning: {w}", file=sys.stderr)
-    summary = {**written, **rf.summary()}
+    summary: FitResult = {**written, **rf.summary()}
     if not args.json:
         _print(summary)
     return summary
 
 
-def _print(s: dict[str, Any]) -> None:
+def _print(s: FitResult) -> None:
     from labkit.analysis.modal.fit import MISFIT_WARN
 
     print(f"{'#':>3} {'group':7} {'freq_hz':>12} {'+-':>9} {'zeta':>9} {'+-':>9}  dominant  -> sim mode")

@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from labkit.jsonutil import Json
 
 NAME = "identify"
 HELP = "ask instruments who they are (*IDN?, the Polytec controllers' own query) and name their labkit driver"
@@ -17,7 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--self-test", action="store_true", help="also run each SCPI instrument's self-test (*TST?)")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> dict[str, Json]:
     from labkit.errors import InputError
     from labkit.experiments.discovery import identify, list_devices
 

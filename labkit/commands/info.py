@@ -299,31 +299,49 @@ def _print(summary: Info) -> None:
     print(f"{summary['file']} ({summary['format']})")
     content: Mapping[str, Any] = summary.get("content", {})
     if summary["format"] == "toml":
-        print(f"  tables: {', '.join(summary['tables']) or '-'}")
-        if content.get("experiment"):
-            print(f"  experiment config: {content['experiment']} ({content['kind']})")
-            for role, model in content.get("instruments", {}).items():
-                print(f"  instrument {role}: {model}")
-            for k in ("drive", "frequencies", "grid", "method"):
-                if k in content:
-                    print(f"  {k}: " + ", ".join(f"{a} = {b}" for a, b in content[k].items()))
-        elif "content" in summary:
-            for k in ("modal_freq_hz", "modal_damping_ratio"):
-                if k in content:
-                    print(f"  {k}: {', '.join(f'{v:.6g}' for v in content[k])}")
-            digest = summary.get("provenance_digest", {})
-            for k, v in digest.items():
-                if k == "modes" and isinstance(v, dict):
-                    for m, where in v.items():
-                        print(f"  provenance: mode {m}: {where}")
-                else:
-                    print(f"  provenance: {k}: {v}")
-        return
-    if summary["format"] != "hdf5":
+        _print_toml(summary, content)
+    elif summary["format"] != "hdf5":
         for k, v in content.items():
             if k != "file":
                 print(f"  {k}: {v}")
-        return
+    else:
+        _print_hdf5(summary, content)
+
+
+def _print_toml(summary: Info, content: Mapping[str, Any]) -> None:
+    """An experiment config's instruments and tables, or a parameter file's modes and provenance."""
+    print(f"  tables: {', '.join(summary['tables']) or '-'}")
+    if content.get("experiment"):
+        _print_config(content)
+    elif "content" in summary:
+        _print_params(summary, content)
+
+
+def _print_config(content: Mapping[str, Any]) -> None:
+    """An experiment config: its experiment, instruments and the tables a reader checks first."""
+    print(f"  experiment config: {content['experiment']} ({content['kind']})")
+    for role, model in content.get("instruments", {}).items():
+        print(f"  instrument {role}: {model}")
+    for k in ("drive", "frequencies", "grid", "method"):
+        if k in content:
+            print(f"  {k}: " + ", ".join(f"{a} = {b}" for a, b in content[k].items()))
+
+
+def _print_params(summary: Info, content: Mapping[str, Any]) -> None:
+    """A robot parameter file: its modes and where each value came from."""
+    for k in ("modal_freq_hz", "modal_damping_ratio"):
+        if k in content:
+            print(f"  {k}: {', '.join(f'{v:.6g}' for v in content[k])}")
+    for k, v in summary.get("provenance_digest", {}).items():
+        if k == "modes" and isinstance(v, dict):
+            for m, where in v.items():
+                print(f"  provenance: mode {m}: {where}")
+        else:
+            print(f"  provenance: {k}: {v}")
+
+
+def _print_hdf5(summary: Info, content: Mapping[str, Any]) -> None:
+    """The root attributes, what the file's reader says of it, and its groups and datasets."""
     if summary.get("being_written"):
         print(f"  {summary['being_written']}" + ("" if summary["datasets"] else
                                                  "; its contents can be listed when that run has ended"))

@@ -22,7 +22,10 @@ from __future__ import annotations
 import argparse
 import sys
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from labkit.jsonutil import Json
 
 NAME = "lab"
 HELP = "the virtual lab: simulated instruments over real transports (lab serve)"
@@ -66,7 +69,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                        help="the lab amplifier's real gain (default 20 dB, as its config declares)")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> dict[str, Json]:
     from pathlib import Path
 
     from labkit.cli import emit_json, require_file

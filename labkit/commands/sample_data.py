@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from labkit.demo.sampledata import SampleSummary
 
 NAME = "sample-data"
 HELP = "regenerate the sample files (run files, parameter file, video, track) from the virtual lab"
@@ -26,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--seed", type=int, default=0, help="virtual lab noise seed")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> SampleSummary:
     from labkit.demo.sampledata import OUTPUTS, generate
     from labkit.outputs import check_output_dir
 

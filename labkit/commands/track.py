@@ -3,12 +3,28 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 from labkit.errors import InputError
 from labkit.outputs import atomic_output, check_outputs
 
+if TYPE_CHECKING:
+    from labkit.analysis.tracking.pipeline import TrackResult
+    from labkit.analysis.tracking.tracker import Scale
+
 NAME = "track"
+
+
+class _VideoOptions(TypedDict):
+    """How the video is read and searched, the same for tracking and for a preview (the options as given)."""
+
+    roi: str | None
+    mask: str | None
+    min_contrast: float | None
+    fps: float | None
+    timestamps: str | None
+    bayer: str
+    robot_size_mm: str | None
 HELP = "track the robot in a top-view video: path, heading, speed with confidence interval"
 
 
@@ -75,32 +91,19 @@ def _scale_bar(text: str):
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    import numpy as np
 
     from labkit.analysis.tracking.pipeline import track_file
-    from labkit.analysis.tracking.tracker import ROBOT_LENGTH_MM, robot_size, scale_given
+    from labkit.analysis.tracking.tracker import ROBOT_LENGTH_MM, robot_size
 
-    scale = None
-    if args.mm_per_px is not None:
-        if not args.mm_per_px > 0:
-            raise InputError(f"bad scale {args.mm_per_px}", key="--mm-per-px", expected="a number > 0")
-        scale = scale_given(args.mm_per_px, args.mm_per_px_std)
-    elif args.scale_bar is not None:
-        scale = _scale_bar(args.scale_bar)
+    scale = _scale(args)
     length = args.robot_length_mm
     if length is None:
         length = robot_size(args.robot_size_mm).length_mm or ROBOT_LENGTH_MM
     if not length > 0:
         raise InputError(f"bad robot length {length}", key="--robot-length-mm", expected="a length > 0 mm")
-    if args.fps is not None and not args.fps > 0:
-        raise InputError(f"bad frame rate {args.fps}", key="--fps", expected="frames per second > 0")
-    if args.min_contrast is not None and not 0 < args.min_contrast < 1:
-        raise InputError(f"bad contrast {args.min_contrast}", key="--min-contrast",
-                         expected="a share between 0 and 1, e.g. 0.1")
-    if args.max_speed_mm_s is not None and not args.max_speed_mm_s > 0:
-        raise InputError(f"bad speed limit {args.max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
-    common = dict(roi=args.roi, mask=args.mask, min_contrast=args.min_contrast, fps=args.fps,
-                  timestamps=args.timestamps, bayer=args.bayer, robot_size_mm=args.robot_size_mm)
+    _check_limits(args)
+    common = _VideoOptions(roi=args.roi, mask=args.mask, min_contrast=args.min_contrast, fps=args.fps,
+                           timestamps=args.timestamps, bayer=args.bayer, robot_size_mm=args.robot_size_mm)
     if args.preview is not None:
         return _preview(args, scale, common)
     if args.preview_png is not None:
@@ -109,43 +112,74 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                      ("--timestamp-std-ms", args.timestamp_std_ms)):
         if val is not None and not val >= 0:
             raise InputError(f"bad {key} {val}", key=key, expected="a time >= 0")
-    declared = dict(line_time_s=None if args.line_time_us is None else 1e-6 * args.line_time_us,
-                    line_time_std_s=1e-6 * args.line_time_std_us,
-                    timestamp_std_s=None if args.timestamp_std_ms is None else 1e-3 * args.timestamp_std_ms)
-    res = track_file(args.video, out=args.out, overlay=args.overlay, force=args.force, scale=scale, **declared,
+    res = track_file(args.video, out=args.out, overlay=args.overlay, force=args.force, scale=scale,
+                     line_time_s=None if args.line_time_us is None else 1e-6 * args.line_time_us,
+                     line_time_std_s=1e-6 * args.line_time_std_us,
+                     timestamp_std_s=None if args.timestamp_std_ms is None else 1e-3 * args.timestamp_std_ms,
                      robot_length_mm=length, max_speed_mm_s=args.max_speed_mm_s, window_s=args.window_s,
                      quiet=args.quiet, **common)
-    track, speed, result = res.track, res.speed, res.summary
     if not args.json:
-        lo, hi = speed.speed_ci_mm_s
-        assert track.scale is not None
-        print(f"{track.source}: {track.frames} frames ({track.lost_frames} lost), "
-              f"scale {track.mm_per_px:.5g} +- {track.scale.mm_per_px_std:.2g} mm/px ({track.scale.method})")
-        print(f"  mean speed {speed.mean_speed_mm_s:.4g} mm/s, {int(100 * speed.ci_level)}% CI "
-              f"[{lo:.4g}, {hi:.4g}] (smoothed path, window {speed.window_s:.3g} s)")
-        if np.isfinite(speed.moving_speed_mm_s) and speed.moving_s < 0.98 * speed.duration_s:
-            mlo, mhi = speed.moving_speed_ci_mm_s
-            print(f"  while moving ({speed.moving_s:.3g} of {speed.duration_s:.3g} s): "
-                  f"{speed.moving_speed_mm_s:.4g} mm/s [{mlo:.4g}, {mhi:.4g}]; "
-                  f"the mean above is over the whole clip, pauses included")
-        print(f"  frame-to-frame {speed.frame_to_frame_speed_mm_s:.4g} mm/s (overstates under jitter), "
-              f"net displacement {speed.net_speed_mm_s:.4g} mm/s (understates on curves)")
-        vx, vy = speed.mean_velocity_mm_s
-        print(f"  mean velocity ({vx:.4g}, {vy:.4g}) mm/s, path {speed.path_length_mm:.4g} mm, "
-              f"turning {np.degrees(speed.mean_turn_rate_rad_s):.3g} deg/s")
-        for part in speed.meta.get("budget", {}).get("parts", []):
-            print(f"  +- {part['std_mm_s']:.2g} mm/s {part['name']} ({part['kind']}, {part['source']})")
-        c, thr, nz = (track.meta.get(k, float("nan")) for k in ("robot_contrast", "min_contrast", "noise"))
-        print(f"  contrast: robot {100 * c:.1f} % darker than the tray; threshold {100 * thr:.1f} % "
-              f"(pixel noise {100 * nz:.2f} %)")
-        for w in res.warnings:
-            print(f"  warning: {w}")
-        for k, v in res.written.items():
-            print(f"  wrote {k}: {v}")
-    return result
+        _print_result(res)
+    return res.summary
 
 
-def _preview(args: argparse.Namespace, scale: Any, common: dict[str, Any]) -> dict[str, Any]:
+def _scale(args: argparse.Namespace) -> Scale | None:
+    """The scale given (``--mm-per-px`` or ``--scale-bar``), or None: the robot's length in the video sets it."""
+    from labkit.analysis.tracking.tracker import scale_given
+
+    if args.mm_per_px is not None:
+        if not args.mm_per_px > 0:
+            raise InputError(f"bad scale {args.mm_per_px}", key="--mm-per-px", expected="a number > 0")
+        return scale_given(args.mm_per_px, args.mm_per_px_std)
+    if args.scale_bar is not None:
+        return _scale_bar(args.scale_bar)
+    return None
+
+
+def _check_limits(args: argparse.Namespace) -> None:
+    """Frame rate, contrast threshold and speed limit, when given, within their meaning (exit 2 if not)."""
+    if args.fps is not None and not args.fps > 0:
+        raise InputError(f"bad frame rate {args.fps}", key="--fps", expected="frames per second > 0")
+    if args.min_contrast is not None and not 0 < args.min_contrast < 1:
+        raise InputError(f"bad contrast {args.min_contrast}", key="--min-contrast",
+                         expected="a share between 0 and 1, e.g. 0.1")
+    if args.max_speed_mm_s is not None and not args.max_speed_mm_s > 0:
+        raise InputError(f"bad speed limit {args.max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
+
+
+def _print_result(res: TrackResult) -> None:
+    """The track's headline for a person: frames, scale, speeds with their intervals, contrast, files."""
+    import numpy as np
+
+    track, speed = res.track, res.speed
+    lo, hi = speed.speed_ci_mm_s
+    assert track.scale is not None
+    print(f"{track.source}: {track.frames} frames ({track.lost_frames} lost), "
+          f"scale {track.mm_per_px:.5g} +- {track.scale.mm_per_px_std:.2g} mm/px ({track.scale.method})")
+    print(f"  mean speed {speed.mean_speed_mm_s:.4g} mm/s, {int(100 * speed.ci_level)}% CI "
+          f"[{lo:.4g}, {hi:.4g}] (smoothed path, window {speed.window_s:.3g} s)")
+    if np.isfinite(speed.moving_speed_mm_s) and speed.moving_s < 0.98 * speed.duration_s:
+        mlo, mhi = speed.moving_speed_ci_mm_s
+        print(f"  while moving ({speed.moving_s:.3g} of {speed.duration_s:.3g} s): "
+              f"{speed.moving_speed_mm_s:.4g} mm/s [{mlo:.4g}, {mhi:.4g}]; "
+              f"the mean above is over the whole clip, pauses included")
+    print(f"  frame-to-frame {speed.frame_to_frame_speed_mm_s:.4g} mm/s (overstates under jitter), "
+          f"net displacement {speed.net_speed_mm_s:.4g} mm/s (understates on curves)")
+    vx, vy = speed.mean_velocity_mm_s
+    print(f"  mean velocity ({vx:.4g}, {vy:.4g}) mm/s, path {speed.path_length_mm:.4g} mm, "
+          f"turning {np.degrees(speed.mean_turn_rate_rad_s):.3g} deg/s")
+    for part in speed.meta.get("budget", {}).get("parts", []):
+        print(f"  +- {part['std_mm_s']:.2g} mm/s {part['name']} ({part['kind']}, {part['source']})")
+    c, thr, nz = (track.meta.get(k, float("nan")) for k in ("robot_contrast", "min_contrast", "noise"))
+    print(f"  contrast: robot {100 * c:.1f} % darker than the tray; threshold {100 * thr:.1f} % "
+          f"(pixel noise {100 * nz:.2f} %)")
+    for w in res.warnings:
+        print(f"  warning: {w}")
+    for k, v in res.written.items():
+        print(f"  wrote {k}: {v}")
+
+
+def _preview(args: argparse.Namespace, scale: Any, common: _VideoOptions) -> dict[str, Any]:
     from labkit.analysis.tracking.preview import preview_frame
 
     if args.out or args.overlay:

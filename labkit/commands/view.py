@@ -17,7 +17,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TypedDict
+
+
+class ViewSummary(TypedDict):
+    """``labkit view --json``'s first line: where the page is served and what it shows."""
+
+    url: str
+    file: str
+    stream: str
+    port: int
 
 NAME = "view"
 HELP = "a run's live page in the browser (FRF building up, drive lamp, events, Stop), on 127.0.0.1"
@@ -31,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
                         help="do not track shaker points' videos (the robot's speed) as they appear")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> ViewSummary:
     from labkit.cli import emit_json
     from labkit.errors import InputError, Interrupted
     from labkit.experiments.liveview import LiveView
@@ -44,7 +53,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     except OSError as exc:
         raise InputError(f"cannot listen on 127.0.0.1:{args.port} ({exc.strerror or exc})", key="--port",
                          expected="a free port, or 0") from None
-    out = {"url": view.url, "file": str(view.run_path), "stream": str(view.stream), "port": view.port}
+    out: ViewSummary = {"url": view.url, "file": str(view.run_path), "stream": str(view.stream), "port": view.port}
     try:
         if args.json:
             emit_json(out)              # the first line: how a script (or a test) finds the page

@@ -12,7 +12,21 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
+
+if TYPE_CHECKING:
+    from labkit.experiments.live import Record
+    from labkit.jsonutil import Json
+
+
+class WatchSummary(TypedDict):
+    """``labkit watch --json``: the run, its stream, the points seen and how the run ended (None: not yet)."""
+
+    file: str
+    stream: str
+    points: int
+    status: Json
+    exit: Json
 
 NAME = "watch"
 HELP = "follow a run's live stream as rows in the terminal (points, drive on/off, events, end)"
@@ -23,18 +37,18 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--no-follow", action="store_true", help="print what the stream holds now and return")
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> WatchSummary:
     from labkit.experiments import live
 
     run_path, stream = live.stream_of(args.run)
-    out: dict[str, Any] = {"file": str(run_path), "stream": str(stream), "points": 0, "status": None, "exit": None}
+    out: WatchSummary = {"file": str(run_path), "stream": str(stream), "points": 0, "status": None, "exit": None}
     pos, last, warned, config = 0, time.time(), False, ""
     follow = not args.no_follow
     while True:
         for end, rec in live.follow(stream, pos, wait=follow, timeout_s=live.STALE_S):
             pos, last, warned = end, time.time(), False
             _count(out, rec)
-            config = rec.get("config") or config
+            config = str(rec.get("config") or config)
             _say(args, live.format_record(rec))
         if not follow or out["status"] is not None:
             break
@@ -51,7 +65,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
-def _count(out: dict[str, Any], rec: dict[str, Any]) -> None:
+def _count(out: WatchSummary, rec: Record) -> None:
     if rec.get("t") == "start":          # a resumed run's stream holds one session per start
         out["status"] = out["exit"] = None
     elif rec.get("t") == "point":

@@ -56,14 +56,19 @@ import json
 import shutil
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from labkit.errors import InputError
+
+if TYPE_CHECKING:
+    from labkit.analysis.modal.robot import FitFiles, FitSummary
+    from labkit.analysis.report.build import ReportSummary
+    from labkit.demo.results import AssignmentNote, DemoFiles, DemoSummary, ShakerPoint
 
 MARKER = ".labkit-demo"
 
@@ -197,7 +202,7 @@ def prepare_out(out: Path, force: bool) -> Path | None:
 
 def run_demo(out: str | Path = "labkit-demo", *, quick: bool = False, seed: int = 0, quiet: bool = False,
              force: bool = False, settings: DemoSettings | None = None,
-             stream: Any = None) -> dict[str, Any]:
+             stream: Any = None) -> DemoSummary:
     """Run the demo (:func:`_run_demo`) into ``out``; with ``force`` an earlier demo's folder is
     replaced only when the new one is complete (a failed demo puts the old folder back)."""
     out = Path(out)
@@ -218,8 +223,28 @@ def run_demo(out: str | Path = "labkit-demo", *, quick: bool = False, seed: int 
     return summary
 
 
+@dataclass(frozen=True)
+class _Run:
+    """What every stage of one demo shares: where it writes, how much it does, how it reports."""
+
+    out: Path
+    settings: DemoSettings
+    stages: Stages
+    quiet: bool
+    seed: int
+
+
+@dataclass(frozen=True)
+class DemoFit:
+    """:func:`fit_and_assign`'s result: the files written, the fit's summary and how modes were assigned."""
+
+    files: FitFiles
+    summary: FitSummary
+    assignment_note: AssignmentNote
+
+
 def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = False,
-              settings: DemoSettings | None = None, stream: Any = None) -> dict[str, Any]:
+              settings: DemoSettings | None = None, stream: Any = None) -> DemoSummary:
     """Run every stage on a fresh in-process virtual lab; return the summary (also in ``demo_summary.json``).
 
     Parameters
@@ -235,16 +260,65 @@ def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = Fa
     settings:
         Overrides ``quick``.
     """
-    from labkit.demo.configs import coarse_grid, write_shaker_config
-    from labkit.experiments.session import run_session
     from labkit.lab import VirtualLab
 
     s = settings or (QUICK if quick else FULL)
     t_start = time.perf_counter()
     st = Stages(7, quiet=quiet, stream=stream)
+    run = _Run(out, s, st, quiet, seed)
     for sub in ("configs", "runs", "tracks", "sim"):
         (out / sub).mkdir(exist_ok=True)
     truth_robot, base = demo_robots()
+    files: DemoFiles = _write_robots(out, truth_robot, base, st)
+    base_file = Path(files["base_robot"])
+    notes: list[str] = []
+
+    with VirtualLab(robot=truth_robot, seed=seed) as lab:
+        truth = lab.truth
+        fit, shaker = _measure(lab, run, base_file, files, notes)
+    files["configs"] = sorted(str(p) for p in (out / "configs").glob("*.toml"))
+
+    points = _track_videos(run, shaker, notes)
+    tracks = [p["track"] for p in points if p.get("track")]
+    files["tracks"] = tracks
+    files["videos"] = [str(shaker.parent / p["video"]) for p in points if p["video"]]
+
+    sw, sim_path = _simulate(run, fit)
+    files["sim_sweep"] = str(sim_path)
+    with st.stage("report", "report: model against measurement"):
+        rep = _report(run, files, fit, tracks, sim_path)
+    files.update({"report_html": rep["html"], "report_figures": rep["figures"],
+                  "agreement_json": rep["agreement_json"]})
+
+    from labkit.demo.results import compare_resonances, compare_speeds, finite, headline, simulator_modes
+
+    resonances = compare_resonances(truth["tethered_modes"], fit.summary["fitted_modes"])
+    speeds = compare_speeds(points, sw)
+    summary: DemoSummary = {
+        "ok": True, "out_dir": str(out), "mode": s.name, "seed": seed,
+        "headline": headline(resonances, speeds, rep.get("speed_rms_error_mm_s")),
+        "wall_s": round(time.perf_counter() - t_start, 1), "stage_s": st.times_s,
+        "files": files,
+        "resonances": resonances,
+        "simulator_modes": simulator_modes(fit.summary, truth_robot, base),
+        "assignment": fit.assignment_note,
+        "speeds": speeds,
+        "speed_rms_error_mm_s": rep.get("speed_rms_error_mm_s"),
+        "report_sections": rep.get("sections", {}),
+        "virtual_robot": {"changes_from_paper": {"c_ad_n": DEMO_C_AD_N, "foot_pad_um": DEMO_FOOT_PAD_UM,
+                                                 "hip_freq_hz": TRUE_HIP_HZ,
+                                                 "hip_damping_ratio": TRUE_HIP_DAMPING}},
+        "settings": asdict(s),
+        "fit_warnings": fit.summary.get("warnings", []),
+        "notes": notes,
+    }
+    files["summary_json"] = str(out / "demo_summary.json")
+    (out / "demo_summary.json").write_text(json.dumps(finite(summary), indent=1) + "\n")
+    return summary
+
+
+def _write_robots(out: Path, truth_robot: Any, base: Any, st: Stages) -> DemoFiles:
+    """Write the virtual robot (the truth) and the base parameters; their paths."""
     st.say(f"parameter set: demo (the published Tables 1-2 with c_ad_n = {DEMO_C_AD_N:g} N and a "
            f"{TRUE_HIP_HZ:g} Hz hip: the virtual robot; the `paper` set is not robust at the demo's drives)")
     truth_file = truth_robot.to_toml(out / "virtual_robot.toml", provenance={
@@ -255,49 +329,56 @@ def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = Fa
         "source": "labkit demo: prior for what an in-chip sweep cannot measure",
         "changes_from_paper": f"c_ad_n = {DEMO_C_AD_N:g} N (the walking robot), {DEMO_FOOT_PAD_UM:g} um foot pads; "
                               "modes are the paper's"})
-    files: dict[str, Any] = {"virtual_robot": str(truth_file), "base_robot": str(base_file)}
-    notes: list[str] = []
+    return {"virtual_robot": str(truth_file), "base_robot": str(base_file)}
 
-    with VirtualLab(robot=truth_robot, seed=seed) as lab:
-        truth = lab.truth
-        # 1. pilot: a coarse log grid, only to see where the peaks are
-        grid = coarse_grid(s.coarse_start_hz, s.coarse_stop_hz, s.coarse_count)
-        pilot = out / "runs" / "inchip_pilot.h5"
-        with st.stage("inchip_pilot", f"in-chip pilot sweep: {len(grid)} lines "
-                                      f"{s.coarse_start_hz:g}-{s.coarse_stop_hz:g} Hz x body, hip, knee"):
-            inchip_run(lab, out / "configs" / "inchip_pilot.toml", pilot, grid, settle_s=s.pilot_settle_s,
-                       dwell_cycles=s.pilot_dwell_cycles, note="pilot: coarse log grid", quiet=quiet, seed=seed)
-        # 2. the measurement: the pilot's grid plus lines across every peak it showed
-        lines, extra, peaks = refined_grid(pilot, grid, s.refine_spacing_rel)
-        if not len(extra):
-            notes.append("the pilot sweep showed no peak: the measurement repeats its grid")
-        inchip = out / "runs" / "inchip.h5"
-        with st.stage("inchip", f"in-chip sweep: {len(lines)} lines, {len(extra)} of them across the peaks at "
-                                + (", ".join(f"{p:.0f}" for p in peaks) or "-") + " Hz"):
-            inchip_run(lab, out / "configs" / "inchip.toml", inchip, lines, settle_s=s.settle_s,
-                       dwell_cycles=s.dwell_cycles, note="the pilot's grid plus lines across its peaks",
-                       quiet=quiet, seed=seed)
-        inchip_runs = [str(inchip)]
-        files["inchip_pilot"] = str(pilot)
-        # 3. fit, with the hip mode assigned explicitly to simulator mode 1
-        with st.stage("fit", "resonance fit of the in-chip run -> robot parameter file"):
-            fit = fit_and_assign(inchip_runs, out / "robot.toml", base_file, notes)
-        files.update(robot_params=fit["out"], fit_file=fit["fit_file"], fit_figures=fit["figures"],
-                     inchip_runs=inchip_runs)
-        # 4. shaker run with video
-        with st.stage("shaker", f"shaker run: {len(s.shaker_freqs_hz)} frequencies at {s.tray_amp_um:g} um, "
-                                f"{s.video_s:g} s of video each"):
-            cfg = write_shaker_config(out / "configs" / "shaker.toml", s.shaker_freqs_hz, s.tray_amp_um,
-                                      video_s=s.video_s, settle_s=s.shaker_settle_s,
-                                      dwell_cycles=s.shaker_dwell_cycles)
-            shaker = out / "runs" / "shaker.h5"
-            _check_run(run_session("shaker", cfg, shaker, lab=lab, quiet=quiet, seed=seed), shaker)
-        files["shaker_run"] = str(shaker)
-    files["configs"] = sorted(str(p) for p in (out / "configs").glob("*.toml"))
 
-    # 5. tracking
+def _measure(lab: Any, run: _Run, base_file: Path, files: DemoFiles, notes: list[str]) -> tuple[DemoFit, Path]:
+    """Stages 1-4 on ``lab``: the in-chip pilot and sweep, the fit, the shaker run; ``(fit, shaker run)``."""
+    from labkit.demo.configs import coarse_grid, write_shaker_config
+    from labkit.experiments.session import run_session
+
+    out, s, st, quiet, seed = run.out, run.settings, run.stages, run.quiet, run.seed
+    # 1. pilot: a coarse log grid, only to see where the peaks are
+    grid = coarse_grid(s.coarse_start_hz, s.coarse_stop_hz, s.coarse_count)
+    pilot = out / "runs" / "inchip_pilot.h5"
+    with st.stage("inchip_pilot", f"in-chip pilot sweep: {len(grid)} lines "
+                                  f"{s.coarse_start_hz:g}-{s.coarse_stop_hz:g} Hz x body, hip, knee"):
+        inchip_run(lab, out / "configs" / "inchip_pilot.toml", pilot, grid, settle_s=s.pilot_settle_s,
+                   dwell_cycles=s.pilot_dwell_cycles, note="pilot: coarse log grid", quiet=quiet, seed=seed)
+    # 2. the measurement: the pilot's grid plus lines across every peak it showed
+    lines, extra, peaks = refined_grid(pilot, grid, s.refine_spacing_rel)
+    if not len(extra):
+        notes.append("the pilot sweep showed no peak: the measurement repeats its grid")
+    inchip = out / "runs" / "inchip.h5"
+    with st.stage("inchip", f"in-chip sweep: {len(lines)} lines, {len(extra)} of them across the peaks at "
+                            + (", ".join(f"{p:.0f}" for p in peaks) or "-") + " Hz"):
+        inchip_run(lab, out / "configs" / "inchip.toml", inchip, lines, settle_s=s.settle_s,
+                   dwell_cycles=s.dwell_cycles, note="the pilot's grid plus lines across its peaks",
+                   quiet=quiet, seed=seed)
+    inchip_runs = [str(inchip)]
+    files["inchip_pilot"] = str(pilot)
+    # 3. fit, with the hip mode assigned explicitly to simulator mode 1
+    with st.stage("fit", "resonance fit of the in-chip run -> robot parameter file"):
+        fit = fit_and_assign(inchip_runs, out / "robot.toml", base_file, notes)
+    files.update({"robot_params": fit.files["out"], "fit_file": fit.files["fit_file"],
+                  "fit_figures": fit.files["figures"], "inchip_runs": inchip_runs})
+    # 4. shaker run with video
+    with st.stage("shaker", f"shaker run: {len(s.shaker_freqs_hz)} frequencies at {s.tray_amp_um:g} um, "
+                            f"{s.video_s:g} s of video each"):
+        cfg = write_shaker_config(out / "configs" / "shaker.toml", s.shaker_freqs_hz, s.tray_amp_um,
+                                  video_s=s.video_s, settle_s=s.shaker_settle_s,
+                                  dwell_cycles=s.shaker_dwell_cycles)
+        shaker = out / "runs" / "shaker.h5"
+        _check_run(run_session("shaker", cfg, shaker, lab=lab, quiet=quiet, seed=seed), shaker)
+    files["shaker_run"] = str(shaker)
+    return fit, shaker
+
+
+def _track_videos(run: _Run, shaker: Path, notes: list[str]) -> list[ShakerPoint]:
+    """Stage 5: track every video of the shaker run; its good points with their tracked speeds."""
     from labkit.analysis.tracking import Scale, track_file
 
+    out, st = run.out, run.stages
     points = shaker_points(shaker)
     with st.stage("track", f"tracking {sum(1 for p in points if p['video'])} videos"):
         # Each video is scaled by the robot's length in it. A robot that stood still (no walk at
@@ -305,7 +386,7 @@ def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = Fa
         # with the scale the other videos of the same run found (one camera, one zoom), as a user
         # at the bench would calibrate once per session.
         scales: list[tuple[float, float]] = []
-        unscaled: list[tuple[dict[str, Any], Path, Path, InputError]] = []
+        unscaled: list[tuple[ShakerPoint, Path, Path, InputError]] = []
         for p in points:
             if not p["video"]:
                 continue
@@ -335,56 +416,31 @@ def _run_demo(out: Path, *, quick: bool = False, seed: int = 0, quiet: bool = Fa
                 _record_track(p, track_path, summ)
                 notes.append(f"{video.name}: scaled by the other videos of the run "
                              f"({run_scale.mm_per_px:.5f} mm/px; the robot did not walk enough to measure it)")
-    tracks = [p["track"] for p in points if p.get("track")]
-    files["tracks"] = tracks
-    files["videos"] = [str(shaker.parent / p["video"]) for p in points if p["video"]]
+    return points
 
-    # 6. simulated sweep with the fitted parameters
+
+def _simulate(run: _Run, fit: DemoFit) -> tuple[Any, Path]:
+    """Stage 6: the simulated sweep with the fitted parameters; ``(sweep, its file)``."""
     from labkit.sim import RobotParams, Shaker, sweep
 
-    fitted = RobotParams.from_toml(fit["out"])
+    s = run.settings
+    fitted = RobotParams.from_toml(fit.files["out"])
     sim_freqs = sorted(set(s.sim_freqs_hz) | set(s.shaker_freqs_hz))
-    with st.stage("simulate", f"simulated sweep: {len(sim_freqs)} frequencies x {s.sim_draws} Monte Carlo "
-                              f"draws x {s.sim_duration_s:g} s"):
+    with run.stages.stage("simulate", f"simulated sweep: {len(sim_freqs)} frequencies x {s.sim_draws} Monte Carlo "
+                                      f"draws x {s.sim_duration_s:g} s"):
         sw = sweep(fitted, Shaker(freq_hz=sim_freqs[0], amp_um=s.tray_amp_um), "freq_hz", sim_freqs,
-                   draws=s.sim_draws, duration_s=s.sim_duration_s, seed=seed, quiet=quiet)
-        sim_path = sw.to_h5(out / "sim" / "sim_sweep.h5")
-    files["sim_sweep"] = str(sim_path)
+                   draws=s.sim_draws, duration_s=s.sim_duration_s, seed=run.seed, quiet=run.quiet)
+        sim_path = sw.to_h5(run.out / "sim" / "sim_sweep.h5")
+    return sw, sim_path
 
-    # 7. report
-    with st.stage("report", "report: model against measurement"):
-        from labkit.analysis.report.build import build_report
 
-        rep = build_report(out / "report", runs=[*inchip_runs, str(shaker)], tracks=tracks,
-                           fit=fit["fit_file"], sims=[str(sim_path)], params=fit["out"],
-                           knee_duration_s=s.knee_duration_s, title="labkit demo: virtual lab", quiet=True)
-    files.update(report_html=rep["html"], report_figures=rep["figures"], agreement_json=rep["agreement_json"])
+def _report(run: _Run, files: DemoFiles, fit: DemoFit, tracks: list[str], sim_path: Path) -> ReportSummary:
+    """Stage 7: the report of model against measurement."""
+    from labkit.analysis.report.build import build_report
 
-    from labkit.demo.results import compare_resonances, compare_speeds, finite, headline, simulator_modes
-
-    resonances = compare_resonances(truth["tethered_modes"], fit["fitted_modes"])
-    speeds = compare_speeds(points, sw)
-    summary = {
-        "ok": True, "out_dir": str(out), "mode": s.name, "seed": seed,
-        "headline": headline(resonances, speeds, rep.get("speed_rms_error_mm_s")),
-        "wall_s": round(time.perf_counter() - t_start, 1), "stage_s": st.times_s,
-        "files": files,
-        "resonances": resonances,
-        "simulator_modes": simulator_modes(fit, truth_robot, base),
-        "assignment": fit["assignment_note"],
-        "speeds": speeds,
-        "speed_rms_error_mm_s": rep.get("speed_rms_error_mm_s"),
-        "report_sections": rep.get("sections", {}),
-        "virtual_robot": {"changes_from_paper": {"c_ad_n": DEMO_C_AD_N, "foot_pad_um": DEMO_FOOT_PAD_UM,
-                                                 "hip_freq_hz": TRUE_HIP_HZ,
-                                                 "hip_damping_ratio": TRUE_HIP_DAMPING}},
-        "settings": asdict(s),
-        "fit_warnings": fit.get("warnings", []),
-        "notes": notes,
-    }
-    files["summary_json"] = str(out / "demo_summary.json")
-    (out / "demo_summary.json").write_text(json.dumps(finite(summary), indent=1) + "\n")
-    return summary
+    return build_report(run.out / "report", runs=[*files["inchip_runs"], files["shaker_run"]], tracks=tracks,
+                        fit=fit.files["fit_file"], sims=[str(sim_path)], params=fit.files["out"],
+                        knee_duration_s=run.settings.knee_duration_s, title="labkit demo: virtual lab", quiet=True)
 
 
 def inchip_run(lab: Any, cfg_path: Path, run_path: Path, freqs_hz: Any, *, note: str, quiet: bool, seed: int,
@@ -410,7 +466,7 @@ def refined_grid(pilot: Path, grid: Any, spacing_rel: float) -> tuple[np.ndarray
     return np.union1d(np.round(np.asarray(grid, float), 3), extra), extra, peaks
 
 
-def _check_run(summary: dict[str, Any], path: Path) -> None:
+def _check_run(summary: Mapping[str, object], path: Path) -> None:
     if summary.get("status") != "complete" or summary.get("points_ok") != summary.get("points_planned"):
         raise InputError(f"the run did not complete cleanly: {summary.get('status')}, "
                          f"{summary.get('points_ok')} of {summary.get('points_planned')} points",
@@ -418,15 +474,15 @@ def _check_run(summary: dict[str, Any], path: Path) -> None:
 
 
 def fit_and_assign(runs: list[str], out: Path, base_file: Path, notes: list[str], *,
-                   figures: bool = True) -> dict[str, Any]:
+                   figures: bool = True) -> DemoFit:
     """Fit the in-chip runs, then assign the tethered hip mode to simulator mode 1 and write.
 
     :func:`labkit.analysis.modal.fit_robot` fits once with ``assign="none"``
     and lists the fitted modes with the location where each responds most;
     the lowest hip-dominant mode is the tethered hip mode. The same fits are
     then re-assigned explicitly, ``1=#K,2=keep,3=keep`` (no refit), which the
-    parameter file's ``[provenance]`` records. Returns what ``labkit fit
-    --json`` prints, plus ``warnings_text`` and ``assignment_note``.
+    parameter file's ``[provenance]`` records. Returns the files written, what
+    ``labkit fit --json`` prints of the fit, and how the modes were assigned.
     """
     from labkit.analysis.modal import fit_robot
 
@@ -444,27 +500,25 @@ def fit_and_assign(runs: list[str], out: Path, base_file: Path, notes: list[str]
         raise InputError("the fit found no mode", file=", ".join(runs))
     spec = f"1=#{chosen['index']},2=keep,3=keep"
     rf = probe.reassign(spec)
-    summ = {**rf.write(out, figures=figures), **rf.summary()}
-    summ["warnings_text"] = "".join(f"labkit fit: warning: {w}\n" for w in rf.warnings)
-    summ["assignment_note"] = {
+    written = rf.write(out, figures=figures)
+    return DemoFit(written, rf.summary(), {
         "assign": spec, "why": why,
         "mode_1": f"fitted #{chosen['index']} ({chosen['freq_hz']:.1f} Hz, tethered hip mode) -> simulator "
                   "mode 1 (lateral, hip)",
         "modes_2_3": "kept from the base file: the released robot's vertical modes cannot be measured in-chip "
                      "(the tethered robot shows a tether mode and an in-chip knee mode instead)",
-        "recorded_in": str(out) + " [provenance] assignment_rule / assignment"}
-    return summ
+        "recorded_in": str(out) + " [provenance] assignment_rule / assignment"})
 
 
-def _record_track(p: dict[str, Any], track_path: Path, summ: dict[str, Any]) -> None:
-    """Put a track's headline numbers on its shaker point."""
-    p.update(track=str(track_path), speed_mm_s=float(summ["mean_speed_mm_s"]),
-             speed_ci_mm_s=[float(v) for v in summ["speed_ci_mm_s"]],
-             frames=int(summ["frames"]), lost_frames=int(summ["lost_frames"]),
-             degraded_frames=int(summ.get("degraded_frames", 0)))
+def _record_track(p: ShakerPoint, track_path: Path, summ: Mapping[str, Any]) -> None:
+    """Put a track's headline numbers (``summ``: the tracker's summary) on its shaker point."""
+    p.update({"track": str(track_path), "speed_mm_s": float(summ["mean_speed_mm_s"]),
+              "speed_ci_mm_s": [float(v) for v in summ["speed_ci_mm_s"]],
+              "frames": int(summ["frames"]), "lost_frames": int(summ["lost_frames"]),
+              "degraded_frames": int(summ.get("degraded_frames", 0))})
 
 
-def shaker_points(path: Path) -> list[dict[str, Any]]:
+def shaker_points(path: Path) -> list[ShakerPoint]:
     """The shaker run's ok points: frequency, measured tray amplitude, video (relative to the run file)."""
     from labkit.files.runs import ShakerRun, read_run_file
 

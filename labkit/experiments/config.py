@@ -45,6 +45,7 @@ and checked before anything is sent (else each point ramps up from
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,7 +54,7 @@ import numpy as np
 
 from labkit.experiments.tomlcheck import Table
 from labkit.jsonutil import Json
-from labkit.tomlio import load_toml
+from labkit.tomlio import TomlValue, load_toml
 
 LOCATIONS = ("body", "hip", "knee")
 SPOTS = ("body", "hip", "knee", "tray")
@@ -422,7 +423,7 @@ def _check_generator_band(root: Table, table: str, key: str, freqs: tuple[float,
                                           f"frequencies <= {top:g} Hz")
 
 
-def _check_driver(spec: Table, model: str, settings: dict[str, Any]) -> None:
+def _check_driver(spec: Table, model: str, settings: Mapping[str, TomlValue]) -> None:
     """The model must have a driver, and every extra key must be one of its settings."""
     from labkit.drivers.registry import driver_class, model_names
     from labkit.errors import ConfigError

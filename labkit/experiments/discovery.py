@@ -82,7 +82,7 @@ def _visa_backends() -> list[Backend]:
     except Exception as exc:   # pyvisa-py missing or broken
         return [Backend("pyvisa-py", False, f"cannot start pyvisa-py: {exc}")]
     try:
-        info: dict[str, Any] = dict(rm.visalib.get_debug_info())   # type: ignore[arg-type]
+        info: dict[str, object] = dict(rm.visalib.get_debug_info())   # type: ignore[arg-type]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")     # the HiSLIP "install zeroconf" warning: said below instead
             found = list(rm.list_resources("?*"))
@@ -94,7 +94,9 @@ def _visa_backends() -> list[Backend]:
         if key == "GPIB INSTR" and not str(info.get("GPIB INTFC", "")).startswith("Available"):
             status = info.get("GPIB INTFC", status)     # listing GPIB needs the interface library
         ok = isinstance(status, str) and status.strip().startswith("Available")
-        why = " ".join(" ".join(status).split()) if not isinstance(status, str) else " ".join(status.split())
+        text = status if isinstance(status, str) else (
+            " ".join(map(str, status)) if isinstance(status, (list, tuple)) else str(status))
+        why = " ".join(text.split())
         res = [r for r in found if r.upper().startswith(prefix)]
         if key == "TCPIP INSTR":
             why = why.replace("Available", "").replace("Resource discovery:", "").replace(" - ", "; ").strip("; ")

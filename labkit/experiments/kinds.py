@@ -53,7 +53,7 @@ class ExperimentKind:
     load: Callable[[str | Path], Any]
     plan: Callable[[Any, Iterable[int]], Plan]
     preflight: Callable[[Any], None]
-    run_attrs: Callable[[Any], dict[str, Any]]
+    run_attrs: Callable[[Any], dict[str, str | float]]
     layout: Callable[[Any], tuple[Fields, dict[str, Fields]]]
     rig_setup: Callable[[Any], RigSetup]
     point_bytes: Callable[[Any], float]     # about how much one point adds to the run file
@@ -73,7 +73,7 @@ def _inchip_preflight(cfg: InchipConfig) -> None:
     """The PZT limit is checked while loading the config; nothing else to predict."""
 
 
-def _inchip_attrs(cfg: InchipConfig) -> dict[str, Any]:
+def _inchip_attrs(cfg: InchipConfig) -> dict[str, str | float]:
     return {"drive_amp_vpp": cfg.amp_vpp, "drive_offset_v": cfg.offset_v, "pzt_max_v": cfg.pzt_max_v,
             "method": cfg.method.kind}
 
@@ -121,51 +121,72 @@ def _shaker_preflight(cfg: ShakerConfig) -> None:
         cap, a requested tray amplitude outside the shaker's envelope.
     """
     amp, env = shaker_chain(cfg)
-    for i, f in enumerate(cfg.freqs_hz):      # the band, whatever the amplitudes are given as
+    _check_band(cfg, env)
+    if cfg.amplitude_kind == "drive_vpp" and cfg.accel_m_s2_per_v is not None:
+        _check_predicted_travel(cfg, amp, env)
+    if cfg.amplitude_kind == "drive_vpp":
+        _check_drives(cfg, amp)
+    else:
+        _check_tray_amplitudes(cfg, env)
+
+
+def _check_band(cfg: ShakerConfig, env: ShakerEnvelope) -> None:
+    """Every frequency within the shaker's band, whatever the amplitudes are given as."""
+    for i, f in enumerate(cfg.freqs_hz):
         if not env.freq_min_hz <= f <= env.freq_max_hz:
             raise LimitError(f"{f:g} Hz is outside the 4809 frequency range {env.freq_min_hz:g}-"
                              f"{env.freq_max_hz:g} Hz; nothing was sent", limit="frequency", file=cfg.path,
                              key=f"grid.freq_hz[{i}]",
                              expected=f"{env.freq_min_hz:g} <= freq_hz <= {env.freq_max_hz:g}")
-    if cfg.amplitude_kind == "drive_vpp" and cfg.accel_m_s2_per_v is not None:
-        # the declared chain predicts the tray's travel: x = a / w^2 with a = sensitivity * gain * V
-        # (the mass line; below the suspension's resonance the tray moves less: conservative)
-        for i, f in enumerate(cfg.freqs_hz):
-            for j, v in enumerate(cfg.amplitudes):
-                x_um = 1e6 * cfg.accel_m_s2_per_v * amp.voltage_gain * v / 2 / (2 * math.pi * f) ** 2
-                key = f"grid.drive_vpp[{j}] at grid.freq_hz[{i}]"
-                if x_um > cfg.tray_max_um:
-                    raise LimitError(f"{v:g} Vpp at {f:g} Hz is predicted to move the tray {x_um:.4g} um "
-                                     f"(declared shaker.accel_m_s2_per_v = {cfg.accel_m_s2_per_v:g}), above "
-                                     f"interlock.tray_max_um = {cfg.tray_max_um:g} um; nothing was sent",
-                                     limit="tray_max_um", file=cfg.path, key=key)
-                try:
-                    env.check(f, x_um, payload_kg=cfg.payload_kg)
-                except LimitError as exc:
-                    raise LimitError(f"{v:g} Vpp at {f:g} Hz is predicted to move the tray {x_um:.4g} um: "
-                                     + exc.message, limit=exc.limit, file=cfg.path, key=key) from None
-    if cfg.amplitude_kind == "drive_vpp":
-        # without a declared sensitivity the runner ramps each point up from tray_control.start_vpp,
-        # measuring the tray and predicting the next step (soft start)
-        for i, v in enumerate(cfg.amplitudes):
+
+
+def _check_predicted_travel(cfg: ShakerConfig, amp: Amplifier, env: ShakerEnvelope) -> None:
+    """Drives given in volts with a declared sensitivity: the tray's predicted travel within the interlock
+    and the envelope. The declared chain predicts it: x = a / w^2 with a = sensitivity * gain * V (the mass
+    line; below the suspension's resonance the tray moves less: conservative)."""
+    assert cfg.accel_m_s2_per_v is not None
+    for i, f in enumerate(cfg.freqs_hz):
+        for j, v in enumerate(cfg.amplitudes):
+            x_um = 1e6 * cfg.accel_m_s2_per_v * amp.voltage_gain * v / 2 / (2 * math.pi * f) ** 2
+            key = f"grid.drive_vpp[{j}] at grid.freq_hz[{i}]"
+            if x_um > cfg.tray_max_um:
+                raise LimitError(f"{v:g} Vpp at {f:g} Hz is predicted to move the tray {x_um:.4g} um "
+                                 f"(declared shaker.accel_m_s2_per_v = {cfg.accel_m_s2_per_v:g}), above "
+                                 f"interlock.tray_max_um = {cfg.tray_max_um:g} um; nothing was sent",
+                                 limit="tray_max_um", file=cfg.path, key=key)
             try:
-                amp.check_input(v)
+                env.check(f, x_um, payload_kg=cfg.payload_kg)
             except LimitError as exc:
-                raise LimitError(exc.message, limit=exc.limit, file=cfg.path, key=f"grid.drive_vpp[{i}]",
-                                 expected=f"<= {amp.max_input_vpp:.4g} Vpp at {cfg.gain_db:g} dB") from None
-    else:
-        for i, f in enumerate(cfg.freqs_hz):
-            for j, a in enumerate(cfg.amplitudes):
-                try:
-                    env.check(f, a, payload_kg=cfg.payload_kg)
-                except LimitError as exc:
-                    raise LimitError(exc.message, limit=exc.limit, file=cfg.path,
-                                     key=f"grid.tray_amp_um[{j}] at grid.freq_hz[{i}]",
-                                     expected=f"<= {env.max_disp_amp_um(f, cfg.payload_kg):.4g} um "
-                                              f"at {f:g} Hz") from None
+                raise LimitError(f"{v:g} Vpp at {f:g} Hz is predicted to move the tray {x_um:.4g} um: "
+                                 + exc.message, limit=exc.limit, file=cfg.path, key=key) from None
 
 
-def _shaker_attrs(cfg: ShakerConfig) -> dict[str, Any]:
+def _check_drives(cfg: ShakerConfig, amp: Amplifier) -> None:
+    """Drives given in volts: each within the amplifier's input cap. Without a declared sensitivity the
+    runner ramps each point up from tray_control.start_vpp, measuring the tray and predicting the next
+    step (soft start)."""
+    for i, v in enumerate(cfg.amplitudes):
+        try:
+            amp.check_input(v)
+        except LimitError as exc:
+            raise LimitError(exc.message, limit=exc.limit, file=cfg.path, key=f"grid.drive_vpp[{i}]",
+                             expected=f"<= {amp.max_input_vpp:.4g} Vpp at {cfg.gain_db:g} dB") from None
+
+
+def _check_tray_amplitudes(cfg: ShakerConfig, env: ShakerEnvelope) -> None:
+    """Tray amplitudes requested: each within the shaker's envelope at its frequency."""
+    for i, f in enumerate(cfg.freqs_hz):
+        for j, a in enumerate(cfg.amplitudes):
+            try:
+                env.check(f, a, payload_kg=cfg.payload_kg)
+            except LimitError as exc:
+                raise LimitError(exc.message, limit=exc.limit, file=cfg.path,
+                                 key=f"grid.tray_amp_um[{j}] at grid.freq_hz[{i}]",
+                                 expected=f"<= {env.max_disp_amp_um(f, cfg.payload_kg):.4g} um "
+                                          f"at {f:g} Hz") from None
+
+
+def _shaker_attrs(cfg: ShakerConfig) -> dict[str, str | float]:
     return {"robot_spot": cfg.robot_spot, "amplitude_kind": cfg.amplitude_kind,
             "amplifier_json": json.dumps({"gain_db": cfg.gain_db, "attenuator_db": cfg.attenuator_db,
                                           "current_limit_a": cfg.current_limit_a,

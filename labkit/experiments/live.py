@@ -44,12 +44,16 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+from labkit.jsonutil import Json
 from labkit.lockfiles import LockRecord
+
+#: one line of the stream: a JSON object (``t`` says which record: start, hb, event, point, end)
+Record = dict[str, Json]
 
 #: seconds between heartbeat lines
 HEARTBEAT_S = 1.0
@@ -81,9 +85,13 @@ def num(x: Any) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def _cplx(z: Any) -> list[float | None]:
+def _cplx(z: Any) -> list[Json]:
     z = complex(z)
     return [num(z.real), num(z.imag)]
+
+
+def _magnitude(z: Any) -> float:
+    return abs(complex(z))
 
 
 def exit_code_of(exc: BaseException | None) -> int:
@@ -153,7 +161,7 @@ class LiveStream:
         self._f: IO[str] | None = None
 
     # -- writing -----------------------------------------------------------------------------
-    def _write(self, rec: dict[str, Any], beat: bool = False) -> None:
+    def _write(self, rec: Record, beat: bool = False) -> None:
         line = json.dumps(rec, separators=(",", ":"), allow_nan=False)
         with self._lock:
             if self._f is None:
@@ -188,7 +196,7 @@ class LiveStream:
         self._k, self._n = points_done, points_planned
         self._write({"t": "start", "time": self._t0, "pid": os.getpid(), "file": self.run_name,
                      "kind": kind, "points_planned": points_planned, "points_done": points_done,
-                     "est_s": num(est_s), "locations": locations, "quality_min": QUALITY_MIN,
+                     "est_s": num(est_s), "locations": list[Json](locations), "quality_min": QUALITY_MIN,
                      "heartbeat_s": HEARTBEAT_S, "config": config})
         self._thread = threading.Thread(target=self._beat, name="labkit-live-heartbeat", daemon=True)
         self._thread.start()
@@ -200,7 +208,7 @@ class LiveStream:
 
     def event(self, text: str) -> None:
         t = time.perf_counter()
-        rec: dict[str, Any] = {"t": "event", "time": time.time(), "text": text}
+        rec: Record = {"t": "event", "time": time.time(), "text": text}
         if text.startswith("drive on"):
             rec["drive"] = True
         elif text.startswith("drive off"):
@@ -208,17 +216,17 @@ class LiveStream:
         self._write(rec)
         self.cost_s += time.perf_counter() - t
 
-    def point(self, index: int, rows: dict[str, Any], loc: dict[str, Any] | None, scope: Scope | None,
+    def point(self, index: int, rows: Mapping[str, object], loc: Mapping[str, object] | None, scope: Scope | None,
               *, drive_set_vpp: float | None = None, over_range: bool = False) -> None:
         """Write one finished point (``rows``: its ``/points`` row; ``loc``: its location rows)."""
         t = time.perf_counter()
         self._k += 1
         self._session += 1
         elapsed = time.time() - self._t0
-        rec: dict[str, Any] = {"t": "point", "time": time.time(), "k": self._k, "n": self._n, "index": int(index),
-                               "location": str(rows.get("location", "")), "status": str(rows.get("status", "")),
-                               "reason": str(rows.get("reason", "")), "elapsed_s": round(elapsed, 3),
-                               "remaining_s": round(elapsed / self._session * max(self._n - self._k, 0), 3)}
+        rec: Record = {"t": "point", "time": time.time(), "k": self._k, "n": self._n, "index": int(index),
+                       "location": str(rows.get("location", "")), "status": str(rows.get("status", "")),
+                       "reason": str(rows.get("reason", "")), "elapsed_s": round(elapsed, 3),
+                       "remaining_s": round(elapsed / self._session * max(self._n - self._k, 0), 3)}
         rec["freq_hz"] = num(rows.get("freq_hz", math.nan))
         if loc is not None:
             rec.update(_location_fields(loc, drive_set_vpp))
@@ -226,7 +234,7 @@ class LiveStream:
             rec.update(_shaker_fields(rows))
         if scope is not None:
             pct = {"drive": num(scope.drive_pct), "velocity": num(scope.velocity_pct)}
-            rec["pct_fs"] = pct
+            rec["pct_fs"] = {k: v for k, v in pct.items()}
             rec["over"] = {"drive": (pct["drive"] or 0) >= OVER_PCT,
                            "velocity": over_range or (pct["velocity"] or 0) >= OVER_PCT}
             rec["under"] = {k: v is not None and v < UNDER_PCT for k, v in pct.items()}
@@ -273,7 +281,7 @@ class LiveStream:
         return text or "stop requested"
 
 
-def _location_fields(loc: dict[str, Any], drive_set_vpp: float | None) -> dict[str, Any]:
+def _location_fields(loc: Mapping[str, object], drive_set_vpp: float | None) -> Record:
     import numpy as np
 
     f = np.asarray(loc["freq_hz"])
@@ -281,14 +289,14 @@ def _location_fields(loc: dict[str, Any], drive_set_vpp: float | None) -> dict[s
         h = np.asarray(loc["frf"])
         return {"freq_hz": [num(x) for x in f], "frf": [[num(x) for x in h.real], [num(x) for x in h.imag]],
                 "quality": [num(x) for x in np.asarray(loc["quality"])]}
-    out: dict[str, Any] = {"frf": _cplx(loc["frf"]), "quality": num(loc["quality"])}
+    out: Record = {"frf": _cplx(loc["frf"]), "quality": num(loc["quality"])}
     if "drive_v" in loc:
-        out["drive_vpp"] = num(2 * abs(complex(loc["drive_v"])))
+        out["drive_vpp"] = num(2 * _magnitude(loc["drive_v"]))
         out["drive_set_vpp"] = num(drive_set_vpp) if drive_set_vpp is not None else None
     return out
 
 
-def _shaker_fields(rows: dict[str, Any]) -> dict[str, Any]:
+def _shaker_fields(rows: Mapping[str, object]) -> Record:
     return {"tray_amp_um": num(rows["tray_amp_um"]), "tray_amp_request_um": num(rows["tray_amp_request_um"]),
             "drive_vpp": num(rows["drive_vpp"]), "drive_request_vpp": num(rows["drive_request_vpp"]),
             "transmissibility": _cplx(rows["transmissibility"]), "quality": num(rows["quality"]),
@@ -297,7 +305,7 @@ def _shaker_fields(rows: dict[str, Any]) -> dict[str, Any]:
 
 # -- reading ---------------------------------------------------------------------------------------
 def follow(path: str | Path, offset: int = 0, *, wait: bool = True, poll_s: float = 0.1,
-           timeout_s: float | None = None) -> Iterator[tuple[int, dict[str, Any]]]:
+           timeout_s: float | None = None) -> Iterator[tuple[int, Record]]:
     """Yield ``(offset after the line, record)`` from ``offset`` on; with ``wait``, follow the file
     until an ``end`` record (or ``timeout_s`` without a new line). Half-written last lines wait."""
     path = Path(path)
@@ -318,6 +326,8 @@ def follow(path: str | Path, offset: int = 0, *, wait: bool = True, poll_s: floa
             try:
                 rec = json.loads(line)
             except ValueError:
+                continue
+            if not isinstance(rec, dict):
                 continue
             yield offset, rec
             ended = rec.get("t") == "end"
@@ -351,16 +361,26 @@ def run_holder(run_path: str | Path) -> LockRecord | None:
     return holder(file_key(run_path))
 
 
-def _db(z: list[float | None]) -> str:
-    re_, im = (z[0] or 0.0), (z[1] or 0.0)
+def _db(z: Json) -> str:
+    re_, im = (_number(z[0]), _number(z[1])) if isinstance(z, list) and len(z) == 2 else (0.0, 0.0)
     mag = math.hypot(re_, im)
     return f"{20 * math.log10(mag):6.1f} dB {math.degrees(math.atan2(im, re_)):7.1f} deg" if mag > 0 else "   -inf dB"
 
 
-def format_record(rec: dict[str, Any]) -> str | None:
+def _number(v: Json) -> float:
+    """A number of a record (0 when it is null or not a number)."""
+    return float(v) if isinstance(v, (int, float)) else 0.0
+
+
+def _object(v: Json) -> dict[str, Json]:
+    """A JSON object of a record (empty when it is missing or not an object)."""
+    return v if isinstance(v, dict) else {}
+
+
+def format_record(rec: Record) -> str | None:
     """One console row for a record (``labkit watch``, and the run's console off a terminal); None for heartbeats."""
     t = rec.get("t")
-    stamp = time.strftime("%H:%M:%S", time.localtime(rec.get("time") or 0))
+    stamp = time.strftime("%H:%M:%S", time.localtime(_number(rec.get("time"))))
     if t == "start":
         return (f"{stamp} start {rec.get('file')}: {rec.get('kind')}, {rec.get('points_done')} of "
                 f"{rec.get('points_planned')} points done, pid {rec.get('pid')}")
@@ -378,25 +398,29 @@ def format_record(rec: dict[str, Any]) -> str | None:
         head += f" {f:9.2f} Hz"
     if rec.get("status") != "ok":
         return f"{head}  {rec.get('status')}: {rec.get('reason')}"
-    parts = [head]
+    return "  ".join([head, *_point_parts(rec)])
+
+
+def _point_parts(rec: Record) -> list[str]:
+    """The measured values of a good point's row: response, quality, range, and the flags."""
+    parts = []
     if "tray_amp_um" in rec:
         want = rec.get("tray_amp_request_um")
         parts.append(f"tray {rec['tray_amp_um'] or math.nan:.3g} um" + (f" (want {want:g})" if want else ""))
         parts.append(f"drive {rec.get('drive_vpp') or math.nan:.3g} Vpp")
         parts.append(f"T {_db(rec['transmissibility'])}")
-    elif isinstance(rec.get("frf"), list) and not isinstance(rec["frf"][0], list):
-        parts.append(f"|H| {_db(rec['frf'])}")
+    elif isinstance(frf := rec.get("frf"), list) and frf and not isinstance(frf[0], list):
+        parts.append(f"|H| {_db(frf)}")
         if rec.get("drive_vpp") is not None:
             parts.append(f"drive {rec['drive_vpp']:.3g} Vpp")
     q = rec.get("quality")
     if isinstance(q, (int, float)):
         parts.append(f"q {q:.3f}" + (" LOW" if q < QUALITY_MIN else ""))
-    pct = rec.get("pct_fs") or {}
+    pct = _object(rec.get("pct_fs"))
     if pct.get("velocity") is not None:
         parts.append(f"vel {pct['velocity']:.0f}% FS")
-    flags = [f"{k} OVER" for k, v in (rec.get("over") or {}).items() if v]
-    flags += [f"{k} under" for k, v in (rec.get("under") or {}).items() if v]
-    return "  ".join(parts + flags)
+    flags = [f"{k} OVER" for k, v in _object(rec.get("over")).items() if v]
+    return parts + flags + [f"{k} under" for k, v in _object(rec.get("under")).items() if v]
 
 
 #: False inside :func:`no_console_rows` (the demo and the sample data print their own stages)

@@ -13,17 +13,17 @@ from pathlib import Path
 from typing import Any
 
 from labkit.errors import ConfigError
-from labkit.tomlio import get_number
+from labkit.tomlio import MISSING, TomlValue, get_number
 
 __all__ = ["Table", "get_number"]
 
-_MISSING = object()
+_MISSING = MISSING
 
 
 class Table:
     """A view of one TOML table: ``data`` plus where it sits (``file``, dotted ``prefix``)."""
 
-    def __init__(self, data: dict[str, Any], file: str | Path | None, prefix: str = "") -> None:
+    def __init__(self, data: dict[str, TomlValue], file: str | Path | None, prefix: str = "") -> None:
         self.data = data
         self.file = None if file is None else str(file)
         self.prefix = prefix
@@ -52,9 +52,8 @@ class Table:
                minimum: float | None = None, maximum: float | None = None,
                exclusive_minimum: bool = False) -> float:
         """A finite number within the bounds (inf or nan never pass: a run would fail mid-way)."""
-        kw: dict[str, Any] = {} if default is _MISSING else {"default": default}
-        value = get_number(self.data, key, file=self.file, prefix=self.prefix, unit=unit,
-                           minimum=minimum, maximum=maximum, exclusive_minimum=exclusive_minimum, **kw)
+        value = get_number(self.data, key, file=self.file, prefix=self.prefix, unit=unit, default=default,
+                           minimum=minimum, maximum=maximum, exclusive_minimum=exclusive_minimum)
         if value is not None and key in self.data and not math.isfinite(value):
             raise self.error(key, f"not finite: {value!r}", "a finite number" + (f" in {unit}" if unit else ""))
         return value

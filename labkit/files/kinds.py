@@ -27,6 +27,8 @@ from labkit.files.base import (
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
+    from labkit.tomlio import TomlValue
+
 
 def _columns(g: Any, n: int | None = None) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     import h5py
@@ -69,6 +71,20 @@ class Track(LabFile):
     def t_s(self) -> np.ndarray:
         return self.columns["t_s"]
 
+    @property
+    def mm_per_px(self) -> float | None:
+        """The image scale the positions were converted with (None if the file does not say)."""
+        return _number(self.attrs.get("mm_per_px"))
+
+    @property
+    def lost_frames(self) -> int:
+        """Frames without a position (the file's ``lost_frames``, else the rows with no ``x_mm``)."""
+        n = _number(self.attrs.get("lost_frames"))
+        if n is not None:
+            return int(n)
+        x = self.columns.get("x_mm")
+        return 0 if x is None else int(np.count_nonzero(~np.isfinite(x)))
+
     def summary(self) -> TrackSummary:
         speed: float | str = self.mean_speed_mm_s
         ci: list[float] | str = list(self.speed_ci_mm_s)
@@ -76,7 +92,7 @@ class Track(LabFile):
             speed = ci = "not in this CSV (older labkit; the track's .h5 file holds it)"
         return {**super().summary(), "frames": int(self.t_s.size), "mean_speed_mm_s": speed,
                 "speed_ci_mm_s": ci, "source_video": self.source_video,
-                "mm_per_px": _number(self.attrs.get("mm_per_px"))}
+                "mm_per_px": self.mm_per_px}
 
     def to_xarray(self) -> xarray.Dataset:
         """Per-frame columns over ``t_s``; the smoothed path as ``smoothed_*`` over ``t_smoothed_s``."""
@@ -589,20 +605,24 @@ class ExperimentConfig(LabFile):
 
     experiment: str = "?"
     text: str = field(default="", repr=False)
-    table: dict[str, Any] = field(default_factory=dict, repr=False)
+    table: dict[str, TomlValue] = field(default_factory=dict, repr=False)
 
     @property
     def instruments(self) -> dict[str, str]:
         """Role -> model of the ``[instruments.<role>]`` tables."""
-        inst = self.table.get("instruments", {})
+        inst = self.table.get("instruments")
+        if not isinstance(inst, dict):
+            return {}
         return {k: str(v.get("model", "?")) for k, v in inst.items() if isinstance(v, dict)}
 
     def summary(self) -> ConfigSummary:
         out: ConfigSummary = {**super().summary(), "experiment": self.experiment, "instruments": self.instruments,
                               "tables": sorted(k for k, v in self.table.items() if isinstance(v, dict))}
         for key in SHOWN_TABLES:
-            if isinstance(self.table.get(key), dict):
-                out[key] = self.table[key]
+            if isinstance(shown := self.table.get(key), dict):
+                from labkit.jsonutil import to_jsonable
+
+                out[key] = to_jsonable(shown)
         return out
 
     def to_xarray(self) -> xarray.Dataset:
@@ -611,7 +631,7 @@ class ExperimentConfig(LabFile):
         return xr.Dataset(attrs={"kind": self.kind, "file": str(self.path), "config_toml": self.text})
 
 
-def read_config(path: Path, table: dict[str, Any], raw: str) -> ExperimentConfig:
+def read_config(path: Path, table: dict[str, TomlValue], raw: str) -> ExperimentConfig:
     shaker = any(k in table for k in ("grid", "shaker", "amplifier", "tray_control"))
     experiment = "shaker" if shaker else "inchip"
     return ExperimentConfig(path, f"config_{experiment}", 0, {}, {}, experiment, raw, table)

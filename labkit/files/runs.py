@@ -22,6 +22,8 @@ from labkit.files.base import FileSummary, Json, LabFile, column, json_attr, req
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
+    from labkit.tomlio import TomlValue
+
 #: run-file layouts this reader knows: 1 (no dimension scales), 2 (dimension scales, t_s in records)
 READS_SCHEMA = (1, 2)
 
@@ -98,7 +100,7 @@ class RunFile(LabFile):
 
     status: str = "?"
     config_toml: str = ""
-    config: dict[str, Any] = field(default_factory=dict, repr=False)
+    config: dict[str, TomlValue] = field(default_factory=dict, repr=False)
     instruments: dict[str, Instrument] = field(default_factory=dict, repr=False)
     points: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     events: dict[str, np.ndarray] = field(default_factory=dict, repr=False)

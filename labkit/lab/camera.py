@@ -35,11 +35,6 @@ class Recording:
     x_mm: np.ndarray
     heading_rad: np.ndarray
 
-    def as_dict(self) -> dict[str, Any]:
-        return {"path": self.path, "frames": self.frames, "timestamps_s": self.timestamps_s,
-                "speed_mm_s": self.speed_mm_s, "y_mm": self.y_mm, "x_mm": self.x_mm,
-                "heading_rad": self.heading_rad}
-
 
 def robot_path(sim: Any, t_s: np.ndarray, move_s: float = float("inf")
                ) -> tuple[np.ndarray, np.ndarray, float]:

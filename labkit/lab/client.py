@@ -10,9 +10,13 @@ import json
 import re
 import socket
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from labkit.errors import InstrumentError
+from labkit.jsonutil import Json
+
+if TYPE_CHECKING:
+    from labkit.lab.control import LabTruth
 
 _TCP = re.compile(r"^TCPIP\d*::([^:]+)::(\d+)::SOCKET$", re.IGNORECASE)
 
@@ -100,7 +104,7 @@ class LabControl:
     def setup(self) -> str:
         return self.query("LAB:SETUP?").lower()
 
-    def truth(self) -> dict[str, Any]:
+    def truth(self) -> LabTruth:
         return json.loads(self.query("LAB:TRUTH?"))
 
     def inject_fault(self, instrument: str, kind: str, after: int = 0, match: str | None = None,
@@ -109,7 +113,7 @@ class LabControl:
         self.write(cmd)
         self.check(cmd)
 
-    def record_video(self, path: str | Path, duration_s: float) -> dict[str, Any]:
+    def record_video(self, path: str | Path, duration_s: float) -> dict[str, Json]:
         """Film ``duration_s`` into ``path``; -> Camera dict. The lab films into its own folder
         (``CAM:DIR?``, on this machine); the clip is then moved to ``path``."""
         import shutil
@@ -128,7 +132,7 @@ class LabControl:
         shutil.move(str(folder / name), str(path))
         stamps = self.query("CAM:TIMESTAMPS?")
         times = [float(v) for v in stamps.split(",") if v.strip()]
-        return {"path": str(path), "frames": int(reply), "timestamps_s": times}
+        return {"path": str(path), "frames": int(reply), "timestamps_s": list[Json](times)}
 
     def close(self) -> None:
         try:
@@ -153,10 +157,10 @@ class LabCamera:
     def __init__(self, resource: str | LabControl, timeout_s: float = 5.0) -> None:
         self.control = resource if isinstance(resource, LabControl) else LabControl(resource, timeout_s)
 
-    def record(self, path: str | Path, duration_s: float) -> dict[str, Any]:
+    def record(self, path: str | Path, duration_s: float) -> dict[str, Json]:
         return self.control.record_video(path, duration_s)
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self) -> dict[str, Json]:
         return {"type": type(self).__name__}
 
     def read(self):  # pragma: no cover - documented limitation

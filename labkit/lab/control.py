@@ -22,18 +22,50 @@ from __future__ import annotations
 import json
 import threading
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypedDict
 
 from labkit import __version__
-from labkit.jsonutil import to_jsonable
+from labkit.jsonutil import Json, to_jsonable
 from labkit.lab.scpi import Call, ScpiError, SimScpiInstrument, fmt_num
+
+if TYPE_CHECKING:
+    from labkit.lab.camera import Recording
+
+
+class TetheredModes(TypedDict):
+    """The tethered robot's modes in the lab (what an in-chip sweep should find)."""
+
+    names: list[str]
+    freq_hz: list[float]
+    damping_ratio: list[float]
+
+
+class LabTruth(TypedDict):
+    """What the lab really is (``LAB:TRUTh?``, one JSON line): modes, mode shapes, chain, robot."""
+
+    setup: str
+    spot: str
+    seed: int
+    tethered_modes: TetheredModes
+    mode_shapes_mm_s_per_v: dict[str, list[float]]
+    frf_model: str
+    amplifier_gain_db: float
+    shaker_accel_m_s2_per_v: float
+    shaker_suspension_hz: float
+    shaker_suspension_damping_ratio: float
+    generator_source_ohm: float
+    vibrometer_full_scale_v: float
+    noise_v_rms: float
+    noise_mm_s_rms: float
+    scope_channels: dict[str, str]
+    robot: dict[str, Json] | None
 
 
 class Bench(Protocol):
     """What the control channel may do to the lab (the lab implements it; no import of the lab here)."""
 
     camera_fps: float
-    last_recording: dict[str, Any] | None
+    last_recording: Recording | None
     recordings_dir: Path
 
     @property
@@ -43,7 +75,7 @@ class Bench(Protocol):
     def setup(self) -> str: ...
 
     @property
-    def truth(self) -> dict[str, Any]: ...
+    def truth(self) -> LabTruth: ...
 
     def set_spot(self, spot: str) -> None: ...
 
@@ -56,7 +88,7 @@ class Bench(Protocol):
 
     def output_state(self, instrument: str = "funcgen", channel: int = 1) -> bool: ...
 
-    def record_video(self, path: str | Path, duration_s: float) -> dict[str, Any]: ...
+    def record_video(self, path: str | Path, duration_s: float) -> dict[str, Json]: ...
 
 
 def _unquote(text: str) -> str:
@@ -168,4 +200,4 @@ class SimLabControl(SimScpiInstrument):
         rec = self.lab.last_recording
         if rec is None:
             return ""
-        return ",".join(f"{t:.6f}" for t in rec["timestamps_s"])
+        return ",".join(f"{t:.6f}" for t in rec.timestamps_s)

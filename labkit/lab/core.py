@@ -25,14 +25,16 @@ import threading
 import time
 from collections import OrderedDict, deque
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from labkit.errors import ConfigError
+from labkit.jsonutil import Json
 from labkit.lab import camera
-from labkit.lab.control import SimLabControl
+from labkit.lab.control import LabTruth, SimLabControl
 from labkit.lab.funcgen import Drive, SimAgilent33220A, SimKeysight33500B, SimRigolDG1000Z
 from labkit.lab.miswire import Miswiring
 from labkit.lab.models import FUNCGEN_MODELS, SCOPE_MODELS, TWO_CHANNEL_SCOPES, VIBROMETER_MODELS
@@ -40,6 +42,10 @@ from labkit.lab.physics import SPOTS, ShakerChain, TetheredModel, simulate_linea
 from labkit.lab.scope import SimInfiniiVision, SimRigolDS1000Z
 from labkit.lab.transport import Fault, PtyServer, TcpServer
 from labkit.lab.vibrometer import FULL_SCALE_V, SimOFV3001, SimOFV5000
+
+if TYPE_CHECKING:
+    from labkit.lab.hislip import HislipServer
+    from labkit.lab.vxi11 import Vxi11Server
 
 SETUPS = ("inchip", "shaker")
 #: the lab's log keeps this many entries (the newest), each text at most LOG_TEXT_CHARS long
@@ -193,9 +199,10 @@ class VirtualLab:
         if self.params is not None:
             hip_hz = float(self.params.modal_freq_hz[0])
             hip_zeta = float(self.params.modal_damping_ratio[0])
-        kw: dict[str, Any] = {} if shapes_mm_s_per_v is None else {"shapes_mm_s_per_v": dict(shapes_mm_s_per_v)}
         self.model = TetheredModel(freq_hz=(hip_hz, float(tether_hz), float(knee_hz)),
-                                   damping_ratio=(hip_zeta, float(tether_damping), float(knee_damping)), **kw)
+                                   damping_ratio=(hip_zeta, float(tether_damping), float(knee_damping)))
+        if shapes_mm_s_per_v is not None:
+            self.model = replace(self.model, shapes_mm_s_per_v=dict(shapes_mm_s_per_v))
         self.chain = ShakerChain(amplifier_gain_db=float(amplifier_gain_db),
                                  accel_m_s2_per_v=float(shaker_accel_m_s2_per_v))
         self.noise_v_rms = float(noise_v_rms)
@@ -212,12 +219,12 @@ class VirtualLab:
         self.servers: dict[str, TcpServer | PtyServer] = {}
         #: VXI-11 servers of the generator and the scope (``vxi11=True``; needs root for port 111)
         self.vxi11 = bool(vxi11)
-        self.vxi11_servers: dict[str, Any] = {}
+        self.vxi11_servers: dict[str, Vxi11Server] = {}
         #: HiSLIP servers of the generator and the scope (``hislip=True``; ephemeral ports, no root)
         self.hislip = bool(hislip)
-        self.hislip_servers: dict[str, Any] = {}
+        self.hislip_servers: dict[str, HislipServer] = {}
         self.camera_fps = 30.0
-        self.last_recording: dict[str, Any] | None = None
+        self.last_recording: camera.Recording | None = None
         #: the only folder the camera writes to (``CAM:REC "<file name>"``); a fresh one per lab
         self.recordings_dir = Path(tempfile.mkdtemp(prefix="labkit-lab-camera-"))
 
@@ -288,8 +295,10 @@ class VirtualLab:
             with self.funcgen.lock:
                 self.funcgen._set_output(ch, False)
         self.scope.close()
-        for vx in [*self.vxi11_servers.values(), *self.hislip_servers.values()]:
+        for vx in self.vxi11_servers.values():
             vx.close()
+        for hs in self.hislip_servers.values():
+            hs.close()
         self.vxi11_servers, self.hislip_servers = {}, {}
         for server in self.servers.values():
             server._stop.set()   # every server winds down at once, then each is joined
@@ -369,7 +378,7 @@ class VirtualLab:
                 server.clear_faults()
 
     # -- the camera -----------------------------------------------------------------------------
-    def record_video(self, path: str | Path, duration_s: float) -> dict[str, Any]:
+    def record_video(self, path: str | Path, duration_s: float) -> dict[str, Json]:
         """Film ``duration_s`` of the robot at :attr:`camera_fps` to ``path``; keep it as :attr:`last_recording`.
 
         The lab hands the camera what it needs (the simulator's run for the
@@ -387,9 +396,9 @@ class VirtualLab:
         rec = camera.record(path, duration_s, fps=self.camera_fps, seed=self.seed, take=len(self.log),
                             sim=sim, shaking=shaker and drive.active(now),
                             move_s=drive.idle_after() - now if moving else float("inf"))
-        self.last_recording = rec.as_dict()
+        self.last_recording = rec
         self._log("camera", "state", f"recorded {rec.frames} frames to {rec.path} (speed {rec.speed_mm_s:.3f} mm/s)")
-        return {"path": rec.path, "frames": rec.frames, "timestamps_s": rec.timestamps_s}
+        return {"path": rec.path, "frames": rec.frames, "timestamps_s": list[Json](rec.timestamps_s)}
 
     # -- records --------------------------------------------------------------------------------
     def now_s(self) -> float:
@@ -440,7 +449,7 @@ class VirtualLab:
 
     # -- truth ----------------------------------------------------------------------------------
     @property
-    def truth(self) -> dict[str, Any]:
+    def truth(self) -> LabTruth:
         """What the lab really is: modes, mode shapes, chain, robot parameters."""
         return {
             "setup": self._setup,

@@ -170,6 +170,91 @@ def _coverage(u: float, v: float, heading: float, polys_px: list[np.ndarray],
     return patch, (r0, c0)
 
 
+def _polygons_px(length_mm: float, width_mm: float, mm_per_px: float) -> list[np.ndarray]:
+    """The robot's polygons in pixels, each edge pulled in by half a sub-sample.
+
+    fillPoly also fills sub-samples whose centres lie on an edge: pulling every edge in by half a
+    sub-sample keeps the rasterised area (and the body's length) exact, not 1/16 px too big.
+    """
+    shrink = 0.5 / SUPERSAMPLE
+    out = []
+    for p in robot_polygons_mm(length_mm, width_mm):
+        q = p / mm_per_px
+        out.append(q - shrink * np.sign(q - q.mean(axis=0)))
+    return out
+
+
+def _background(shape: tuple[int, int], pad: int, texture: float,
+                tray_rect_px: tuple[float, float, float, float] | None, rng: np.random.Generator) -> np.ndarray:
+    """The tray's reflectance over ``shape`` (the frame plus ``pad`` on each side): texture and rim."""
+    refl = _texture_field(shape, texture, rng)
+    if tray_rect_px is None:
+        return refl
+    u0, v0, u1, v1 = tray_rect_px
+    # anti-aliased inner edge: area coverage of the rectangle per pixel
+    cols = np.arange(shape[1]) - pad
+    rows = np.arange(shape[0]) - pad
+    cu = np.clip(np.minimum(cols + 0.5, u1) - np.maximum(cols - 0.5, u0), 0, 1)
+    cv_ = np.clip(np.minimum(rows + 0.5, v1) - np.maximum(rows - 0.5, v0), 0, 1)
+    inside = np.outer(cv_, cu).astype(np.float32)
+    return refl * inside + RIM_REFLECTANCE * (1 - inside)
+
+
+def _shifted(refl: np.ndarray, jit: np.ndarray, pad: int, hw: tuple[int, int]) -> np.ndarray:
+    """The frame's view of the padded background, shifted by the jitter ``jit`` (u, v) in pixels."""
+    import cv2
+
+    h, w = hw
+    if pad and (jit != 0).any():
+        # shift the scene: output(p) = refl(p - jit) in frame coordinates
+        m = np.array([[1, 0, pad - jit[0]], [0, 1, pad - jit[1]]], np.float32)
+        return cv2.warpAffine(refl, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                              borderMode=cv2.BORDER_REFLECT)
+    return refl[pad:pad + h, pad:pad + w].copy()
+
+
+def _draw_robot(scene: np.ndarray, cov: tuple[np.ndarray, tuple[int, int]] | None) -> None:
+    """Blend the robot's coverage patch (at its top-left corner ``(r0, c0)``) into ``scene``, in place."""
+    if cov is None:
+        return
+    h, w = scene.shape
+    patch, (r0, c0) = cov
+    pr0, pc0 = max(r0, 0), max(c0, 0)
+    pr1, pc1 = min(r0 + patch.shape[0], h), min(c0 + patch.shape[1], w)
+    c = patch[pr0 - r0:pr1 - r0, pc0 - c0:pc1 - c0]
+    sub = scene[pr0:pr1, pc0:pc1]
+    scene[pr0:pr1, pc0:pc1] = sub * (1 - c) + ROBOT_REFLECTANCE * c
+
+
+def _expose(img: np.ndarray, kernel: np.ndarray | None, noise: float, rng: np.random.Generator) -> np.ndarray:
+    """The camera's frame of the lit scene ``img``: vibration blur, sensor noise, 8-bit grey levels."""
+    import cv2
+
+    if kernel is not None:
+        img = cv2.filter2D(img, -1, kernel, borderType=cv2.BORDER_REFLECT)
+    if noise > 0:
+        img = img + rng.normal(0, noise, img.shape).astype(np.float32)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+@dataclass(frozen=True)
+class _Lighting:
+    """The illumination over the clip: a gain ``1 + a sin(phase)`` and a drifting left-right gradient."""
+
+    t0_s: float
+    span_s: float
+    drift: float
+    width_px: int
+
+    def at(self, t_s: float) -> np.ndarray:
+        """The light (grey level per unit reflectance) of each column at time ``t_s``, shape (1, width)."""
+        uu = (np.arange(self.width_px, dtype=np.float32) - self.width_px / 2) / self.width_px
+        phase = 2 * np.pi * (t_s - self.t0_s) / self.span_s
+        gain = 1 + self.drift * np.sin(phase)
+        grad = 0.5 * self.drift * np.sin(0.5 * phase + 0.7)
+        return (gain + grad * uu)[None, :] * TEFLON_LEVEL
+
+
 def render_frames(y_mm: ArrayLike, x_mm: ArrayLike | None, heading_rad: ArrayLike,
                   t_s: ArrayLike, *, size_px: tuple[int, int] = (640, 480), mm_per_px: float = 0.05,
                   noise: float = 2.0, blur_px: float = 0.0, blur_angle_rad: float = 0.0,
@@ -222,8 +307,6 @@ def render_frames(y_mm: ArrayLike, x_mm: ArrayLike | None, heading_rad: ArrayLik
         ``(N, height, width)`` uint8 grey frames; with ``return_truth`` the pair
         ``(frames, truth)``.
     """
-    import cv2
-
     t = np.asarray(t_s, float)
     n = t.size
     y = np.broadcast_to(np.asarray(y_mm, float), (n,))
@@ -235,73 +318,31 @@ def render_frames(y_mm: ArrayLike, x_mm: ArrayLike | None, heading_rad: ArrayLik
     if mm_per_px <= 0:
         raise ValueError("render_frames: mm_per_px must be > 0")
     rng = np.random.default_rng(seed)
-    if origin_px is None:
-        origin_px = ((w - 1) / 2 - (x.min() + x.max()) / 2 / mm_per_px,
-                     (h - 1) / 2 + (y.min() + y.max()) / 2 / mm_per_px)
-    u_world = origin_px[0] + x / mm_per_px
-    v_world = origin_px[1] - y / mm_per_px
+    if origin_px is None:       # centre the path in the frame
+        origin_px = ((w - 1 - (x.min() + x.max()) / mm_per_px) / 2, (h - 1 + (y.min() + y.max()) / mm_per_px) / 2)
+    u_world, v_world = origin_px[0] + x / mm_per_px, origin_px[1] - y / mm_per_px
     jit = jitter_px * np.sin(rng.uniform(0, 2 * np.pi, (n, 2))) if jitter_px > 0 else np.zeros((n, 2))
     u, v = u_world + jit[:, 0], v_world + jit[:, 1]
 
-    # fillPoly also fills sub-samples whose centres lie on an edge: pull every edge in by half a
-    # sub-sample so the rasterised area (and the body's length) is exact, not 1/16 px too big
-    shrink = 0.5 / SUPERSAMPLE
-    polys_px = []
-    for p in robot_polygons_mm(length_mm, width_mm):
-        q = p / mm_per_px
-        polys_px.append(q - shrink * np.sign(q - q.mean(axis=0)))
+    polys_px = _polygons_px(length_mm, width_mm, mm_per_px)
     # background reflectance (texture and rim), rendered with a margin so jitter shifts stay filled
     pad = int(np.ceil(jitter_px)) + 2
-    refl = _texture_field((h + 2 * pad, w + 2 * pad), texture, rng)
-    if tray_rect_px is not None:
-        u0, v0, u1, v1 = tray_rect_px
-        inside = np.zeros((h + 2 * pad, w + 2 * pad), np.float32)
-        # anti-aliased inner edge: area coverage of the rectangle per pixel
-        cols = np.arange(w + 2 * pad) - pad
-        rows = np.arange(h + 2 * pad) - pad
-        cu = np.clip(np.minimum(cols + 0.5, u1) - np.maximum(cols - 0.5, u0), 0, 1)
-        cv_ = np.clip(np.minimum(rows + 0.5, v1) - np.maximum(rows - 0.5, v0), 0, 1)
-        inside[:] = np.outer(cv_, cu)
-        refl = refl * inside + RIM_REFLECTANCE * (1 - inside)
+    refl = _background((h + 2 * pad, w + 2 * pad), pad, texture, tray_rect_px, rng)
     kernel = _vibration_kernel(blur_px, blur_angle_rad)
-    span = max(t[-1] - t[0], 1e-9)
-    uu = (np.arange(w, dtype=np.float32) - w / 2) / w
     hidden = np.zeros(n, bool)
     for t0, t1 in occlusion or ():
         hidden |= (t >= t0) & (t <= t1)
+    light = _Lighting(t[0], max(t[-1] - t[0], 1e-9), lighting_drift, w)
 
     frames = np.empty((n, h, w), np.uint8)
     whole = np.zeros(n, bool)
     half_diag = np.hypot(length_mm / 2, width_mm / 2 + _LEG_OUT_MM) / mm_per_px
     for k in range(n):
-        if pad and (jit[k] != 0).any():
-            # shift the scene: output(p) = refl(p - jit) in frame coordinates
-            m = np.array([[1, 0, pad - jit[k, 0]], [0, 1, pad - jit[k, 1]]], np.float32)
-            bg = cv2.warpAffine(refl, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                borderMode=cv2.BORDER_REFLECT)
-        else:
-            bg = refl[pad:pad + h, pad:pad + w].copy()
-        scene = bg
+        scene = _shifted(refl, jit[k], pad, (h, w))
         if not hidden[k]:
-            cov = _coverage(u[k], v[k], hd[k], polys_px, (h, w))
-            if cov is not None:
-                patch, (r0, c0) = cov
-                pr0, pc0 = max(r0, 0), max(c0, 0)
-                pr1, pc1 = min(r0 + patch.shape[0], h), min(c0 + patch.shape[1], w)
-                c = patch[pr0 - r0:pr1 - r0, pc0 - c0:pc1 - c0]
-                sub = scene[pr0:pr1, pc0:pc1]
-                scene[pr0:pr1, pc0:pc1] = sub * (1 - c) + ROBOT_REFLECTANCE * c
+            _draw_robot(scene, _coverage(u[k], v[k], hd[k], polys_px, (h, w)))
             whole[k] = (half_diag + 1 < u[k] < w - 2 - half_diag) and (half_diag + 1 < v[k] < h - 2 - half_diag)
-        phase = 2 * np.pi * (t[k] - t[0]) / span
-        gain = 1 + lighting_drift * np.sin(phase)
-        grad = 0.5 * lighting_drift * np.sin(0.5 * phase + 0.7)
-        light = (gain + grad * uu)[None, :] * TEFLON_LEVEL
-        img = scene * light
-        if kernel is not None:
-            img = cv2.filter2D(img, -1, kernel, borderType=cv2.BORDER_REFLECT)
-        if noise > 0:
-            img = img + rng.normal(0, noise, img.shape).astype(np.float32)
-        frames[k] = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        frames[k] = _expose(scene * light.at(t[k]), kernel, noise, rng)
 
     if not return_truth:
         return frames

@@ -110,32 +110,36 @@ class SimOFV5000(_Controller):
         verb, dev, idx, prop = parts[0], parts[1], int(parts[2]), parts[3]
         key = (dev, idx, prop)
         if verb == "Get" and len(parts) == 4:
-            if key == ("VeloDec", 1, "Range"):
-                return range_text(self.scale_mm_s_per_v)
-            if key == ("VeloDec", 1, "OverRange"):
-                return "1" if self.over_range() else "0"
-            return self.props.get(key)
+            return self._get(key)
         if verb == "GetDevInfo" and len(parts) == 4:
             if key in self.allowed:
                 return ",".join(self.allowed[key])
-            if key in self.props:
-                return self.props[key]
-            return "Not Available"
+            return self.props.get(key, "Not Available")
         if verb == "Set" and len(parts) == 5:
-            value = parts[4]
-            if key == ("VeloDec", 1, "Range") and self.range_locked:
-                return None
-            if key == ("VeloDec", 1, "Range"):
-                for r in RANGES_MM_S_PER_V:
-                    if value.lower() == range_text(r).lower():
-                        self.scale_mm_s_per_v = r
-                        self.clipped = False
-                return None
-            if key in self.allowed and value not in self.allowed[key]:
-                return None      # invalid settings are ignored silently
-            if key in self.props:
-                self.props[key] = value
+            self._set(key, parts[4])
         return None
+
+    def _get(self, key: tuple[str, int, str]) -> str | None:
+        if key == ("VeloDec", 1, "Range"):
+            return range_text(self.scale_mm_s_per_v)
+        if key == ("VeloDec", 1, "OverRange"):
+            return "1" if self.over_range() else "0"
+        return self.props.get(key)
+
+    def _set(self, key: tuple[str, int, str], value: str) -> None:
+        """A setting; a locked range, an invalid value and an unknown property are ignored silently."""
+        if key == ("VeloDec", 1, "Range"):
+            if self.range_locked:
+                return
+            for r in RANGES_MM_S_PER_V:
+                if value.lower() == range_text(r).lower():
+                    self.scale_mm_s_per_v = r
+                    self.clipped = False
+            return
+        if key in self.allowed and value not in self.allowed[key]:
+            return      # invalid settings are ignored silently
+        if key in self.props:
+            self.props[key] = value
 
 
 #: OFV-3001 with an OVD-01 decoder: range number -> scale factor, mm/s per V (docs/instruments.md)

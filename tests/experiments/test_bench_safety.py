@@ -243,6 +243,9 @@ def _shaker_cfg(tmp_path: Path, lab: VirtualLab, grid: str, extra: str = "") -> 
     # 2 Vpp at 10 Hz with the declared sensitivity: far beyond the stroke
     ("freq_hz = [10.0]\ndrive_vpp = [2.0]", "accel_m_s2_per_v = 20.0", "grid.drive_vpp[0] at grid.freq_hz[0]",
      "predicted to move the tray"),
+    # 50 um asked of the tray at 5 kHz (within the interlock's 60 um): beyond the 4809's force
+    ("freq_hz = [5000.0]\ntray_amp_um = [50.0]", "", "grid.tray_amp_um[0] at grid.freq_hz[0]",
+     "over the 4809 force limit"),
 ])
 def test_shaker_limits_refused_before_any_command(tmp_path, lab, grid, extra, key, words):
     cfg = _shaker_cfg(tmp_path, lab, grid, extra)

@@ -113,6 +113,20 @@ def test_fit_file_names_modes_locations_and_covariance_axes():
     assert "location" not in labkit.open(path).groups["inchip"].modes
 
 
+def test_a_track_says_its_scale_and_lost_frames_from_the_h5_and_from_the_csv(tmp_path):
+    """The one track reader: the .h5's lost_frames and mm_per_px attributes, read by h5py here;
+    a CSV without them counts the rows with no position (a lost frame's cells are empty)."""
+    h5 = REPO / "sample_data" / "shaker_240hz_track.h5"
+    track = labkit.open(h5)
+    with h5py.File(h5) as f:
+        assert track.lost_frames == int(f.attrs["lost_frames"]) and track.mm_per_px == float(f.attrs["mm_per_px"])
+    p = tmp_path / "t.csv"
+    p.write_text("# labkit track of v.mkv; mm_per_px=0.05; quality: 0 ok, 1 degraded, 2 lost\n"
+                 "t_s,x_mm,y_mm,quality\n0,1,2,0\n0.1,,,2\n0.2,1,3.87,0\n0.3,,,2\n")
+    csv = labkit.open(p)
+    assert (csv.kind, csv.lost_frames, csv.mm_per_px) == ("track_csv", 2, 0.05)
+
+
 def test_frequency_and_time_are_coordinates_in_xarray():
     """The two the issue names: freq_hz of an FRF, t_s of a record and of a track."""
     with xr.open_dataset(SAMPLE / "inchip_run.h5", engine="h5netcdf", group="locations/knee") as ds:

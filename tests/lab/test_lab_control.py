@@ -109,7 +109,7 @@ def test_camera_records_a_readable_video(lab, tmp_path):
     grey = frames[0].mean(axis=2)
     assert grey.min() < 100 < grey.max()           # a dark chip on the light tray
     # the slow turn: the heading changed over the clip
-    hd = lab.last_recording["heading_rad"]
+    hd = lab.last_recording.heading_rad
     assert hd[-1] - hd[0] == pytest.approx(np.deg2rad(1.5) * (info["timestamps_s"][-1]), rel=0.05, abs=0.01)
 
 
@@ -181,14 +181,14 @@ def test_camera_sees_the_robot_walk_during_a_sine_burst_only(lab, raw, tmp_path)
     vpp = 2 * amp_um / lab.chain.tray_amp_um(freq_hz, 1.0)
     drive_sine(fg, freq_hz, vpp)
     lab.record_video(tmp_path / "sine.avi", 0.5)
-    walking = lab.last_recording["speed_mm_s"]
+    walking = lab.last_recording.speed_mm_s
     assert walking != 0.0
     assert fg.query("SOUR1:BURS:MODE TRIG;NCYC 2400;STAT ON;:TRIG1:SOUR BUS;*OPC?") == "1"   # 10 s bursts
     lab.record_video(tmp_path / "armed.avi", 0.5)
-    assert lab.last_recording["speed_mm_s"] == 0.0                     # no trigger yet: no drive
+    assert lab.last_recording.speed_mm_s == 0.0                     # no trigger yet: no drive
     assert fg.query("*TRG;*OPC?") == "1"
     lab.record_video(tmp_path / "burst.avi", 0.5)
-    assert lab.last_recording["speed_mm_s"] == walking                 # inside the burst: as the sine
+    assert lab.last_recording.speed_mm_s == walking                 # inside the burst: as the sine
 
 
 def test_cam_rec_writes_only_inside_the_labs_folder_and_leaves_the_channel_free(lab, raw, tmp_path):

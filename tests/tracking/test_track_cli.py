@@ -40,9 +40,9 @@ def test_track_cli_writes_everything(video_dir, tmp_path, cli):
         assert f.attrs["mm_per_px"] == MM_PER_PX and f.attrs["mm_per_px_std"] == 0.0
         assert int(np.sum(f["quality"][()] == 2)) == lost
         assert np.isnan(f["x_mm"][()][~truth.visible]).all()
-    from labkit.analysis.tracking.output import load_track_h5
-    back = load_track_h5(out)
-    assert back.lost_frames == lost and back.mm_per_px == MM_PER_PX
+    import labkit
+    back = labkit.open(out)
+    assert back.kind == "track" and back.lost_frames == lost and back.mm_per_px == MM_PER_PX
     lines = (tmp_path / "track.csv").read_text().splitlines()
     assert lines[1].startswith("t_s,x_mm,y_mm,heading_rad,quality") and len(lines) == 62
     png = cv2.imread(str(tmp_path / "track.png"))
