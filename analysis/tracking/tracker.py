@@ -5,8 +5,9 @@ Method, per frame (the functions' docstrings say why):
 1. Before the first frame, the static scene is modelled from 15 frames spread
    over the video (:func:`labkit.analysis.tracking.measure.background_model`):
    the tray's rim (dark, in every sample, reaching the border), static dark
-   objects (dark in every sample while the tray around them is dark in few:
-   dust, however large, is never the robot), the flat field (ring light shape,
+   objects (dark in every sample, not moving, while the tray around them is
+   dark in few: dust, however large, is never the robot; a robot that walks
+   even a few pixels over the clip moves between the samples), the flat field (ring light shape,
    Teflon texture) and the pixel noise. The contrast threshold is 5 noise
    sigmas (at least 4 %) unless ``min_contrast`` is given.
 2. A window around the predicted position (the whole region of interest when
@@ -208,6 +209,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     shape_ref: tuple[float, float] | None = None
     shape_spread: tuple[float, ...] = (0.0, 0.0)
     unlike = 0
+    on_static = 0      # found frames touching a never-search region (static dust, the rim)
     area_hist: list[float] = []
     area_ref = expected_area_px
     area_lo, area_hi = 0.8, 1.25     # a whole robot's area relative to its reference (widened for a soft body)
@@ -287,6 +289,7 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                 vel = (0.0, 0.0)
         else:
             q = QUALITY_OK
+            on_static += int(blob.masked)
             if blob.border or (area_ref and not area_lo < blob.area / area_ref < area_hi):
                 q = QUALITY_DEGRADED
             elif blob.masked and cov_hist and abs(blob.coverage / float(np.median(cov_hist[-25:])) - 1) > \
@@ -367,7 +370,8 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
                                if lengths_a.size > 1 else float("nan")),
                 n_length=int(lengths_a.size), best_contrast=finder.best_contrast,
                 robot_contrast=float(np.median(contrasts)) if contrasts else float("nan"),
-                ambiguous=finder.ambiguous, jumps=jumps, unlike=unlike, min_contrast=seg.min_contrast, noise=seg.noise)
+                ambiguous=finder.ambiguous, jumps=jumps, unlike=unlike, on_static=on_static,
+                min_contrast=seg.min_contrast, noise=seg.noise)
 
 
 def _log_spread(values: list[float]) -> float:
@@ -562,9 +566,10 @@ def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path 
                   size: tuple[int, int],
                   roi: tuple[int, int, int, int] | None, valid: np.ndarray | None, seg: Segmentation,
                   margin_px: int, expected: float | None, vmax: float | None, scale: Scale | None,
-                  length_mm: float | None) -> dict | None:
+                  length_mm: float | None, area_mm2: float | None) -> dict | None:
     """Track again with static objects searchable (and no flat field, which holds them); the result
-    only if a robot-sized, robot-long object was found in most frames."""
+    only if an object shaped like the declared robot was found in most frames: with a scale, of
+    its area and length; without one, of its proportions (area / length squared)."""
     from labkit.analysis.tracking.video_io import iter_frames, open_source
 
     cap, info = open_source(source, fps=fps, timestamps=timestamps, bayer=bayer)
@@ -578,11 +583,15 @@ def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path 
         return None
     area = float(np.median(raw["area_px"][found]))
     length = float(raw["length_px"])
-    # the size and the length at the known scale (the shape alone does not tell a chip from a speck)
-    if scale is None or expected is None or length_mm is None:
-        return None
-    ok = 0.75 < area / expected < 1.33 and abs(length * scale.mm_per_px / length_mm - 1) < 0.12
-    return raw if ok else None
+    if length_mm is None or area_mm2 is None:
+        return None         # nothing declared ("learn"): a static object is never the robot
+    if scale is None:
+        # no scale: the outline's proportions (area over length squared, the same at any scale)
+        # must be the declared robot's; a round speck or a thin fibre is not
+        return raw if 0.75 < (area / length ** 2) / (area_mm2 / length_mm ** 2) < 1.33 else None
+    # the size and the length at the known scale
+    ok = 0.75 < area / expected < 1.33 if expected else True
+    return raw if ok and abs(length * scale.mm_per_px / length_mm - 1) < 0.12 else None
 
 
 def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | None = None,
@@ -686,16 +695,25 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         cap.release()
         if spool is not None:
             spool.close()
-    if (np.all(raw["quality"] == QUALITY_LOST) and static is not None and static.object_boxes
-            and scale is not None and raw["t_s"].size):
-        # nothing moved: a static object may still be the robot vibrating in place (a drive that
-        # does not make it walk). Only an object of the robot's size and length counts, never dust.
+    found = int(np.sum(raw["quality"] != QUALITY_LOST))
+    if (static is not None and static.object_boxes and raw["t_s"].size
+            and (found < 0.5 * raw["t_s"].size or raw["on_static"] > 0.5 * found)):
+        # nothing (or little) moved, or what was found clings to a static object (a piece of it
+        # sticking out of its mask): a static object may still be the robot vibrating in place (a
+        # drive that does not make it walk). Only an object shaped like the declared robot counts,
+        # never dust, and only if it is found in more frames.
         still = _static_robot(source, fps, timestamps, bayer, (W, H), roi_t if roi is not None else None,
-                              scene.valid_with_objects, seg, margin_px, expected, vmax, scale, size.length_mm)
-        if still is not None:
+                              scene.valid_with_objects, seg, margin_px, expected, vmax, scale, size.length_mm,
+                              size.area_mm2)
+        if still is not None and np.sum(still["quality"] != QUALITY_LOST) >= found:
             raw = still
-            warnings.append("the robot did not move: the only robot-like object is static (its size and length "
-                            "match the robot's at this scale); its speed is ~0, not dust's")
+            if len(static.object_boxes) == 1:       # the one static object set aside is the robot
+                warnings = [w for w in warnings if not w.startswith("1 static dark object(s) set aside")]
+            warnings.append("the robot hardly moved: it was set aside as a static object at first, and is "
+                            "tracked as the robot because its "
+                            + ("size and length match the robot's at this scale" if scale is not None else
+                               "proportions match the declared robot's") + " (a still robot's speed is ~0, not "
+                            "dust's)")
     if raw["t_s"].size == 0:
         if info.undecodable:
             raise InputError(f"none of the {info.undecodable} frames could be decoded", file=source)
@@ -723,7 +741,7 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
             boxes = "; ".join(",".join(str(v) for v in b) for b in static.object_boxes[:2])
             what = (f"only {len(static.object_boxes)} static dark object(s) (never moving: dust, or a robot that "
                     f"never moved) at x,y,w,h {boxes} were found and set aside"
-                    f"{'' if scale is not None else ' (with --mm-per-px a robot that never moved is told from dust)'}"
+                    f" (none of them shaped like the declared robot; --robot-size-mm L,W declares it)"
                     f"; otherwise {what}")
         raise InputError(f"no robot found in any of {t_s.size} frames: {what}", file=source,
                          expected="a chip darker than the tray that moves (see --preview FRAME)")
