@@ -10,16 +10,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+_LEVELS = np.arange(256, dtype=np.float64)
+
 
 def _otsu(hist: np.ndarray) -> tuple[int, float, float]:
     """Otsu threshold of a 256-bin histogram; returns (threshold, dark mean, light mean)."""
     p = hist.astype(np.float64).ravel()
     tot = p.sum()
     omega = np.cumsum(p)
-    mu = np.cumsum(p * np.arange(256))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sb = (mu[-1] * omega - mu * tot) ** 2 / (omega * (tot - omega))
-    sb[~np.isfinite(sb)] = -1
+    mu = np.cumsum(p * _LEVELS)
+    denom = omega * (tot - omega)
+    sb = np.full(256, -1.0)
+    np.divide((mu[-1] * omega - mu * tot) ** 2, denom, out=sb, where=denom > 0)   # one class empty: -1
     k = int(np.argmax(sb))
     if sb[k] <= 0:
         return k, float("nan"), float("nan")
@@ -278,10 +280,9 @@ class _Finder:
         spread = np.sqrt(max((mr["mu20"] + mr["mu02"]) / n, 1e-9))
         coef = np.array([mf["m00"] / n, 0.0, 0.0])
         if off < 0.1 * spread:
-            try:
-                coef = np.linalg.solve(ata, atb)
-            except np.linalg.LinAlgError:
-                pass
+            solved, sol = cv2.solve(ata, atb.reshape(3, 1), flags=cv2.DECOMP_LU)   # numpy's costs 10x more
+            if solved:
+                coef = sol.ravel()
         hh, ww = win.shape
         uu = np.arange(ww, dtype=np.float32)
         vv = np.arange(hh, dtype=np.float32)
@@ -327,8 +328,12 @@ def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> 
     move it.
     """
     vv, uu = np.nonzero(weights != 0)
-    wt = weights[vv, uu].astype(np.float64)
-    s = (uu - cu) * np.cos(theta) + (vv - cv_) * np.sin(theta)
+    wt = np.tile(weights[vv, uu].astype(np.float64) / 4, 4)
+    # each pixel as four quarter-pixel samples: along an image axis the centres alone would
+    # project onto whole pixels only, leaving every other half-pixel bin empty (a -4 % length)
+    c, sn = np.cos(theta), np.sin(theta)
+    s0 = (uu - cu) * c + (vv - cv_) * sn
+    s = np.concatenate([s0 + 0.25 * (du * c + dv * sn) for du, dv in ((-1, -1), (1, -1), (-1, 1), (1, 1))])
     binw = 0.5
     lo = np.floor(s.min() / binw) - 2
     idx = (np.floor(s / binw) - lo).astype(int)
@@ -343,8 +348,7 @@ def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> 
         if sel.sum() < 3:
             return float("nan")
         level = np.median(prof[sel])
-        order = np.argsort(sign * centres)
-        c_sorted, p_sorted = sign * centres[order], prof[order]
+        c_sorted, p_sorted = sign * centres[::sign], prof[::sign]    # centres increase: sorted by slicing
         beyond = np.flatnonzero((c_sorted > 0.9 * half_len) & (p_sorted < 0.5 * level))
         if beyond.size == 0:
             return float("nan")
@@ -385,7 +389,7 @@ class StaticScene:
 
 def background_model(samples: list[np.ndarray], seg: Segmentation | None = None, grow_px: int = 8,
                      dark_ratio: float = 0.6) -> StaticScene:
-    """Static structure from frames spread over the video.
+    """Static structure from frames spread over the video (in time order).
 
     Each sample is divided by its own smooth background (:func:`smooth_background`:
     the ring light's unevenness and the frame's flicker go). Then:
@@ -395,31 +399,48 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     * dark = darker than the tray by more than the segmentation's contrast
       threshold (or 6 noise sigmas while that is not known);
     * dark in *every* sample and reaching the frame's border: the tray's rim,
-      masked (a robot touching it must not merge with it);
-    * dark in every sample inside the frame, robot-sized, clearly dark (by at
-      least 15 % and 3 thresholds: the tray's mottling is not), while the tray
-      around it is dark in under a quarter of the samples on average: a static
-      object (dust, a scratch): masked. The robot passing by or touching it
-      darkens its surroundings in only a few samples; a robot that moves even
-      slowly darkens them in many (its samples overlap), so it is never taken
-      for dust; a robot that never moves at all cannot be told from dust and is
-      masked too (the tracker then says so);
+      masked (a robot touching it must not merge with it) (:func:`_rim`);
+    * dark in every sample inside the frame, robot-sized and clearly dark, not
+      moving and with the tray around it rarely dark: a static object (dust, a
+      scratch), masked (:func:`static_objects`). A robot that moves even a few
+      pixels over the clip is never taken for dust;
     * the flat field is the static scene's brightness (ring light, texture,
-      rim, dust), relative to its median: the per-pixel mean of the samples
-      (scaled for flicker) where nothing moving is dark within ``grow_px``;
-      where the robot covered a pixel in every sample, the smooth background
-      of the samples' mean. Dividing a frame by it leaves only what moves.
+      rim, dust), relative to its median (:func:`_flat_field`). Dividing a
+      frame by it leaves only what moves.
     """
-    import cv2
-
     if len(samples) < 5:
         return StaticScene(None, None, float("nan"), None, [], len(samples))
     h, w = samples[0].shape
     if seg is None:
         seg = Segmentation.for_frame(w, h, None, None)
-    # the rim: dark (< dark_ratio of the tray's level) in every sample and reaching the border;
-    # each sample relative to its bright tray (lighting drift); the per-pixel maximum removes
-    # anything that moves
+    rim = _rim(samples, dark_ratio)
+    rim_g = _dilate(rim.view(np.uint8), grow_px) if rim.any() else np.zeros((h, w), np.uint8)
+    # smaller things relative to the local tray (smooth background: ring light, flicker)
+    ratios = [seg.ratio(s) for s in samples]
+    noise = _pixel_noise(ratios[0], ratios[len(ratios) // 2])
+    thr = seg.min_contrast if not seg.auto else max(6 * noise, 0.04)
+    rim_keep = np.asarray(1 - rim_g, np.uint8)
+    objects, boxes = static_objects(ratios, thr, seg.body_width_px, rim_keep)
+    ov_m, ov_boxes = burnt_in_overlays(ratios, thr, seg.body_width_px, rim_keep)
+    static = rim | (objects > 0) | (ov_m if ov_m is not None else False)
+    # what moves is judged at a higher darkness than the noise (texture dimples are static and must
+    # stay in the flat field; a robot's blurred edge below it is covered by the growth)
+    thr_b = max(thr, min(0.12, 0.5 * (seg.min_contrast if not seg.auto else 0.24)))
+    flat = _flat_field(samples, ratios, static, rim, FlatSettings(thr_b, grow_px, seg.body_width_px))
+    rim_m = _dilate(rim.view(np.uint8), 1).astype(bool) if rim.any() else None
+    # static objects grown by the measuring band, so the robot passing by is cut off them
+    obj_m = _dilate(objects, 3).astype(bool) if boxes else None
+    return StaticScene(rim_m, flat, noise, obj_m, boxes, len(samples), ov_m, ov_boxes)
+
+
+def _rim(samples: list[np.ndarray], dark_ratio: float) -> np.ndarray:
+    """The tray's rim: dark (< ``dark_ratio`` of the tray's level) in every sample and reaching the border.
+
+    Each sample is taken relative to its bright tray (lighting drift); the per-pixel maximum
+    removes anything that moves."""
+    import cv2
+
+    h, w = samples[0].shape
     peak = None
     for smp in samples:
         sub = smp[::4, ::4]
@@ -433,93 +454,168 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
         x, y, bw, bh, _a = stats[i]
         if x == 0 or y == 0 or x + bw == w or y + bh == h:
             rim |= labels == i
-    rim_g = cv2.dilate(rim.view(np.uint8), _square(grow_px)) if rim.any() else np.zeros((h, w), np.uint8)
-    # smaller things relative to the local tray (smooth background: ring light, flicker)
-    ratios = [seg.ratio(s) for s in samples]
-    # noise from two samples far apart (least shared robot); robust sigma of their difference
-    a, b = ratios[0], ratios[len(ratios) // 2]
+    return rim
+
+
+def _pixel_noise(a: np.ndarray, b: np.ndarray) -> float:
+    """The pixel noise relative to the tray: robust sigma of the difference of two samples (ratios to
+    their smooth background) where both show bare tray, over sqrt 2."""
     both = (a > 0.9) & (b > 0.9)
     diff = (a - b)[both][::7]
-    noise = float(1.4826 * np.median(np.abs(diff - np.median(diff))) / np.sqrt(2)) if diff.size > 100 else 0.01
-    thr = seg.min_contrast if not seg.auto else max(6 * noise, 0.04)
-    rim_keep = np.asarray(1 - rim_g, np.uint8)
-    darks = [np.asarray(r < 1 - thr, np.uint8) & rim_keep for r in ratios]
+    if diff.size <= 100:
+        return 0.01
+    return float(1.4826 * np.median(np.abs(diff - np.median(diff))) / np.sqrt(2))
+
+
+def static_objects(ratios: list[np.ndarray], thr: float, body_width_px: float, keep: np.ndarray
+                   ) -> tuple[np.ndarray, list[tuple[int, int, int, int]]]:
+    """Static dark objects (dust, a scratch): their mask (uint8) and boxes (x, y, w, h).
+
+    ``ratios``: sample frames (in time order) relative to their smooth background; ``thr``:
+    the darkness that counts as dark; ``keep`` (uint8, 1 = may be marked) leaves the rim out.
+    A candidate is dark in every sample, robot-sized (at least half a body width squared: a
+    speck needs no mask) and clearly dark (by at least 15 % and 3 thresholds: the tray's
+    mottling is not). It is set aside only if it does not move (:func:`drifts`: its darkness
+    centroid keeps its place over the samples) and the tray around it is dark in under a
+    quarter of the samples on average (the robot passing by darkens it in a few). A robot
+    that moves even a few pixels over the clip keeps its place in no sample; one that never
+    moves at all cannot be told from dust here (the tracker tries it as the robot when
+    nothing else is found).
+    """
+    import cv2
+
+    darks = [np.asarray(r < 1 - thr, np.uint8) & keep for r in ratios]
     inter = darks[0].copy()
     for d in darks[1:]:
         inter &= d
     n, labels, stats, _ = cv2.connectedComponentsWithStats(inter, connectivity=8)
+    h, w = inter.shape
     objects = np.zeros((h, w), np.uint8)
-    boxes = []
-    if n > 1:
-        # how many samples each pixel is dark in: around a static object (dust) the tray is dark
-        # only when the robot passes (a few samples); around a robot that moves slowly (its
-        # samples overlap in the middle) it is dark in many
-        dark_count = np.zeros((h, w), np.int32)
-        for d in darks:
-            dark_count += d
-        r = int(max(seg.body_width_px / 2, 4))
-        for i in range(1, n):
-            x, y, bw, bh, area = stats[i]
-            if area < 0.5 * seg.body_width_px ** 2:
-                continue      # texture, a speck: never robot-sized, needs no mask
-            x0, y0 = max(x - r - 3, 0), max(y - r - 3, 0)
-            x1, y1 = min(x + bw + r + 3, w), min(y + bh + r + 3, h)
-            comp = np.asarray(labels[y0:y1, x0:x1] == i, np.uint8)
-            darkness = 1.0 - float(np.mean([float(rt[y0:y1, x0:x1][comp > 0].mean()) for rt in ratios]))
-            if darkness < max(3 * thr, 0.15):
-                continue      # the tray's mottling: faint, static, divided out by the flat field
-            ring = _dilate(comp, r) & (1 - _dilate(comp, 2))
-            ring_frac = float(dark_count[y0:y1, x0:x1][ring > 0].mean()) / len(darks) if ring.any() else 0.0
-            if ring_frac < 0.25:
-                objects[y0:y1, x0:x1] |= _dilate(comp, 2)
-                boxes.append((int(x), int(y), int(bw), int(bh)))
-    # the static scene's brightness B: each pixel's mean over the samples where nothing moving is
-    # dark within grow_px (static structure -- rim, dust, texture, the ring light's shape -- stays in
-    # it); each sample scaled to a common brightness first (flicker)
-    ov_m, ov_boxes = burnt_in_overlays(ratios, thr, seg.body_width_px, rim_keep)
-    static = rim | (objects > 0) | (ov_m if ov_m is not None else False)
+    boxes: list[tuple[int, int, int, int]] = []
+    if n <= 1:
+        return objects, boxes
+    dark_count = np.zeros((h, w), np.int32)
+    for d in darks:
+        dark_count += d
+    r = int(max(body_width_px / 2, 4))
+    for i in range(1, n):
+        x, y, bw, bh, area = (int(v) for v in stats[i])
+        if area < 0.5 * body_width_px ** 2:
+            continue      # texture, a speck: never robot-sized, needs no mask
+        box = np.s_[max(y - r - 3, 0):min(y + bh + r + 3, h), max(x - r - 3, 0):min(x + bw + r + 3, w)]
+        comp = np.asarray(labels[box] == i, np.uint8)
+        darkness = 1.0 - float(np.mean([float(rt[box][comp > 0].mean()) for rt in ratios]))
+        if darkness < max(3 * thr, 0.15):
+            continue      # the tray's mottling: faint, static, divided out by the flat field
+        ring = _dilate(comp, r) & (1 - _dilate(comp, 2))
+        ring_frac = float(dark_count[box][ring > 0].mean()) / len(darks) if ring.any() else 0.0
+        if ring_frac < 0.25 and not drifts([rt[box] for rt in ratios], _dilate(comp, r), thr):
+            objects[box] |= _dilate(comp, 2)
+            boxes.append((x, y, bw, bh))
+    return objects, boxes
+
+
+def drifts(wins: list[np.ndarray], region: np.ndarray, thr: float, min_px: float = 1.0) -> bool:
+    """Whether a dark object moves over the samples (``wins``: its surroundings in each, in time order).
+
+    Its darkness centroid (pixels of ``region`` darker than ``thr``, weighted by their
+    darkness) is found in each sample. Samples whose dark area there is not the usual one
+    (within 6 %) are left out: something else (the robot passing by dust) is in them; a robot
+    moving slowly keeps its area. The object moves if the median centroid of the last third of
+    the rest is farther from that of the first third than ``min_px`` and than 3 sigmas of the
+    centroid's own frame-to-frame scatter (the tray's vibration, the noise: dust shakes with the
+    tray but goes nowhere), and the middle third's lies on the way (20-80 % of it): a walk, not
+    a change at one end (a robot touching dust late in the clip). A robot that moves only in
+    part of the clip may fail this; the tracker then tries the static object as the robot.
+    """
+    import cv2
+
+    cents, areas = [], []
+    for win in wins:
+        dark = (win < 1 - thr) & (region > 0)
+        m = cv2.moments((np.clip(1.0 - win, 0.0, None) * dark).astype(np.float32))
+        if m["m00"] <= 0:
+            return True         # not dark in one sample: not static
+        cents.append((m["m10"] / m["m00"], m["m01"] / m["m00"]))
+        areas.append(float(np.count_nonzero(dark)))
+    a = np.asarray(areas)
+    c = np.asarray(cents)[np.abs(a - np.median(a)) <= 0.06 * np.median(a) + 10]
+    if len(c) < 6:
+        return False
+    k = len(c) // 3
+    first, middle, last = (np.median(c[sl], axis=0) for sl in (np.s_[:k], np.s_[k:-k], np.s_[-k:]))
+    d = last - first
+    drift = float(np.hypot(*d))
+    steps = np.diff(c, axis=0)
+    scatter = 1.4826 * np.median(np.abs(steps - np.median(steps, axis=0)), axis=0) / np.sqrt(2)
+    if drift <= max(min_px, 3.0 * float(np.hypot(*scatter))):
+        return False
+    # a walk passes the middle third on its way; a change at one end only is something else
+    return bool(0.2 < float(np.dot(middle - first, d)) / drift ** 2 < 0.8)
+
+
+@dataclass
+class FlatSettings:
+    """How :func:`_flat_field` tells what moves: darker than ``1 - thr_b``, grown by ``grow_px``; holes
+    (covered in every sample) are filled from the tray within a body width."""
+
+    thr_b: float
+    grow_px: int
+    body_width_px: float
+
+
+def _flat_field(samples: list[np.ndarray], ratios: list[np.ndarray], static: np.ndarray, rim: np.ndarray,
+                fs: FlatSettings) -> np.ndarray:
+    """The static scene's brightness B, relative to its median (float32).
+
+    Each pixel's mean over the samples where nothing moving is dark within ``grow_px`` (static
+    structure -- rim, dust, texture, the ring light's shape -- stays in it); each sample scaled
+    to a common brightness first (flicker). The rim (static, never walked on) keeps its mean over
+    all samples; where the robot covered a pixel in every sample, the tray around it
+    (:func:`_fill_holes`)."""
+    import cv2
+
+    h, w = samples[0].shape
     gains = np.array([float(np.median(smp[::4, ::4])) for smp in samples])
     gains /= np.median(gains)
     total = np.zeros((h, w), np.float32)
     count = np.zeros((h, w), np.float32)
-    grow = _square(grow_px)
-    # what moves is judged at a higher darkness than the noise (texture dimples are static and must
-    # stay in B; a robot's blurred edge below it is covered by the growth)
-    thr_b = max(thr, min(0.12, 0.5 * (seg.min_contrast if not seg.auto else 0.24)))
-    for smp, g, rat in zip(samples, gains, ratios):
-        moving = np.asarray(rat < 1 - thr_b, np.uint8) & np.asarray(~static, np.uint8)
-        clear = (1 - np.asarray(cv2.dilate(moving, grow), np.float32))
-        total += smp.astype(np.float32) * np.float32(1 / g) * clear
-        count += clear
-    # the rim (static, never walked on) keeps its mean over all samples
+    grow = _square(fs.grow_px)
+    not_static = np.asarray(~static, np.uint8)
     flat = np.zeros((h, w), np.float32)
-    for smp, g in zip(samples, gains):
-        flat += smp.astype(np.float32) * np.float32(1 / (g * len(samples)))
+    for smp, g, rat in zip(samples, gains, ratios):
+        moving = np.asarray(rat < 1 - fs.thr_b, np.uint8) & not_static
+        clear = (1 - np.asarray(cv2.dilate(moving, grow), np.float32))
+        scaled = smp.astype(np.float32) * np.float32(1 / g)
+        total += scaled * clear
+        count += clear
+        flat += scaled * np.float32(1 / len(samples))
     np.divide(total, count, out=flat, where=count > 0)
     holes = (count == 0) & ~rim
     if holes.any():
-        # the robot covered these in every sample: fill from the tray around them (a normalised
-        # Gaussian average of the known tray, widening until every hole is reached; the rim is
-        # never a source: it would darken the tray beside it)
-        known = ((count > 0) & ~rim).astype(np.float32)
-        src = flat * known
-        sigma = max(seg.body_width_px / 2, 4.0)
-        todo = holes.copy()
-        for _ in range(6):
-            num = _wide_blur(src, sigma)
-            den = _wide_blur(known, sigma)
-            ok = todo & (den > 1e-3)
-            flat[ok] = num[ok] / den[ok]
-            todo &= ~ok
-            if not todo.any():
-                break
-            sigma *= 2
-        flat[todo] = float(np.median(flat[~holes]))
+        _fill_holes(flat, holes, ((count > 0) & ~rim), fs.body_width_px)
     flat /= np.float32(np.median(flat[::4, ::4]))
-    rim_m = cv2.dilate(rim.view(np.uint8), _square(1)).astype(bool) if rim.any() else None
-    # static objects grown by the measuring band, so the robot passing by is cut off them
-    obj_m = cv2.dilate(objects, _square(3)).astype(bool) if boxes else None
-    return StaticScene(rim_m, flat, noise, obj_m, boxes, len(samples), ov_m, ov_boxes)
+    return flat
+
+
+def _fill_holes(flat: np.ndarray, holes: np.ndarray, known_b: np.ndarray, body_width_px: float) -> None:
+    """Fill ``holes`` of ``flat`` in place from the ``known_b`` tray around them: a normalised Gaussian
+    average, widening until every hole is reached (the rim is never a source: it would darken the
+    tray beside it)."""
+    known = known_b.astype(np.float32)
+    src = flat * known
+    sigma = max(body_width_px / 2, 4.0)
+    todo = holes.copy()
+    for _ in range(6):
+        num = _wide_blur(src, sigma)
+        den = _wide_blur(known, sigma)
+        ok = todo & (den > 1e-3)
+        flat[ok] = num[ok] / den[ok]
+        todo &= ~ok
+        if not todo.any():
+            break
+        sigma *= 2
+    flat[todo] = float(np.median(flat[~holes]))
 
 
 def burnt_in_overlays(ratios: list[np.ndarray], thr: float, body_width_px: float, keep: np.ndarray | None = None

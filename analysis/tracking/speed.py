@@ -437,6 +437,106 @@ def speed_uncertainty(t: np.ndarray, z: np.ndarray, z_s: np.ndarray, v: np.ndarr
             "max_lag": max_lag, "residual_dof": dof}
 
 
+@dataclass
+class _PathFit:
+    """The positions used and their local polynomial fit (the smoothed path and its velocity)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    window_s: float
+    order: int
+    breaks: list[int] = field(default_factory=list)
+    ops: list = field(default_factory=list)
+    xy_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    v: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    @property
+    def z(self) -> np.ndarray:
+        return np.column_stack([self.x, self.y])
+
+    def refit(self) -> None:
+        """Fit again (after dropping a position or finding change points)."""
+        self.ops = poly_fit_weights(self.t, self.window_s, self.order, self.breaks or None)
+        self.xy_s, self.v = local_poly_fit(self.t, self.z, self.window_s, self.order, weights=self.ops)
+
+    def residual_sigma(self) -> np.ndarray:
+        """Robust sigma of the residuals about the smoothed path, per axis."""
+        r = self.z - self.xy_s
+        return 1.4826 * np.median(np.abs(r - np.median(r, axis=0)), axis=0)
+
+    def drop_outliers(self, ok: np.ndarray, max_drops: int = 20) -> int:
+        """A safety net behind the tracker's gates, judged against a motion that may change.
+
+        A position is an outlier only if it is far (> 8 robust sigmas) from BOTH short lines
+        fitted to the frames just before it and just after it -- a start, a stop or a turn fits
+        one side, a spike neither. The worst is left out (also from ``ok``) and the test repeated
+        (at most ``max_drops`` times). Returns how many were dropped."""
+        dropped = 0
+        while dropped < max_drops and self.t.size > 8:
+            score = one_sided_scores(self.t, self.z, np.maximum(self.residual_sigma(), 1e-12), self.window_s / 2)
+            worst = int(np.argmax(score))
+            if score[worst] <= 8:
+                break
+            ok[np.flatnonzero(ok)[worst]] = False
+            keep = np.arange(self.t.size) != worst
+            self.t, self.x, self.y = self.t[keep], self.x[keep], self.y[keep]
+            self.refit()
+            dropped += 1
+        return dropped
+
+    def arc_corrected_speed(self) -> np.ndarray:
+        """Each sample's speed (and, in place, velocity) corrected for the polynomial's error on an arc.
+
+        A polynomial through a stretch of an arc misjudges the speed there (a quadratic at the
+        window's centre shortens it by ~ (w omega)^2 / 40, near a shifted window's edge it
+        lengthens it): on a circle z = R exp(i omega t) the fit's slope at t_i is
+        R |sum_j c1_ij exp(i omega (t_j - t_i))| instead of R omega, so each sample's speed is
+        divided by that ratio at the measured course rate omega (exact for a circular arc).
+        Where the robot stands still the course is the noise's and its rate means nothing: no
+        correction."""
+        t, v, ops = self.t, self.v, self.ops
+        speed = np.hypot(v[:, 0], v[:, 1])
+        course = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
+        # (a break's sample carries the velocity before it: the course after it starts at the next one)
+        _, course_rate = local_poly_fit(t, course, self.window_s, self.order,
+                                        weights=poly_fit_weights(t, self.window_s, self.order, self.breaks,
+                                                                 shared=False) if self.breaks else ops)
+        om = np.maximum(np.abs(course_rate), 1e-4)
+        shrink = np.ones(t.size)
+        sig_v = np.array([np.sqrt(float(c1 @ c1)) for _a, _c0, c1 in ops]) * float(
+            np.sqrt(np.sum(self.residual_sigma() ** 2)))
+        for i, (a, _c0, c1) in enumerate(ops):
+            if speed[i] > 5 * sig_v[i]:
+                shrink[i] = abs(np.sum(c1 * np.exp(1j * om[i] * (t[a:a + c1.size] - t[i])))) / om[i]
+        shrink = np.clip(shrink, 0.5, 2.0)
+        self.v = v / shrink[:, None]
+        return speed / shrink
+
+    def time_weights(self) -> np.ndarray:
+        """Each sample's share of the time; a break's sample carries the speed before it, the half
+        interval after it goes to the next sample (which carries the speed after it)."""
+        wts = _time_weights(self.t)
+        for k in self.breaks:
+            half = (self.t[k + 1] - self.t[k]) / 2
+            wts[k] -= half
+            wts[k + 1] += half
+        return wts
+
+    def turning(self, hd: np.ndarray | None, duration: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """(smoothed heading, turn rate, mean turn rate): from the heading ``hd`` at the samples used
+        if it is known often enough, else from the course."""
+        t, w, o = self.t, self.window_s, self.order
+        if hd is not None and np.isfinite(hd).sum() >= o + 2:
+            good = np.isfinite(hd)
+            hs, hr = local_poly_fit(t[good], hd[good], w, o)
+            return (np.interp(t, t[good], hs), np.interp(t, t[good], hr),
+                    float((hs[-1] - hs[0]) / max(t[good][-1] - t[good][0], 1e-12)))
+        head_s = np.unwrap(np.arctan2(-self.v[:, 0], self.v[:, 1]))   # course, in the heading convention
+        _, turn = local_poly_fit(t, head_s, w, o)
+        return head_s, turn, float((head_s[-1] - head_s[0]) / max(duration, 1e-12))
+
+
 def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_rad: np.ndarray | None = None,
                    quality: np.ndarray | None = None, *, window_s: float | None = None, order: int = 2,
                    mm_per_px_rel_std: float = 0.0, ci_level: float = 0.95, n_boot: int = 2000,
@@ -454,109 +554,61 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
         Relative standard uncertainty of the image scale, folded into the intervals.
     """
     t = np.asarray(t_s, float)
-    x = np.asarray(x_mm, float)
-    y = np.asarray(y_mm, float)
-    ok = np.isfinite(t) & np.isfinite(x) & np.isfinite(y)
+    ok = np.isfinite(t) & np.isfinite(np.asarray(x_mm, float)) & np.isfinite(np.asarray(y_mm, float))
     if quality is not None:
         ok &= np.asarray(quality) == 0
-    if heading_rad is not None:
-        hd_all = np.asarray(heading_rad, float)
-    t, x, y = t[ok], x[ok], y[ok]
-    if t.size < 8:
-        raise InputError(f"only {t.size} clearly tracked frames", key="track",
+    if ok.sum() < 8:
+        raise InputError(f"only {int(ok.sum())} clearly tracked frames", key="track",
                          expected="at least 8 frames with the robot fully in view")
+    t = t[ok]
     duration = float(t[-1] - t[0])
     frame_dt = float(np.median(np.diff(t)))
     if window_s is None:
         window_s = min(max(1.0, 7 * frame_dt), duration / 2)
-    window_s = float(max(window_s, (order + 1) * frame_dt))
-    ops = poly_fit_weights(t, window_s, order)
-    xy_s, v = local_poly_fit(t, np.column_stack([x, y]), window_s, order, weights=ops)
-    # a safety net behind the tracker's gates, judged against a motion that may change: a
-    # position is an outlier only if it is far (> 8 robust sigmas) from BOTH short lines fitted
-    # to the frames just before it and just after it -- a start, a stop or a turn fits one side,
-    # a spike neither. The worst is left out and the test repeated (at most 20 times).
-    outliers = 0
-    while outliers < 20 and t.size > 8:
-        z = np.column_stack([x, y])
-        mad = 1.4826 * np.median(np.abs(z - xy_s - np.median(z - xy_s, axis=0)), axis=0)
-        score = one_sided_scores(t, z, np.maximum(mad, 1e-12), window_s / 2)
-        worst = int(np.argmax(score))
-        if score[worst] <= 8:
-            break
-        idx = np.flatnonzero(ok)
-        ok[idx[worst]] = False
-        keep = np.arange(t.size) != worst
-        t, x, y = t[keep], x[keep], y[keep]
-        ops = poly_fit_weights(t, window_s, order)
-        xy_s, v = local_poly_fit(t, np.column_stack([x, y]), window_s, order, weights=ops)
-        outliers += 1
+    fit = _PathFit(t, np.asarray(x_mm, float)[ok], np.asarray(y_mm, float)[ok],
+                   float(max(window_s, (order + 1) * frame_dt)), order)
+    fit.refit()
+    del seed, n_boot      # kept in the signature for callers of the bootstrap version
+    outliers = fit.drop_outliers(ok)
     # starts, stops and collisions: the smoother's windows do not cross them (a window across a
     # kink rounds it off and misjudges the path's length there)
-    z = np.column_stack([x, y])
-    breaks = change_points(t, z, window_s, 1.4826 * np.median(np.abs(z - xy_s - np.median(z - xy_s, axis=0)), axis=0))
-    if breaks:
-        ops = poly_fit_weights(t, window_s, order, breaks)
-        xy_s, v = local_poly_fit(t, np.column_stack([x, y]), window_s, order, weights=ops)
-    speed = np.hypot(v[:, 0], v[:, 1])
-    # a polynomial through a stretch of an arc misjudges the speed there (a quadratic at the
-    # window's centre shortens it by ~ (w omega)^2 / 40, near a shifted window's edge it
-    # lengthens it): on a circle z = R exp(i omega t) the fit's slope at t_i is
-    # R |sum_j c1_ij exp(i omega (t_j - t_i))| instead of R omega, so each sample's speed is
-    # divided by that ratio at the measured course rate omega (exact for a circular arc)
-    course = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
-    # (a break's sample carries the velocity before it: the course after it starts at the next one)
-    _, course_rate = local_poly_fit(t, course, window_s, order,
-                                    weights=poly_fit_weights(t, window_s, order, breaks, shared=False)
-                                    if breaks else ops)
-    om = np.maximum(np.abs(course_rate), 1e-4)
-    shrink = np.ones(t.size)
-    # where the robot stands still the course is the noise's and its rate means nothing: no correction
-    resid = np.column_stack([x, y]) - xy_s
-    sig_v = np.array([np.sqrt(float(c1 @ c1)) for _a, _c0, c1 in ops]) * float(np.sqrt(np.sum(
-        (1.4826 * np.median(np.abs(resid - np.median(resid, axis=0)), axis=0)) ** 2)))
-    for i, (a, _c0, c1) in enumerate(ops):
-        if speed[i] > 5 * sig_v[i]:
-            shrink[i] = abs(np.sum(c1 * np.exp(1j * om[i] * (t[a:a + c1.size] - t[i])))) / om[i]
-    shrink = np.clip(shrink, 0.5, 2.0)
-    speed = speed / shrink
-    v = v / shrink[:, None]
-    wts = _time_weights(t)
-    for k in breaks:
-        # a break's sample carries the speed before it; the half interval after it goes to the
-        # next sample (which carries the speed after it)
-        half = (t[k + 1] - t[k]) / 2
-        wts[k] -= half
-        wts[k + 1] += half
+    fit.breaks = change_points(fit.t, fit.z, fit.window_s, fit.residual_sigma())
+    if fit.breaks:
+        fit.refit()
+    speed = fit.arc_corrected_speed()
+    return _speed_result(fit, speed, ok, None if heading_rad is None else np.asarray(heading_rad, float)[ok],
+                         SpeedOptions(mm_per_px_rel_std, ci_level, outliers))
+
+
+@dataclass
+class SpeedOptions:
+    """What :func:`_speed_result` needs besides the fit."""
+
+    mm_per_px_rel_std: float
+    ci_level: float
+    outliers: int
+
+
+def _speed_result(fit: _PathFit, speed: np.ndarray, ok: np.ndarray, hd: np.ndarray | None,
+                  opt: SpeedOptions) -> SpeedResult:
+    """The means, their intervals, the moving part and the path's lengths, from the corrected fit."""
+    t, x, y, xy_s, v = fit.t, fit.x, fit.y, fit.xy_s, fit.v
+    duration = float(t[-1] - t[0])
+    wts = fit.time_weights()
     mean_speed = float(np.sum(speed * wts) / np.sum(wts))
     mean_vel = (float(np.sum(v[:, 0] * wts) / wts.sum()), float(np.sum(v[:, 1] * wts) / wts.sum()))
-    steps = np.hypot(np.diff(x), np.diff(y))
-    path_ff = float(steps.sum())
+    path_ff = float(np.hypot(np.diff(x), np.diff(y)).sum())
     net = float(np.hypot(xy_s[-1, 0] - xy_s[0, 0], xy_s[-1, 1] - xy_s[0, 1]))
-
-    if heading_rad is not None and np.isfinite(hd_all[ok]).sum() >= order + 2:
-        hd = hd_all[ok]
-        good = np.isfinite(hd)
-        hs, hr = local_poly_fit(t[good], hd[good], window_s, order)
-        head_s = np.interp(t, t[good], hs)
-        turn = np.interp(t, t[good], hr)
-        mean_turn = float((hs[-1] - hs[0]) / max(t[good][-1] - t[good][0], 1e-12))
-    else:
-        head_s = np.unwrap(np.arctan2(-v[:, 0], v[:, 1]))   # course, in the heading convention
-        _, turn = local_poly_fit(t, head_s, window_s, order)
-        mean_turn = float((head_s[-1] - head_s[0]) / max(duration, 1e-12))
-
+    head_s, turn, mean_turn = fit.turning(hd, duration)
     # the interval: the estimator is linear in the positions (up to |v|), so the position noise
     # measured from the residuals is propagated exactly (see :func:`speed_uncertainty`)
-    unc = speed_uncertainty(t, np.column_stack([x, y]), xy_s, v, wts, ops, window_s,
-                            mm_per_px_rel_std=mm_per_px_rel_std)
+    unc = speed_uncertainty(t, fit.z, xy_s, v, wts, fit.ops, fit.window_s, mm_per_px_rel_std=opt.mm_per_px_rel_std)
     mean_speed -= unc["noise_bias_mm_s"]
-    zq = NormalDist().inv_cdf(0.5 + ci_level / 2)
+    zq = NormalDist().inv_cdf(0.5 + opt.ci_level / 2)
     sd, sdv = unc["speed_std_mm_s"], unc["velocity_std_mm_s"]
     q = np.array([[max(mean_speed - zq * sd, 0.0), mean_vel[0] - zq * sdv[0], mean_vel[1] - zq * sdv[1]],
                   [mean_speed + zq * sd, mean_vel[0] + zq * sdv[0], mean_vel[1] + zq * sdv[1]]])
     block = int(unc["max_lag"]) + 1
-    del seed, n_boot      # kept in the signature for callers of the bootstrap version
     sample_sd = unc.pop("sample_speed_std_mm_s")
     moving = moving_part(t, speed, sample_sd)
     moving_s = float(np.sum(wts[moving]))
@@ -570,10 +622,10 @@ def speed_analysis(t_s: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, heading_
         frame_to_frame_speed_mm_s=path_ff / duration if duration > 0 else float("nan"),
         net_speed_mm_s=net / duration if duration > 0 else float("nan"),
         path_length_mm=mean_speed * duration, path_length_frame_to_frame_mm=path_ff, net_displacement_mm=net,
-        mean_turn_rate_rad_s=mean_turn, duration_s=duration, window_s=window_s, frames_used=int(t.size),
-        ci_level=ci_level, block_len=block,
-        meta={"order": order, "mm_per_px_rel_std": mm_per_px_rel_std, "uncertainty": unc,
-              "outliers_dropped": outliers, "change_points_s": [float(t[b]) for b in breaks]},
+        mean_turn_rate_rad_s=mean_turn, duration_s=duration, window_s=fit.window_s, frames_used=int(t.size),
+        ci_level=opt.ci_level, block_len=block,
+        meta={"order": fit.order, "mm_per_px_rel_std": opt.mm_per_px_rel_std, "uncertainty": unc,
+              "outliers_dropped": opt.outliers, "change_points_s": [float(t[b]) for b in fit.breaks]},
         moving_speed_mm_s=mean_speed * k_mov, moving_speed_ci_mm_s=(float(q[0, 0]) * k_mov, float(q[1, 0]) * k_mov),
         moving_s=moving_s, moving_stretches_s=_stretches(t, moving))
 

@@ -5,8 +5,9 @@ Method, per frame (the functions' docstrings say why):
 1. Before the first frame, the static scene is modelled from 15 frames spread
    over the video (:func:`labkit.analysis.tracking.measure.background_model`):
    the tray's rim (dark, in every sample, reaching the border), static dark
-   objects (dark in every sample while the tray around them is dark in few:
-   dust, however large, is never the robot), the flat field (ring light shape,
+   objects (dark in every sample, not moving, while the tray around them is
+   dark in few: dust, however large, is never the robot; a robot that walks
+   even a few pixels over the clip moves between the samples), the flat field (ring light shape,
    Teflon texture) and the pixel noise. The contrast threshold is 5 noise
    sigmas (at least 4 %) unless ``min_contrast`` is given.
 2. A window around the predicted position (the whole region of interest when
@@ -50,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from labkit.analysis.tracking.measure import Segmentation, _Finder, background_model, body_length_px
+from labkit.analysis.tracking.measure import Segmentation, _Blob, _Finder, background_model, body_length_px
 from labkit.errors import InputError
 
 QUALITY_OK = 0        # robot fully seen: position and heading trusted
@@ -186,188 +187,275 @@ def track_frames(frames: Iterable[tuple[np.ndarray, float]], frame_size: tuple[i
     vibration jitter)
     is not the robot: the frame is lost (an occlusion), and the gate grows with
     the time since the last good frame until, after ``reacquire_s``, the robot
-    may be found anywhere. See :func:`track_video` for the public entry point.
+    may be found anywhere. The per-frame work is :meth:`TrackerState.step`. See
+    :func:`track_video` for the public entry point.
     """
     W, H = frame_size
     rx, ry, rw, rh = roi or (0, 0, W, H)
     seg = seg or Segmentation.for_frame(rw, rh, None, None)
     vroi = None if valid is None else np.ascontiguousarray(valid[ry:ry + rh, rx:rx + rw])
     froi = None if flat is None else np.ascontiguousarray(flat[ry:ry + rh, rx:rx + rw])
-    finder = _Finder(vroi, margin_px, seg, min_area_px, froi)
-    ts: list[float] = []
-    us: list[float] = []
-    vs: list[float] = []
-    ths: list[float] = []
-    alts: list[tuple[float, float, float]] = []
-    qs: list[int] = []
-    areas: list[float] = []
-    lengths: list[float] = []
-    contrasts: list[float] = []
-    cov_hist: list[float] = []      # the robot's weighted area in clear frames (what a whole robot shows)
-    shapes: list[tuple[float, float]] = []
+    state = TrackerState(_Finder(vroi, margin_px, seg, min_area_px, froi),
+                         TrackLimits(max_speed_px_s, max_speed_body_s, reacquire_s),
+                         (rx, ry, rw, rh), RobotModel(area_ref=expected_area_px))
+    for k, (frame, t) in enumerate(frames):
+        state.step(frame[ry:ry + rh, rx:rx + rw] if roi else frame, t, k)
+        if progress is not None:
+            progress.update(1)
+    return state.result()
+
+
+@dataclass
+class TrackLimits:
+    """How far the robot may go between frames (see :meth:`TrackerState.gate`)."""
+
+    max_speed_px_s: float | None = None
+    max_speed_body_s: float | None = None
+    reacquire_s: float = 1.0
+
+
+@dataclass
+class FrameRow:
+    """One frame's result (image coordinates of the full frame)."""
+
+    t: float
+    u: float = float("nan")
+    v: float = float("nan")
+    theta: float = float("nan")
+    u_alt: float = float("nan")       # without the flat field
+    v_alt: float = float("nan")
+    major: float = float("nan")       # the outline's length from the moments (px)
+    quality: int = QUALITY_LOST
+    area: float = float("nan")        # the weighted (coverage) area
+    raw_area: float = float("nan")    # the dark component's area
+
+
+@dataclass
+class RobotModel:
+    """What the tracker has learned of the robot: its area, outline, length and darkness."""
+
+    area_ref: float | None = None     # expected, then the median of recent confident frames
+    area_lo: float = 0.8              # a whole robot's area relative to area_ref (widened for a soft body)
+    area_hi: float = 1.25
+    area_hist: list[float] = field(default_factory=list)
+    cov_hist: list[float] = field(default_factory=list)   # weighted area in clear frames
+    shapes: list[tuple[float, float]] = field(default_factory=list)
     shape_ref: tuple[float, float] | None = None
     shape_spread: tuple[float, ...] = (0.0, 0.0)
-    unlike = 0
-    area_hist: list[float] = []
-    area_ref = expected_area_px
-    area_lo, area_hi = 0.8, 1.25     # a whole robot's area relative to its reference (widened for a soft body)
-    # with only the expected area (from the scale) the tolerance is wide: blur and legs vary it
-    tol_first = (0.5, 2.0)
-    major = None
-    last: tuple[float, float, float] | None = None   # u, v, t of the last good frame (ROI coords)
-    vel = (0.0, 0.0)
-    jumps = 0
-    raw_area: list[float] = []     # each found component's area (px), for re-checking the first frames
+    lengths: list[float] = field(default_factory=list)
+    contrasts: list[float] = field(default_factory=list)
+    major: float | None = None        # smoothed outline length (px): the gate and the window's size
 
-    frame_dts: list[float] = []
-    frame_dt = [0.0]          # their median (updated as they come)
+    def area_tol(self) -> tuple[float, float]:
+        """Area tolerance of a candidate: wide while only the expected area is known (blur and legs vary it)."""
+        return (0.5, 2.0) if len(self.area_hist) < 5 else (0.45, 1.7)
 
-    def gate(dt: float) -> float | None:
-        if major is None or dt > reacquire_s:
+    def quality(self, blob: _Blob) -> int:
+        """OK, or degraded: cut by the border, of an odd area, or touching dust and missing darkness."""
+        if blob.border or (self.area_ref and not self.area_lo < blob.area / self.area_ref < self.area_hi):
+            return QUALITY_DEGRADED
+        if blob.masked and self.cov_hist:
+            recent = self.cov_hist[-25:]
+            if abs(blob.coverage / float(np.median(recent)) - 1) > max(0.01, 5 * _log_spread(recent)):
+                return QUALITY_DEGRADED      # partly hidden by static dust (or the rim)
+        return QUALITY_OK
+
+    def learn_area(self, area: float) -> bool:
+        """Add a confident frame's area; True when the first five now define the robot."""
+        self.area_hist.append(area)
+        if not (len(self.area_hist) <= 25 or len(self.area_hist) % 10 == 0):
+            return False
+        self.area_ref = float(np.median(self.area_hist[-25:]))
+        if len(self.area_hist) >= 5:
+            spread = _log_spread(self.area_hist[-25:])
+            self.area_lo, self.area_hi = min(0.8, np.exp(-5 * spread)), max(1.25, np.exp(5 * spread))
+        return len(self.area_hist) == 5
+
+    def learn_shape(self, blob: _Blob) -> bool:
+        """Add a confident frame's outline (length, width); True when the reference outline changed.
+
+        The reference is the median of the recent outlines; their robust spread is how much it
+        varies by itself (a soft body, blur that changes with the speed)."""
+        self.shapes.append((blob.major_px, blob.minor_px))
+        if len(self.shapes) < 5 or not (len(self.shapes) <= 25 or len(self.shapes) % 10 == 0):
+            return False
+        arr = np.log(np.asarray(self.shapes[-25:]))
+        med = np.median(arr, axis=0)
+        self.shape_ref = (float(np.exp(med[0])), float(np.exp(med[1])))
+        self.shape_spread = tuple(1.4826 * np.median(np.abs(arr - med), axis=0))
+        return True
+
+
+@dataclass
+class TrackerState:
+    """The tracker between frames: the finder, the motion model, what is learned of the robot, the rows.
+
+    :meth:`step` handles one frame (ROI-cropped); :meth:`result` gives the raw arrays."""
+
+    finder: _Finder
+    limits: TrackLimits
+    roi: tuple[int, int, int, int]                  # x, y, w, h
+    robot: RobotModel
+    rows: list[FrameRow] = field(default_factory=list)
+    last: tuple[float, float, float] | None = None  # u, v, t of the last good frame (ROI coords)
+    vel: tuple[float, float] = (0.0, 0.0)
+    frame_dts: list[float] = field(default_factory=list)
+    frame_dt: float = 0.0                           # the median frame interval (of the first 15)
+    jumps: int = 0                                  # robot-like objects beyond reach
+    unlike: int = 0                                 # robot-sized objects not shaped like it
+    on_static: int = 0                              # found frames touching a never-search region
+
+    def gate(self, dt: float) -> float | None:
+        """How far (px) from the prediction the robot may be after ``dt``; None: anywhere."""
+        major = self.robot.major
+        if major is None or dt > self.limits.reacquire_s:
             return None
-        if max_speed_px_s:
-            vmax = max_speed_px_s
-        elif max_speed_body_s:
-            vmax = max_speed_body_s * major
+        if self.limits.max_speed_px_s:
+            vmax = self.limits.max_speed_px_s
+        elif self.limits.max_speed_body_s:
+            vmax = self.limits.max_speed_body_s * major
         else:
             # one body length per frame interval: the physical limit of frame-to-frame identity
-            vmax = major / (frame_dt[0] if frame_dts else max(dt, 1e-6))
+            vmax = major / (self.frame_dt if self.frame_dts else max(dt, 1e-6))
         # jitter of a vibrating robot (a tenth of its length) + what it can walk in dt
         return 3.0 + 0.1 * major + vmax * dt
 
-    for k, (frame, t) in enumerate(frames):
-        if ts and len(frame_dts) < 15 and t > ts[-1]:
-            frame_dts.append(t - ts[-1])
-            frame_dt[0] = float(np.median(frame_dts))
-        img = frame[ry:ry + rh, rx:rx + rw] if roi else frame
-        blob = None
-        pred = None
-        tol = tol_first if len(area_hist) < 5 else (0.45, 1.7)
-        g = None
-        if last is not None and major is not None:
-            dt = t - last[2]
-            pred = (last[0] + vel[0] * dt, last[1] + vel[1] * dt)
-            g = gate(dt)
-            half = int(0.65 * major + 3 * margin_px + 10 + 1.5 * np.hypot(vel[0] * dt, vel[1] * dt))
+    def step(self, img: np.ndarray, t: float, k: int) -> None:
+        """Find the robot in frame ``k`` (time ``t``), record its row and update the models."""
+        if self.rows and len(self.frame_dts) < 15 and t > self.rows[-1].t:
+            self.frame_dts.append(t - self.rows[-1].t)
+            self.frame_dt = float(np.median(self.frame_dts))
+        blob, pred = self._search(img, t, k)
+        rb = self.robot
+        if (blob is not None and not blob.border and rb.shape_ref is not None
+                and not _shaped_like(blob, rb.shape_ref, rb.shape_spread, pred, rb.major)):
+            # robot-sized but not robot-shaped (a tweezer's prong, the robot merged with something)
+            # and off the motion's prediction: not a position
+            blob = None
+            self.unlike += 1
+        row = FrameRow(t)
+        self.rows.append(row)
+        if blob is None:
+            if self.last is not None and t - self.last[2] > 1.0:
+                self.vel = (0.0, 0.0)
+            return
+        self._record(row, blob)
+        if row.quality == QUALITY_OK or (len(rb.area_hist) < 5 and not blob.border):
+            self._learn(blob, row.quality, t)
+        elif self.last is None:
+            rb.major = blob.major_px
+            self.last = (blob.u, blob.v, t)
+
+    def _search(self, img: np.ndarray, t: float, k: int) -> tuple[_Blob | None, tuple[float, float] | None]:
+        """The robot's blob near the prediction (a window grown once if it touched its edge), else over
+        the whole region within the gate; also the prediction."""
+        rb, finder = self.robot, self.finder
+        rw, rh = self.roi[2], self.roi[3]
+        tol = rb.area_tol()
+        blob, pred, g = None, None, None
+        if self.last is not None and rb.major is not None:
+            dt = t - self.last[2]
+            pred = (self.last[0] + self.vel[0] * dt, self.last[1] + self.vel[1] * dt)
+            g = self.gate(dt)
+            half = int(0.65 * rb.major + 3 * finder.margin + 10 + 1.5 * np.hypot(self.vel[0] * dt, self.vel[1] * dt))
             for grow in (1, 2):
                 hw = half * grow
                 x0, y0 = max(int(pred[0]) - hw, 0), max(int(pred[1]) - hw, 0)
                 x1, y1 = min(int(pred[0]) + hw + 1, rw), min(int(pred[1]) + hw + 1, rh)
                 if x1 - x0 < 8 or y1 - y0 < 8:
                     break
-                blob, touched = finder.find(img, x0, y0, x1, y1, pred=pred, area_ref=area_ref,
-                                            keep_weights=len(lengths) < 100 and k % 3 == 0, gate_px=g,
+                blob, touched = finder.find(img, x0, y0, x1, y1, pred=pred, area_ref=rb.area_ref,
+                                            keep_weights=len(rb.lengths) < 100 and k % 3 == 0, gate_px=g,
                                             area_tol=tol, alt=k % 4 == 0)
                 if blob is None or not touched:
                     break
         if blob is None:
-            # acquisition or re-acquisition over the whole region of interest (within the gate)
-            blob, _ = finder.find(img, 0, 0, rw, rh, pred=pred if g is not None else None, area_ref=area_ref,
-                                  keep_weights=True, gate_px=g, area_tol=tol)
-            if blob is not None and pred is not None and g is not None and np.hypot(blob.u - pred[0],
-                                                                                     blob.v - pred[1]) > g:
-                blob = None
-            if blob is None and g is not None:
-                jumps += int(finder.find(img, 0, 0, rw, rh, pred=None, area_ref=area_ref, area_tol=tol)[0]
-                             is not None)
-        if (blob is not None and not blob.border and shape_ref is not None
-                and not _shaped_like(blob, shape_ref, shape_spread, pred, major)):
-            # robot-sized but not robot-shaped (a tweezer's prong, the robot merged with something)
-            # and off the motion's prediction: not a position
+            blob = self._acquire(img, pred if g is not None else None, g, tol)
+        return blob, pred
+
+    def _acquire(self, img: np.ndarray, pred: tuple[float, float] | None, g: float | None,
+                 tol: tuple[float, float]) -> _Blob | None:
+        """(Re-)acquisition over the whole region of interest, within the gate ``g`` of ``pred``; a
+        robot-like object beyond it is counted as a jump (an occlusion), not taken."""
+        rw, rh = self.roi[2], self.roi[3]
+        area_ref = self.robot.area_ref
+        blob, _ = self.finder.find(img, 0, 0, rw, rh, pred=pred, area_ref=area_ref, keep_weights=True,
+                                   gate_px=g, area_tol=tol)
+        if blob is not None and pred is not None and g is not None and np.hypot(blob.u - pred[0],
+                                                                                 blob.v - pred[1]) > g:
             blob = None
-            unlike += 1
-        ts.append(t)
-        raw_area.append(blob.area if blob is not None else np.nan)
-        if blob is None:
-            for column in (us, vs, ths, areas):
-                column.append(np.nan)
-            alts.append((np.nan, np.nan, np.nan))
-            qs.append(QUALITY_LOST)
-            if last is not None and t - last[2] > 1.0:
-                vel = (0.0, 0.0)
-        else:
-            q = QUALITY_OK
-            if blob.border or (area_ref and not area_lo < blob.area / area_ref < area_hi):
-                q = QUALITY_DEGRADED
-            elif blob.masked and cov_hist and abs(blob.coverage / float(np.median(cov_hist[-25:])) - 1) > \
-                    max(0.01, 5 * _log_spread(cov_hist[-25:])):
-                # touching static dust (or the rim) and missing part of its darkness: partly hidden by it
-                q = QUALITY_DEGRADED
-            if q == QUALITY_OK and not blob.masked:
-                cov_hist.append(blob.coverage)
-            us.append(blob.u + rx)
-            vs.append(blob.v + ry)
-            alts.append((blob.u_alt + rx, blob.v_alt + ry, blob.major_px))
-            ths.append(blob.theta)
-            areas.append(blob.coverage)
-            qs.append(q)
-            if q == QUALITY_OK:
-                contrasts.append(blob.contrast)
-            if q == QUALITY_OK or (len(area_hist) < 5 and not blob.border):
-                if last is not None and 0 < t - last[2] < 0.5:
-                    a = 0.5  # light smoothing of the velocity used only for the prediction
-                    nv = ((blob.u - last[0]) / (t - last[2]), (blob.v - last[1]) / (t - last[2]))
-                    vel = (a * nv[0] + (1 - a) * vel[0], a * nv[1] + (1 - a) * vel[1])
-                elif last is not None:
-                    vel = (0.0, 0.0)
-                last = (blob.u, blob.v, t)
-                area_hist.append(blob.area)
-                if len(area_hist) <= 25 or len(area_hist) % 10 == 0:
-                    area_ref = float(np.median(area_hist[-25:]))
-                    if len(area_hist) >= 5:
-                        # the area's own variation (a soft body curls and stretches) widens the tolerance
-                        spread = _log_spread(area_hist[-25:])
-                        area_lo, area_hi = min(0.8, np.exp(-5 * spread)), max(1.25, np.exp(5 * spread))
-                    if len(area_hist) == 5:
-                        # the first confident frames now define the robot: re-check them
-                        qs_a = np.asarray(qs)
-                        for j in np.flatnonzero(qs_a == QUALITY_OK):
-                            if not area_lo < raw_area[j] / area_ref < area_hi:
-                                qs[j] = QUALITY_DEGRADED
-                major = blob.major_px if major is None else 0.9 * major + 0.1 * blob.major_px
-                if q == QUALITY_OK:
-                    shapes.append((blob.major_px, blob.minor_px))
-                    if len(shapes) >= 5 and (len(shapes) <= 25 or len(shapes) % 10 == 0):
-                        # the robot's outline (length, width) from its recent confident frames, and how
-                        # much it varies by itself (a soft body, blur that changes with the speed)
-                        arr = np.log(np.asarray(shapes[-25:]))
-                        med = np.median(arr, axis=0)
-                        shape_ref = (float(np.exp(med[0])), float(np.exp(med[1])))
-                        shape_spread = tuple(1.4826 * np.median(np.abs(arr - med), axis=0))
-                        if seg.body_width_px < 1.1 * shape_ref[1]:
-                            # the robot is wider than the background filter was sized for (no size known
-                            # before): resized to the width just learned, so the filter never eats it
-                            seg = _resized(seg, rw, rh, shape_ref[1])
-                            finder.seg = seg
-                if blob.weights is not None:
-                    lengths.append(body_length_px(blob.weights, blob.u - blob.origin[0], blob.v - blob.origin[1],
-                                                  blob.theta))
-            elif last is None:
-                major = blob.major_px
-                last = (blob.u, blob.v, t)
-        if progress is not None:
-            progress.update(1)
-    lengths_a = np.asarray(lengths, float)
-    lengths_a = lengths_a[np.isfinite(lengths_a)]
-    alt = np.asarray(alts, float).reshape(-1, 3)
-    # the lighting model's shift of the position is smooth along the path: measured every 4th frame
-    # (a second measurement costs as much as the first), interpolated in time between
-    t_a = np.asarray(ts, float)
-    for col, pos in ((0, us), (1, vs)):
-        p = np.asarray(pos, float)
-        shift = alt[:, col] - p
-        known = np.isfinite(shift)
-        if known.sum() >= 1:
-            alt[:, col] = p + np.interp(t_a, t_a[known], shift[known])
-    return dict(t_s=np.asarray(ts, float), u_px=np.asarray(us, float), v_px=np.asarray(vs, float),
-                u_alt=alt[:, 0], v_alt=alt[:, 1], major_px=alt[:, 2],
-                theta=np.asarray(ths, float), quality=np.asarray(qs, np.int8), area_px=np.asarray(areas, float),
-                length_px=float(np.median(lengths_a)) if lengths_a.size else float("nan"),
-                length_px_std=(float(1.2533 * np.std(lengths_a) / np.sqrt(lengths_a.size))
-                               if lengths_a.size > 1 else float("nan")),
-                n_length=int(lengths_a.size), best_contrast=finder.best_contrast,
-                robot_contrast=float(np.median(contrasts)) if contrasts else float("nan"),
-                ambiguous=finder.ambiguous, jumps=jumps, unlike=unlike, min_contrast=seg.min_contrast, noise=seg.noise)
+        if blob is None and g is not None:
+            self.jumps += int(self.finder.find(img, 0, 0, rw, rh, pred=None, area_ref=area_ref,
+                                               area_tol=tol)[0] is not None)
+        return blob
+
+    def _record(self, row: FrameRow, blob: _Blob) -> None:
+        """Fill the frame's row from the blob (full-frame coordinates) and judge its quality."""
+        rx, ry = self.roi[0], self.roi[1]
+        rb = self.robot
+        row.raw_area = blob.area
+        row.quality = rb.quality(blob)
+        self.on_static += int(blob.masked)
+        if row.quality == QUALITY_OK and not blob.masked:
+            rb.cov_hist.append(blob.coverage)
+        row.u, row.v, row.theta, row.area = blob.u + rx, blob.v + ry, blob.theta, blob.coverage
+        row.u_alt, row.v_alt, row.major = blob.u_alt + rx, blob.v_alt + ry, blob.major_px
+        if row.quality == QUALITY_OK:
+            rb.contrasts.append(blob.contrast)
+
+    def _learn(self, blob: _Blob, q: int, t: float) -> None:
+        """A confident frame: update the motion model and what is known of the robot."""
+        rb = self.robot
+        if self.last is not None and 0 < t - self.last[2] < 0.5:
+            a = 0.5  # light smoothing of the velocity used only for the prediction
+            dt = t - self.last[2]
+            nv = ((blob.u - self.last[0]) / dt, (blob.v - self.last[1]) / dt)
+            self.vel = (a * nv[0] + (1 - a) * self.vel[0], a * nv[1] + (1 - a) * self.vel[1])
+        elif self.last is not None:
+            self.vel = (0.0, 0.0)
+        self.last = (blob.u, blob.v, t)
+        if rb.learn_area(blob.area) and rb.area_ref:
+            # the first confident frames now define the robot: re-check them
+            for row in self.rows:
+                if row.quality == QUALITY_OK and not rb.area_lo < row.raw_area / rb.area_ref < rb.area_hi:
+                    row.quality = QUALITY_DEGRADED
+        rb.major = blob.major_px if rb.major is None else 0.9 * rb.major + 0.1 * blob.major_px
+        if q == QUALITY_OK and rb.learn_shape(blob) and rb.shape_ref is not None:
+            width = rb.shape_ref[1]
+            if self.finder.seg.body_width_px < 1.1 * width:
+                # the robot is wider than the background filter was sized for (no size known
+                # before): resized to the width just learned, so the filter never eats it
+                self.finder.seg = _resized(self.finder.seg, self.roi[2], self.roi[3], width)
+        if blob.weights is not None:
+            rb.lengths.append(body_length_px(blob.weights, blob.u - blob.origin[0], blob.v - blob.origin[1],
+                                             blob.theta))
+
+    def result(self) -> dict:
+        """The raw per-frame arrays and the counts (what :func:`track_frames` returns)."""
+        rb = self.robot
+        col = {name: np.array([getattr(r, name) for r in self.rows], float)
+               for name in ("t", "u", "v", "theta", "u_alt", "v_alt", "major", "area")}
+        t_a = col["t"]
+        # the lighting model's shift of the position is smooth along the path: measured every 4th
+        # frame (a second measurement costs as much as the first), interpolated in time between
+        for alt, pos in (("u_alt", "u"), ("v_alt", "v")):
+            shift = col[alt] - col[pos]
+            known = np.isfinite(shift)
+            if known.sum() >= 1:
+                col[alt] = col[pos] + np.interp(t_a, t_a[known], shift[known])
+        lengths = np.asarray(rb.lengths, float)
+        lengths = lengths[np.isfinite(lengths)]
+        seg = self.finder.seg
+        return dict(t_s=t_a, u_px=col["u"], v_px=col["v"], u_alt=col["u_alt"], v_alt=col["v_alt"],
+                    major_px=col["major"], theta=col["theta"],
+                    quality=np.array([r.quality for r in self.rows], np.int8), area_px=col["area"],
+                    length_px=float(np.median(lengths)) if lengths.size else float("nan"),
+                    length_px_std=(float(1.2533 * np.std(lengths) / np.sqrt(lengths.size))
+                                   if lengths.size > 1 else float("nan")),
+                    n_length=int(lengths.size), best_contrast=self.finder.best_contrast,
+                    robot_contrast=float(np.median(rb.contrasts)) if rb.contrasts else float("nan"),
+                    ambiguous=self.finder.ambiguous, jumps=self.jumps, unlike=self.unlike,
+                    on_static=self.on_static, min_contrast=seg.min_contrast, noise=seg.noise)
 
 
 def _log_spread(values: list[float]) -> float:
@@ -558,19 +646,54 @@ def prepare_scene(cap: Any, info: Any, *, roi: tuple[int, int, int, int] | str |
                          valid_with_objects=with_objects if static_mask else valid)
 
 
-def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path | None, bayer: str,
-                  size: tuple[int, int],
-                  roi: tuple[int, int, int, int] | None, valid: np.ndarray | None, seg: Segmentation,
-                  margin_px: int, expected: float | None, vmax: float | None, scale: Scale | None,
-                  length_mm: float | None) -> dict | None:
+@dataclass
+class TrackPass:
+    """What a tracking pass over a source needs (the first one, and one over a static object)."""
+
+    source: str | Path
+    fps: float | None
+    timestamps: str | Path | None
+    bayer: str
+    size: RobotSize
+    scale: Scale | None
+    margin_px: int = 4
+    max_speed_mm_s: float | None = None
+    robot_length_mm: float = ROBOT_LENGTH_MM
+    roi: tuple[int, int, int, int] | str | None = None    # as given (None: the whole frame)
+    mask: Any = None
+    min_contrast: float | None = None
+    static_mask: bool = True
+    quiet: bool = True
+
+    @property
+    def expected_area_px(self) -> float | None:
+        """The robot's area in pixels, from the declared outline and a known scale."""
+        if self.scale is None or not self.size.area_mm2:
+            return None
+        return self.size.area_mm2 / self.scale.mm_per_px ** 2
+
+    def speed_limits(self) -> tuple[float | None, float | None]:
+        """(px/s, body lengths/s): a declared limit in pixels with a scale, in body lengths without."""
+        v = self.max_speed_mm_s
+        if not v:
+            return None, None
+        if self.scale is not None:
+            return v / self.scale.mm_per_px, None
+        return None, v / self.robot_length_mm
+
+
+def _static_robot(tp: TrackPass, frame_size: tuple[int, int], roi: tuple[int, int, int, int] | None,
+                  valid: np.ndarray | None, seg: Segmentation) -> dict | None:
     """Track again with static objects searchable (and no flat field, which holds them); the result
-    only if a robot-sized, robot-long object was found in most frames."""
+    only if an object shaped like the declared robot was found in most frames: with a scale, of
+    its area and length; without one, of its proportions (area / length squared)."""
     from labkit.analysis.tracking.video_io import iter_frames, open_source
 
-    cap, info = open_source(source, fps=fps, timestamps=timestamps, bayer=bayer)
+    cap, info = open_source(tp.source, fps=tp.fps, timestamps=tp.timestamps, bayer=tp.bayer)
     try:
-        raw = track_frames(iter_frames(cap, info), size, roi=roi, valid=valid, flat=None, seg=seg,
-                           margin_px=margin_px, expected_area_px=expected, max_speed_px_s=vmax)
+        raw = track_frames(iter_frames(cap, info), frame_size, roi=roi, valid=valid, flat=None, seg=seg,
+                           margin_px=tp.margin_px, expected_area_px=tp.expected_area_px,
+                           max_speed_px_s=tp.speed_limits()[0])
     finally:
         cap.release()
     found = raw["quality"] != QUALITY_LOST
@@ -578,11 +701,17 @@ def _static_robot(source: str | Path, fps: float | None, timestamps: str | Path 
         return None
     area = float(np.median(raw["area_px"][found]))
     length = float(raw["length_px"])
-    # the size and the length at the known scale (the shape alone does not tell a chip from a speck)
-    if scale is None or expected is None or length_mm is None:
-        return None
-    ok = 0.75 < area / expected < 1.33 and abs(length * scale.mm_per_px / length_mm - 1) < 0.12
-    return raw if ok else None
+    length_mm, area_mm2 = tp.size.length_mm, tp.size.area_mm2
+    if length_mm is None or area_mm2 is None:
+        return None         # nothing declared ("learn"): a static object is never the robot
+    if tp.scale is None:
+        # no scale: the outline's proportions (area over length squared, the same at any scale)
+        # must be the declared robot's; a round speck or a thin fibre is not
+        return raw if 0.75 < (area / length ** 2) / (area_mm2 / length_mm ** 2) < 1.33 else None
+    # the size and the length at the known scale
+    expected = tp.expected_area_px
+    ok = 0.75 < area / expected < 1.33 if expected else True
+    return raw if ok and abs(length * tp.scale.mm_per_px / length_mm - 1) < 0.12 else None
 
 
 def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | None = None,
@@ -644,107 +773,24 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
         Raises :class:`InputError` if the source is missing, unreadable, empty,
         or no robot is found (the message gives the contrast found).
     """
-    from labkit.analysis.tracking.video_io import SpooledFrames, check_timestamps, iter_frames, open_source, spools
-    from labkit.progress import progress as bar
-
-    cap, info = open_source(source, fps=fps, timestamps=timestamps, bayer=bayer)
-    warnings: list[str] = []
-    spool = None
-    if info.bayer:
-        warnings.append(f"raw Bayer frames ({info.bayer}{', detected' if bayer == 'auto' else ''}): demosaiced "
-                        f"to grey")
-    try:
-        if info.width <= 0 or info.height <= 0:
-            raise InputError("the video holds no frames", file=source)
-        W, H = info.width, info.height
-        if scale is None and mm_per_px is not None:
-            scale = scale_given(mm_per_px)
-        size = robot_size(robot_size_mm)
-        if robot_length_mm is None:
-            robot_length_mm = size.length_mm or ROBOT_LENGTH_MM
-        if max_speed_mm_s is not None and not max_speed_mm_s > 0:
-            raise InputError(f"bad speed limit {max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
-        # a decoded video is decoded once, into a spool: samples and tracking read it (no seeking)
-        spool = SpooledFrames(cap, info) if spools(info) else None
-        frames = spool if spool is not None else iter_frames(cap, info)
-        scene = prepare_scene(cap, info, roi=roi, mask=mask, scale=scale, min_contrast=min_contrast,
-                              static_mask=static_mask, size=size,
-                              samples=spool.samples(15) if spool is not None else None)
-        roi_t, valid, seg, static, flat = scene.roi, scene.valid, scene.seg, scene.static, scene.flat
-        warnings.extend(scene.warnings)
-        expected = size.area_mm2 / scale.mm_per_px ** 2 if scale is not None and size.area_mm2 else None
-        vmax = max_speed_mm_s / scale.mm_per_px if scale is not None and max_speed_mm_s else None
-        # without a scale a declared limit is counted in body lengths
-        body_s = max_speed_mm_s / robot_length_mm if max_speed_mm_s and vmax is None else None
-        with bar(info.frame_count or None, "track", quiet=quiet, unit="frame") as pb:
-            raw = track_frames(frames, (W, H), roi=roi_t if roi is not None else None,
-                               valid=valid, flat=flat, seg=seg, margin_px=margin_px,
-                               expected_area_px=expected, max_speed_px_s=vmax, max_speed_body_s=body_s,
-                               progress=pb)
-            finish_progress(pb, int(raw["t_s"].size), info.frame_count)
-    finally:
-        cap.release()
-        if spool is not None:
-            spool.close()
-    if (np.all(raw["quality"] == QUALITY_LOST) and static is not None and static.object_boxes
-            and scale is not None and raw["t_s"].size):
-        # nothing moved: a static object may still be the robot vibrating in place (a drive that
-        # does not make it walk). Only an object of the robot's size and length counts, never dust.
-        still = _static_robot(source, fps, timestamps, bayer, (W, H), roi_t if roi is not None else None,
-                              scene.valid_with_objects, seg, margin_px, expected, vmax, scale, size.length_mm)
-        if still is not None:
-            raw = still
-            warnings.append("the robot did not move: the only robot-like object is static (its size and length "
-                            "match the robot's at this scale); its speed is ~0, not dust's")
-    if raw["t_s"].size == 0:
-        if info.undecodable:
-            raise InputError(f"none of the {info.undecodable} frames could be decoded", file=source)
-        raise InputError("the video holds no frames", file=source)
-    if info.times is not None and raw["t_s"].size + info.undecodable != info.times.size:
-        raise InputError(f"{info.times.size} declared times for {raw['t_s'].size + info.undecodable} frames",
-                         file=timestamps, key="--timestamps", expected="one time per frame of the video")
-    if info.undecodable:
-        warnings.insert(0, f"{info.undecodable} frame(s) could not be decoded and were skipped "
-                           f"(damaged or truncated file); {raw['t_s'].size} kept")
-    t_s, ts_source, faulty = check_timestamps(raw["t_s"], info.fps_nominal, str(source))
-    if info.timestamps_from != "container":
-        ts_source = info.timestamps_from
-    if faulty.any():
-        for key in ("u_px", "v_px", "theta", "area_px", "u_alt", "v_alt", "major_px"):
-            raw[key][faulty] = np.nan
-        raw["quality"][faulty] = QUALITY_LOST
+    if scale is None and mm_per_px is not None:
+        scale = scale_given(mm_per_px)
+    size = robot_size(robot_size_mm)
+    if max_speed_mm_s is not None and not max_speed_mm_s > 0:
+        raise InputError(f"bad speed limit {max_speed_mm_s}", key="--max-speed-mm-s", expected="a speed > 0 mm/s")
+    tp = TrackPass(source, fps, timestamps, bayer, size, scale, margin_px, max_speed_mm_s,
+                   robot_length_mm or size.length_mm or ROBOT_LENGTH_MM, roi, mask, min_contrast, static_mask, quiet)
+    raw, scene, info, warnings = _first_pass(tp)
+    raw = _still_robot(raw, tp, scene, info, warnings)
+    t_s, ts_source, faulty = _frame_times(raw, info, tp, warnings)
     if np.all(raw["quality"] == QUALITY_LOST):
-        found = raw["best_contrast"]
-        noise = raw["noise"]
-        what = (f"the strongest dark object had {100 * found:.1f} % contrast against the tray"
-                f"{f' (pixel noise {100 * noise:.1f} %)' if np.isfinite(noise) else ''}; a robot needs "
-                f"{100 * raw['min_contrast']:.1f} % (--min-contrast)")
-        if static is not None and static.object_boxes:
-            boxes = "; ".join(",".join(str(v) for v in b) for b in static.object_boxes[:2])
-            what = (f"only {len(static.object_boxes)} static dark object(s) (never moving: dust, or a robot that "
-                    f"never moved) at x,y,w,h {boxes} were found and set aside"
-                    f"{'' if scale is not None else ' (with --mm-per-px a robot that never moved is told from dust)'}"
-                    f"; otherwise {what}")
-        raise InputError(f"no robot found in any of {t_s.size} frames: {what}", file=source,
-                         expected="a chip darker than the tray that moves (see --preview FRAME)")
+        raise _no_robot(raw, scene.static, t_s.size, source)
     stretches = lost_stretches(t_s, raw["quality"])
-    if stretches:
-        n_lost = int(np.sum(raw["quality"] == QUALITY_LOST))
-        shown = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in stretches[:4]) + (" ..." if len(stretches) > 4 else "")
-        warnings.append(f"{n_lost} frame(s) lost in {len(stretches)} stretch(es) ({shown}): occluded, out of view "
-                        f"or unlike the robot; bridged by the smoothed path, not used for the speed")
-    if raw["ambiguous"]:
-        warnings.append(f"{raw['ambiguous']} frame(s) had a second robot-sized object within reach: check the "
-                        f"overlay (--overlay) or narrow the search (--roi/--mask)")
-    if raw.get("unlike"):
-        warnings.append(f"{raw['unlike']} frame(s) had a robot-sized object not shaped like the robot (its length "
-                        f"or width off: a tweezer, the robot merged with something): flagged lost")
-    if raw["jumps"]:
-        warnings.append(f"{raw['jumps']} frame(s) showed a robot-like object farther than the robot can walk: "
-                        f"flagged lost (an occlusion), not taken as a position")
+    warnings.extend(_track_warnings(raw, stretches))
     heading, sense = resolve_heading(t_s, raw["u_px"], raw["v_px"], raw["theta"], raw["quality"])
+    static = scene.static
     track = Track(t_s=t_s, u_px=raw["u_px"], v_px=raw["v_px"], heading_rad=heading, quality=raw["quality"],
-                  area_px=raw["area_px"], frame_size=(W, H), roi=roi_t, source=str(source),
+                  area_px=raw["area_px"], frame_size=(info.width, info.height), roi=scene.roi, source=str(source),
                   timestamps_source=ts_source, heading_sense=sense, length_px=raw["length_px"],
                   length_px_std=raw["length_px_std"], u_alt_px=raw["u_alt"], v_alt_px=raw["v_alt"],
                   major_px=raw["major_px"],
@@ -759,6 +805,127 @@ def track_video(source: str | Path, *, roi: tuple[int, int, int, int] | str | No
                         "jumps_rejected": raw["jumps"], "unlike_frames": raw.get("unlike", 0),
                         "lost_stretches_s": stretches,
                         "length_samples": raw["n_length"], "warnings": warnings})
-    track.scale = scale if scale is not None else scale_from_robot_length(track, robot_length_mm,
+    track.scale = scale if scale is not None else scale_from_robot_length(track, tp.robot_length_mm,
                                                                           robot_length_std_mm)
     return track
+
+
+def _first_pass(tp: TrackPass) -> tuple[dict, PreparedScene, Any, list[str]]:
+    """Open the source, model its static scene and track it once: (raw arrays, scene, video info, warnings)."""
+    from labkit.analysis.tracking.video_io import SpooledFrames, iter_frames, open_source, spools
+    from labkit.progress import progress as bar
+
+    cap, info = open_source(tp.source, fps=tp.fps, timestamps=tp.timestamps, bayer=tp.bayer)
+    warnings: list[str] = []
+    spool = None
+    if info.bayer:
+        warnings.append(f"raw Bayer frames ({info.bayer}{', detected' if tp.bayer == 'auto' else ''}): demosaiced "
+                        f"to grey")
+    try:
+        if info.width <= 0 or info.height <= 0:
+            raise InputError("the video holds no frames", file=tp.source)
+        # a decoded video is decoded once, into a spool: samples and tracking read it (no seeking)
+        spool = SpooledFrames(cap, info) if spools(info) else None
+        frames = spool if spool is not None else iter_frames(cap, info)
+        scene = prepare_scene(cap, info, roi=tp.roi, mask=tp.mask, scale=tp.scale, min_contrast=tp.min_contrast,
+                              static_mask=tp.static_mask, size=tp.size,
+                              samples=spool.samples(15) if spool is not None else None)
+        warnings.extend(scene.warnings)
+        vmax, body_s = tp.speed_limits()
+        with bar(info.frame_count or None, "track", quiet=tp.quiet, unit="frame") as pb:
+            raw = track_frames(frames, (info.width, info.height), roi=scene.roi if tp.roi is not None else None,
+                               valid=scene.valid, flat=scene.flat, seg=scene.seg, margin_px=tp.margin_px,
+                               expected_area_px=tp.expected_area_px, max_speed_px_s=vmax, max_speed_body_s=body_s,
+                               progress=pb)
+            finish_progress(pb, int(raw["t_s"].size), info.frame_count)
+    finally:
+        cap.release()
+        if spool is not None:
+            spool.close()
+    return raw, scene, info, warnings
+
+
+def _still_robot(raw: dict, tp: TrackPass, scene: PreparedScene, info: Any, warnings: list[str]) -> dict:
+    """The first pass's arrays, or those of a static object that is the robot after all.
+
+    When nothing (or little) moved, or what was found clings to a static object (a piece of
+    it sticking out of its mask), a static object may still be the robot standing or vibrating
+    in place (a drive that does not make it walk). Only an object shaped like the declared
+    robot counts, never dust, and only if it is found in more frames (:func:`_static_robot`)."""
+    static = scene.static
+    n = raw["t_s"].size
+    found = int(np.sum(raw["quality"] != QUALITY_LOST))
+    if static is None or not static.object_boxes or not n or (found >= 0.5 * n and raw["on_static"] <= 0.5 * found):
+        return raw
+    still = _static_robot(tp, (info.width, info.height), scene.roi if tp.roi is not None else None,
+                          scene.valid_with_objects, scene.seg)
+    if still is None or np.sum(still["quality"] != QUALITY_LOST) < found:
+        return raw
+    if len(static.object_boxes) == 1:       # the one static object set aside is the robot
+        warnings[:] = [w for w in warnings if not w.startswith("1 static dark object(s) set aside")]
+    warnings.append("the robot hardly moved: it was set aside as a static object at first, and is tracked as the "
+                    "robot because its " + ("size and length match the robot's at this scale" if tp.scale is not None
+                                            else "proportions match the declared robot's")
+                    + " (a still robot's speed is ~0, not dust's)")
+    return still
+
+
+def _frame_times(raw: dict, info: Any, tp: TrackPass, warnings: list[str]) -> tuple[np.ndarray, str, np.ndarray]:
+    """The checked frame times, where they came from, and the faulty frames (flagged lost in ``raw``)."""
+    from labkit.analysis.tracking.video_io import check_timestamps
+
+    if raw["t_s"].size == 0:
+        if info.undecodable:
+            raise InputError(f"none of the {info.undecodable} frames could be decoded", file=tp.source)
+        raise InputError("the video holds no frames", file=tp.source)
+    if info.times is not None and raw["t_s"].size + info.undecodable != info.times.size:
+        raise InputError(f"{info.times.size} declared times for {raw['t_s'].size + info.undecodable} frames",
+                         file=tp.timestamps, key="--timestamps", expected="one time per frame of the video")
+    if info.undecodable:
+        warnings.insert(0, f"{info.undecodable} frame(s) could not be decoded and were skipped "
+                           f"(damaged or truncated file); {raw['t_s'].size} kept")
+    t_s, ts_source, faulty = check_timestamps(raw["t_s"], info.fps_nominal, str(tp.source))
+    if info.timestamps_from != "container":
+        ts_source = info.timestamps_from
+    if faulty.any():
+        for key in ("u_px", "v_px", "theta", "area_px", "u_alt", "v_alt", "major_px"):
+            raw[key][faulty] = np.nan
+        raw["quality"][faulty] = QUALITY_LOST
+    return t_s, ts_source, faulty
+
+
+def _no_robot(raw: dict, static: Any, frames: int, source: str | Path) -> InputError:
+    """The error for a video where the robot was never found: the contrast found, and any static objects."""
+    found = raw["best_contrast"]
+    noise = raw["noise"]
+    what = (f"the strongest dark object had {100 * found:.1f} % contrast against the tray"
+            f"{f' (pixel noise {100 * noise:.1f} %)' if np.isfinite(noise) else ''}; a robot needs "
+            f"{100 * raw['min_contrast']:.1f} % (--min-contrast)")
+    if static is not None and static.object_boxes:
+        boxes = "; ".join(",".join(str(v) for v in b) for b in static.object_boxes[:2])
+        what = (f"only {len(static.object_boxes)} static dark object(s) (never moving: dust, or a robot that "
+                f"never moved) at x,y,w,h {boxes} were found and set aside"
+                f" (none of them shaped like the declared robot; --robot-size-mm L,W declares it)"
+                f"; otherwise {what}")
+    return InputError(f"no robot found in any of {frames} frames: {what}", file=source,
+                      expected="a chip darker than the tray that moves (see --preview FRAME)")
+
+
+def _track_warnings(raw: dict, stretches: list[tuple[float, float]]) -> list[str]:
+    """What the user should know about the frames: lost stretches, ambiguous, unlike or jumping candidates."""
+    out = []
+    if stretches:
+        n_lost = int(np.sum(raw["quality"] == QUALITY_LOST))
+        shown = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in stretches[:4]) + (" ..." if len(stretches) > 4 else "")
+        out.append(f"{n_lost} frame(s) lost in {len(stretches)} stretch(es) ({shown}): occluded, out of view "
+                   f"or unlike the robot; bridged by the smoothed path, not used for the speed")
+    if raw["ambiguous"]:
+        out.append(f"{raw['ambiguous']} frame(s) had a second robot-sized object within reach: check the "
+                   f"overlay (--overlay) or narrow the search (--roi/--mask)")
+    if raw.get("unlike"):
+        out.append(f"{raw['unlike']} frame(s) had a robot-sized object not shaped like the robot (its length "
+                   f"or width off: a tweezer, the robot merged with something): flagged lost")
+    if raw["jumps"]:
+        out.append(f"{raw['jumps']} frame(s) showed a robot-like object farther than the robot can walk: "
+                   f"flagged lost (an occlusion), not taken as a position")
+    return out

@@ -381,10 +381,10 @@ def _track_videos(run: _Run, shaker: Path, notes: list[str]) -> list[ShakerPoint
     out, st = run.out, run.stages
     points = shaker_points(shaker)
     with st.stage("track", f"tracking {sum(1 for p in points if p['video'])} videos"):
-        # Each video is scaled by the robot's length in it. A robot that stood still (no walk at
-        # that drive) cannot be told from dust without a scale, so those videos are tracked again
-        # with the scale the other videos of the same run found (one camera, one zoom), as a user
-        # at the bench would calibrate once per session.
+        # Each video is scaled by the robot's length in it (a slow or still robot included: the
+        # tracker tells it from dust by its motion or its outline). A video that still fails is
+        # tracked again with the scale the other videos of the same run found (one camera, one
+        # zoom), as a user at the bench would calibrate once per session, and noted if it fails again.
         scales: list[tuple[float, float]] = []
         unscaled: list[tuple[ShakerPoint, Path, Path, InputError]] = []
         for p in points:
