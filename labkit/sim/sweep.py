@@ -420,8 +420,8 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
         Names of the fields in the bounds' messages (:func:`labkit.sim.core.check_run`).
     error_control:
         ``"sample"`` (default): the nominal robot (draw 0) at every point checks its step
-        (:func:`labkit.sim.errorcontrol.control`); where it had to halve the step, the other
-        draws of that point are rerun at the step it settled on (their status ``sampled``).
+        (:func:`labkit.sim.errorcontrol.control`), first; where it had to halve the step, the
+        other draws of that point then run at the step it settled on (their status ``sampled``).
         ``"every"``: every run checks itself. ``"off"``: no check (``unchecked``).
         ``convergence``, ``step_error_mm_s`` and ``dt_s`` of the result hold what each run did.
 
@@ -449,13 +449,14 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
     n_main = len(tasks)
     if dt_check:
         tasks += [(params, base_scenario, quantity, float(v), 0, *common, True, fraction, "off") for v in grid]
-    rows = map_tasks(run_point, tasks, scheduler=scheduler, workers=workers,
-                     desc=f"sweep {quantity}", quiet=quiet)
-    quarter_rows, rows = rows[n_main:], rows[:n_main]
+    def run(some: list[tuple], desc: str) -> list[dict]:
+        return map_tasks(run_point, some, scheduler=scheduler, workers=workers, desc=desc, quiet=quiet)
+
     if error_control == "sample" and n_draws > 1:
-        _refine_sampled(rows, tasks[:n_main], n_draws,
-                        lambda again: map_tasks(run_point, again, scheduler=scheduler, workers=workers,
-                                                desc="sweep: refined points", quiet=quiet))
+        rows = _run_sampled(tasks, n_main, n_draws, run, f"sweep {quantity}")
+    else:
+        rows = run(tasks, f"sweep {quantity}")
+    quarter_rows, rows = rows[n_main:], rows[:n_main]
     shape = (len(grid), n_draws)
     speeds = np.array([r["speed_mm_s"] for r in rows]).reshape(shape)
     frac = np.array([r["contact_fraction"] for r in rows]).reshape(shape + (6, len(CONTACT_MODES)))
@@ -513,25 +514,27 @@ def _check_options(draws: int, duration_s: float, step_fraction: float, accel_li
                          expected=", ".join(ERROR_CONTROL))
 
 
-def _refine_sampled(rows: list[dict], tasks: list[tuple], n_draws: int,
-                    run: Callable[[list[tuple]], list[dict]]) -> None:
-    """Sampled error control: at every point whose nominal robot was refined (it halved its
-    step and then agreed with half of it), rerun the other draws at that step (in place in
-    ``rows``); elsewhere they keep the default step. Their status: ``sampled``."""
-    redo: list[int] = []
-    for i in range(0, len(rows), n_draws):
-        nominal = rows[i]
-        for k in range(i + 1, i + n_draws):
-            rows[k]["convergence"] = "sampled"
-        if nominal["convergence"] == "refined":
-            redo += list(range(i + 1, i + n_draws))
-    if not redo:
-        return
-    again = []
-    for k in redo:
-        t = list(tasks[k])
-        t[10] = t[10] / 2 ** rows[k - k % n_draws]["halvings"]
-        again.append(tuple(t))
-    for k, row in zip(redo, run(again)):
-        row["convergence"] = "sampled"
-        rows[k] = row
+def _run_sampled(tasks: list[tuple], n_main: int, n_draws: int, run: Callable[[list[tuple], str], list[dict]],
+                 desc: str) -> list[dict]:
+    """Sampled error control: the nominal robot (draw 0) of every point first, with the control;
+    then the other draws (and the tasks after ``n_main``, the dt check's), each at the step its
+    point's nominal robot settled on where it refined it (halved the step and then agreed with
+    half of it), else at the default step; their status ``sampled``. Returns every task's row,
+    in the order of ``tasks``. (Run after the nominal robots, a refined point's draws are not
+    first run at the default step and thrown away.)"""
+    nominal = run(tasks[0:n_main:n_draws], desc + ": nominal robots, checked")
+    rest: list[tuple] = []
+    for i in range(n_main):
+        t = list(tasks[i])
+        if i % n_draws:
+            row = nominal[i // n_draws]
+            if row["convergence"] == "refined":
+                t[10] = t[10] / 2 ** row["halvings"]
+            rest.append(tuple(t))
+    rest += tasks[n_main:]
+    done = iter(run(rest, desc + ": draws"))
+    rows = [nominal[i // n_draws] if i % n_draws == 0 else next(done) for i in range(n_main)]
+    for i in range(n_main):
+        if i % n_draws:
+            rows[i]["convergence"] = "sampled"
+    return rows + list(done)
