@@ -14,7 +14,12 @@ number on a shared machine):
   cache, ``cache=True``);
 * the wall time of a paper-style sweep, 40 shaker frequencies 150..2000 Hz x
   10 draws x 2 s at the converged default step, both cores (target <= 40 s);
-  ``--quick`` runs a smaller sweep and says so.
+  ``--quick`` runs a smaller sweep and says so; its CPU seconds as the pool's two
+  workers used them (``cpu_s_workers``, from /proc: on a shared machine the wall time
+  also measures the others), and every run's status (``status_counts``);
+* per run at a few of the sweep's frequencies (``profile_nominal_unchecked``): steps,
+  trial steps (every advance of the scheme: accepted, refused, event location), refused
+  sub-steps, CPU seconds.
 
 Cost of the scheme (issue 10): one implicit-midpoint step of the 23-coordinate
 coupled system is M v0 and a solve with S = 2M + hD + h^2/2 K (through the
@@ -125,6 +130,43 @@ def _breakdown() -> dict:
     return out
 
 
+def _workers_cpu_s(workers: int) -> float | None:
+    """CPU seconds (user + system) the local pool's worker processes have used so far, from
+    /proc (they are the forkserver's children, not this process's; the pool lives as long as
+    this process, so this is the sweep's CPU plus the workers' start-up). None off Linux."""
+    from labkit import executor
+
+    pool = executor._POOLS.get(workers)
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0.0
+    try:
+        for pid in list(getattr(pool, "_processes", None) or {}):
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / tick
+    except (OSError, ValueError):
+        return None
+    return total if pool is not None else None
+
+
+def _profile(params, sc, freqs, sdur: float) -> dict:
+    """Per-run counters at a few of the sweep's frequencies (nominal robot, control off):
+    steps, trial steps (every advance: accepted, refused, event location), refused sub-steps,
+    and CPU seconds."""
+    from labkit.sim import Shaker, simulate
+
+    rows = []
+    for f in freqs:
+        c0 = time.process_time()
+        r = simulate(params, Shaker(float(f), sc.amp_um), duration_s=sdur, error_control="off")
+        rows.append({"freq_hz": round(float(f), 1), "cpu_s": round(time.process_time() - c0, 3),
+                     "steps": r.n_steps, "trial_steps": r.counters["trial_steps"],
+                     "refused_substeps": r.counters["steps_halved"],
+                     "speed_mm_s": round(r.mean_speed_mm_s, 4)})
+    return {"runs": rows, "cpu_s_per_run": round(sum(x["cpu_s"] for x in rows) / len(rows), 4),
+            "trial_steps_per_run": round(sum(x["trial_steps"] for x in rows) / len(rows))}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="a small sweep and shorter runs (< 20 s)")
@@ -194,13 +236,12 @@ def main() -> None:
     w0 = time.perf_counter()
     s = sweep(params, sc, "freq_hz", freqs, draws=draws, duration_s=sdur, workers=2, seed=0, quiet=True)
     sweep_wall = time.perf_counter() - w0
+    sweep_cpu = _workers_cpu_s(2)
     # CPU the sweep needs, from nominal runs at a few of its frequencies in this
     # process: on a shared machine the wall time above also measures the others.
     probe = freqs[:: max(1, len(freqs) // 8)]
-    c0 = time.process_time()
-    for f in probe:
-        simulate(params, Shaker(float(f), sc.amp_um), duration_s=sdur, error_control="off")
-    cpu_per_run = (time.process_time() - c0) / len(probe)
+    profile = _profile(params, sc, probe, sdur)
+    cpu_per_run = profile["cpu_s_per_run"]
     # the sweep's error control: the nominal robot at every point checks its step (4 runs'
     # worth when it passes, more where it refines or is chaotic), and the draws of the
     # points it refined are rerun at its step (docs/model.md, "Error control and validity")
@@ -216,11 +257,15 @@ def main() -> None:
                     "cpu_s_per_run_estimate": round(cpu_per_run, 4),
                     "cpu_s_per_checked_run_estimate": round(cpu_per_checked, 4),
                     "nominal_status": {k: status.count(k) for k in sorted(set(status))},
+                    "cpu_s_workers": None if sweep_cpu is None else round(sweep_cpu, 1),
+                    "status_counts": {k: int((s.convergence == k).sum()) for k in sorted(set(s.convergence.flat))}
+                    if s.convergence is not None else {},
                     "cpu_s_total_estimate": round(cpu_per_run * (runs - len(freqs)) + cpu_per_checked * len(freqs), 1),
                     "wall_s_on_2_idle_cores_estimate": round((cpu_per_run * (runs - len(freqs))
                                                               + cpu_per_checked * len(freqs)) / 2, 1),
                     "target_wall_s": 40.0,
-                    "mean_speed_mm_s_at_first_point": round(float(s.mean_speed_mm_s[0]), 3)}
+                    "mean_speed_mm_s_at_first_point": round(float(s.mean_speed_mm_s[0]), 3),
+                    "profile_nominal_unchecked": profile}
     print(json.dumps(out))
 
 

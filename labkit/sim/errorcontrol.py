@@ -13,7 +13,12 @@ default) goes through :func:`control` after its main run at the step ``h``
    at this step;
 3. a failing run halves its step until the runs at ``h/2^k`` and ``h/2^(k+1)`` agree (at
    most :data:`MAX_HALVINGS` halvings) and the run at ``h/2^k`` is the result
-   (``refined``); when none agrees, the finest run is the result, flagged ``not_converged``;
+   (``refined``); when none agrees, the finest run is the result, flagged ``not_converged``.
+   A pair that agrees by more than :data:`CONFIRM_FRACTION` of the tolerance is confirmed by
+   the run at the next half step (:func:`_confirmed`; two steps can agree by chance before
+   the sequence converges): the run at ``h/2^k`` is kept only when it is also within the
+   tolerance of the run at ``h/2^(k+2)`` (4/3 of their difference) and the finer pair agrees;
+   otherwise the walk goes on from ``h/2^(k+1)``, the runs already made reused;
 4. a run sensitive at :data:`CHAOS_LEVELS` successive steps (each probed once the one
    before was sensitive), or at the step that agreed with half of it, is *chaotic*: no
    single trajectory converges; it is kept at that step and flagged, never refined further.
@@ -23,7 +28,8 @@ default) goes through :func:`control` after its main run at the step ``h``
 
 The whole run is checked, not a stretch of it: on random Monte Carlo cases a check over
 the first quarter passed runs whose error grew later (bench/convergence_bench.py). Cost of a
-run that passes: 4 runs' worth (the run, twice its steps, the probe); of a chaotic one 14;
+run that passes: 4 runs' worth (the run, twice its steps, the probe), 8 when the pass is
+marginal and confirmed (four times its steps on top); of a chaotic one 14;
 of one refined k times about 2^(k+2); sweeps check a sample (:mod:`labkit.sim.sweep`).
 """
 from __future__ import annotations
@@ -43,6 +49,11 @@ STEP_TOL_ABS_MM_S = 0.02
 #: The step error of the run at h, estimated from the speeds at h and h/2: this many times
 #: their difference (2: first-order convergence; 4/3 would assume second order).
 ERROR_FACTOR = 2.0
+#: Two steps that agree, but by more than this fraction of the tolerance, are confirmed by the
+#: next half step (:func:`_confirmed`): two steps can agree before the step sequence reaches
+#: its asymptotic range (PZT 667 Hz, 23.6 V on a draw of the paper robot: -3.57 and -3.62 mm/s
+#: at h and h/2, -3.02, -2.66, -2.50 at h/4 .. h/16).
+CONFIRM_FRACTION = 0.5
 #: At most this many halvings of the step (h/16).
 MAX_HALVINGS = 4
 #: A run is chaotic when starts 0.05 um apart differ beyond the tolerance at this many
@@ -65,6 +76,21 @@ def probe_seed(seed: int | None) -> int:
     return 1 if seed is None else int(seed) + 1
 
 
+def _confirmed(runs: list[SimResult], k: int, run: Runner) -> tuple[bool, float]:
+    """A marginal agreement of the runs at levels k and k+1 (module doc, step 3), checked by the
+    run at k+2 (appended to ``runs``): (whether it holds, the error estimate of the run at k).
+
+    First-order convergence from level k: the run at k is off by twice its difference from k+1,
+    and by 4/3 of its difference from k+2; both within the tolerance of the finest run, and the
+    pair (k+1, k+2) agreeing by the same test as (k, k+1)."""
+    if len(runs) < k + 3:
+        runs.append(run(runs[0].dt_s / 2 ** (k + 2), runs[0].seed))
+    v, w, x = (runs[i].mean_speed_mm_s for i in (k, k + 1, k + 2))
+    tol = tolerance_mm_s(x)
+    err = max(ERROR_FACTOR * abs(v - w), 4.0 / 3.0 * abs(v - x))
+    return err <= tol and ERROR_FACTOR * abs(w - x) <= tol, err
+
+
 def _status(runs: list[SimResult], spreads: list[float], run: Runner) -> tuple[str, int, float, float]:
     """Walk down the steps (module doc): (status, level of the result, error, tolerance)."""
     h, seed, sensitive_levels = runs[0].dt_s, runs[0].seed, 0
@@ -77,9 +103,15 @@ def _status(runs: list[SimResult], spreads: list[float], run: Runner) -> tuple[s
         sensitive_levels = sensitive_levels + 1 if sensitive else 0
         if sensitive_levels >= CHAOS_LEVELS:
             return "chaotic", k, math.nan, tolerance_mm_s(v)
-        runs.append(run(h / 2 ** (k + 1), seed))
+        if len(runs) < k + 2:
+            runs.append(run(h / 2 ** (k + 1), seed))
         w = runs[k + 1].mean_speed_mm_s
         err, tol = ERROR_FACTOR * abs(v - w), tolerance_mm_s(w)
+        if err <= tol and not sensitive and err > CONFIRM_FRACTION * tol and k + 2 <= MAX_HALVINGS:
+            ok, err3 = _confirmed(runs, k, run)
+            if not ok:
+                continue
+            err, tol = err3, tolerance_mm_s(runs[k + 2].mean_speed_mm_s)
         if err <= tol:
             return ("chaotic" if sensitive else "converged" if k == 0 else "refined"), k, err, tol
     return "not_converged", MAX_HALVINGS, err, tol

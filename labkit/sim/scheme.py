@@ -101,40 +101,62 @@ P_SIZE = 25
 RAR_A = 9.638
 RAR_N = 1.159
 
-# ---- matrices A (row-major blocks)
-OFF_M = 0
-OFF_RT = OFF_M + NQ * NQ              # NI x NQ: contact rows then mode rows (R_I^T, rows contiguous)
-OFF_MRT = OFF_RT + NI * NQ             # NI x NQ: (M^-1 R_I)^T
-OFF_WI = OFF_MRT + NI * NQ             # R_I^T M^-1 R_I
-OFF_K = OFF_WI + NI * NI               # diagonal of K
-OFF_D = OFF_K + NQ
-OFF_FC = OFF_D + NQ                    # constant forces (deviation coordinates)
-OFF_FA = OFF_FC + NQ                   # actuator forces per volt (tripod phases included)
-OFF_KV = OFF_FA + NQ                   # 6 x NQ: knee vertical velocity rows
-OFF_YFEQ = OFF_KV + 6 * NQ             # 6: lateral foot position at rest
-OFF_HELD = OFF_YFEQ + 6                # 18: 1 = the mode is held rigid in impacts
+
+def layout(regions: tuple) -> tuple:
+    """The offsets of ``regions`` ((name, size) pairs) laid end to end in one flat array, in
+    their order, then the array's size. Every workspace below (A, a level's block of A, S, W,
+    I) is one such table, unpacked into its names (``tests/sim/test_layout_tables.py`` checks
+    each name against its table, that no two regions overlap and that all lie inside)."""
+    offsets = []
+    end = 0
+    for _, size in regions:
+        offsets.append(end)
+        end += size
+    return (*offsets, end)
+
+
 #: Step levels with cached matrices: the default step dt and its halvings dt / 2^k,
 #: k < NLEV (the sub-steps of :func:`integrate`); other lengths (partial steps up to
 #: an event) solve their own system.
 NLEV = 7
-OFF_LEV = OFF_HELD + 18                # per level: S^-1 by parts, Z, Q below (S = 2M + h D + h^2/2 K)
-LEV_DLI = 0                            # NQ: 1 / S_ii of the leg coordinates (the first NB unused)
-LEV_SCI = LEV_DLI + NQ                 # NB x NB: the inverse of the body's Schur complement of S
-LEV_ZT = LEV_SCI + NB * NB             # NR x NQ: (Sinv R)^T
-LEV_Q = LEV_ZT + NR * NQ               # NR x NR: R^T Sinv R
-LEV_SIZE = LEV_Q + NR * NR
-A_SIZE = OFF_LEV + NLEV * LEV_SIZE
+#: One level's block of A: S^-1 by parts, Z, Q (S = 2M + h D + h^2/2 K).
+LEV_REGIONS = (
+    ("LEV_DLI", NQ),            # 1 / S_ii of the leg coordinates (the first NB unused)
+    ("LEV_SCI", NB * NB),       # the inverse of the body's Schur complement of S
+    ("LEV_ZT", NR * NQ),        # (Sinv R)^T
+    ("LEV_Q", NR * NR),         # R^T Sinv R
+)
+LEV_DLI, LEV_SCI, LEV_ZT, LEV_Q, LEV_SIZE = layout(LEV_REGIONS)
+#: The constant matrices A (row-major blocks).
+A_REGIONS = (
+    ("OFF_M", NQ * NQ),         # the mass matrix
+    ("OFF_RT", NI * NQ),        # contact rows then mode rows (R_I^T, rows contiguous)
+    ("OFF_MRT", NI * NQ),       # (M^-1 R_I)^T
+    ("OFF_WI", NI * NI),        # R_I^T M^-1 R_I
+    ("OFF_K", NQ),              # diagonal of K
+    ("OFF_D", NQ),              # diagonal of D
+    ("OFF_FC", NQ),             # constant forces (deviation coordinates)
+    ("OFF_FA", NQ),             # actuator forces per volt (tripod phases included)
+    ("OFF_KV", 6 * NQ),         # knee vertical velocity rows
+    ("OFF_YFEQ", 6),            # lateral foot position at rest
+    ("OFF_HELD", 18),           # 1 = the mode is held rigid in impacts
+    ("OFF_LEV", NLEV * LEV_SIZE),   # per level: LEV_REGIONS
+)
+(OFF_M, OFF_RT, OFF_MRT, OFF_WI, OFF_K, OFF_D, OFF_FC, OFF_FA, OFF_KV, OFF_YFEQ, OFF_HELD, OFF_LEV,
+ A_SIZE) = layout(A_REGIONS)
 
-# ---- state S
-S_Q = 0
-S_V = S_Q + NQ
-S_TC = S_V + NQ          # time in contact per foot
-S_YPIN = S_TC + 6        # lateral position where a pinned foot is held
-S_LAM = S_YPIN + 6       # last contact force per row (N; + pushes the foot up)
-S_SLIP = S_LAM + NR      # friction force of a slipping pinned foot (0: it sticks)
-S_FV = S_SLIP + 6        # per film row (feet z, body z): its mean velocity relative to the ground
-S_FH = S_FV + 7          # over the last step, and that step's length (0: none; M7)
-S_SIZE = S_FH + 7
+#: The state S.
+S_REGIONS = (
+    ("S_Q", NQ),                # generalised coordinates
+    ("S_V", NQ),                # their velocities
+    ("S_TC", 6),                # time in contact per foot
+    ("S_YPIN", 6),              # lateral position where a pinned foot is held
+    ("S_LAM", NR),              # last contact force per row (N; + pushes the foot up)
+    ("S_SLIP", 6),              # friction force of a slipping pinned foot (0: it sticks)
+    ("S_FV", 7),                # per film row (feet z, body z): its mean velocity relative to the ground
+    ("S_FH", 7),                # over the last step, and that step's length (0: none; M7)
+)
+S_Q, S_V, S_TC, S_YPIN, S_LAM, S_SLIP, S_FV, S_FH, S_SIZE = layout(S_REGIONS)
 
 # ---- recorded trajectory columns (SI)
 REC_T, REC_Y, REC_Z, REC_PH, REC_ZG, REC_FZ, REC_FY, REC_KV = 0, 1, 2, 3, 6, 7, 13, 19
@@ -146,51 +168,53 @@ EV_COLS = 6
 CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED, CNT_RELEASES, CNT_HALVED, CNT_ADV = 6, 7, 8, 9, 10, 11, 12
 CNT_SIZE = 13
 
-# ---- float scratch W
-W_F = 0                   # forces at the step's midpoint
-W_R = W_F + NQ            # right-hand side
-W_Y0 = W_R + NQ           # Sinv r
-W_VB = W_Y0 + NQ          # vbar
-W_Q0 = W_VB + NQ
-W_V0 = W_Q0 + NQ
-W_SM = W_V0 + NQ          # a partial step: D_l^-1, the Schur complement, u_a (partial_system)
-W_B = W_SM + NQ * NQ      # its right-hand sides (also scratch of cached_inverse)
-W_QH = W_B + NQ * (1 + NR)
-W_AS = W_QH + NR * NR     # small system NI x NI
-W_BS = W_AS + NI * NI     # small right-hand side NI
-W_C = W_BS + NI           # film coefficient per active row
-W_T = W_C + NI            # targets per active row
-W_LAMS = W_T + NI         # saved contact forces
-W_Q1 = W_LAMS + NR        # trial end state
-W_V1 = W_Q1 + NQ
-W_GAP0 = W_V1 + NQ        # 7 gaps at the start
-W_GAP1 = W_GAP0 + 7       # 7 gaps at the end of a trial
-W_VREL = W_GAP1 + 7
-W_FI = W_VREL + 7         # forces at a state (contact_force)
-W_RY = W_FI + NQ          # R_a . Sinv r per active row (NI)
-W_LI0 = W_RY + NI         # instantaneous contact forces at the start of a trial (NR)
-W_LI1 = W_LI0 + NR        # ... at its end
-W_G0 = W_LI1 + NR         # release margins at the start (7: feet, body)
-W_CT = W_G0 + 7           # time at which W_LI1 holds the contact forces of the current state (cache)
-W_CV = W_CT + 1           # ... and the drive voltage they were computed with
 #: Cached inverses of R^T M^-1 R over a set of rows (the pinned rows, with or without stiff
 #: film rows): NSLOT slots, direct-mapped by the set's bit mask (rows 0-12); the sets
 #: change only at events, so nearly every step finds its matrix here.
 NSLOT = 64
 NC = 13
-W_FX = W_CV + 1           # per film row of the last trial (7): x = h c / m_row
-W_FR = W_FX + 7           # ... and the fraction of its film force that stops the row (transient)
-W_GRND = W_FR + 7         # ground(): two remembered (t, zg, vg, ag), then the slot to replace next
-W_CACHE = W_GRND + 9
-W_U = W_CACHE + NSLOT * NC * NC   # advance: the body's part of a right-hand side
-W_SIZE = W_U + NB
-# ---- int scratch I
-I_ROWS = 0                # active rows
-I_KIND = I_ROWS + NI      # 0 film, 1 pinned
-I_IMP = I_KIND + NI       # impacting flags (7)
-I_TAG = I_IMP + 7          # mask held by each cache slot (-1: empty)
-I_POS = I_TAG + NSLOT     # position of row r in the cached set's order
-I_SIZE = I_POS + NC
+#: The float scratch W.
+W_REGIONS = (
+    ("W_F", NQ),                # forces at the step's midpoint
+    ("W_R", NQ),                # right-hand side
+    ("W_Y0", NQ),               # Sinv r
+    ("W_VB", NQ),               # vbar
+    ("W_Q0", NQ),               # the step's start: positions
+    ("W_V0", NQ),               # ... and velocities
+    ("W_SM", NQ * NQ),          # a partial step: D_l^-1, the Schur complement, u_a (partial_system)
+    ("W_B", NQ * (1 + NR)),     # its right-hand sides (also scratch of cached_inverse)
+    ("W_QH", NR * NR),          # a partial step's R^T Sinv R
+    ("W_AS", NI * NI),          # small system NI x NI
+    ("W_BS", NI),               # small right-hand side NI
+    ("W_C", NI),                # film coefficient per active row
+    ("W_T", NI),                # targets per active row
+    ("W_GAP0", 7),              # 7 gaps at the start
+    ("W_GAP1", 7),              # 7 gaps at the end of a trial
+    ("W_VREL", 7),              # per point: relative normal velocity, or where its release crosses
+    ("W_FI", NQ),               # forces at a state (contact_force)
+    ("W_RY", NI),               # R_a . Sinv r per active row
+    ("W_LI0", NR),              # instantaneous contact forces at the start of a trial
+    ("W_LI1", NR),              # ... at its end
+    ("W_G0", 7),                # release margins at the start (feet, body)
+    ("W_CT", 1),                # time at which W_LI1 holds the contact forces of the current state (cache)
+    ("W_CV", 1),                # ... and the drive voltage they were computed with
+    ("W_FX", 7),                # per film row of the last trial: x = h c / m_row
+    ("W_FR", 7),                # ... and the fraction of its film force that stops the row (transient)
+    ("W_GRND", 9),              # ground(): two remembered (t, zg, vg, ag), then the slot to replace next
+    ("W_CACHE", NSLOT * NC * NC),   # the cached inverses (NSLOT above)
+    ("W_U", NB),                # advance: the body's part of a right-hand side
+)
+(W_F, W_R, W_Y0, W_VB, W_Q0, W_V0, W_SM, W_B, W_QH, W_AS, W_BS, W_C, W_T, W_GAP0, W_GAP1, W_VREL, W_FI, W_RY,
+ W_LI0, W_LI1, W_G0, W_CT, W_CV, W_FX, W_FR, W_GRND, W_CACHE, W_U, W_SIZE) = layout(W_REGIONS)
+#: The integer scratch I.
+I_REGIONS = (
+    ("I_ROWS", NI),             # active rows
+    ("I_KIND", NI),             # 0 film, 1 pinned
+    ("I_IMP", 7),               # impacting flags
+    ("I_TAG", NSLOT),           # mask held by each cache slot (-1: empty)
+    ("I_POS", NC),              # position of row r in the cached set's order
+)
+I_ROWS, I_KIND, I_IMP, I_TAG, I_POS, I_SIZE = layout(I_REGIONS)
 
 
 @jit

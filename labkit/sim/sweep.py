@@ -498,8 +498,8 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
         Names of the fields in the bounds' messages (:func:`labkit.sim.core.check_run`).
     error_control:
         ``"sample"`` (default): the nominal robot (draw 0) at every point checks its step
-        (:func:`labkit.sim.errorcontrol.control`); where it had to halve the step, the other
-        draws of that point are rerun at the step it settled on (their status ``sampled``).
+        (:func:`labkit.sim.errorcontrol.control`), first; where it had to halve the step, the
+        other draws of that point then run at the step it settled on (their status ``sampled``).
         ``"every"``: every run checks itself. ``"off"``: no check (``unchecked``).
         ``convergence``, ``step_error_mm_s`` and ``dt_s`` of the result hold what each run did.
 
@@ -524,10 +524,11 @@ def sweep(params: RobotParams, base_scenario: Shaker | PZT, quantity: str = "fre
              for v in grid for d in range(n_draws)]
     checks = [dataclasses.replace(proto, value=float(v), quarter=True, control="off") for v in grid] if dt_check else []
     run = functools.partial(_run_batch, scheduler=scheduler, workers=workers, quiet=quiet)
-    rows = run(tasks + checks, f"sweep {quantity}")
-    quarter_rows, rows = rows[len(tasks):], rows[:len(tasks)]
     if error_control == "sample" and n_draws > 1:
-        rows = _refine_sampled(rows, tasks, n_draws, lambda again: run(again, "sweep: refined points"))
+        rows = _run_sampled(tasks + checks, len(tasks), n_draws, run, f"sweep {quantity}")
+    else:
+        rows = run(tasks + checks, f"sweep {quantity}")
+    quarter_rows, rows = rows[len(tasks):], rows[:len(tasks)]
     t = RunTable.of(rows, len(grid), n_draws)
     meta = _sweep_meta(proto, n_draws, scheduler, error_control)
     if dt_check:
@@ -596,17 +597,23 @@ def _check_options(draws: int, duration_s: float, step_fraction: float, accel_li
                          expected=", ".join(ERROR_CONTROL))
 
 
-def _refine_sampled(rows: list[RunRow], tasks: list[PointTask], n_draws: int,
-                    run: Callable[[list[PointTask]], list[RunRow]]) -> list[RunRow]:
-    """Sampled error control: at every point whose nominal robot was refined (it halved its
-    step and then agreed with half of it), rerun the other draws at that step; elsewhere they
-    keep the default step. Their status: ``sampled``. Returns the rows, those draws replaced."""
-    out = [r if k % n_draws == 0 else dataclasses.replace(r, convergence="sampled") for k, r in enumerate(rows)]
-    redo = [k for i in range(0, len(rows), n_draws) if rows[i].convergence == "refined"
-            for k in range(i + 1, i + n_draws)]
-    if redo:
-        again = [dataclasses.replace(tasks[k], fraction=tasks[k].fraction / 2 ** rows[k - k % n_draws].halvings)
-                 for k in redo]
-        for k, row in zip(redo, run(again)):
-            out[k] = dataclasses.replace(row, convergence="sampled")
-    return out
+def _run_sampled(tasks: list[PointTask], n_main: int, n_draws: int,
+                 run: Callable[[list[PointTask], str], list[RunRow]], desc: str) -> list[RunRow]:
+    """Sampled error control: the nominal robot (draw 0) of every point first, with the control;
+    then the other draws (and the tasks after ``n_main``, the dt check's), each at the step its
+    point's nominal robot settled on where it refined it (halved the step and then agreed with
+    half of it), else at the default step; their status ``sampled``. Returns every task's row,
+    in the order of ``tasks``. (Run after the nominal robots, a refined point's draws are not
+    first run at the default step and thrown away.)"""
+    nominal = run(tasks[0:n_main:n_draws], desc + ": nominal robots, checked")
+    rest: list[PointTask] = []
+    for i in range(n_main):
+        if i % n_draws:
+            row = nominal[i // n_draws]
+            halve = 2 ** row.halvings if row.convergence == "refined" else 1
+            rest.append(dataclasses.replace(tasks[i], fraction=tasks[i].fraction / halve))
+    rest += tasks[n_main:]
+    done = iter(run(rest, desc + ": draws"))
+    rows = [nominal[i // n_draws] if i % n_draws == 0 else dataclasses.replace(next(done), convergence="sampled")
+            for i in range(n_main)]
+    return rows + list(done)
