@@ -37,7 +37,7 @@ from typing import Any
 from labkit.executor import map_tasks
 from labkit.sim import RobotParams, Shaker
 from labkit.sim.presets import load
-from labkit.sim.sweep import run_point
+from labkit.sim.sweep import PointTask, run_point
 
 FREQ_HZ = 240.0
 AMP_UM = 25.0
@@ -58,12 +58,14 @@ def scaled(params: RobotParams, name: str, factor: float) -> tuple[RobotParams, 
 
 
 def tasks(params: RobotParams, amp_um: float, robots: int, seed: int, duration_s: float,
-          nominal: bool, control: str = "check") -> list[tuple[Any, ...]]:
+          nominal: bool, control: str = "check") -> list[PointTask]:
     """:func:`labkit.sim.sweep.run_point` tasks: draw 0 the nominal robot, 1..robots drawn ones;
     ``control`` is ``simulate``'s error control (its default, ``"check"``, as every scenario run)."""
     first = 0 if nominal else 1
     sc = Shaker(FREQ_HZ, amp_um)
-    return [(params, sc, "amp_um", amp_um, d, seed, duration_s, None, None, False, 1.0, control)
+    from labkit.sim.uncertainty import DEFAULT_TABLE
+
+    return [PointTask(params, sc, "amp_um", amp_um, d, seed, duration_s, dict(DEFAULT_TABLE), control=control)
             for d in range(first, robots + 1)]
 
 
@@ -99,7 +101,7 @@ def speed(args: argparse.Namespace, params: RobotParams) -> dict[str, Any]:
     for seed in args.seeds:
         rows = map_tasks(run_point, tasks(params, AMP_UM, args.robots, seed, args.duration, True, args.control),
                          workers=args.workers, quiet=True)
-        sp = [abs(r["speed_mm_s"]) for r in rows]
+        sp = [abs(r.speed_mm_s) for r in rows]
         ratio = adhesion_ratios(params, args.robots, seed)
         out[str(seed)] = {"nominal": round(sp[0], 3), "drawn": stats(sp[1:]), "adhesion_over_pull": ratio,
                           "held_by_adhesion": sum(r >= 1.0 for r in ratio)}
@@ -108,13 +110,13 @@ def speed(args: argparse.Namespace, params: RobotParams) -> dict[str, Any]:
 
 def smooth(args: argparse.Namespace, params: RobotParams) -> dict[str, Any]:
     variants = [("base", 1.0)] + [(n, f) for n in PARAMETERS for f in (1 - args.step, 1 + args.step)]
-    batch: list[tuple[Any, ...]] = []
+    batch: list[PointTask] = []
     for name, f in variants:
         p, amp = (params, AMP_UM) if name == "base" else scaled(params, name, f)
         batch += tasks(p, amp, args.robots, args.seed, args.duration, False, args.control)
     rows = map_tasks(run_point, batch, workers=args.workers, quiet=True)
     n = args.robots
-    means = [statistics.fmean(abs(r["speed_mm_s"]) for r in rows[k * n:(k + 1) * n]) for k in range(len(variants))]
+    means = [statistics.fmean(abs(r.speed_mm_s) for r in rows[k * n:(k + 1) * n]) for k in range(len(variants))]
     base = means[0]
     table = {}
     for i, name in enumerate(PARAMETERS):
