@@ -59,9 +59,12 @@ import time
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover - annotations only
+    from labkit.experiments.session import SessionSummary
 
 from labkit.errors import InputError
 
@@ -410,7 +413,7 @@ def refined_grid(pilot: Path, grid: Any, spacing_rel: float) -> tuple[np.ndarray
     return np.union1d(np.round(np.asarray(grid, float), 3), extra), extra, peaks
 
 
-def _check_run(summary: dict[str, Any], path: Path) -> None:
+def _check_run(summary: SessionSummary, path: Path) -> None:
     if summary.get("status") != "complete" or summary.get("points_ok") != summary.get("points_planned"):
         raise InputError(f"the run did not complete cleanly: {summary.get('status')}, "
                          f"{summary.get('points_ok')} of {summary.get('points_planned')} points",

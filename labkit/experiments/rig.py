@@ -27,6 +27,7 @@ from labkit.experiments.protocols import (
     Vibrometer,
 )
 from labkit.experiments.safety import RECONNECT_WINDOW_S, DriveGuard, Interlock
+from labkit.jsonutil import Json
 
 if TYPE_CHECKING:  # pragma: no cover
     from labkit.lab.client import LabControl
@@ -408,14 +409,14 @@ class Rig:
         except LimitError as exc:
             raise Interlock(f"shaker envelope: {exc.message}") from None
 
-    def record_video(self, path: Any, duration_s: float) -> dict[str, Any]:
+    def record_video(self, path: Any, duration_s: float) -> dict[str, Json]:
         if self.camera is None:
             raise InstrumentError("no camera", instrument="camera", command="record")
         return self.camera.record(str(path), duration_s)
 
-    def snapshots(self) -> dict[str, tuple[str, str, dict[str, Any]]]:
+    def snapshots(self) -> dict[str, tuple[str, str, dict[str, Json]]]:
         """role -> (model, resource, snapshot) for the run file."""
-        out: dict[str, tuple[str, str, dict[str, Any]]] = {}
+        out: dict[str, tuple[str, str, dict[str, Json]]] = {}
         opened: dict[str, FunctionGenerator | Scope | Vibrometer] = {
             "funcgen": self.funcgen, "scope": self.scope, "vibrometer": self.vibrometer}
         for role, obj in opened.items():

@@ -37,7 +37,7 @@ import time
 from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, TypedDict, cast
 
 import numpy as np
 
@@ -47,7 +47,7 @@ from labkit.experiments.config import ShakerConfig
 from labkit.experiments.kinds import POINT_OVERHEAD_BYTES, Config
 from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, SinePoint
 from labkit.experiments.rig import Rig
-from labkit.experiments.runfile import RunFile, WriteFailed
+from labkit.experiments.runfile import Row, RunFile, WriteFailed
 from labkit.experiments.safety import (
     RECONNECT_WINDOW_S,
     DriveGuard,
@@ -96,6 +96,13 @@ def burst_idle(amp_vpp: float, offset_v: float) -> tuple[float, float]:
     return math.degrees(math.asin(s)), offset_v + half * s
 
 
+class InterlockRecord(TypedDict):
+    """A point an interlock stopped (the session's JSON summary lists them)."""
+
+    index: int
+    reason: str
+
+
 class InterlockEnd(LimitError):
     """The run ended on an interlock (``on_interlock = "end"``); the file is complete up to it."""
 
@@ -127,7 +134,7 @@ class Runner:
         self.sine_set: tuple[float, float] | None = None   # (amp_vpp, offset_v) programmed
         self.freq_set: float | None = None
         self.record_s: float | None = None
-        self.interlocks: list[dict[str, Any]] = []
+        self.interlocks: list[InterlockRecord] = []
         self.gain_um_per_vpp: dict[float, float] = {}       # shaker: tray response per drive volt
         # per point: total, waited (for the bench); the last TIMING_POINTS only (flat memory)
         self.timing: deque[dict[str, float]] = deque(maxlen=TIMING_POINTS)
@@ -150,7 +157,7 @@ class Runner:
             pass
         self.live.event(text)
 
-    def _live_point(self, p: Any, rows: dict[str, Any], loc: dict[str, Any] | None) -> None:
+    def _live_point(self, p: Any, rows: Row, loc: Row | None) -> None:
         """The finished point into the live stream, with its last record's levels on the scope."""
         from labkit.experiments.rig import VERTICAL_DIVS
 
@@ -474,8 +481,8 @@ class Runner:
                               "turned off; the file holds every point completed before it; fix the disk, "
                               "then continue with --resume", file=self.file.path, key="--out") from exc
 
-    def _empty_row(self, p: Any) -> dict[str, Any]:
-        row: dict[str, Any] = {"location": getattr(p, "location", getattr(p, "robot_spot", "")),
+    def _empty_row(self, p: Any) -> Row:
+        row: Row = {"location": getattr(p, "location", getattr(p, "robot_spot", "")),
                                "freq_hz": getattr(p, "freq_hz", float("nan")), "reason": ""}
         if isinstance(p, ShakerPoint):
             nan = float("nan")
@@ -736,7 +743,8 @@ class Runner:
             info = self.rig.record_video(tmp, p.video_s)
         self._event(f"video {path.name}: {info.get('frames', 0)} frames")
         rel = os.path.relpath(path, self.file.path.parent)
-        return rel, int(info.get("frames", 0))
+        frames = info.get("frames", 0)
+        return rel, int(frames) if isinstance(frames, (int, float)) else 0
 
 
 #: bytes per second of video a point may write: the lab camera's 640 x 480 at 30 frames/s, one
@@ -764,7 +772,7 @@ def _warn(text: str) -> None:
         pass
 
 
-def _nbytes(loc_rows: dict[str, Any] | None, records: Any) -> float:
+def _nbytes(loc_rows: Row | None, records: Any) -> float:
     """Bytes a point's rows and records take (records are stored as float32)."""
     n = 0.0
     for v in (loc_rows or {}).values():

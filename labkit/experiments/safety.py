@@ -17,10 +17,11 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import Any, TypedDict
 
 from labkit.errors import DriveNotOff, InstrumentError, Interrupted
 from labkit.experiments.protocols import FunctionGenerator
+from labkit.jsonutil import Json
 
 #: the shutdown path's log (``labkit -v``: INFO, ``-vv``: DEBUG, on stderr)
 _log = logging.getLogger(__name__)
@@ -274,8 +275,19 @@ def signals_raise() -> Iterator[None]:
 sigterm_raises = signals_raise
 
 
+class OffSummary(TypedDict, total=False):
+    """``labkit off``'s result (its ``--json`` line): every output of the generator read back off."""
+
+    ok: bool
+    instrument: str                  # the model that answered
+    resource: str
+    channels_off: list[int]
+    attempts: int                    # connections it took
+    in_use_by: str                   # the run holding the generator's lock, when one did
+
+
 def turn_off(config: str | None = None, *, model: str | None = None, resource: str | None = None,
-             timeout_s: float = 3.0, attempts: int = 3) -> dict[str, Any]:
+             timeout_s: float = 3.0, attempts: int = 3) -> OffSummary:
     """``labkit off``: every output of a rig's generator off, confirmed by reading each one back.
 
     Reads only ``[instruments.funcgen]`` of ``config`` (the rest may be invalid), or takes
@@ -287,7 +299,7 @@ def turn_off(config: str | None = None, *, model: str | None = None, resource: s
     from labkit.errors import ConfigError, InputError
     from labkit.lockfiles import describe, holder
 
-    settings: dict[str, Any] = {}
+    settings: dict[str, Json] = {}
     if config is not None:
         from labkit.tomlio import load_toml
 
@@ -322,7 +334,7 @@ def turn_off(config: str | None = None, *, model: str | None = None, resource: s
             if still_on:
                 raise InstrumentError(f"output(s) {still_on} still read on after OFF", instrument="funcgen",
                                       command="OUTP?")
-            out: dict[str, Any] = {"ok": True, "instrument": getattr(fg, "instrument_model", None) or model,
+            out: OffSummary = {"ok": True, "instrument": getattr(fg, "instrument_model", None) or model,
                                    "resource": resource, "channels_off": list(fg.channels),
                                    "attempts": attempt + 1}
             if busy:
