@@ -93,6 +93,8 @@ def measure(points: int, warmup: int, settle_s: float, dwell_cycles: float) -> d
             "rss_slope_bytes_per_point": round(slope, 1),
             "rss_slope_second_half_bytes_per_point": round(late_slope, 1),
             "file_bytes_per_point": round(file_bytes / max(points, 1), 1),
+            "rss_mib_at_points": {int(n[i]): round(rss[i] / 2**20, 2)
+                                  for i in np.linspace(0, len(n) - 1, 11).round().astype(int)},
             "rss_first_mib": round(rss[0] / 2**20, 2),
             "rss_last_mib": round(rss[-1] / 2**20, 2), "points_first": int(n[0]), "points_last": int(n[-1])}
 

@@ -78,7 +78,7 @@ import os
 import platform
 import time
 from pathlib import Path
-from typing import Any, TypeAlias, TypedDict
+from typing import TYPE_CHECKING, Any, TypeAlias, TypedDict
 
 import numpy as np
 
@@ -86,6 +86,9 @@ from labkit.errors import InputError
 from labkit.h5io import SCHEMA_VERSION as H5_SCHEMA_VERSION
 from labkit.h5io import get_json, label_dimensions, open_h5, put_json, stamp, utc_now
 from labkit.jsonutil import Json
+
+if TYPE_CHECKING:  # pragma: no cover - annotations only (kinds imports this module's tables)
+    from labkit.experiments.kinds import Config
 
 #: one value of a table row: a number, a text, or (a chirp's lines) an array of them
 Cell: TypeAlias = "float | complex | int | str | np.ndarray | np.generic"
@@ -447,7 +450,7 @@ class RunFile:
 
     # -- opening ---------------------------------------------------------------------------
     @classmethod
-    def create(cls, path: str | Path, cfg: Any, config_json: dict[str, Json], points_planned: int,
+    def create(cls, path: str | Path, cfg: Config, config_json: dict[str, Json], points_planned: int,
                extra_attrs: dict[str, AttrValue] | None = None, reserve_bytes: float = 0.0) -> RunFile:
         """A new run file for ``cfg`` (an InchipConfig or ShakerConfig); refuses to overwrite.
 
@@ -489,7 +492,7 @@ class RunFile:
         return cls(f, path)
 
     @staticmethod
-    def _lay_out(f: Any, cfg: Any, config_json: dict[str, Json], points_planned: int,
+    def _lay_out(f: Any, cfg: Config, config_json: dict[str, Json], points_planned: int,
                  extra_attrs: dict[str, AttrValue] | None) -> None:
         from labkit.experiments import kinds
 
@@ -515,7 +518,7 @@ class RunFile:
         label_dimensions(f)             # coordinates for h5py, xarray and HDFView (schema 2)
 
     @classmethod
-    def resume(cls, path: str | Path, cfg: Any, config_json: dict[str, Json],
+    def resume(cls, path: str | Path, cfg: Config, config_json: dict[str, Json],
                retry_interlocked: bool = False) -> RunFile:
         """Reopen a run file to continue it after its last complete point.
 

@@ -35,7 +35,7 @@ import os
 import sys
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypedDict, cast
 
@@ -278,10 +278,8 @@ class Runner:
         if self.cfg.method.kind == "chirp":
             why = ("a chirp is a generator sweep, which keeps running between triggers: if this "
                    "computer dies mid-run, the drive stays on until someone turns it off")
-        elif not callable(getattr(fg, "burst", None)):
-            why = f"the {getattr(fg, 'model', 'generator')} driver has no burst mode"
-        elif not getattr(scope, "record_delay", False):
-            why = f"the {getattr(scope, 'model', 'scope')} driver cannot delay its record past the settling"
+        elif not scope.record_delay:            # every generator bursts (FunctionGenerator.burst)
+            why = f"the {scope.model} driver cannot delay its record past the settling"
         else:
             why = ""
         self.bounded = not why
@@ -299,8 +297,7 @@ class Runner:
                       "Output key (docs/faults.md)")
         else:
             text = f"DRIVE NOT BOUNDED: {why}"
-            if callable(getattr(fg, "burst_off", None)):
-                fg.burst_off()        # a bounded run before may have left burst mode on
+            fg.burst_off()            # a bounded run before may have left burst mode on
             _warn(text)
         self._event(text)
         try:
@@ -391,14 +388,7 @@ class Runner:
         # room for the point before driving it (DiskFull stops the run cleanly: drive off, status written)
         self.file.ensure_room(self.point_bytes)
         try:
-            if isinstance(p, SinePoint):
-                rows, loc_rows, records = self._sine_point(p)
-            elif isinstance(p, ChirpPoint):
-                rows, loc_rows, records = self._chirp_point(p)
-            elif isinstance(p, ShakerPoint):
-                rows, loc_rows, records = self._shaker_point(p)
-            else:  # pragma: no cover - plans hold only these
-                raise TypeError(f"unknown step {p!r}")
+            rows, loc_rows, records = _MEASURE[type(p)](self, p)
             rows.update(status="ok")
         except Interlock as il:
             self.guard.off(f"interlock: {il.reason}")
@@ -418,7 +408,7 @@ class Runner:
         self.file.ensure_room(_nbytes(loc_rows, records) + POINT_OVERHEAD_BYTES)
         with deferred(), self._writing(p.index):      # all of a point's rows, or none
             if loc_rows is not None:
-                self.file.add_location_rows(loc_rows.pop("location"), loc_rows)
+                self.file.add_location_rows(str(loc_rows.pop("location")), loc_rows)
             if records is not None:
                 group, dt, arrays = records
                 self.file.add_records(group, p.index, dt, arrays)
@@ -483,7 +473,7 @@ class Runner:
 
     def _empty_row(self, p: Any) -> Row:
         row: Row = {"location": getattr(p, "location", getattr(p, "robot_spot", "")),
-                               "freq_hz": getattr(p, "freq_hz", float("nan")), "reason": ""}
+                    "freq_hz": getattr(p, "freq_hz", float("nan")), "reason": ""}
         if isinstance(p, ShakerPoint):
             nan = float("nan")
             row.update(tray_amp_request_um=p.tray_amp_um if p.tray_amp_um is not None else nan,
@@ -584,7 +574,7 @@ class Runner:
                 break
         return rec, waited
 
-    def _sine_point(self, p: SinePoint) -> tuple[dict, dict | None, Any]:
+    def _sine_point(self, p: SinePoint) -> tuple[Row, Row | None, Any]:
         self._set_sine(p.freq_hz, p.amp_vpp, p.offset_v)
         self._arm_burst(p.freq_hz, p.settle_s, p.dwell_s)     # before the output goes on
         t_changed = time.monotonic()
@@ -593,16 +583,16 @@ class Runner:
         ph = measure.sine_phasors(rec, p.freq_hz, self.rig.scale_mm_s_per_v, self.rig.velocity_delay_s)
         self._check_measured_drive(ph)
         self.timing.append({"waited_s": waited, "settle_s": p.settle_s, "dwell_s": p.dwell_s})
-        rows = {"location": p.location, "freq_hz": p.freq_hz, "reason": ""}
-        loc = {"location": p.location, "freq_hz": p.freq_hz, "frf": ph.frf, "quality": ph.quality,
-               "drive_v": ph.drive_v, "velocity_mm_s": ph.velocity_mm_s, "point_index": p.index}
+        rows: Row = {"location": p.location, "freq_hz": p.freq_hz, "reason": ""}
+        loc: Row = {"location": p.location, "freq_hz": p.freq_hz, "frf": ph.frf, "quality": ph.quality,
+                    "drive_v": ph.drive_v, "velocity_mm_s": ph.velocity_mm_s, "point_index": p.index}
         records = None
         if self.cfg.method.keep_raw:
             records = ("raw", rec.dt_s, {"drive_v": (rec.drive_v, "V"), "velocity_v": (rec.velocity_v, "V")})
         return rows, loc, records
 
     # -- chirp -------------------------------------------------------------------------------
-    def _chirp_point(self, p: ChirpPoint) -> tuple[dict, dict | None, Any]:
+    def _chirp_point(self, p: ChirpPoint) -> tuple[Row, Row | None, Any]:
         rig = self.rig
         fg = self.guard.funcgen
         fg.set_sine(p.start_hz, p.amp_vpp, p.offset_v)
@@ -634,9 +624,9 @@ class Runner:
         f, h, coh = measure.chirp_h1(records, rig.scale_mm_s_per_v, p.start_hz, p.stop_hz,
                                      rig.velocity_delay_s)
         self.timing.append({"waited_s": p.averages * p.length_s})
-        rows = {"location": p.location, "freq_hz": float("nan"), "reason": ""}
-        loc = {"location": p.location, "freq_hz": f, "frf": h, "quality": coh, "coherence": coh,
-               "point_index": np.full(f.shape, p.index)}
+        rows: Row = {"location": p.location, "freq_hz": float("nan"), "reason": ""}
+        loc: Row = {"location": p.location, "freq_hz": f, "frf": h, "quality": coh, "coherence": coh,
+                    "point_index": np.full(f.shape, p.index)}
         raw = None
         if self.cfg.method.keep_raw:
             raw = ("raw", records[0].dt_s, {
@@ -645,7 +635,7 @@ class Runner:
         return rows, loc, raw
 
     # -- shaker ------------------------------------------------------------------------------
-    def _shaker_point(self, p: ShakerPoint) -> tuple[dict, dict | None, Any]:
+    def _shaker_point(self, p: ShakerPoint) -> tuple[Row, Row | None, Any]:
         cfg, rig = cast(ShakerConfig, self.cfg), self.rig     # shaker points come from shaker plans
         f = p.freq_hz
         self._move_spot("tray", drive_off=False)
@@ -717,12 +707,12 @@ class Runner:
             video, frames = self._video(p)
             waited += p.video_s
         self.timing.append({"waited_s": waited})
-        rows = {"location": p.robot_spot, "freq_hz": f, "reason": reason,
-                "tray_amp_request_um": p.tray_amp_um if p.tray_amp_um is not None else math.nan,
-                "drive_request_vpp": p.drive_vpp if p.drive_vpp is not None else math.nan,
-                "drive_vpp": vpp, "iterations": iterations, "tray_amp_um": x_um,
-                "tray_velocity_mm_s": tray.velocity_re_drive, "robot_velocity_mm_s": robot.velocity_re_drive,
-                "transmissibility": complex(T), "quality": float(q), "video": video, "video_frames": frames}
+        rows: Row = {"location": p.robot_spot, "freq_hz": f, "reason": reason,
+                     "tray_amp_request_um": p.tray_amp_um if p.tray_amp_um is not None else math.nan,
+                     "drive_request_vpp": p.drive_vpp if p.drive_vpp is not None else math.nan,
+                     "drive_vpp": vpp, "iterations": iterations, "tray_amp_um": x_um,
+                     "tray_velocity_mm_s": tray.velocity_re_drive, "robot_velocity_mm_s": robot.velocity_re_drive,
+                     "transmissibility": complex(T), "quality": float(q), "video": video, "video_frames": frames}
         records = ("records", tray_rec.dt_s, {
             "tray_velocity_mm_s": (tray_rec.velocity_v * rig.scale_mm_s_per_v, "mm/s"),
             "robot_velocity_mm_s": (robot_rec.velocity_v * rig.scale_mm_s_per_v, "mm/s"),
@@ -745,6 +735,11 @@ class Runner:
         rel = os.path.relpath(path, self.file.path.parent)
         frames = info.get("frames", 0)
         return rel, int(frames) if isinstance(frames, (int, float)) else 0
+
+
+#: how each kind of point is measured (a step -> handler table: a plan holds only these kinds)
+_MEASURE: dict[type, Callable[[Runner, Any], tuple[Row, Row | None, Any]]] = {
+    SinePoint: Runner._sine_point, ChirpPoint: Runner._chirp_point, ShakerPoint: Runner._shaker_point}
 
 
 #: bytes per second of video a point may write: the lab camera's 640 x 480 at 30 frames/s, one
