@@ -3,13 +3,17 @@
 Prints ONE JSON object: the resident memory (``VmRSS`` of the ``labkit`` process, read from
 ``/proc``) against the points written (the run file, read without locking), sampled as the
 run goes, and its least-squares slope in bytes per point after a warm-up of ``--warmup``
-points. The lab runs in this process, so its own records do not count. Target: under 100
-bytes a point. Measured on a loaded 2-core machine: 674 bytes a point over points 300-2000
-before HDF5's chunk and metadata caches were bounded (``labkit.experiments.runfile.open_for_writing``),
-436 after (a 64 KiB chunk cache); over points 1000-5000, 248 with that cache and 141 with
-the 8 KiB one now used (docs/faults.md).
+points (and before its last, so the run's end does not count), its slope over the second
+half of them, and the resident memory at eleven points of the run. The lab runs in this
+process, so its own records do not count. Target: under 100 bytes a point. Measured on a
+loaded 2-core machine (load 15, ``--points 10000 --warmup 1000 --settle-s 0.01``): 32 bytes
+a point (63.39 MiB at point 1017, 63.71 MiB at point 9994) with run-file layout 3 (text
+fixed-length, both HDF5 caches bounded); 216 bytes a point (63.77 to 65.39 MiB at point 8735)
+with layout 2 (variable-length strings, the metadata cache unbounded); 68 bytes a point over a
+2000-point run (``--points 2000 --warmup 200``) with layout 3. Earlier: 674 bytes a
+point over points 300-2000 before the chunk cache was bounded (docs/faults.md).
 
-    python bench/memory_bench.py [--points 5000] [--warmup 500]
+    python bench/memory_bench.py [--points 5000] [--warmup 500] [--settle-s 0.12]
 """
 from __future__ import annotations
 
@@ -77,7 +81,7 @@ def measure(points: int, warmup: int, settle_s: float, dwell_cycles: float) -> d
         while proc.poll() is None:
             rss = rss_bytes(proc.pid)
             n = points_written(out)
-            if rss is not None and n >= warmup:
+            if rss is not None and warmup <= n < points:     # not the run's end (final status, summary)
                 samples.append((n, rss))
             time.sleep(0.5)
         err = proc.stderr.read() if proc.stderr else ""

@@ -183,6 +183,8 @@ def _make_table(group: Any, fields: dict[str, tuple[str, str]], with_index: bool
         ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(rows,),
                                   fletcher32=True)
         ds.attrs["units"] = units
+        if dtype.kind == "S":
+            ds.attrs["_Encoding"] = "utf-8"        # the netCDF convention: xarray reads it as text
 
 
 def fit_text(values: Any, dtype: np.dtype) -> np.ndarray:

@@ -6,6 +6,7 @@ import json
 import h5py
 import numpy as np
 import pytest
+import xarray as xr
 
 from clihelpers import REPO, last_json, run_cli
 from labkit.errors import InputError
@@ -168,8 +169,20 @@ def test_text_is_fixed_length_checksummed_and_cut_at_a_character(tmp_path):
     assert len(reason.encode()) <= f_width(path, "points/reason")
     assert event.endswith(rf.CUT_MARK) and ("\u00e9v\u00e9nement " * 100).startswith(event[:-1])
     assert list(read_run_file(path).points["reason"]) == [reason]
+    with xr.open_dataset(path, engine="h5netcdf", group="events") as ev:     # text, not bytes
+        assert ev.text.values.tolist() == [event]
     old = read_run_file(REPO / "tests" / "files" / "schema1" / "inchip_run.h5")
     assert old.points["status"].dtype.kind == "U" and old.complete_points > 0
+    # an older file is appended to in its own layout, with HDF5's default metadata cache (its
+    # variable-length strings' heap must not be written between flushes)
+    older = tmp_path / "older.h5"
+    older.write_bytes((REPO / "tests" / "files" / "schema1" / "inchip_run.h5").read_bytes())
+    with rf.RunFile(rf.open_for_writing(older, "r+"), older) as run:
+        assert run.f.id.get_mdc_config().max_size != rf.METADATA_CACHE_BYTES
+        run.event("appended to a layout-1 file \u00b5")
+        assert run.f["events/text"].dtype.kind == "O"
+    with h5py.File(older, "r") as f:
+        assert f["events/text"].asstr()[-1] == "appended to a layout-1 file \u00b5"
 
 
 def f_width(path, name):
