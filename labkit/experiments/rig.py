@@ -10,6 +10,7 @@ channel) or a :class:`PromptSpot` (asks the person at the terminal).
 """
 from __future__ import annotations
 
+import logging
 import sys
 from typing import TYPE_CHECKING, Any, TextIO, cast
 
@@ -31,6 +32,9 @@ from labkit.jsonutil import Json
 
 if TYPE_CHECKING:  # pragma: no cover
     from labkit.lab.client import LabControl
+
+#: closing the rig on the shutdown path (``labkit -v`` shows what failed)
+_log = logging.getLogger(__name__)
 
 #: scope vertical divisions on screen (both supported models have 8)
 VERTICAL_DIVS = 8
@@ -340,8 +344,8 @@ class Rig:
                 continue
             try:
                 obj.close()
-            except Exception:
-                pass
+            except Exception as exc:
+                _log.info("closing the %s: %s: %s", name, type(exc).__name__, exc)
 
     def __enter__(self) -> Rig:
         return self.open()

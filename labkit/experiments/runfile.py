@@ -74,6 +74,7 @@ from __future__ import annotations
 
 import errno
 import json
+import logging
 import os
 import platform
 import time
@@ -89,6 +90,9 @@ from labkit.jsonutil import Json
 
 if TYPE_CHECKING:  # pragma: no cover - annotations only (kinds imports this module's tables)
     from labkit.experiments.kinds import Config
+
+#: the run file's own failures on the shutdown path (``labkit -v`` shows them)
+_log = logging.getLogger(__name__)
 
 #: one value of a table row: a number, a text, or (a chirp's lines) an array of them
 Cell: TypeAlias = "float | complex | int | str | np.ndarray | np.generic"
@@ -672,8 +676,8 @@ class RunFile:
     def close(self) -> None:
         try:
             self.f.close()
-        except Exception:  # pragma: no cover - closing after a failed write
-            pass
+        except Exception as exc:  # pragma: no cover - closing after a failed write
+            _log.info("%s: closing the run file: %s: %s", self.path, type(exc).__name__, exc)
 
     def __enter__(self) -> RunFile:
         return self

@@ -36,6 +36,7 @@ import sys
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypedDict, cast
 
@@ -96,6 +97,22 @@ def burst_idle(amp_vpp: float, offset_v: float) -> tuple[float, float]:
     return math.degrees(math.asin(s)), offset_v + half * s
 
 
+@dataclass
+class Programmed:
+    """What the runner has programmed on the instruments, so a point sends only what changed.
+
+    After a reconnect nothing is assumed: the runner starts a fresh one.
+    """
+
+    sine_set: tuple[float, float] | None = None     # (amp_vpp, offset_v) on the generator
+    freq_set: float | None = None                   # its frequency, Hz
+    record_s: float | None = None                   # the scope's record length, s
+    record_delay: tuple[float, float] | None = None  # (record_s, delay_s) set on the scope
+    burst_n: int | None = None                      # cycles of the armed burst
+    burst_phase: float | None = None                # its start phase, deg (sets the level between bursts)
+    burst_end: float = 0.0                          # time.monotonic() when the last burst ends by itself
+
+
 class InterlockRecord(TypedDict):
     """A point an interlock stopped (the session's JSON summary lists them)."""
 
@@ -131,20 +148,14 @@ class Runner:
         self.guard.log = self._event
         self.point_bytes = kinds.of(cfg).point_bytes(cfg)
         self.spot: str | None = None
-        self.sine_set: tuple[float, float] | None = None   # (amp_vpp, offset_v) programmed
-        self.freq_set: float | None = None
-        self.record_s: float | None = None
+        self.prog = Programmed()                 # what is programmed now (sent again only when it changes)
         self.interlocks: list[InterlockRecord] = []
         self.gain_um_per_vpp: dict[float, float] = {}       # shaker: tray response per drive volt
         # per point: total, waited (for the bench); the last TIMING_POINTS only (flat memory)
         self.timing: deque[dict[str, float]] = deque(maxlen=TIMING_POINTS)
         # bounded drive: each acquisition is a finite burst (settle + dwell cycles), armed per point
         self.bounded = False
-        self.burst_n: int | None = None          # cycles of the armed burst
-        self.burst_phase: float | None = None    # its start phase, deg (sets the level between bursts)
         self.reconnects = 0                      # dropped links replaced so far (at most MAX_RECONNECTS)
-        self.burst_end = 0.0                     # time.monotonic() when the last burst ends by itself
-        self.record_delay: tuple[float, float] | None = None   # (record_s, delay_s) set on the scope
         self.drive_set_vpp: float | None = None  # amplitude commanded (for the measured-drive check)
         self.live = live.LiveStream(runfile.path, live.console_for_run(quiet))   # RUN.live.jsonl
         self.last_rec: tuple[measure.Records, float | None, float | None] | None = None  # + V/div then
@@ -153,8 +164,8 @@ class Runner:
     def _event(self, text: str) -> None:
         try:
             self.file.event(text)
-        except Exception:  # the log must never stop a shutdown
-            pass
+        except Exception as exc:  # the log must never stop a shutdown
+            _log.info("event not written to the run file (%s: %s): %s", type(exc).__name__, exc, text)
         self.live.event(text)
 
     def _live_point(self, p: Any, rows: Row, loc: Row | None) -> None:
@@ -302,29 +313,29 @@ class Runner:
         self._event(text)
         try:
             self.file.set_attrs(drive_bounded=self.bounded, drive_bounded_note=text)
-        except Exception:   # the events say it too
-            pass
+        except Exception as exc:   # the events say it too
+            _log.info("drive_bounded not written to the run file: %s: %s", type(exc).__name__, exc)
 
     def _arm_burst(self, freq_hz: float, settle_s: float, hold_s: float) -> None:
         """Burst mode with enough cycles for ``settle_s + hold_s`` at ``freq_hz`` (re-armed when it changes)."""
         if not self.bounded:
             return
         n = math.ceil((settle_s + hold_s) * freq_hz) + BURST_MARGIN_CYCLES
-        phase = burst_idle(*(self.sine_set or (0.0, 0.0)))[0]
-        if (n, phase) != (self.burst_n, self.burst_phase):
+        phase = burst_idle(*(self.prog.sine_set or (0.0, 0.0)))[0]
+        if (n, phase) != (self.prog.burst_n, self.prog.burst_phase):
             self._wait_burst_end()          # never re-arm a running burst
             self.guard.funcgen.burst(n, trigger_source="BUS", start_phase_deg=phase)
-            self.burst_n, self.burst_phase = n, phase
+            self.prog.burst_n, self.prog.burst_phase = n, phase
 
     def _wait_burst_end(self) -> None:
         """A trigger during a running burst is ignored by the generator: wait for its end."""
-        left = self.burst_end - time.monotonic()
+        left = self.prog.burst_end - time.monotonic()
         if left > 0:
             time.sleep(left)
 
     def _fire_burst(self, freq_hz: float) -> float:
         """Start the armed burst (``*TRG``) once the last one has ended; return the start (monotonic)."""
-        assert self.burst_n is not None
+        assert self.prog.burst_n is not None
         self._wait_burst_end()
         t = time.monotonic()
         self.guard.funcgen.trigger()
@@ -332,7 +343,7 @@ class Runner:
         # return (after it, when the driver reads the error queue on the same link): count its
         # end from the return. From t, a trigger that took over 2 ms to arrive (a loaded machine)
         # let the next point's commands cut the burst short (seen once on the virtual lab: 86 us)
-        self.burst_end = time.monotonic() + self.burst_n / freq_hz + 0.002
+        self.prog.burst_end = time.monotonic() + self.prog.burst_n / freq_hz + 0.002
         return t
 
     def _no_drive_in(self, rec: measure.Records) -> bool:
@@ -454,9 +465,7 @@ class Runner:
 
     def _forget_settings(self) -> None:
         """After a reconnect nothing programmed is assumed: the next point sends it all again."""
-        self.sine_set = self.freq_set = self.record_s = self.record_delay = None
-        self.burst_n = self.burst_phase = None
-        self.burst_end = 0.0
+        self.prog = Programmed()
         m = self.cfg.method
         if m.kind == "stepped":
             self.rig.set_record_points(math.ceil(m.dwell_cycles * self.cfg.scope.samples_per_cycle))
@@ -492,21 +501,21 @@ class Runner:
         running burst."""
         self._wait_burst_end()
         fg = self.guard.funcgen
-        if self.sine_set is not None and self.sine_set[1] == offset_v and amp_vpp < self.sine_set[0]:
+        if self.prog.sine_set is not None and self.prog.sine_set[1] == offset_v and amp_vpp < self.prog.sine_set[0]:
             # Lower the amplitude BEFORE moving the frequency: the old, larger drive must never
             # meet a frequency where it would move the shaker further (x ~ V / f^2).
             fg.set_amplitude(amp_vpp)
-            if self.freq_set != freq_hz:
+            if self.prog.freq_set != freq_hz:
                 fg.set_frequency(freq_hz)
-            self.sine_set = (amp_vpp, offset_v)
+            self.prog.sine_set = (amp_vpp, offset_v)
             self.rig.on_drive_amplitude(amp_vpp, offset_v)
-        elif self.sine_set != (amp_vpp, offset_v):
+        elif self.prog.sine_set != (amp_vpp, offset_v):
             fg.set_sine(freq_hz, amp_vpp, offset_v)
-            self.sine_set = (amp_vpp, offset_v)
+            self.prog.sine_set = (amp_vpp, offset_v)
             self.rig.on_drive_amplitude(amp_vpp, offset_v)
-        elif self.freq_set != freq_hz:
+        elif self.prog.freq_set != freq_hz:
             fg.set_frequency(freq_hz)
-        self.freq_set = freq_hz
+        self.prog.freq_set = freq_hz
         self.drive_set_vpp = amp_vpp
 
     def _settle_and_acquire(self, freq_hz: float, settle_s: float, dwell_s: float,
@@ -516,15 +525,15 @@ class Runner:
         Returns the record and the time spent waiting for the physics (settle + dwell), s.
         """
         rig = self.rig
-        if self.record_s != dwell_s:
+        if self.prog.record_s != dwell_s:
             rig.scope.set_timebase(dwell_s)
-            self.record_s = dwell_s
-            self.record_delay = None
+            self.prog.record_s = dwell_s
+            self.prog.record_delay = None
         if self.bounded:
             # each acquisition is its own burst: the response starts from rest at the trigger
-            if self.record_delay != (dwell_s, settle_s):
+            if self.prog.record_delay != (dwell_s, settle_s):
                 rig.scope.set_record_delay(dwell_s, settle_s)
-                self.record_delay = (dwell_s, settle_s)
+                self.prog.record_delay = (dwell_s, settle_s)
             waited = 0.0
         else:
             left = settle_s - (time.monotonic() - t_changed)
@@ -597,13 +606,13 @@ class Runner:
         fg = self.guard.funcgen
         fg.set_sine(p.start_hz, p.amp_vpp, p.offset_v)
         rig.on_drive_amplitude(p.amp_vpp, p.offset_v)
-        self.sine_set = None
+        self.prog.sine_set = None
         fg.set_sweep(p.start_hz, p.stop_hz, p.length_s, spacing=p.spacing, trigger_source="BUS")
         self.guard.on()
         rig.chirp_timebase(p.length_s)
         rig.set_record_points(math.ceil(p.length_s * p.stop_hz * 10))
-        self.record_s = p.length_s
-        self.record_delay = None
+        self.prog.record_s = p.length_s
+        self.prog.record_delay = None
         records = []
         try:
             for _ in range(p.averages):

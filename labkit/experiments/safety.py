@@ -112,8 +112,8 @@ class DriveGuard:
                     break
                 try:
                     self.funcgen.close()
-                except Exception:
-                    pass
+                except Exception as exc2:
+                    _log.info("%s: closing the failed link: %s: %s", self.where, type(exc2).__name__, exc2)
                 attempt += 1
                 time.sleep(min(0.05 * attempt, 0.3))
                 try:
@@ -132,8 +132,8 @@ class DriveGuard:
         """Close the generator's connection (the output state is left as it is)."""
         try:
             self.funcgen.close()
-        except Exception:
-            pass
+        except Exception as exc:
+            _log.info("%s: closing the link: %s: %s", self.where, type(exc).__name__, exc)
 
 
 #: the signals that end a run like Ctrl-C does: interrupt (Ctrl-C), terminate (kill, systemd),
@@ -353,7 +353,7 @@ def turn_off(config: str | None = None, *, model: str | None = None, resource: s
             if fg is not None:
                 try:
                     fg.close()
-                except Exception:
-                    pass
+                except Exception as exc:
+                    _log.info("%s: closing the link: %s: %s", where, type(exc).__name__, exc)
         time.sleep(0.2 * (attempt + 1))
     raise DriveNotOff("funcgen", where, str(last), config=config or "")
