@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -178,6 +179,21 @@ def stop_handled() -> None:
     _PENDING.clear()
 
 
+#: the unraisable-exception hook :func:`_stop_unraisable` passes everything else to
+_UNRAISABLE: list[Any] = []
+
+
+def _stop_unraisable(unraisable: Any) -> None:
+    """A stop signal's exception raised where Python can only drop it (a weakref callback, a
+    ``__del__``): no "Exception ignored" traceback, since :func:`check_stop` raises it again
+    (it is in ``_PENDING``); anything else goes to the hook there was."""
+    if isinstance(unraisable.exc_value, (KeyboardInterrupt, Interrupted)):
+        _log.debug("a stop signal's exception was dropped in %r; it stops the command all the same",
+                   unraisable.object)
+        return
+    (_UNRAISABLE[0] if _UNRAISABLE else sys.__unraisablehook__)(unraisable)
+
+
 def install_stop_handlers(previous: dict[int, Any] | None = None) -> dict[int, Any]:
     """Make every stop signal raise (:func:`raise_stop_signal`) in the main thread; return the old handlers.
 
@@ -199,6 +215,9 @@ def install_stop_handlers(previous: dict[int, Any] | None = None) -> dict[int, A
     for s in (*STOP_SIGNALS, signal.SIGXFSZ):
         previous[s] = signal.getsignal(s)
         signal.signal(s, signal.SIG_IGN if s == signal.SIGXFSZ else raise_stop_signal)
+    if getattr(sys.unraisablehook, "__name__", "") != _stop_unraisable.__name__:
+        _UNRAISABLE[:] = [sys.unraisablehook]
+        sys.unraisablehook = _stop_unraisable
     from labkit import early_signals
 
     _PENDING.extend(early_signals())      # noted while the command started: check_stop() raises them
