@@ -27,10 +27,12 @@ from labkit.jsonutil import to_jsonable
 #: the layout version written (every kind; ``docs/file-formats.md`` has the history):
 #: 1 -- no dimension scales; 2 -- each group's axis (``index``, ``t_s``, ``freq_hz``, a sweep's
 #: quantity) is an HDF5 dimension scale attached to the datasets along it (:func:`label_dimensions`),
-#: and run files' point records hold ``t_s``
-SCHEMA_VERSION = 2
+#: and run files' point records hold ``t_s``; 3 -- run files' text columns (a point's status,
+#: location, reason, video; the events' text) are fixed-length UTF-8 with checksums, not
+#: variable-length strings (other kinds: as version 2)
+SCHEMA_VERSION = 3
 #: the newest layout this labkit reads (readers accept every version up to it)
-READS_SCHEMA_VERSION = 2
+READS_SCHEMA_VERSION = 3
 
 
 def utc_now() -> str:

@@ -22,7 +22,10 @@ its next point as having no drive.
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # pragma: no cover - annotations only (the CLI starts light)
+    from labkit.experiments.safety import OffSummary
 
 NAME = "off"
 HELP = "turn every generator output of a rig off and confirm it (after a crash, or any time)"
@@ -58,10 +61,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         return summaries[0] | {"labs": summaries}
     summary = turn_off(args.config, model=args.model, resource=args.resource, timeout_s=args.timeout_s)
     _print(args, summary)
-    return summary
+    return dict(summary)
 
 
-def _print(args: argparse.Namespace, summary: dict[str, Any]) -> None:
+def _print(args: argparse.Namespace, summary: OffSummary) -> None:
     if not args.json:
         chans = ", ".join(str(c) for c in summary["channels_off"])
         print(f"{summary['instrument']} at {summary['resource']}: output(s) {chans} off (confirmed)"

@@ -30,4 +30,4 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                           retry_interlocked=args.retry_interlocked)
     if not args.json:
         print_summary(summary)
-    return summary
+    return dict(summary)

@@ -9,7 +9,10 @@ flushed to the run file. ``--resume FILE`` continues an interrupted run.
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # pragma: no cover - annotations only (the CLI starts light)
+    from labkit.experiments.session import SessionSummary
 
 NAME = "sweep"
 HELP = "in-chip swept-sine test (stepped sine or chirp) into an HDF5 run file"
@@ -49,10 +52,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                           retry_interlocked=args.retry_interlocked)
     if not args.json:
         print_summary(summary)
-    return summary
+    return dict(summary)
 
 
-def print_summary(s: dict[str, Any]) -> None:
+def print_summary(s: SessionSummary) -> None:
     print(f"{s['file']}: {s['status']}, {s['points_ok']} of {s['points_planned']} points measured"
           + (f", {s['points_interlocked']} stopped by an interlock" if s.get("points_interlocked") else ""))
     for il in s.get("interlocks", []):

@@ -69,6 +69,7 @@ if TYPE_CHECKING:
     from labkit.analysis.modal.robot import FitFiles, FitSummary
     from labkit.analysis.report.build import ReportSummary
     from labkit.demo.results import AssignmentNote, DemoFiles, DemoSummary, ShakerPoint
+    from labkit.experiments.session import SessionSummary
 
 MARKER = ".labkit-demo"
 
@@ -466,7 +467,7 @@ def refined_grid(pilot: Path, grid: Any, spacing_rel: float) -> tuple[np.ndarray
     return np.union1d(np.round(np.asarray(grid, float), 3), extra), extra, peaks
 
 
-def _check_run(summary: Mapping[str, object], path: Path) -> None:
+def _check_run(summary: SessionSummary, path: Path) -> None:
     if summary.get("status") != "complete" or summary.get("points_ok") != summary.get("points_planned"):
         raise InputError(f"the run did not complete cleanly: {summary.get('status')}, "
                          f"{summary.get('points_ok')} of {summary.get('points_planned')} points",

@@ -18,10 +18,13 @@ from __future__ import annotations
 import contextlib
 import errno
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from labkit.errors import InstrumentError
 from labkit.jsonutil import Json
+
+if TYPE_CHECKING:  # pragma: no cover - annotations only
+    from labkit.experiments.locks import ServedLabRecord
 
 #: pyvisa-py's session types, the resource prefix each lists, and what it needs
 _BACKENDS = (
@@ -60,7 +63,7 @@ class Devices:
 
     backends: list[Backend]
     serial_ports: list[SerialPort]
-    labs: list[dict[str, Any]]
+    labs: list[ServedLabRecord]
 
     def as_dict(self) -> dict[str, Json]:
         """What ``labkit devices --json`` prints."""
@@ -68,7 +71,8 @@ class Devices:
 
         return {"backends": [dataclasses.asdict(b) for b in self.backends],
                 "serial_ports": [dataclasses.asdict(p) for p in self.serial_ports],
-                "virtual_labs": [{"pid": lab.get("pid"), "resources": lab.get("resources"),
+                "virtual_labs": [{"pid": lab.get("pid"),
+                                  "resources": {r: v for r, v in lab.get("resources", {}).items()},
                                   "config": lab.get("config")} for lab in self.labs]}
 
 

@@ -35,7 +35,7 @@ import sys
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict, cast
 
 from labkit.errors import InputError
 from labkit.lockfiles import LockRecord, describe, file_key, lock_path, read_lock, read_record, runtime_dir
@@ -238,7 +238,19 @@ def _alive(pid: Any) -> bool:
     return isinstance(pid, int) and pid > 0 and process_alive(pid)
 
 
-def served_labs() -> list[dict[str, Any]]:
+class ServedLabRecord(TypedDict, total=False):
+    """The record a ``labkit lab serve`` writes (:func:`announce_lab`, JSON) and readers find."""
+
+    pid: int
+    resources: dict[str, str]        # role -> resource
+    models: dict[str, str]           # role -> driver model
+    config: str | None               # the config it wrote for its lab
+    since: str                       # HH:MM:SS
+    started: float                   # Unix time
+    setup: str                       # what it serves (``labkit lab serve --setup``)
+
+
+def served_labs() -> list[ServedLabRecord]:
     """Every running ``labkit lab serve`` (their records), the newest first.
 
     A record whose process has ended (killed before it could remove it) is skipped
@@ -254,11 +266,11 @@ def served_labs() -> list[dict[str, Any]]:
                 p.unlink()
                 p.with_suffix(".toml").unlink(missing_ok=True)    # the config it wrote beside its record
             continue
-        labs.append(data)
+        labs.append(cast(ServedLabRecord, data))        # its shape checked above
     return sorted(labs, key=lambda d: -float(d.get("started") or 0.0))
 
 
-def served_lab() -> dict[str, Any]:
+def served_lab() -> ServedLabRecord:
     """The newest running ``labkit lab serve`` (its record), or InputError when none runs."""
     labs = served_labs()
     if not labs:

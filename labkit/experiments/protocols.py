@@ -86,6 +86,7 @@ class Waveform(Protocol):
 class Scope(Protocol):
     """A digitiser of the drive and the vibrometer's analog output."""
 
+    model: str
     poll_s: float
     record_delay: bool          # set_record_delay works on this model
 

@@ -10,6 +10,7 @@ channel) or a :class:`PromptSpot` (asks the person at the terminal).
 """
 from __future__ import annotations
 
+import logging
 import sys
 from typing import TYPE_CHECKING, Any, TextIO, cast
 
@@ -27,9 +28,13 @@ from labkit.experiments.protocols import (
     Vibrometer,
 )
 from labkit.experiments.safety import RECONNECT_WINDOW_S, DriveGuard, Interlock
+from labkit.jsonutil import Json
 
 if TYPE_CHECKING:  # pragma: no cover
     from labkit.lab.client import LabControl
+
+#: closing the rig on the shutdown path (``labkit -v`` shows what failed)
+_log = logging.getLogger(__name__)
 
 #: scope vertical divisions on screen (both supported models have 8)
 VERTICAL_DIVS = 8
@@ -339,8 +344,8 @@ class Rig:
                 continue
             try:
                 obj.close()
-            except Exception:
-                pass
+            except Exception as exc:
+                _log.info("closing the %s: %s: %s", name, type(exc).__name__, exc)
 
     def __enter__(self) -> Rig:
         return self.open()
@@ -408,14 +413,14 @@ class Rig:
         except LimitError as exc:
             raise Interlock(f"shaker envelope: {exc.message}") from None
 
-    def record_video(self, path: Any, duration_s: float) -> dict[str, Any]:
+    def record_video(self, path: Any, duration_s: float) -> dict[str, Json]:
         if self.camera is None:
             raise InstrumentError("no camera", instrument="camera", command="record")
         return self.camera.record(str(path), duration_s)
 
-    def snapshots(self) -> dict[str, tuple[str, str, dict[str, Any]]]:
+    def snapshots(self) -> dict[str, tuple[str, str, dict[str, Json]]]:
         """role -> (model, resource, snapshot) for the run file."""
-        out: dict[str, tuple[str, str, dict[str, Any]]] = {}
+        out: dict[str, tuple[str, str, dict[str, Json]]] = {}
         opened: dict[str, FunctionGenerator | Scope | Vibrometer] = {
             "funcgen": self.funcgen, "scope": self.scope, "vibrometer": self.vibrometer}
         for role, obj in opened.items():

@@ -5,7 +5,10 @@ Every dataset carries a ``units`` attribute. Rows are appended to resizable
 run killed with SIGKILL leaves a file that opens and holds every completed
 point; at most the point in progress is lost. Within a table the ``index``
 dataset is always written last: its length is the number of complete rows,
-and reopening for ``--resume`` trims any longer sibling back to it.
+and reopening for ``--resume`` trims any longer sibling back to it. Text columns
+(``status``, ``location``, ``reason``, ``video``, the events' ``text``) are
+fixed-length UTF-8 (layout 3), so every byte of a point lives in its datasets'
+checksummed chunks and nothing in HDF5's global heap.
 
 Common layout (both kinds)
 --------------------------
@@ -71,32 +74,69 @@ from __future__ import annotations
 
 import errno
 import json
+import logging
 import os
 import platform
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeAlias, TypedDict
 
 import numpy as np
 
 from labkit.errors import InputError
+from labkit.h5io import SCHEMA_VERSION as H5_SCHEMA_VERSION
 from labkit.h5io import get_json, label_dimensions, open_h5, put_json, stamp, utc_now
+from labkit.jsonutil import Json
 
-#: 1: first layout; 2: dimension scales (``/points/index``, ``freq_hz``, records' ``t_s``),
-#: see docs/file-formats.md. Readers (labkit.files.runs) read both.
-SCHEMA_VERSION = 2
-_STR = "str"
+if TYPE_CHECKING:  # pragma: no cover - annotations only (kinds imports this module's tables)
+    from labkit.experiments.kinds import Config
+
+#: the run file's own failures on the shutdown path (``labkit -v`` shows them)
+_log = logging.getLogger(__name__)
+
+#: one value of a table row: a number, a text, or (a chirp's lines) an array of them
+Cell: TypeAlias = "float | complex | int | str | np.ndarray | np.generic"
+#: a table row: column name -> value (a column missing from it gets a blank)
+Row: TypeAlias = "dict[str, Cell]"
+#: a root attribute's value
+AttrValue: TypeAlias = "str | float | int | bool"
+
+
+class RunSummary(TypedDict, total=False):
+    """:func:`summary`: what a run file holds, as the CLI's ``--json`` line prints it."""
+
+    file: str
+    kind: str
+    status: str
+    points_planned: int
+    points_done: int
+    points_ok: int
+    points_interlocked: int
+    points_retried: int
+    locations: dict[str, int]          # in-chip: FRF lines per location
+
+#: 1: first layout; 2: dimension scales (``/points/index``, ``freq_hz``, records' ``t_s``);
+#: 3: text columns fixed-length UTF-8 with checksums (no variable-length strings, no global heap),
+#: see docs/file-formats.md. Readers (labkit.files.runs) read every version.
+SCHEMA_VERSION = H5_SCHEMA_VERSION
+#: a text column: ``"str<bytes>"``, fixed-length UTF-8 of that many bytes (longer text is cut, ending in
+#: :data:`CUT_MARK`). Fixed-length text lives in the dataset's own chunks, checksummed and flushed with
+#: the point; variable-length strings would live in HDF5's global heap, which HDF5 may write at any
+#: instant between two flushes when its metadata cache is bounded (a kill then left it unreadable).
+_LABEL, _TEXT, _LINE = "str32", "str256", "str512"
+#: the end of a text cut to its column's width
+CUT_MARK = "\u2026"
 
 #: name -> (dtype, units). ``index`` is last on purpose: it is written last.
 POINT_FIELDS: dict[str, tuple[str, str]] = {
-    "location": (_STR, "label"), "freq_hz": ("f8", "Hz"), "status": (_STR, "label"),
-    "reason": (_STR, "text"), "time_unix_s": ("f8", "s"), "duration_s": ("f8", "s"),
+    "location": (_LABEL, "label"), "freq_hz": ("f8", "Hz"), "status": (_LABEL, "label"),
+    "reason": (_TEXT, "text"), "time_unix_s": ("f8", "s"), "duration_s": ("f8", "s"),
 }
 SHAKER_FIELDS: dict[str, tuple[str, str]] = {
     "tray_amp_request_um": ("f8", "um"), "drive_request_vpp": ("f8", "Vpp"), "drive_vpp": ("f8", "Vpp"),
     "iterations": ("i8", "1"), "tray_amp_um": ("f8", "um"), "tray_velocity_mm_s": ("c16", "mm/s"),
     "robot_velocity_mm_s": ("c16", "mm/s"), "transmissibility": ("c16", "1"), "quality": ("f8", "1"),
-    "video": (_STR, "path"), "video_frames": ("i8", "1"),
+    "video": (_TEXT, "path"), "video_frames": ("i8", "1"),
 }
 STEPPED_FIELDS: dict[str, tuple[str, str]] = {
     "freq_hz": ("f8", "Hz"), "frf": ("c16", "(mm/s)/V"), "quality": ("f8", "1"),
@@ -106,7 +146,7 @@ CHIRP_FIELDS: dict[str, tuple[str, str]] = {
     "freq_hz": ("f8", "Hz"), "frf": ("c16", "(mm/s)/V"), "quality": ("f8", "1"),
     "coherence": ("f8", "1"), "point_index": ("i8", "1"),
 }
-EVENT_FIELDS = {"time_unix_s": ("f8", "s"), "text": (_STR, "text")}
+EVENT_FIELDS = {"time_unix_s": ("f8", "s"), "text": (_LINE, "text")}
 
 
 def versions() -> dict[str, str]:
@@ -126,10 +166,14 @@ def versions() -> dict[str, str]:
     return out
 
 
-def _dtype(code: str):
+def _dtype(code: str) -> np.dtype:
     import h5py
 
-    return h5py.string_dtype() if code == _STR else np.dtype(code)
+    return h5py.string_dtype("utf-8", int(code[3:])) if code.startswith("str") else np.dtype(code)
+
+
+#: bytes of a text column's chunk: it fits HDF5's chunk cache (:data:`CHUNK_CACHE_BYTES`) twice
+TEXT_CHUNK_BYTES = 4096
 
 
 def _make_table(group: Any, fields: dict[str, tuple[str, str]], with_index: bool = True) -> None:
@@ -137,10 +181,32 @@ def _make_table(group: Any, fields: dict[str, tuple[str, str]], with_index: bool
     for name, (code, units) in items:
         if name in group:
             continue
-        # a Fletcher-32 checksum per chunk (HDF5 refuses filters on variable-length strings)
-        ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=_dtype(code), chunks=(256,),
-                                  fletcher32=code != _STR)
+        dtype = _dtype(code)
+        rows = max(8, TEXT_CHUNK_BYTES // dtype.itemsize) if dtype.kind == "S" else 256
+        # a Fletcher-32 checksum per chunk, text included
+        ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(rows,),
+                                  fletcher32=True)
         ds.attrs["units"] = units
+        if dtype.kind == "S":
+            ds.attrs["_Encoding"] = "utf-8"        # the netCDF convention: xarray reads it as text
+
+
+def fit_text(values: Any, dtype: np.dtype) -> np.ndarray:
+    """Text as a fixed-length UTF-8 column of ``dtype``: each value encoded, and cut at a character
+    boundary (ending in :data:`CUT_MARK`) when longer than the column's width."""
+    width = dtype.itemsize
+    out = []
+    for v in np.atleast_1d(np.asarray(values, dtype=object)).tolist():
+        raw = (v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)).encode("utf-8")
+        if len(raw) > width:
+            mark = CUT_MARK.encode("utf-8")
+            raw = raw[:width - len(mark)].decode("utf-8", "ignore").encode("utf-8") + mark
+        out.append(raw)
+    return np.array(out, dtype=dtype)
+
+
+def _column(values: Any, dtype: np.dtype) -> np.ndarray:
+    return fit_text(values, dtype) if dtype.kind == "S" else np.asarray(values, dtype=dtype)
 
 
 class _Table:
@@ -160,12 +226,12 @@ class _Table:
         names.sort(key=lambda k: k == "index")
         self.columns = [(k, group[k]) for k in names]
 
-    def append(self, rows: dict[str, Any]) -> None:
+    def append(self, rows: Row) -> None:
         from h5py import h5s
 
         k = max(int(np.size(v)) for v in rows.values()) if rows else 1
         for name, ds in self.columns:
-            arr = np.asarray(rows[name], dtype=ds.dtype) if name in rows else _blank(ds.dtype, k)
+            arr = _column(rows[name], ds.dtype) if name in rows else _blank(ds.dtype, k)
             arr = np.ascontiguousarray(np.broadcast_to(np.atleast_1d(arr), (k,)))
             n = ds.id.get_space().shape[0]
             ds.id.set_extent((n + k,))
@@ -296,14 +362,30 @@ def check_room(path: str | Path, need_bytes: float, *, key: str = "--out") -> No
 #: to (4 KiB for complex rows) and one more (the default, 8 MiB a dataset, kept every chunk the
 #: run wrote, and 64 KiB still filled over the first 4000 points: memory grew with every point)
 CHUNK_CACHE_BYTES = 8 * 1024
+#: HDF5's metadata cache of a run file being written (version 3 on), capped: its default grows
+#: towards 32 MiB. A run file's metadata while it is written (object headers, the chunk indexes)
+#: is about 110 KiB after 10000 points, so the cap holds all of it and HDF5 never has to write
+#: metadata out between two of the run's flushes to make room (tests/experiments/test_runfile.py)
+METADATA_CACHE_BYTES = 1024 * 1024
+
+
 def open_for_writing(path: str | Path, mode: str) -> Any:
-    """``h5py.File(path, mode)`` with HDF5's chunk cache bounded, so raw data does not pile up per
-    point. The metadata cache keeps HDF5's default: capped at 256 KiB it wrote metadata (the global
-    heap of the variable-length strings) between the run's flushes, and a SIGKILL at such an instant
-    left ``/events/text`` unreadable (seen once in 10 early kills, tests/experiments/test_faults.py)."""
+    """``h5py.File(path, mode)`` with both of HDF5's caches bounded, so memory stays flat per point.
+
+    A file of a layout before version 3 (variable-length strings, kept in HDF5's global heap,
+    which grows with every point) is resumed with HDF5's default metadata cache: capped, it
+    wrote the heap between the run's flushes, and a kill at such an instant left the events'
+    text unreadable."""
     import h5py
 
-    return h5py.File(path, mode, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=521)
+    f = h5py.File(path, mode, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=521)
+    if mode == "w" or int(f.attrs.get("schema_version", 0)) >= 3:
+        mdc = f.id.get_mdc_config()
+        mdc.set_initial_size = True
+        mdc.initial_size = mdc.max_size = METADATA_CACHE_BYTES
+        mdc.min_size = METADATA_CACHE_BYTES // 2
+        f.id.set_mdc_config(mdc)
+    return f
 
 
 def _link_into_place(tmp: Path, path: Path) -> None:
@@ -374,8 +456,8 @@ class RunFile:
 
     # -- opening ---------------------------------------------------------------------------
     @classmethod
-    def create(cls, path: str | Path, cfg: Any, config_json: dict[str, Any], points_planned: int,
-               extra_attrs: dict[str, Any] | None = None, reserve_bytes: float = 0.0) -> RunFile:
+    def create(cls, path: str | Path, cfg: Config, config_json: dict[str, Json], points_planned: int,
+               extra_attrs: dict[str, AttrValue] | None = None, reserve_bytes: float = 0.0) -> RunFile:
         """A new run file for ``cfg`` (an InchipConfig or ShakerConfig); refuses to overwrite.
 
         The file is made aside (``.<name>.partial.<pid>``), with ``reserve_bytes`` set aside
@@ -416,8 +498,8 @@ class RunFile:
         return cls(f, path)
 
     @staticmethod
-    def _lay_out(f: Any, cfg: Any, config_json: dict[str, Any], points_planned: int,
-                 extra_attrs: dict[str, Any] | None) -> None:
+    def _lay_out(f: Any, cfg: Config, config_json: dict[str, Json], points_planned: int,
+                 extra_attrs: dict[str, AttrValue] | None) -> None:
         from labkit.experiments import kinds
 
         kind = kinds.of(cfg)
@@ -442,7 +524,7 @@ class RunFile:
         label_dimensions(f)             # coordinates for h5py, xarray and HDFView (schema 2)
 
     @classmethod
-    def resume(cls, path: str | Path, cfg: Any, config_json: dict[str, Any],
+    def resume(cls, path: str | Path, cfg: Config, config_json: dict[str, Json],
                retry_interlocked: bool = False) -> RunFile:
         """Reopen a run file to continue it after its last complete point.
 
@@ -497,7 +579,7 @@ class RunFile:
             st = f["points/status"]
             values = st.asstr()[...]
             if np.any(values == "interlock"):
-                st[...] = np.where(values == "interlock", RETRIED, values).astype(object)
+                st[...] = _column(np.where(values == "interlock", RETRIED, values), st.dtype)
         f.attrs["status"] = "running"
         f.attrs["ended_utc"] = ""
         resumed = get_json(f, "resumed_utc_json", [])
@@ -510,7 +592,7 @@ class RunFile:
         return reserve_space(self.path, nbytes)
 
     # -- writing ---------------------------------------------------------------------------
-    def set_instrument(self, role: str, model: str, resource: str, snapshot: dict[str, Any]) -> None:
+    def set_instrument(self, role: str, model: str, resource: str, snapshot: dict[str, Json]) -> None:
         g = self.f.require_group(f"instruments/{role}")
         g.attrs["model"] = model
         g.attrs["resource"] = resource
@@ -555,7 +637,7 @@ class RunFile:
         self._table("events").append({"time_unix_s": time.time() if t_unix_s is None else t_unix_s, "text": text})
         self.f.flush()
 
-    def add_location_rows(self, location: str, rows: dict[str, Any]) -> None:
+    def add_location_rows(self, location: str, rows: Row) -> None:
         """Append rows to ``/locations/<location>`` (not flushed: :meth:`end_point` flushes)."""
         self._floor("a point's rows")
         self._table(f"locations/{location}").append(rows)
@@ -575,7 +657,7 @@ class RunFile:
             del g["t_s"]
         label_dimensions(g)             # t_s (s) from dt_s, a dimension scale
 
-    def end_point(self, index: int, row: dict[str, Any]) -> None:
+    def end_point(self, index: int, row: Row) -> None:
         """Append the point's row to ``/points`` (index last) and flush: the point is complete."""
         self._floor("a point's row")
         self._table("points").append(dict(row, index=index))
@@ -594,8 +676,8 @@ class RunFile:
     def close(self) -> None:
         try:
             self.f.close()
-        except Exception:  # pragma: no cover - closing after a failed write
-            pass
+        except Exception as exc:  # pragma: no cover - closing after a failed write
+            _log.info("%s: closing the run file: %s: %s", self.path, type(exc).__name__, exc)
 
     def __enter__(self) -> RunFile:
         return self
@@ -604,7 +686,7 @@ class RunFile:
         self.close()
 
 
-def write_lab_record(path: str | Path, timeline: list[tuple], truth: dict[str, Any] | None,
+def write_lab_record(path: str | Path, timeline: list[tuple], truth: Json | None,
                      clock_offset_s: float = 0.0, t0_monotonic_s: float | None = None) -> None:
     """Store the virtual lab's output timeline (and its truth) in a finished run file.
 
@@ -645,13 +727,13 @@ def read_points(path: str | Path) -> dict[str, np.ndarray]:
     return read_run_file(path).points
 
 
-def summary(path: str | Path) -> dict[str, Any]:
+def summary(path: str | Path) -> RunSummary:
     """A short JSON-able summary of a run file (for the CLI's ``--json`` line)."""
     from labkit.files.runs import InchipRun, read_run_file
 
     run = read_run_file(path)
     st = run.points.get("status", np.array([], dtype=str))
-    out: dict[str, Any] = {
+    out: RunSummary = {
         "file": os.fspath(path), "kind": run.kind, "status": run.status, "points_planned": run.points_planned,
         "points_done": int(np.sum(st != RETRIED)) if st.size else run.complete_points,
         "points_ok": int(np.sum(st == "ok")), "points_interlocked": int(np.sum(st == "interlock")),

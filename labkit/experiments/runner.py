@@ -35,9 +35,10 @@ import os
 import sys
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, TypedDict, cast
 
 import numpy as np
 
@@ -47,7 +48,7 @@ from labkit.experiments.config import ShakerConfig
 from labkit.experiments.kinds import POINT_OVERHEAD_BYTES, Config
 from labkit.experiments.plans import ChirpPoint, MoveSpot, Plan, ShakerPoint, SinePoint
 from labkit.experiments.rig import Rig
-from labkit.experiments.runfile import RunFile, WriteFailed
+from labkit.experiments.runfile import Row, RunFile, WriteFailed
 from labkit.experiments.safety import (
     RECONNECT_WINDOW_S,
     DriveGuard,
@@ -96,6 +97,29 @@ def burst_idle(amp_vpp: float, offset_v: float) -> tuple[float, float]:
     return math.degrees(math.asin(s)), offset_v + half * s
 
 
+@dataclass
+class Programmed:
+    """What the runner has programmed on the instruments, so a point sends only what changed.
+
+    After a reconnect nothing is assumed: the runner starts a fresh one.
+    """
+
+    sine_set: tuple[float, float] | None = None     # (amp_vpp, offset_v) on the generator
+    freq_set: float | None = None                   # its frequency, Hz
+    record_s: float | None = None                   # the scope's record length, s
+    record_delay: tuple[float, float] | None = None  # (record_s, delay_s) set on the scope
+    burst_n: int | None = None                      # cycles of the armed burst
+    burst_phase: float | None = None                # its start phase, deg (sets the level between bursts)
+    burst_end: float = 0.0                          # time.monotonic() when the last burst ends by itself
+
+
+class InterlockRecord(TypedDict):
+    """A point an interlock stopped (the session's JSON summary lists them)."""
+
+    index: int
+    reason: str
+
+
 class InterlockEnd(LimitError):
     """The run ended on an interlock (``on_interlock = "end"``); the file is complete up to it."""
 
@@ -124,20 +148,14 @@ class Runner:
         self.guard.log = self._event
         self.point_bytes = kinds.of(cfg).point_bytes(cfg)
         self.spot: str | None = None
-        self.sine_set: tuple[float, float] | None = None   # (amp_vpp, offset_v) programmed
-        self.freq_set: float | None = None
-        self.record_s: float | None = None
-        self.interlocks: list[dict[str, Any]] = []
+        self.prog = Programmed()                 # what is programmed now (sent again only when it changes)
+        self.interlocks: list[InterlockRecord] = []
         self.gain_um_per_vpp: dict[float, float] = {}       # shaker: tray response per drive volt
         # per point: total, waited (for the bench); the last TIMING_POINTS only (flat memory)
         self.timing: deque[dict[str, float]] = deque(maxlen=TIMING_POINTS)
         # bounded drive: each acquisition is a finite burst (settle + dwell cycles), armed per point
         self.bounded = False
-        self.burst_n: int | None = None          # cycles of the armed burst
-        self.burst_phase: float | None = None    # its start phase, deg (sets the level between bursts)
         self.reconnects = 0                      # dropped links replaced so far (at most MAX_RECONNECTS)
-        self.burst_end = 0.0                     # time.monotonic() when the last burst ends by itself
-        self.record_delay: tuple[float, float] | None = None   # (record_s, delay_s) set on the scope
         self.drive_set_vpp: float | None = None  # amplitude commanded (for the measured-drive check)
         self.live = live.LiveStream(runfile.path, live.console_for_run(quiet))   # RUN.live.jsonl
         self.last_rec: tuple[measure.Records, float | None, float | None] | None = None  # + V/div then
@@ -146,11 +164,11 @@ class Runner:
     def _event(self, text: str) -> None:
         try:
             self.file.event(text)
-        except Exception:  # the log must never stop a shutdown
-            pass
+        except Exception as exc:  # the log must never stop a shutdown
+            _log.info("event not written to the run file (%s: %s): %s", type(exc).__name__, exc, text)
         self.live.event(text)
 
-    def _live_point(self, p: Any, rows: dict[str, Any], loc: dict[str, Any] | None) -> None:
+    def _live_point(self, p: Any, rows: Row, loc: Row | None) -> None:
         """The finished point into the live stream, with its last record's levels on the scope."""
         from labkit.experiments.rig import VERTICAL_DIVS
 
@@ -271,10 +289,8 @@ class Runner:
         if self.cfg.method.kind == "chirp":
             why = ("a chirp is a generator sweep, which keeps running between triggers: if this "
                    "computer dies mid-run, the drive stays on until someone turns it off")
-        elif not callable(getattr(fg, "burst", None)):
-            why = f"the {getattr(fg, 'model', 'generator')} driver has no burst mode"
-        elif not getattr(scope, "record_delay", False):
-            why = f"the {getattr(scope, 'model', 'scope')} driver cannot delay its record past the settling"
+        elif not scope.record_delay:            # every generator bursts (FunctionGenerator.burst)
+            why = f"the {scope.model} driver cannot delay its record past the settling"
         else:
             why = ""
         self.bounded = not why
@@ -292,35 +308,34 @@ class Runner:
                       "Output key (docs/faults.md)")
         else:
             text = f"DRIVE NOT BOUNDED: {why}"
-            if callable(getattr(fg, "burst_off", None)):
-                fg.burst_off()        # a bounded run before may have left burst mode on
+            fg.burst_off()            # a bounded run before may have left burst mode on
             _warn(text)
         self._event(text)
         try:
             self.file.set_attrs(drive_bounded=self.bounded, drive_bounded_note=text)
-        except Exception:   # the events say it too
-            pass
+        except Exception as exc:   # the events say it too
+            _log.info("drive_bounded not written to the run file: %s: %s", type(exc).__name__, exc)
 
     def _arm_burst(self, freq_hz: float, settle_s: float, hold_s: float) -> None:
         """Burst mode with enough cycles for ``settle_s + hold_s`` at ``freq_hz`` (re-armed when it changes)."""
         if not self.bounded:
             return
         n = math.ceil((settle_s + hold_s) * freq_hz) + BURST_MARGIN_CYCLES
-        phase = burst_idle(*(self.sine_set or (0.0, 0.0)))[0]
-        if (n, phase) != (self.burst_n, self.burst_phase):
+        phase = burst_idle(*(self.prog.sine_set or (0.0, 0.0)))[0]
+        if (n, phase) != (self.prog.burst_n, self.prog.burst_phase):
             self._wait_burst_end()          # never re-arm a running burst
             self.guard.funcgen.burst(n, trigger_source="BUS", start_phase_deg=phase)
-            self.burst_n, self.burst_phase = n, phase
+            self.prog.burst_n, self.prog.burst_phase = n, phase
 
     def _wait_burst_end(self) -> None:
         """A trigger during a running burst is ignored by the generator: wait for its end."""
-        left = self.burst_end - time.monotonic()
+        left = self.prog.burst_end - time.monotonic()
         if left > 0:
             time.sleep(left)
 
     def _fire_burst(self, freq_hz: float) -> float:
         """Start the armed burst (``*TRG``) once the last one has ended; return the start (monotonic)."""
-        assert self.burst_n is not None
+        assert self.prog.burst_n is not None
         self._wait_burst_end()
         t = time.monotonic()
         self.guard.funcgen.trigger()
@@ -328,7 +343,7 @@ class Runner:
         # return (after it, when the driver reads the error queue on the same link): count its
         # end from the return. From t, a trigger that took over 2 ms to arrive (a loaded machine)
         # let the next point's commands cut the burst short (seen once on the virtual lab: 86 us)
-        self.burst_end = time.monotonic() + self.burst_n / freq_hz + 0.002
+        self.prog.burst_end = time.monotonic() + self.prog.burst_n / freq_hz + 0.002
         return t
 
     def _no_drive_in(self, rec: measure.Records) -> bool:
@@ -384,14 +399,7 @@ class Runner:
         # room for the point before driving it (DiskFull stops the run cleanly: drive off, status written)
         self.file.ensure_room(self.point_bytes)
         try:
-            if isinstance(p, SinePoint):
-                rows, loc_rows, records = self._sine_point(p)
-            elif isinstance(p, ChirpPoint):
-                rows, loc_rows, records = self._chirp_point(p)
-            elif isinstance(p, ShakerPoint):
-                rows, loc_rows, records = self._shaker_point(p)
-            else:  # pragma: no cover - plans hold only these
-                raise TypeError(f"unknown step {p!r}")
+            rows, loc_rows, records = _MEASURE[type(p)](self, p)
             rows.update(status="ok")
         except Interlock as il:
             self.guard.off(f"interlock: {il.reason}")
@@ -411,7 +419,7 @@ class Runner:
         self.file.ensure_room(_nbytes(loc_rows, records) + POINT_OVERHEAD_BYTES)
         with deferred(), self._writing(p.index):      # all of a point's rows, or none
             if loc_rows is not None:
-                self.file.add_location_rows(loc_rows.pop("location"), loc_rows)
+                self.file.add_location_rows(str(loc_rows.pop("location")), loc_rows)
             if records is not None:
                 group, dt, arrays = records
                 self.file.add_records(group, p.index, dt, arrays)
@@ -457,9 +465,7 @@ class Runner:
 
     def _forget_settings(self) -> None:
         """After a reconnect nothing programmed is assumed: the next point sends it all again."""
-        self.sine_set = self.freq_set = self.record_s = self.record_delay = None
-        self.burst_n = self.burst_phase = None
-        self.burst_end = 0.0
+        self.prog = Programmed()
         m = self.cfg.method
         if m.kind == "stepped":
             self.rig.set_record_points(math.ceil(m.dwell_cycles * self.cfg.scope.samples_per_cycle))
@@ -474,9 +480,9 @@ class Runner:
                               "turned off; the file holds every point completed before it; fix the disk, "
                               "then continue with --resume", file=self.file.path, key="--out") from exc
 
-    def _empty_row(self, p: Any) -> dict[str, Any]:
-        row: dict[str, Any] = {"location": getattr(p, "location", getattr(p, "robot_spot", "")),
-                               "freq_hz": getattr(p, "freq_hz", float("nan")), "reason": ""}
+    def _empty_row(self, p: Any) -> Row:
+        row: Row = {"location": getattr(p, "location", getattr(p, "robot_spot", "")),
+                    "freq_hz": getattr(p, "freq_hz", float("nan")), "reason": ""}
         if isinstance(p, ShakerPoint):
             nan = float("nan")
             row.update(tray_amp_request_um=p.tray_amp_um if p.tray_amp_um is not None else nan,
@@ -495,21 +501,21 @@ class Runner:
         running burst."""
         self._wait_burst_end()
         fg = self.guard.funcgen
-        if self.sine_set is not None and self.sine_set[1] == offset_v and amp_vpp < self.sine_set[0]:
+        if self.prog.sine_set is not None and self.prog.sine_set[1] == offset_v and amp_vpp < self.prog.sine_set[0]:
             # Lower the amplitude BEFORE moving the frequency: the old, larger drive must never
             # meet a frequency where it would move the shaker further (x ~ V / f^2).
             fg.set_amplitude(amp_vpp)
-            if self.freq_set != freq_hz:
+            if self.prog.freq_set != freq_hz:
                 fg.set_frequency(freq_hz)
-            self.sine_set = (amp_vpp, offset_v)
+            self.prog.sine_set = (amp_vpp, offset_v)
             self.rig.on_drive_amplitude(amp_vpp, offset_v)
-        elif self.sine_set != (amp_vpp, offset_v):
+        elif self.prog.sine_set != (amp_vpp, offset_v):
             fg.set_sine(freq_hz, amp_vpp, offset_v)
-            self.sine_set = (amp_vpp, offset_v)
+            self.prog.sine_set = (amp_vpp, offset_v)
             self.rig.on_drive_amplitude(amp_vpp, offset_v)
-        elif self.freq_set != freq_hz:
+        elif self.prog.freq_set != freq_hz:
             fg.set_frequency(freq_hz)
-        self.freq_set = freq_hz
+        self.prog.freq_set = freq_hz
         self.drive_set_vpp = amp_vpp
 
     def _settle_and_acquire(self, freq_hz: float, settle_s: float, dwell_s: float,
@@ -519,15 +525,15 @@ class Runner:
         Returns the record and the time spent waiting for the physics (settle + dwell), s.
         """
         rig = self.rig
-        if self.record_s != dwell_s:
+        if self.prog.record_s != dwell_s:
             rig.scope.set_timebase(dwell_s)
-            self.record_s = dwell_s
-            self.record_delay = None
+            self.prog.record_s = dwell_s
+            self.prog.record_delay = None
         if self.bounded:
             # each acquisition is its own burst: the response starts from rest at the trigger
-            if self.record_delay != (dwell_s, settle_s):
+            if self.prog.record_delay != (dwell_s, settle_s):
                 rig.scope.set_record_delay(dwell_s, settle_s)
-                self.record_delay = (dwell_s, settle_s)
+                self.prog.record_delay = (dwell_s, settle_s)
             waited = 0.0
         else:
             left = settle_s - (time.monotonic() - t_changed)
@@ -577,7 +583,7 @@ class Runner:
                 break
         return rec, waited
 
-    def _sine_point(self, p: SinePoint) -> tuple[dict, dict | None, Any]:
+    def _sine_point(self, p: SinePoint) -> tuple[Row, Row | None, Any]:
         self._set_sine(p.freq_hz, p.amp_vpp, p.offset_v)
         self._arm_burst(p.freq_hz, p.settle_s, p.dwell_s)     # before the output goes on
         t_changed = time.monotonic()
@@ -586,27 +592,27 @@ class Runner:
         ph = measure.sine_phasors(rec, p.freq_hz, self.rig.scale_mm_s_per_v, self.rig.velocity_delay_s)
         self._check_measured_drive(ph)
         self.timing.append({"waited_s": waited, "settle_s": p.settle_s, "dwell_s": p.dwell_s})
-        rows = {"location": p.location, "freq_hz": p.freq_hz, "reason": ""}
-        loc = {"location": p.location, "freq_hz": p.freq_hz, "frf": ph.frf, "quality": ph.quality,
-               "drive_v": ph.drive_v, "velocity_mm_s": ph.velocity_mm_s, "point_index": p.index}
+        rows: Row = {"location": p.location, "freq_hz": p.freq_hz, "reason": ""}
+        loc: Row = {"location": p.location, "freq_hz": p.freq_hz, "frf": ph.frf, "quality": ph.quality,
+                    "drive_v": ph.drive_v, "velocity_mm_s": ph.velocity_mm_s, "point_index": p.index}
         records = None
         if self.cfg.method.keep_raw:
             records = ("raw", rec.dt_s, {"drive_v": (rec.drive_v, "V"), "velocity_v": (rec.velocity_v, "V")})
         return rows, loc, records
 
     # -- chirp -------------------------------------------------------------------------------
-    def _chirp_point(self, p: ChirpPoint) -> tuple[dict, dict | None, Any]:
+    def _chirp_point(self, p: ChirpPoint) -> tuple[Row, Row | None, Any]:
         rig = self.rig
         fg = self.guard.funcgen
         fg.set_sine(p.start_hz, p.amp_vpp, p.offset_v)
         rig.on_drive_amplitude(p.amp_vpp, p.offset_v)
-        self.sine_set = None
+        self.prog.sine_set = None
         fg.set_sweep(p.start_hz, p.stop_hz, p.length_s, spacing=p.spacing, trigger_source="BUS")
         self.guard.on()
         rig.chirp_timebase(p.length_s)
         rig.set_record_points(math.ceil(p.length_s * p.stop_hz * 10))
-        self.record_s = p.length_s
-        self.record_delay = None
+        self.prog.record_s = p.length_s
+        self.prog.record_delay = None
         records = []
         try:
             for _ in range(p.averages):
@@ -627,9 +633,9 @@ class Runner:
         f, h, coh = measure.chirp_h1(records, rig.scale_mm_s_per_v, p.start_hz, p.stop_hz,
                                      rig.velocity_delay_s)
         self.timing.append({"waited_s": p.averages * p.length_s})
-        rows = {"location": p.location, "freq_hz": float("nan"), "reason": ""}
-        loc = {"location": p.location, "freq_hz": f, "frf": h, "quality": coh, "coherence": coh,
-               "point_index": np.full(f.shape, p.index)}
+        rows: Row = {"location": p.location, "freq_hz": float("nan"), "reason": ""}
+        loc: Row = {"location": p.location, "freq_hz": f, "frf": h, "quality": coh, "coherence": coh,
+                    "point_index": np.full(f.shape, p.index)}
         raw = None
         if self.cfg.method.keep_raw:
             raw = ("raw", records[0].dt_s, {
@@ -638,7 +644,7 @@ class Runner:
         return rows, loc, raw
 
     # -- shaker ------------------------------------------------------------------------------
-    def _shaker_point(self, p: ShakerPoint) -> tuple[dict, dict | None, Any]:
+    def _shaker_point(self, p: ShakerPoint) -> tuple[Row, Row | None, Any]:
         cfg, rig = cast(ShakerConfig, self.cfg), self.rig     # shaker points come from shaker plans
         f = p.freq_hz
         self._move_spot("tray", drive_off=False)
@@ -710,12 +716,12 @@ class Runner:
             video, frames = self._video(p)
             waited += p.video_s
         self.timing.append({"waited_s": waited})
-        rows = {"location": p.robot_spot, "freq_hz": f, "reason": reason,
-                "tray_amp_request_um": p.tray_amp_um if p.tray_amp_um is not None else math.nan,
-                "drive_request_vpp": p.drive_vpp if p.drive_vpp is not None else math.nan,
-                "drive_vpp": vpp, "iterations": iterations, "tray_amp_um": x_um,
-                "tray_velocity_mm_s": tray.velocity_re_drive, "robot_velocity_mm_s": robot.velocity_re_drive,
-                "transmissibility": complex(T), "quality": float(q), "video": video, "video_frames": frames}
+        rows: Row = {"location": p.robot_spot, "freq_hz": f, "reason": reason,
+                     "tray_amp_request_um": p.tray_amp_um if p.tray_amp_um is not None else math.nan,
+                     "drive_request_vpp": p.drive_vpp if p.drive_vpp is not None else math.nan,
+                     "drive_vpp": vpp, "iterations": iterations, "tray_amp_um": x_um,
+                     "tray_velocity_mm_s": tray.velocity_re_drive, "robot_velocity_mm_s": robot.velocity_re_drive,
+                     "transmissibility": complex(T), "quality": float(q), "video": video, "video_frames": frames}
         records = ("records", tray_rec.dt_s, {
             "tray_velocity_mm_s": (tray_rec.velocity_v * rig.scale_mm_s_per_v, "mm/s"),
             "robot_velocity_mm_s": (robot_rec.velocity_v * rig.scale_mm_s_per_v, "mm/s"),
@@ -736,7 +742,13 @@ class Runner:
             info = self.rig.record_video(tmp, p.video_s)
         self._event(f"video {path.name}: {info.get('frames', 0)} frames")
         rel = os.path.relpath(path, self.file.path.parent)
-        return rel, int(info.get("frames", 0))
+        frames = info.get("frames", 0)
+        return rel, int(frames) if isinstance(frames, (int, float)) else 0
+
+
+#: how each kind of point is measured (a step -> handler table: a plan holds only these kinds)
+_MEASURE: dict[type, Callable[[Runner, Any], tuple[Row, Row | None, Any]]] = {
+    SinePoint: Runner._sine_point, ChirpPoint: Runner._chirp_point, ShakerPoint: Runner._shaker_point}
 
 
 #: bytes per second of video a point may write: the lab camera's 640 x 480 at 30 frames/s, one
@@ -764,7 +776,7 @@ def _warn(text: str) -> None:
         pass
 
 
-def _nbytes(loc_rows: dict[str, Any] | None, records: Any) -> float:
+def _nbytes(loc_rows: Row | None, records: Any) -> float:
     """Bytes a point's rows and records take (records are stored as float32)."""
     n = 0.0
     for v in (loc_rows or {}).values():

@@ -14,13 +14,15 @@ from __future__ import annotations
 import contextlib
 import logging
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
-from typing import Any
+from typing import Any, TypedDict
 
 from labkit.errors import DriveNotOff, InstrumentError, Interrupted
 from labkit.experiments.protocols import FunctionGenerator
+from labkit.jsonutil import Json
 
 #: the shutdown path's log (``labkit -v``: INFO, ``-vv``: DEBUG, on stderr)
 _log = logging.getLogger(__name__)
@@ -111,8 +113,8 @@ class DriveGuard:
                     break
                 try:
                     self.funcgen.close()
-                except Exception:
-                    pass
+                except Exception as exc2:
+                    _log.info("%s: closing the failed link: %s: %s", self.where, type(exc2).__name__, exc2)
                 attempt += 1
                 time.sleep(min(0.05 * attempt, 0.3))
                 try:
@@ -131,8 +133,8 @@ class DriveGuard:
         """Close the generator's connection (the output state is left as it is)."""
         try:
             self.funcgen.close()
-        except Exception:
-            pass
+        except Exception as exc:
+            _log.info("%s: closing the link: %s: %s", self.where, type(exc).__name__, exc)
 
 
 #: the signals that end a run like Ctrl-C does: interrupt (Ctrl-C), terminate (kill, systemd),
@@ -177,6 +179,21 @@ def stop_handled() -> None:
     _PENDING.clear()
 
 
+#: the unraisable-exception hook :func:`_stop_unraisable` passes everything else to
+_UNRAISABLE: list[Any] = []
+
+
+def _stop_unraisable(unraisable: Any) -> None:
+    """A stop signal's exception raised where Python can only drop it (a weakref callback, a
+    ``__del__``): no "Exception ignored" traceback, since :func:`check_stop` raises it again
+    (it is in ``_PENDING``); anything else goes to the hook there was."""
+    if isinstance(unraisable.exc_value, (KeyboardInterrupt, Interrupted)):
+        _log.debug("a stop signal's exception was dropped in %r; it stops the command all the same",
+                   unraisable.object)
+        return
+    (_UNRAISABLE[0] if _UNRAISABLE else sys.__unraisablehook__)(unraisable)
+
+
 def install_stop_handlers(previous: dict[int, Any] | None = None) -> dict[int, Any]:
     """Make every stop signal raise (:func:`raise_stop_signal`) in the main thread; return the old handlers.
 
@@ -198,6 +215,9 @@ def install_stop_handlers(previous: dict[int, Any] | None = None) -> dict[int, A
     for s in (*STOP_SIGNALS, signal.SIGXFSZ):
         previous[s] = signal.getsignal(s)
         signal.signal(s, signal.SIG_IGN if s == signal.SIGXFSZ else raise_stop_signal)
+    if getattr(sys.unraisablehook, "__name__", "") != _stop_unraisable.__name__:
+        _UNRAISABLE[:] = [sys.unraisablehook]
+        sys.unraisablehook = _stop_unraisable
     from labkit import early_signals
 
     _PENDING.extend(early_signals())      # noted while the command started: check_stop() raises them
@@ -274,8 +294,19 @@ def signals_raise() -> Iterator[None]:
 sigterm_raises = signals_raise
 
 
+class OffSummary(TypedDict, total=False):
+    """``labkit off``'s result (its ``--json`` line): every output of the generator read back off."""
+
+    ok: bool
+    instrument: str                  # the model that answered
+    resource: str
+    channels_off: list[int]
+    attempts: int                    # connections it took
+    in_use_by: str                   # the run holding the generator's lock, when one did
+
+
 def turn_off(config: str | None = None, *, model: str | None = None, resource: str | None = None,
-             timeout_s: float = 3.0, attempts: int = 3) -> dict[str, Any]:
+             timeout_s: float = 3.0, attempts: int = 3) -> OffSummary:
     """``labkit off``: every output of a rig's generator off, confirmed by reading each one back.
 
     Reads only ``[instruments.funcgen]`` of ``config`` (the rest may be invalid), or takes
@@ -287,7 +318,7 @@ def turn_off(config: str | None = None, *, model: str | None = None, resource: s
     from labkit.errors import ConfigError, InputError
     from labkit.lockfiles import describe, holder
 
-    settings: dict[str, Any] = {}
+    settings: dict[str, Json] = {}
     if config is not None:
         from labkit.tomlio import load_toml
 
@@ -322,7 +353,7 @@ def turn_off(config: str | None = None, *, model: str | None = None, resource: s
             if still_on:
                 raise InstrumentError(f"output(s) {still_on} still read on after OFF", instrument="funcgen",
                                       command="OUTP?")
-            out: dict[str, Any] = {"ok": True, "instrument": getattr(fg, "instrument_model", None) or model,
+            out: OffSummary = {"ok": True, "instrument": getattr(fg, "instrument_model", None) or model,
                                    "resource": resource, "channels_off": list(fg.channels),
                                    "attempts": attempt + 1}
             if busy:
@@ -341,7 +372,7 @@ def turn_off(config: str | None = None, *, model: str | None = None, resource: s
             if fg is not None:
                 try:
                     fg.close()
-                except Exception:
-                    pass
+                except Exception as exc:
+                    _log.info("%s: closing the link: %s: %s", where, type(exc).__name__, exc)
         time.sleep(0.2 * (attempt + 1))
     raise DriveNotOff("funcgen", where, str(last), config=config or "")

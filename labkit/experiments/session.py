@@ -16,11 +16,18 @@ from labkit.experiments import kinds
 from labkit.experiments import runfile as rf
 from labkit.experiments.config import InstrumentSpec, comparable
 from labkit.experiments.kinds import Config
+from labkit.experiments.locks import ServedLabRecord
 from labkit.experiments.plans import Plan
-from labkit.experiments.runner import video_bytes, video_folder
+from labkit.experiments.runner import InterlockRecord, video_bytes, video_folder
 from labkit.experiments.safety import shielded
 from labkit.jsonutil import to_jsonable
 
+
+class SessionSummary(rf.RunSummary, total=False):
+    """:func:`run_session`'s result (the CLI's ``--json`` line): the run file's summary, and how it ended."""
+
+    ok: bool
+    interlocks: list[InterlockRecord]      # each point an interlock stopped in this session
 
 def load(kind: str, path: str | Path) -> Config:
     """Read and validate a config of experiment ``kind`` (``"inchip"``, ``"shaker"``)."""
@@ -77,7 +84,7 @@ def virtual_lab(cfg: Any, seed: int = 0, lab: Any = None) -> Iterator[tuple[Any,
 
 def run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: Any = False,
                 resume: str | Path | None = None, quiet: bool = False, seed: int = 0,
-                stdin: Any = None, force: bool = False, retry_interlocked: bool = False) -> dict[str, Any]:
+                stdin: Any = None, force: bool = False, retry_interlocked: bool = False) -> SessionSummary:
     """Run an in-chip sweep (``kind="inchip"``) or a shaker run; return the JSON summary.
 
     ``lab``: False (the config's instruments), True (start a virtual lab in-process for
@@ -165,7 +172,7 @@ def check_writable(folder: Path, key: str) -> None:
 
 def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: Any, resume: str | Path | None,
                  quiet: bool, seed: int, stdin: Any, force: bool = False,
-                 retry_interlocked: bool = False) -> dict[str, Any]:
+                 retry_interlocked: bool = False) -> SessionSummary:
     from labkit.experiments.locks import lock_run
 
     experiment = kinds.get(kind)
@@ -240,8 +247,7 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
                     if lab_obj is not None and rf.headroom_bytes(path) > rf.RESERVE_BYTES / 2:
                         _store_lab_record(path, lab_obj)
                     rf.release_space(path)          # what the run did not use
-    out_summary = rf.summary(path)
-    out_summary.update(ok=True, status=status)
+    out_summary: SessionSummary = {**rf.summary(path), "ok": True, "status": status}
     if runner is not None:
         out_summary["interlocks"] = runner.interlocks
     return out_summary
@@ -250,7 +256,7 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
 class ServedLab:
     """A virtual lab another process serves (``labkit lab serve``): used, never started or closed here."""
 
-    def __init__(self, record: dict[str, Any]) -> None:
+    def __init__(self, record: ServedLabRecord) -> None:
         self.resources: dict[str, str] = dict(record["resources"])
         self.models: dict[str, str] = dict(record.get("models") or {})
         self.pid = record.get("pid")

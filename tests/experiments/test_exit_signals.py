@@ -132,3 +132,34 @@ def test_a_stop_after_the_run_completed_exits_0_and_says_complete(tmp_path, lab)
         assert "interrupted" not in err and "Traceback" not in err, (trial, err)
         assert '"status": "complete"' in stdout.strip().splitlines()[-1], stdout
     assert alive >= 2, alive          # the signal reached a running labkit (its file said complete)
+
+
+def test_a_stop_dropped_where_python_cannot_raise_prints_no_traceback(monkeypatch):
+    """A stop signal's exception raised inside a weakref callback (``labkit report`` met it mid-run)
+    is dropped by Python, which printed "Exception ignored ... Traceback"; the command stops all the
+    same (``check_stop``), so that is silenced; any other dropped exception still reaches the hook."""
+    import gc
+    import weakref
+
+    from labkit.errors import Interrupted
+    from labkit.experiments import safety
+
+    seen: list[BaseException] = []
+    with safety.signals_raise():
+        assert sys.unraisablehook is safety._stop_unraisable
+        monkeypatch.setattr(safety, "_UNRAISABLE", [lambda u: seen.append(u.exc_value)])
+
+        class Thing:
+            pass
+
+        def stop(_ref):
+            raise Interrupted("SIGTERM")
+
+        def other(_ref):
+            raise ValueError("shown")
+
+        a, b = Thing(), Thing()
+        refs = [weakref.ref(a, stop), weakref.ref(b, other)]
+        del a, b
+        gc.collect()
+    assert [type(e) for e in seen] == [ValueError] and len(refs) == 2

@@ -17,6 +17,7 @@ import pytest
 import labkit
 from clihelpers import REPO, last_json, run_cli
 from labkit.errors import InputError
+from labkit.h5io import SCHEMA_VERSION
 
 xr = pytest.importorskip("xarray", reason="xarray is in the test extra: pip install -e '.[test]'")
 pytest.importorskip("h5netcdf", reason="h5netcdf is in the test extra: pip install -e '.[test]'")
@@ -315,7 +316,7 @@ def sim_files(tmp_path_factory):
 def test_simulation_result_opens_with_time_as_coordinate(sim_files):
     r, _, d = sim_files
     obj = labkit.open(d / "run.h5")
-    assert obj.kind == "sim_result" and obj.schema_version == 2
+    assert obj.kind == "sim_result" and obj.schema_version == SCHEMA_VERSION
     np.testing.assert_array_equal(obj.t_s, r.t_s)
     assert obj.mean_speed_mm_s == pytest.approx(r.mean_speed_mm_s)
     with xr.open_dataset(d / "run.h5", engine="h5netcdf") as ds:
