@@ -706,8 +706,9 @@ def _grow_while_misfit(ctx: _Ctx, ref: Refined) -> Refined:
             _check_size(ctx.chans, lam.size + 1, ctx.powers)
         except InputError:
             break
-        for new, inside_only in _candidates(ctx, lam, mis.max()):
-            trial = _try_mode(ctx, lam, new, mis.max(), inside_only)
+        for new, inside_only, peak in _candidates(ctx, lam, mis.max()):
+            trial = (_try_peak(ctx, ref, new, mis.max()) if peak
+                     else _try_mode(ctx, lam, new, mis.max(), inside_only))
             if trial is not None:
                 where = "" if ctx.band[0] < trial.freq_hz[-1] < ctx.band[1] else " (outside the band)"
                 ctx.warnings.append(f"added a mode at {ctx.hz(trial.freq_hz[-1])}{where}: the stabilisation "
@@ -726,11 +727,13 @@ def _screen(ctx: _Ctx, lam: np.ndarray) -> float:
                for c, p, mod in zip(ctx.chans, lin, ctx.models(lam, lin)))
 
 
-def _candidates(ctx: _Ctx, lam: np.ndarray, worst: float) -> list[tuple[complex, bool]]:
-    """Poles worth a trial, best first by their screened misfit: ``(pole, must stay inside the band)``."""
+def _candidates(ctx: _Ctx, lam: np.ndarray, worst: float) -> list[tuple[complex, bool, bool]]:
+    """Poles worth a trial: ``(pole, must stay inside the band, at an unexplained peak of |H|)``; the
+    peaks of |H| no pole explains first, then the others best first by their screened misfit."""
     out: list[tuple[float, complex, bool]] = []
     lo, hi = ctx.band
     guesses = [(fk, zk, True) for fk, zk in _residual_peaks(ctx, lam, 3)]
+    peaks = [complex(modal_to_pole(np.array([fk]), np.array([zk]))[0]) for fk, zk in _unfitted_peaks(ctx, lam)]
     guesses += [(edge, z, False) for edge in (hi * 1.01, hi * 1.04, hi * 1.1, lo * 0.99, lo * 0.96, lo * 0.9)
                 for z in (0.005, 0.02)]
     for f0, z0, inside_only in guesses:
@@ -740,24 +743,49 @@ def _candidates(ctx: _Ctx, lam: np.ndarray, worst: float) -> list[tuple[complex,
             out.append((sc, new, inside_only))
     out.sort(key=lambda t: t[0])
     seen_edges: set[bool] = set()
-    picked: list[tuple[complex, bool]] = []
+    picked: list[tuple[complex, bool, bool]] = [(new, True, True) for new in peaks]
     for _, new, inside_only in out:             # every inside guess, the best one above and below
         above = abs(new) > 2 * np.pi * hi
         if inside_only:
-            picked.append((new, inside_only))
+            picked.append((new, inside_only, False))
         elif above not in seen_edges:
             seen_edges.add(above)
-            picked.append((new, inside_only))
+            picked.append((new, inside_only, False))
     return picked
+
+
+#: A peak of |H| counts (as in peak picking) when log |H| stands out by this much (a factor e).
+PEAK_PROMINENCE = 1.0
+
+
+def _unfitted_peaks(ctx: _Ctx, lam: np.ndarray) -> list[tuple[float, float]]:
+    """(frequency, damping) guesses at the peaks of |H| inside the band that no pole of ``lam`` explains:
+    local maxima of log |H| (any location) standing out by :data:`PEAK_PROMINENCE`, with no pole
+    within the peak's half-power band.  A weak mode next to strong ones can leave a residual far
+    below the misfit of the quiet lines elsewhere; its own peak still shows where it is."""
+    from scipy.signal import find_peaks
+    f_poles = pole_to_modal(lam)[0] if lam.size else np.zeros(0)
+    out: list[tuple[float, float]] = []
+    for c in ctx.chans:
+        fk, a = c.w / (2 * np.pi), np.abs(c.H)
+        for k in find_peaks(np.log(a + 1e-300), prominence=PEAK_PROMINENCE)[0]:
+            i, j = k, k
+            while i > 0 and a[i - 1] > a[k] / np.sqrt(2):
+                i -= 1
+            while j < a.size - 1 and a[j + 1] > a[k] / np.sqrt(2):
+                j += 1
+            lo, hi = fk[max(i - 1, 0)], fk[min(j + 1, a.size - 1)]
+            if np.any((f_poles > lo) & (f_poles < hi)) or any(lo < f < hi for f, _ in out):
+                continue
+            out.append((float(fk[k]), float(np.clip((hi - lo) / (2 * fk[k]), 1e-4, 0.3))))
+    return out
 
 
 def _try_mode(ctx: _Ctx, lam: np.ndarray, new: complex, worst: float, inside_only: bool) -> Refined | None:
     """The fit with one more pole started at ``new``, or None when it does not settle, is not
     credible, leaves the band (``inside_only``) or lowers the worst misfit by less than a fifth."""
-    # A trial: a mode that does not settle in 20 iterations is not kept anyway.
-    trial = refine(ctx.chans, np.append(lam, new), ctx.powers, band_hz=ctx.band, covariance=ctx.covariance,
-                   max_iter=20)
-    if not trial.success:
+    trial = _trial_fit(ctx, lam, new, at_peak=False)
+    if trial is None:
         return None
     keep, _ = _credible(ctx.chans, trial, ctx.f_ref, check_width=True)
     lo, hi = ctx.band
@@ -765,6 +793,52 @@ def _try_mode(ctx: _Ctx, lam: np.ndarray, new: complex, worst: float, inside_onl
     if not (keep.all() and inside) or _misfits(ctx, trial).max() > 0.8 * worst:
         return None
     return trial
+
+
+def _try_peak(ctx: _Ctx, ref: Refined, new: complex, worst: float) -> Refined | None:
+    """The fit ``ref`` with one more pole started at ``new``, an unexplained peak of |H|, or None.
+
+    The peak itself shows the mode, so the new mode is judged neither by its width nor by its
+    residue's significance (a weak mode beside strong ones is uncertain under the sandwich
+    covariance, whose leverage correction grows at a sharp peak), but by the misfit it removes: kept
+    when it lowers the misfit by a fifth over the peak's neighbourhood (its half-power band, three
+    times widened) without raising the worst one, stays in the band and leaves the other modes credible.
+    """
+    trial = _trial_fit(ctx, _poles(ref), new, at_peak=True)
+    if trial is None:
+        return None
+    keep, _ = _credible(ctx.chans, trial, ctx.f_ref)
+    lo, hi = ctx.band
+    if not (keep[:-1].all() and lo < trial.freq_hz[-1] < hi) or _misfits(ctx, trial).max() > worst:
+        return None
+    near = 3 * abs(new.real) / (2 * np.pi)
+    f0 = abs(new.imag) / (2 * np.pi)
+    return trial if _local_misfit(ctx, trial, f0, near) <= 0.8 * _local_misfit(ctx, ref, f0, near) else None
+
+
+def _trial_fit(ctx: _Ctx, lam: np.ndarray, new: complex, *, at_peak: bool) -> Refined | None:
+    """The refinement with one more pole started at ``new`` (20 iterations: a mode that does not
+    settle in them is not kept anyway), or None.  At a peak of |H| the new frequency is first held
+    at the peak while the rest settles, so that a weak mode is not pulled away by strong ones."""
+    lam1 = np.append(lam, new)
+    if at_peak:
+        held = np.zeros(lam1.size, dtype=bool)
+        held[-1] = True
+        first = refine(ctx.chans, lam1, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance, max_iter=20,
+                       fixed_freq=held)
+        lam1 = np.append(lam, _poles(first)[-1]) if first.success else lam1
+    trial = refine(ctx.chans, lam1, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance, max_iter=20)
+    return trial if trial.success else None
+
+
+def _local_misfit(ctx: _Ctx, ref: Refined, f0: float, half: float) -> float:
+    """Mean of ``|model - H|^2 / noise`` over the lines within ``half`` of ``f0`` (normalised units)."""
+    models = ctx.models(_poles(ref), ref.lin)
+    out = 0.0
+    for c, mod in zip(ctx.chans, models):
+        s = np.abs(c.w / (2 * np.pi) - f0) <= max(half, 2 * float(np.min(np.diff(c.w))) / (2 * np.pi))
+        out += float(np.mean(np.abs(mod[s] - c.H[s]) ** 2 / ctx.noise(c)[s])) if s.any() else 0.0
+    return out
 
 
 def _fit_given(ctx: _Ctx, f_given: np.ndarray, z_given: np.ndarray, method: str, kind: str) -> ModalFit:

@@ -16,7 +16,12 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "pyfrf_impact" / "h1_five_
 #: the data README's table, re-derived below from |H1| so that the table and the file agree
 PEAKS_HZ = {(700.0, 1000.0): [810, 824, 851, 900],
             (2900.0, 3300.0): [3008, 3035, 3108],
-            (4900.0, 7300.0): [5031, 5074, 5103, 5969, 6078, 7092, 7158]}
+            (4900.0, 7300.0): [5031, 5074, 5103, 5969, 6078, 7092, 7158],
+            (700.0, 1600.0): [810, 824, 851, 900, 1518],
+            (2500.0, 4600.0): [2640, 3008, 3035, 3108, 3669, 4128, 4164, 4392, 4470]}
+#: peaks the automatic order does not fit yet in that band (docs/fitting.md says why); asserted
+#: missed, so that the day they are fitted this test asks for the table to be updated
+MISSED_HZ = {(2500.0, 4600.0): [3108]}
 
 
 def _load() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -57,4 +62,5 @@ def test_every_peak_in_the_band_is_fitted_automatically(band):
     assert np.all(std > 0)
     for peak in PEAKS_HZ[band]:
         lo, hi = _half_power_band(f, h, peak)
-        assert np.any((got > lo) & (got < hi)), (peak, (lo, hi), got)
+        fitted = np.any((got > lo) & (got < hi))
+        assert fitted != (peak in MISSED_HZ.get(band, [])), (peak, (lo, hi), got)
