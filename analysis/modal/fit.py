@@ -294,6 +294,9 @@ class _Ctx:
     covariance: str
     warnings: list[str]
     noise_cache: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: modes added at a peak of |H| that the band's fit cannot hold: (frequency, its variance and
+    #: the damping ratio's, from a fit of the lines around the peak alone); held in every later refinement
+    held: list[tuple[float, float, float]] = field(default_factory=list)
 
     def hz(self, f: float) -> str:
         return f"{f * self.f_ref:.5g} Hz"
@@ -717,7 +720,7 @@ def _grow_while_misfit(ctx: _Ctx, ref: Refined) -> Refined:
                 break
         else:
             break
-    return ref
+    return _with_held_variances(ctx, ref)
 
 
 def _screen(ctx: _Ctx, lam: np.ndarray) -> float:
@@ -803,32 +806,101 @@ def _try_peak(ctx: _Ctx, ref: Refined, new: complex, worst: float) -> Refined | 
     covariance, whose leverage correction grows at a sharp peak), but by the misfit it removes: kept
     when it lowers the misfit by a fifth over the peak's neighbourhood (its half-power band, three
     times widened) without raising the worst one, stays in the band and leaves the other modes credible.
+    When the band's fit pulls the new pole away from its peak (a weak mode where far stronger ones
+    dominate the least squares), the mode is fitted from the lines around the peak alone
+    (:func:`_local_pole`, kept when it lowers their misfit by a fifth) and held in the band's fit.
     """
-    trial = _trial_fit(ctx, _poles(ref), new, at_peak=True)
-    if trial is None:
-        return None
-    keep, _ = _credible(ctx.chans, trial, ctx.f_ref)
-    lo, hi = ctx.band
-    if not (keep[:-1].all() and lo < trial.freq_hz[-1] < hi) or _misfits(ctx, trial).max() > worst:
-        return None
     near = 3 * abs(new.real) / (2 * np.pi)
     f0 = abs(new.imag) / (2 * np.pi)
-    return trial if _local_misfit(ctx, trial, f0, near) <= 0.8 * _local_misfit(ctx, ref, f0, near) else None
+    trial = _trial_fit(ctx, _poles(ref), new, at_peak=True)
+    local = None
+    if trial is None or abs(trial.freq_hz[-1] - f0) > near:     # pulled away from its peak
+        local = _local_pole(ctx, _poles(ref), new)
+        if local is None:
+            return None
+        ctx.held.append((pole_to_modal(np.array([local[0]]))[0][0], local[1], local[2]))
+        trial = _trial_fit(ctx, _poles(ref), local[0], at_peak=False)
+    keep, _ = _credible(ctx.chans, trial, ctx.f_ref) if trial is not None else (np.zeros(1, bool), [])
+    lo, hi = ctx.band
+    if (trial is None or not (keep[:-1].all() and lo < trial.freq_hz[-1] < hi)
+            or _misfits(ctx, trial).max() > worst
+            or (local is None and _local_misfit(ctx, trial, f0, near) > 0.8 * _local_misfit(ctx, ref, f0, near))):
+        if local is not None:
+            ctx.held.pop()
+        return None
+    if local is not None:
+        ctx.warnings.append(f"the mode at {ctx.hz(trial.freq_hz[-1])} was fitted from the lines within "
+                            f"{LOCAL_SPAN:.0%} of its peak alone (the band's fit pulls its pole away): its "
+                            "frequency and damping ratio are held there in the band's fit")
+    return trial
 
 
 def _trial_fit(ctx: _Ctx, lam: np.ndarray, new: complex, *, at_peak: bool) -> Refined | None:
     """The refinement with one more pole started at ``new`` (20 iterations: a mode that does not
     settle in them is not kept anyway), or None.  At a peak of |H| the new frequency is first held
-    at the peak while the rest settles, so that a weak mode is not pulled away by strong ones."""
+    at the peak while the rest settles, so that a weak mode is not pulled away by strong ones.
+    The modes in ``ctx.held`` stay held (frequency and damping ratio)."""
     lam1 = np.append(lam, new)
     if at_peak:
-        held = np.zeros(lam1.size, dtype=bool)
+        held = _held_mask(ctx, lam1)
         held[-1] = True
         first = refine(ctx.chans, lam1, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance, max_iter=20,
-                       fixed_freq=held)
+                       fixed_freq=held, fixed_damping=_held_mask(ctx, lam1))
         lam1 = np.append(lam, _poles(first)[-1]) if first.success else lam1
-    trial = refine(ctx.chans, lam1, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance, max_iter=20)
+    held = _held_mask(ctx, lam1)
+    # a held frequency's mode is one the data show: the rest may take the usual iterations to settle
+    trial = refine(ctx.chans, lam1, ctx.powers, band_hz=ctx.band, covariance=ctx.covariance,
+                   max_iter=100 if held[-1] else 20, fixed_freq=held, fixed_damping=held)
     return trial if trial.success else None
+
+
+def _held_mask(ctx: _Ctx, lam: np.ndarray) -> np.ndarray:
+    f = pole_to_modal(lam)[0] if lam.size else np.zeros(0)
+    return np.array([any(abs(fi - h[0]) <= 1e-9 * h[0] for h in ctx.held) for fi in f], dtype=bool)
+
+
+#: Half-width of the lines around a peak fitted alone (a fraction of its frequency) when the band's
+#: fit pulls the peak's mode away.
+LOCAL_SPAN = 0.01
+
+
+def _local_pole(ctx: _Ctx, lam: np.ndarray, new: complex) -> tuple[complex, float, float] | None:
+    """The pole of the peak at ``new`` (and its frequency's and damping ratio's variances) from the lines within
+    :data:`LOCAL_SPAN` of it alone, with the poles of ``lam`` among them; None if that fails."""
+    f0 = abs(new.imag) / (2 * np.pi)
+    lo, hi = f0 * (1 - LOCAL_SPAN), f0 * (1 + LOCAL_SPAN)
+    sub = []
+    for c in ctx.chans:
+        s = (c.w >= 2 * np.pi * lo) & (c.w <= 2 * np.pi * hi)
+        sub.append(Channel(c.name, c.w[s], c.H[s], c.weight[s]))
+    f_lam = pole_to_modal(lam)[0] if lam.size else np.zeros(0)
+    lam1 = np.append(lam[(f_lam > lo) & (f_lam < hi)], new)
+    try:
+        _check_size(sub, lam1.size, ctx.powers)
+    except InputError:
+        return None
+    loc = refine(sub, lam1, ctx.powers, band_hz=(lo, hi), covariance=ctx.covariance)
+    if not (loc.success and lo < loc.freq_hz[-1] < hi):
+        return None
+    noise = [ctx.noise(c)[(c.w >= 2 * np.pi * lo) & (c.w <= 2 * np.pi * hi)] for c in ctx.chans]
+    without = residues_ls(sub, lam1[:-1], ctx.powers)
+    before = sum(float(np.sum(np.abs(basis(c.w, lam1[:-1], ctx.powers) @ p - c.H) ** 2 / v))
+                 for c, p, v in zip(sub, without, noise))
+    after = sum(float(np.sum(np.abs(basis(c.w, _poles(loc), ctx.powers) @ p - c.H) ** 2 / v))
+                for c, p, v in zip(sub, loc.lin, noise))
+    if after > 0.8 * before:
+        return None
+    i = 2 * (lam1.size - 1)
+    return complex(_poles(loc)[-1]), float(loc.cov[i, i]), float(loc.cov[i + 1, i + 1])
+
+
+def _with_held_variances(ctx: _Ctx, ref: Refined) -> Refined:
+    """``ref`` with the variances of the frequencies in ``ctx.held`` set to their local fits'."""
+    for i, fi in enumerate(ref.freq_hz):
+        for h, var_f, var_z in ctx.held:
+            if abs(fi - h) <= 1e-9 * h:
+                ref.cov[2 * i, 2 * i], ref.cov[2 * i + 1, 2 * i + 1] = var_f, var_z
+    return ref
 
 
 def _local_misfit(ctx: _Ctx, ref: Refined, f0: float, half: float) -> float:
