@@ -413,6 +413,8 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     h, w = samples[0].shape
     if seg is None:
         seg = Segmentation.for_frame(w, h, None, None)
+    if h * w > DECIMATE_ABOVE_PX and seg.body_width_px >= 16:
+        return _decimated_model(samples, seg, grow_px, dark_ratio)
     rim = _rim(samples, dark_ratio)
     rim_g = _dilate(rim.view(np.uint8), grow_px) if rim.any() else np.zeros((h, w), np.uint8)
     # smaller things relative to the local tray (smooth background: ring light, flicker)
@@ -431,6 +433,35 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     # static objects grown by the measuring band, so the robot passing by is cut off them
     obj_m = _dilate(objects, 3).astype(bool) if boxes else None
     return StaticScene(rim_m, flat, noise, obj_m, boxes, len(samples), ov_m, ov_boxes)
+
+
+DECIMATE_ABOVE_PX = 1_000_000   # larger frames (1080p) are modelled at half resolution
+
+
+def _decimated_model(samples: list[np.ndarray], seg: Segmentation, grow_px: int, dark_ratio: float) -> StaticScene:
+    """:func:`background_model` of a large frame, computed on the samples halved (2 x 2 pixel means) and
+    brought back to full size: the static structure is several pixels wide and the flat field smooth
+    at that scale, at a quarter of the cost. The pixel noise is measured at full resolution (halving
+    averages it down)."""
+    import cv2
+
+    h, w = samples[0].shape
+    half = [np.asarray(cv2.resize(s, (w // 2, h // 2), interpolation=cv2.INTER_AREA)) for s in samples]
+    seg_h = Segmentation.for_frame(w // 2, h // 2, seg.body_width_px / 2, None if seg.auto else seg.min_contrast)
+    sc = background_model(half, seg_h, max(grow_px // 2, 1), dark_ratio)
+
+    def up(m: np.ndarray | None) -> np.ndarray | None:
+        if m is None:
+            return None
+        return np.asarray(cv2.resize(m.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST), bool)
+
+    sc.noise = _pixel_noise(seg.ratio(samples[0]), seg.ratio(samples[len(samples) // 2]))
+    sc.rim, sc.objects, sc.overlays = up(sc.rim), up(sc.objects), up(sc.overlays)
+    if sc.flat is not None:
+        sc.flat = np.asarray(cv2.resize(sc.flat, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
+    sc.object_boxes = [(2 * x, 2 * y, 2 * bw, 2 * bh) for x, y, bw, bh in sc.object_boxes]
+    sc.overlay_boxes = [(2 * x, 2 * y, 2 * bw, 2 * bh) for x, y, bw, bh in sc.overlay_boxes]
+    return sc
 
 
 def _rim(samples: list[np.ndarray], dark_ratio: float) -> np.ndarray:
