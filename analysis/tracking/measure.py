@@ -117,7 +117,8 @@ class Segmentation:
         if flat is not None:
             f /= flat
         bg = smooth_background(f, self.cell_px, self.kernel_cells)
-        return f / np.maximum(bg, np.float32(1.0))
+        np.maximum(bg, np.float32(1.0), out=bg)
+        return np.divide(f, bg, out=f)       # in place: no per-frame temporaries
 
 
 class _Finder:
@@ -263,7 +264,7 @@ class _Finder:
             masked = bool(np.any(band & (1 - vmask)))    # part of the robot's band is never-search (dust, rim)
             band &= vmask
             ring &= vmask
-        f = win.astype(np.float32)
+        f = np.asarray(win, np.float32)    # read only here: no copy
         # background under the robot: least-squares plane through the ring around it
         # (lighting gradients), from the ring's moments: no pixel lists needed
         mr = cv2.moments(ring, binaryImage=True)
@@ -286,8 +287,9 @@ class _Finder:
         hh, ww = win.shape
         uu = np.arange(ww, dtype=np.float32)
         vv = np.arange(hh, dtype=np.float32)
-        bg = np.float32(coef[0]) + np.float32(coef[1]) * uu[None, :] + np.float32(coef[2]) * vv[:, None]
-        ratio = f / np.maximum(bg, np.float32(1e-3))
+        ratio = np.add.outer(np.float32(coef[2]) * vv + np.float32(coef[0]), np.float32(coef[1]) * uu)
+        np.maximum(ratio, np.float32(1e-3), out=ratio)
+        np.divide(f, ratio, out=ratio)      # the window over the background plane
         inner = cv2.erode(comp, _square(2))
         if cv2.countNonZero(inner) < 5:
             inner = comp
@@ -304,8 +306,13 @@ class _Finder:
             rho = float(cv2.mean(ratio * tex, mask=inner)[0])
             if 1.0 - rho < 0.5 * self.seg.min_contrast:
                 return None
-            denom = np.maximum(1.0 - np.float32(rho) / np.maximum(tex, np.float32(1e-3)), np.float32(1e-3))
-            w = np.clip((1.0 - ratio) / denom, -0.5, 1.5)
+            denom = np.maximum(tex, np.float32(1e-3))
+            np.divide(np.float32(-rho), denom, out=denom)
+            denom += np.float32(1.0)
+            np.maximum(denom, np.float32(1e-3), out=denom)
+            w = np.subtract(np.float32(1.0), ratio, out=ratio)
+            w /= denom
+            np.clip(w, -0.5, 1.5, out=w)
         w *= band
         mo = cv2.moments(w)
         if mo["m00"] <= 0:
