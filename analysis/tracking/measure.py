@@ -420,7 +420,7 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     h, w = samples[0].shape
     if seg is None:
         seg = Segmentation.for_frame(w, h, None, None)
-    if h * w > DECIMATE_ABOVE_PX and seg.body_width_px >= 16:
+    if h * w >= DECIMATE_FROM_PX and seg.body_width_px >= 32:
         return _decimated_model(samples, seg, grow_px, dark_ratio)
     rim = _rim(samples, dark_ratio)
     rim_g = _dilate(rim.view(np.uint8), grow_px) if rim.any() else np.zeros((h, w), np.uint8)
@@ -442,14 +442,14 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     return StaticScene(rim_m, flat, noise, obj_m, boxes, len(samples), ov_m, ov_boxes)
 
 
-DECIMATE_ABOVE_PX = 1_000_000   # larger frames (1080p) are modelled at half resolution
+DECIMATE_FROM_PX = 300_000   # frames from 640 x 480 up, with a body >= 32 px wide, are modelled at half resolution
 
 
 def _decimated_model(samples: list[np.ndarray], seg: Segmentation, grow_px: int, dark_ratio: float) -> StaticScene:
-    """:func:`background_model` of a large frame, computed on the samples halved (2 x 2 pixel means) and
-    brought back to full size: the static structure is several pixels wide and the flat field smooth
-    at that scale, at a quarter of the cost. The pixel noise is measured at full resolution (halving
-    averages it down)."""
+    """:func:`background_model` of a large frame (a body >= 32 px wide), computed on the samples halved
+    (2 x 2 pixel means) and brought back to full size: the static structure is several pixels wide and
+    the flat field smooth at that scale, at a quarter of the cost. The rim and the pixel noise are
+    measured at full resolution (halving would move the rim's edge and average the noise down)."""
     import cv2
 
     h, w = samples[0].shape
@@ -463,7 +463,9 @@ def _decimated_model(samples: list[np.ndarray], seg: Segmentation, grow_px: int,
         return np.asarray(cv2.resize(m.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST), bool)
 
     sc.noise = _pixel_noise(seg.ratio(samples[0]), seg.ratio(samples[len(samples) // 2]))
-    sc.rim, sc.objects, sc.overlays = up(sc.rim), up(sc.objects), up(sc.overlays)
+    rim = _rim(samples, dark_ratio)     # the rim's edge to the pixel: a robot walks along it
+    sc.rim = _dilate(rim.view(np.uint8), 1).astype(bool) if rim.any() else None
+    sc.objects, sc.overlays = up(sc.objects), up(sc.overlays)
     if sc.flat is not None:
         sc.flat = np.asarray(cv2.resize(sc.flat, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
     sc.object_boxes = [(2 * x, 2 * y, 2 * bw, 2 * bh) for x, y, bw, bh in sc.object_boxes]
