@@ -171,9 +171,9 @@ class _Finder:
         self.best_contrast = max(self.best_contrast, float(contrast))
         if contrast < self.seg.min_contrast:
             return None, False
-        binary = (q <= thr).astype(np.uint8)
+        binary = cv2.threshold(q, thr, 1, cv2.THRESH_BINARY_INV)[1]     # q <= thr, as uint8 0/1
         if vmask is not None:
-            binary &= vmask
+            cv2.bitwise_and(binary, vmask, dst=binary)
         contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         lo, hi = area_tol
         cands = []
