@@ -334,16 +334,22 @@ def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> 
     place). The leg stubs stick out of the long sides, not the ends, so they do not
     move it.
     """
-    vv, uu = np.nonzero(weights != 0)
+    vv, uu = np.nonzero(weights)
     wt = np.tile(weights[vv, uu].astype(np.float64) / 4, 4)
     # each pixel as four quarter-pixel samples: along an image axis the centres alone would
     # project onto whole pixels only, leaving every other half-pixel bin empty (a -4 % length)
     c, sn = np.cos(theta), np.sin(theta)
-    s0 = (uu - cu) * c + (vv - cv_) * sn
-    s = np.concatenate([s0 + 0.25 * (du * c + dv * sn) for du, dv in ((-1, -1), (1, -1), (-1, 1), (1, 1))])
     binw = 0.5
-    lo = np.floor(s.min() / binw) - 2
-    idx = (np.floor(s / binw) - lo).astype(int)
+    # positions in bins, in float32 (1e-5 px over the chip's length, far below a bin), floored in place
+    s0 = ((uu.astype(np.float32) - np.float32(cu)) * np.float32(c / binw)
+          + (vv.astype(np.float32) - np.float32(cv_)) * np.float32(sn / binw))
+    n = s0.size
+    s = np.empty(4 * n, np.float32)
+    for i, (du, dv) in enumerate(((-1, -1), (1, -1), (-1, 1), (1, 1))):
+        np.add(s0, np.float32(0.25 * (du * c + dv * sn) / binw), out=s[i * n:(i + 1) * n])
+    np.floor(s, out=s)
+    lo = float(s.min()) - 2
+    idx = (s - np.float32(lo)).astype(np.intp)
     prof = np.bincount(idx, wt, minlength=idx.max() + 3) / binw
     prof = np.convolve(prof, np.ones(3) / 3, mode="same")
     centres = (np.arange(prof.size) + lo + 0.5) * binw
