@@ -117,7 +117,8 @@ class Segmentation:
         if flat is not None:
             f /= flat
         bg = smooth_background(f, self.cell_px, self.kernel_cells)
-        return f / np.maximum(bg, np.float32(1.0))
+        np.maximum(bg, np.float32(1.0), out=bg)
+        return np.divide(f, bg, out=f)       # in place: no per-frame temporaries
 
 
 class _Finder:
@@ -170,9 +171,9 @@ class _Finder:
         self.best_contrast = max(self.best_contrast, float(contrast))
         if contrast < self.seg.min_contrast:
             return None, False
-        binary = (q <= thr).astype(np.uint8)
+        binary = cv2.threshold(q, thr, 1, cv2.THRESH_BINARY_INV)[1]     # q <= thr, as uint8 0/1
         if vmask is not None:
-            binary &= vmask
+            cv2.bitwise_and(binary, vmask, dst=binary)
         contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         lo, hi = area_tol
         cands = []
@@ -263,7 +264,7 @@ class _Finder:
             masked = bool(np.any(band & (1 - vmask)))    # part of the robot's band is never-search (dust, rim)
             band &= vmask
             ring &= vmask
-        f = win.astype(np.float32)
+        f = np.asarray(win, np.float32)    # read only here: no copy
         # background under the robot: least-squares plane through the ring around it
         # (lighting gradients), from the ring's moments: no pixel lists needed
         mr = cv2.moments(ring, binaryImage=True)
@@ -286,8 +287,9 @@ class _Finder:
         hh, ww = win.shape
         uu = np.arange(ww, dtype=np.float32)
         vv = np.arange(hh, dtype=np.float32)
-        bg = np.float32(coef[0]) + np.float32(coef[1]) * uu[None, :] + np.float32(coef[2]) * vv[:, None]
-        ratio = f / np.maximum(bg, np.float32(1e-3))
+        ratio = np.add.outer(np.float32(coef[2]) * vv + np.float32(coef[0]), np.float32(coef[1]) * uu)
+        np.maximum(ratio, np.float32(1e-3), out=ratio)
+        np.divide(f, ratio, out=ratio)      # the window over the background plane
         inner = cv2.erode(comp, _square(2))
         if cv2.countNonZero(inner) < 5:
             inner = comp
@@ -304,8 +306,13 @@ class _Finder:
             rho = float(cv2.mean(ratio * tex, mask=inner)[0])
             if 1.0 - rho < 0.5 * self.seg.min_contrast:
                 return None
-            denom = np.maximum(1.0 - np.float32(rho) / np.maximum(tex, np.float32(1e-3)), np.float32(1e-3))
-            w = np.clip((1.0 - ratio) / denom, -0.5, 1.5)
+            denom = np.maximum(tex, np.float32(1e-3))
+            np.divide(np.float32(-rho), denom, out=denom)
+            denom += np.float32(1.0)
+            np.maximum(denom, np.float32(1e-3), out=denom)
+            w = np.subtract(np.float32(1.0), ratio, out=ratio)
+            w /= denom
+            np.clip(w, -0.5, 1.5, out=w)
         w *= band
         mo = cv2.moments(w)
         if mo["m00"] <= 0:
@@ -327,16 +334,22 @@ def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> 
     place). The leg stubs stick out of the long sides, not the ends, so they do not
     move it.
     """
-    vv, uu = np.nonzero(weights != 0)
+    vv, uu = np.nonzero(weights)
     wt = np.tile(weights[vv, uu].astype(np.float64) / 4, 4)
     # each pixel as four quarter-pixel samples: along an image axis the centres alone would
     # project onto whole pixels only, leaving every other half-pixel bin empty (a -4 % length)
     c, sn = np.cos(theta), np.sin(theta)
-    s0 = (uu - cu) * c + (vv - cv_) * sn
-    s = np.concatenate([s0 + 0.25 * (du * c + dv * sn) for du, dv in ((-1, -1), (1, -1), (-1, 1), (1, 1))])
     binw = 0.5
-    lo = np.floor(s.min() / binw) - 2
-    idx = (np.floor(s / binw) - lo).astype(int)
+    # positions in bins, in float32 (1e-5 px over the chip's length, far below a bin), floored in place
+    s0 = ((uu.astype(np.float32) - np.float32(cu)) * np.float32(c / binw)
+          + (vv.astype(np.float32) - np.float32(cv_)) * np.float32(sn / binw))
+    n = s0.size
+    s = np.empty(4 * n, np.float32)
+    for i, (du, dv) in enumerate(((-1, -1), (1, -1), (-1, 1), (1, 1))):
+        np.add(s0, np.float32(0.25 * (du * c + dv * sn) / binw), out=s[i * n:(i + 1) * n])
+    np.floor(s, out=s)
+    lo = float(s.min()) - 2
+    idx = (s - np.float32(lo)).astype(np.intp)
     prof = np.bincount(idx, wt, minlength=idx.max() + 3) / binw
     prof = np.convolve(prof, np.ones(3) / 3, mode="same")
     centres = (np.arange(prof.size) + lo + 0.5) * binw
@@ -413,6 +426,8 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     h, w = samples[0].shape
     if seg is None:
         seg = Segmentation.for_frame(w, h, None, None)
+    if h * w >= DECIMATE_FROM_PX and seg.body_width_px >= 32:
+        return _decimated_model(samples, seg, grow_px, dark_ratio)
     rim = _rim(samples, dark_ratio)
     rim_g = _dilate(rim.view(np.uint8), grow_px) if rim.any() else np.zeros((h, w), np.uint8)
     # smaller things relative to the local tray (smooth background: ring light, flicker)
@@ -431,6 +446,37 @@ def background_model(samples: list[np.ndarray], seg: Segmentation | None = None,
     # static objects grown by the measuring band, so the robot passing by is cut off them
     obj_m = _dilate(objects, 3).astype(bool) if boxes else None
     return StaticScene(rim_m, flat, noise, obj_m, boxes, len(samples), ov_m, ov_boxes)
+
+
+DECIMATE_FROM_PX = 300_000   # frames from 640 x 480 up, with a body >= 32 px wide, are modelled at half resolution
+
+
+def _decimated_model(samples: list[np.ndarray], seg: Segmentation, grow_px: int, dark_ratio: float) -> StaticScene:
+    """:func:`background_model` of a large frame (a body >= 32 px wide), computed on the samples halved
+    (2 x 2 pixel means) and brought back to full size: the static structure is several pixels wide and
+    the flat field smooth at that scale, at a quarter of the cost. The rim and the pixel noise are
+    measured at full resolution (halving would move the rim's edge and average the noise down)."""
+    import cv2
+
+    h, w = samples[0].shape
+    half = [np.asarray(cv2.resize(s, (w // 2, h // 2), interpolation=cv2.INTER_AREA)) for s in samples]
+    seg_h = Segmentation.for_frame(w // 2, h // 2, seg.body_width_px / 2, None if seg.auto else seg.min_contrast)
+    sc = background_model(half, seg_h, max(grow_px // 2, 1), dark_ratio)
+
+    def up(m: np.ndarray | None) -> np.ndarray | None:
+        if m is None:
+            return None
+        return np.asarray(cv2.resize(m.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST), bool)
+
+    sc.noise = _pixel_noise(seg.ratio(samples[0]), seg.ratio(samples[len(samples) // 2]))
+    rim = _rim(samples, dark_ratio)     # the rim's edge to the pixel: a robot walks along it
+    sc.rim = _dilate(rim.view(np.uint8), 1).astype(bool) if rim.any() else None
+    sc.objects, sc.overlays = up(sc.objects), up(sc.overlays)
+    if sc.flat is not None:
+        sc.flat = np.asarray(cv2.resize(sc.flat, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
+    sc.object_boxes = [(2 * x, 2 * y, 2 * bw, 2 * bh) for x, y, bw, bh in sc.object_boxes]
+    sc.overlay_boxes = [(2 * x, 2 * y, 2 * bw, 2 * bh) for x, y, bw, bh in sc.overlay_boxes]
+    return sc
 
 
 def _rim(samples: list[np.ndarray], dark_ratio: float) -> np.ndarray:
