@@ -32,12 +32,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, TypedDict
+from dataclasses import asdict, dataclass, field, replace
+from typing import TYPE_CHECKING, TypedDict, cast
 
 import numpy as np
 
 from labkit.errors import InputError
+from labkit.jsonutil import Json
 from labkit.sim.paper.observations import (
     MET,
     NOT_APPLICABLE,
@@ -92,36 +93,9 @@ class ObservationScore:
     def met(self) -> bool:
         return self.state == MET
 
-    def to_dict(self) -> ObservationScoreJSON:
-        return ObservationScoreJSON(
-            id=self.id, scenario=self.scenario, metric=self.metric, band=self.band, source=self.source,
-            paper_value=self.paper_value, nominal=self.nominal, nominal_state=self.nominal_state,
-            ensemble=self.ensemble, state=self.state, mean=self.mean, spread=self.spread, median=self.median,
-            robots=self.robots, met_share=self.met_share, per_seed=list(self.per_seed),
-            per_seed_states=list(self.per_seed_states), violation=self.violation)
-
-
-class ObservationScoreJSON(TypedDict):
-    """:class:`ObservationScore` as JSON."""
-
-    id: str
-    scenario: str
-    metric: str
-    band: str
-    source: str
-    paper_value: float | None
-    nominal: float | None
-    nominal_state: str
-    ensemble: float | None
-    state: str
-    mean: float | None
-    spread: float | None
-    median: float | None
-    robots: int
-    met_share: float | None
-    per_seed: list[float | None]
-    per_seed_states: list[str]
-    violation: float | None
+    def to_dict(self) -> dict[str, Json]:
+        """The score as JSON: every field, in the order above."""
+        return cast("dict[str, Json]", asdict(self))
 
 
 @dataclass(frozen=True)
@@ -173,7 +147,7 @@ class EnsembleScoreJSON(TypedDict):
     met: dict[str, int]
     nominal_met: dict[str, int]
     seed_met: list[int]
-    observations: list[ObservationScoreJSON]
+    observations: list[dict[str, Json]]
 
 
 @dataclass(frozen=True)
