@@ -225,6 +225,9 @@ class VirtualLab:
         self.hislip_servers: dict[str, HislipServer] = {}
         self.camera_fps = 30.0
         self.last_recording: camera.Recording | None = None
+        #: clips filmed so far: the camera's noise and frame jitter are drawn from (seed, take), so a
+        #: lab with the same seed films the same clips whatever the timing of the queries around them
+        self.takes = 0
         #: the only folder the camera writes to (``CAM:REC "<file name>"``); a fresh one per lab
         self.recordings_dir = Path(tempfile.mkdtemp(prefix="labkit-lab-camera-"))
 
@@ -393,10 +396,11 @@ class VirtualLab:
         moving = shaker and drive.sine_like() and drive.active(now)
         if moving:
             sim = self._simulation(drive.freq_hz, self.chain.tray_amp_um(drive.freq_hz, drive.amp_v))
-        rec = camera.record(path, duration_s, fps=self.camera_fps, seed=self.seed, take=len(self.log),
+        rec = camera.record(path, duration_s, fps=self.camera_fps, seed=self.seed, take=self.takes,
                             sim=sim, shaking=shaker and drive.active(now),
                             move_s=drive.idle_after() - now if moving else float("inf"))
         self.last_recording = rec
+        self.takes += 1
         self._log("camera", "state", f"recorded {rec.frames} frames to {rec.path} (speed {rec.speed_mm_s:.3f} mm/s)")
         return {"path": rec.path, "frames": rec.frames, "timestamps_s": list[Json](rec.timestamps_s)}
 

@@ -113,6 +113,38 @@ def test_camera_records_a_readable_video(lab, tmp_path):
     assert hd[-1] - hd[0] == pytest.approx(np.deg2rad(1.5) * (info["timestamps_s"][-1]), rel=0.05, abs=0.01)
 
 
+def _frames(path: Path) -> np.ndarray:
+    cap = cv2.VideoCapture(str(path))
+    out = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        out.append(frame)
+    cap.release()
+    return np.array(out)
+
+
+def test_the_same_seed_films_the_same_clips_whatever_the_queries_between(tmp_path):
+    """The clip's noise and frame jitter come from (seed, take), take counting the clips filmed: two labs
+    with one seed film the same frames although one answered many more queries before each clip."""
+    clips = []
+    for extra in (0, 25):
+        with VirtualLab(seed=3) as lab, LabControl(lab.resources["control"], timeout_s=5) as ctl:
+            lab.set_setup("shaker")
+            lab.camera_fps = 10
+            got = []
+            for k in range(2):
+                for _ in range(extra):
+                    ctl.query("*IDN?")
+                lab.record_video(tmp_path / f"{extra}-{k}.avi", 0.5)
+                got.append(_frames(tmp_path / f"{extra}-{k}.avi"))
+            assert lab.takes == 2
+            clips.append(got)
+    assert all(np.array_equal(a, b) for a, b in zip(clips[0], clips[1]))
+    assert not np.array_equal(clips[0][0], clips[0][1])      # a second take is a new draw of the noise
+
+
 def test_camera_bad_directory_is_a_clear_error(lab, tmp_path):
     with LabControl(lab.resources["control"], timeout_s=2) as ctl:
         t0 = time.monotonic()
