@@ -520,9 +520,10 @@ def static_objects(ratios: list[np.ndarray], thr: float, body_width_px: float, k
     ``ratios``: sample frames (in time order) relative to their smooth background; ``thr``:
     the darkness that counts as dark; ``keep`` (uint8, 1 = may be marked) leaves the rim out.
     A candidate is dark in every sample, robot-sized (at least half a body width squared: a
-    speck needs no mask) and clearly dark (by at least 15 % and 3 thresholds: the tray's
-    mottling is not). It is set aside only if it does not move (:func:`drifts`: its darkness
-    centroid keeps its place over the samples) and the tray around it is dark in under a
+    speck needs no mask) and clearly dark (by at least 15 % and 3 thresholds in three samples
+    of four: the tray's mottling is not, even where a fast robot crossed it in a few samples).
+    It is set aside only if it does not move (:func:`drifts`: its darkness centroid keeps its
+    place over the samples) and the tray around it is dark in under a
     quarter of the samples on average (the robot passing by darkens it in a few). A robot
     that moves even a few pixels over the clip keeps its place in no sample; one that never
     moves at all cannot be told from dust here (the tracker tries it as the robot when
@@ -550,7 +551,9 @@ def static_objects(ratios: list[np.ndarray], thr: float, body_width_px: float, k
             continue      # texture, a speck: never robot-sized, needs no mask
         box = np.s_[max(y - r - 3, 0):min(y + bh + r + 3, h), max(x - r - 3, 0):min(x + bw + r + 3, w)]
         comp = np.asarray(labels[box] == i, np.uint8)
-        darkness = 1.0 - float(np.mean([float(rt[box][comp > 0].mean()) for rt in ratios]))
+        # its own darkness: clear in most samples (the lower quartile), not the mean, which a fast
+        # robot crossing a dimple of the tray's mottling in a few samples makes look like dust
+        darkness = 1.0 - float(np.percentile([float(rt[box][comp > 0].mean()) for rt in ratios], 75))
         if darkness < max(3 * thr, 0.15):
             continue      # the tray's mottling: faint, static, divided out by the flat field
         ring = _dilate(comp, r) & (1 - _dilate(comp, 2))
