@@ -119,9 +119,9 @@ def _start_residues(channels: Sequence[Channel], lam: np.ndarray, powers: Sequen
         return residues_ls(channels, lam, powers)
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
-    B = basis(channels[0].w, lam, powers)
-    X = np.concatenate([B.real, B.imag])
-    G = X.T @ X
+    _, WB, G_all = _wb_gram(channels[0].w, lam, powers)         # the first normal equations' too
+    X = WB[:, 2 * lam.size:]                                      # [Re B; Im B]
+    G = G_all[2 * lam.size:, 2 * lam.size:]
     d = np.sqrt(np.diag(G))
     d[d == 0] = 1.0
     try:
@@ -261,22 +261,10 @@ def _shared_parts(theta, channels, m, powers):
     small ``M_k``; ``rs_k`` is the real-stacked weighted residual ``r_k``.  The Gram matrix is one
     symmetric rank-k update (``dsyrk``: half the work of a general product).
     """
-    from scipy.linalg.blas import dsyrk
-
     n_lin = 2 * m + 2 * len(powers)
     f, z, lins = _unpack(theta, m, n_lin, len(channels))
     lam, dlams = _poles_and_derivatives(f, z)
-    B, E, F = _basis_ef(channels[0].w, lam, powers)
-    E2, F2 = E * E, F * F
-    n = E.shape[0]
-    WB = np.empty((2 * n, 2 * m + n_lin), order="F")    # column blocks contiguous
-    P = E2 + F2
-    WB[:n, :m], WB[n:, :m] = P.real, P.imag
-    P = E2 - F2
-    WB[:n, m:2 * m], WB[n:, m:2 * m] = -P.imag, P.real
-    WB[:n, 2 * m:], WB[n:, 2 * m:] = B.real, B.imag
-    G = dsyrk(1.0, WB, trans=1)                         # upper triangle of WB^T WB
-    G = G + np.triu(G, 1).T
+    B, WB, G = _wb_gram(channels[0].w, lam, powers)
     i = np.arange(m)
     per = []
     for ch, p in zip(channels, lins):
@@ -290,6 +278,36 @@ def _shared_parts(theta, channels, m, powers):
         M[2 * m:, 2 * m:] = c * np.eye(n_lin)
         per.append((r, np.concatenate([r.real, r.imag]), M))
     return WB, G, per
+
+
+#: The last :func:`_wb_gram`: ``(basis arrays, (WB, G))``, valid while :data:`_LAST_BASIS` holds that basis.
+_LAST_WB: list[tuple] = []
+
+
+def _wb_gram(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The basis ``B`` of poles ``lam``, the shared ``WB`` of :func:`_shared_parts` and its Gram matrix
+    ``WB^T WB`` (one ``dsyrk``), remembered for the last basis (the starting residues and the first
+    normal equations use the same)."""
+    from scipy.linalg.blas import dsyrk
+
+    basis_ef = _basis_ef(w, lam, powers)
+    if _LAST_WB and _LAST_WB[0][0] is basis_ef:
+        return basis_ef[0], *_LAST_WB[0][1]
+    B, E, F = basis_ef
+    m = lam.size
+    E2, F2 = E * E, F * F
+    n = E.shape[0]
+    WB = np.empty((2 * n, 2 * m + B.shape[1]), order="F")    # column blocks contiguous
+    P = E2 + F2
+    WB[:n, :m], WB[n:, :m] = P.real, P.imag
+    P = E2 - F2
+    WB[:n, m:2 * m], WB[n:, m:2 * m] = -P.imag, P.real
+    WB[:n, 2 * m:], WB[n:, 2 * m:] = B.real, B.imag
+    G = dsyrk(1.0, WB, trans=1)                         # upper triangle of WB^T WB
+    G = G + np.triu(G, 1).T
+    WB.flags.writeable = False
+    _LAST_WB[:] = [(basis_ef, (WB, G))]
+    return B, WB, G
 
 
 def _normals(theta, channels, m, powers) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -533,9 +551,32 @@ def _pinv_sym(A: np.ndarray) -> np.ndarray:
     # by many orders of magnitude (Hz against damping ratios against residues).
     d = np.sqrt(np.abs(np.diag(A)))              # a Schur complement's diagonal can round below 0
     d[~(d > 0) | ~np.isfinite(d)] = 1.0
+    inv = _inv_well_conditioned(A / np.outer(d, d))
+    if inv is not None:
+        return inv / np.outer(d, d)
     ev, V = np.linalg.eigh(A / np.outer(d, d))
     keep = ev > ev.max() * 1e-14
     return ((V[:, keep] / ev[keep]) @ V[:, keep].T) / np.outer(d, d)
+
+
+def _inv_well_conditioned(A: np.ndarray) -> np.ndarray | None:
+    """``A^-1`` of a symmetric positive definite ``A`` by Cholesky (a sixth of an eigendecomposition's
+    time) when LAPACK's condition estimate shows that :func:`_pinv_sym`'s cut-off (eigenvalues below
+    ``1e-14`` of the largest) would cut nothing; otherwise None."""
+    from scipy.linalg.lapack import dpocon, dpotrf, dpotri
+
+    if A.size == 0 or not np.all(np.isfinite(A)):
+        return None
+    L, info = dpotrf(A, lower=1, clean=1)
+    if info != 0:
+        return None
+    rcond, info = dpocon(L, float(np.max(np.sum(np.abs(A), axis=0))), uplo="L")
+    if info != 0 or not rcond > 1e-11:          # the 1-norm estimate is within a factor n of the 2-norm's
+        return None
+    inv, info = dpotri(L, lower=1)
+    if info != 0:
+        return None
+    return np.tril(inv) + np.tril(inv, -1).T
 
 
 def _covariance_blocks(terms, m: int, n_lin: int, free_p: np.ndarray, dof: int, kind: str) -> np.ndarray:
