@@ -71,17 +71,19 @@ def _basis_ef(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np
 
 
 def _basis_ef_new(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    jw = 1j * w[:, None]
-    E = 1.0 / (jw - lam[None, :])
-    F = 1.0 / (jw - np.conj(lam)[None, :])
-    cols = np.empty((w.size, 2 * lam.size + 2 * len(powers)), dtype=complex)
-    cols[:, 0:2 * lam.size:2] = E + F
-    cols[:, 1:2 * lam.size:2] = 1j * (E - F)
+    # Built as (columns, lines) rows and returned transposed (column-major): each column is contiguous,
+    # which is what the Gram matrices (BLAS) and WB (:func:`_wb_gram`) want; a third less time.
+    jw = 1j * w[None, :]
+    E = 1.0 / (jw - lam[:, None])
+    F = 1.0 / (jw - np.conj(lam)[:, None])
+    cols = np.empty((2 * lam.size + 2 * len(powers), w.size), dtype=complex)
+    np.add(E, F, out=cols[0:2 * lam.size:2])
+    cols[1:2 * lam.size:2] = 1j * (E - F)
     for k, q in enumerate(powers):
         t = (1j ** (q % 4)) * w ** float(q)                 # (j w)^q without a complex power (slow)
-        cols[:, 2 * lam.size + 2 * k] = t
-        cols[:, 2 * lam.size + 2 * k + 1] = 1j * t
-    return cols, E, F
+        cols[2 * lam.size + 2 * k] = t
+        cols[2 * lam.size + 2 * k + 1] = 1j * t
+    return cols.T, E.T, F.T
 
 
 def _ri(a: np.ndarray) -> np.ndarray:
@@ -295,14 +297,17 @@ def _wb_gram(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np.
         return basis_ef[0], *_LAST_WB[0][1]
     B, E, F = basis_ef
     m = lam.size
-    E2, F2 = E * E, F * F
+    Et, Ft, Bt = E.T, F.T, B.T                          # (columns, lines), contiguous rows (_basis_ef_new)
+    E2, F2 = Et * Et, Ft * Ft
     n = E.shape[0]
-    WB = np.empty((2 * n, 2 * m + B.shape[1]), order="F")    # column blocks contiguous
+    WBt = np.empty((2 * m + B.shape[1], 2 * n))         # WB^T by rows: WB column-major
     P = E2 + F2
-    WB[:n, :m], WB[n:, :m] = P.real, P.imag
+    WBt[:m, :n], WBt[:m, n:] = P.real, P.imag
     P = E2 - F2
-    WB[:n, m:2 * m], WB[n:, m:2 * m] = -P.imag, P.real
-    WB[:n, 2 * m:], WB[n:, 2 * m:] = B.real, B.imag
+    np.negative(P.imag, out=WBt[m:2 * m, :n])
+    WBt[m:2 * m, n:] = P.real
+    WBt[2 * m:, :n], WBt[2 * m:, n:] = Bt.real, Bt.imag
+    WB = WBt.T
     G = dsyrk(1.0, WB, trans=1)                         # upper triangle of WB^T WB
     G = G + np.triu(G, 1).T
     WB.flags.writeable = False
@@ -661,12 +666,14 @@ def _covariance(A: np.ndarray, stacks: list[tuple[np.ndarray, np.ndarray | None,
     for k, (X, M, res) in enumerate(stacks):         # real and imaginary rows together
         idx = np.r_[np.arange(2 * m), 2 * m + k * n_lin + np.arange(n_lin)]
         S = inv[np.ix_(idx, idx)]
-        lev = np.clip(_leverages(X, S if M is None else M @ S @ M.T), 0.0, 0.99)
+        if M is not None and buf is None:
+            buf = np.empty(X.shape, order="F")       # one work array for every channel's leverages and meat
+        lev = np.clip(_leverages(X, S if M is None else M @ S @ M.T, buf), 0.0, 0.99)
         u = (res / (1.0 - lev))[:, None]
         if M is None:
             Xu = np.multiply(X, u, out=X)            # in place: the rows weighted for the meat
         else:
-            buf = np.empty_like(X) if buf is None else buf
+            assert buf is not None
             Xu = np.multiply(X, u, out=buf)
         G = dsyrk(1.0, Xu, trans=1) if Xu.flags.f_contiguous else dsyrk(1.0, Xu.T, trans=0)
         G = G + np.triu(G, 1).T                      # X_u^T X_u from its upper triangle
@@ -674,10 +681,11 @@ def _covariance(A: np.ndarray, stacks: list[tuple[np.ndarray, np.ndarray | None,
     return inv @ meat @ inv
 
 
-def _leverages(J: np.ndarray, S: np.ndarray) -> np.ndarray:
+def _leverages(J: np.ndarray, S: np.ndarray, work: np.ndarray | None = None) -> np.ndarray:
     """``diag(J S J^T)`` for a symmetric positive semi-definite ``S``: ``|J L|^2`` by rows with the
     Cholesky factor ``S = L L^T`` (a triangular product, half the work of ``J S``), or ``J S`` itself
-    where ``S`` is singular (a direction the pseudo-inverse cut)."""
+    where ``S`` is singular (a direction the pseudo-inverse cut).  ``work``: a column-major array of
+    ``J``'s shape to compute in (overwritten), instead of a new one."""
     from scipy.linalg import LinAlgError, cholesky
     from scipy.linalg.blas import dtrmm
 
@@ -687,9 +695,13 @@ def _leverages(J: np.ndarray, S: np.ndarray) -> np.ndarray:
         L = cholesky(S / np.outer(d, d), lower=True) * d[:, None]
     except LinAlgError:
         return np.einsum("ij,ij->i", J @ S, J)
-    X = dtrmm(1.0, L, np.asfortranarray(J), side=1, lower=1)      # J L, column-major as BLAS wants it
+    if work is not None and work.shape == J.shape and work.flags.f_contiguous:
+        np.copyto(work, J)
+        X = dtrmm(1.0, L, work, side=1, lower=1, overwrite_b=1)   # J L in place, column-major for BLAS
+    else:
+        X = dtrmm(1.0, L, np.asfortranarray(J), side=1, lower=1)
     X *= X
-    return X.sum(axis=1)
+    return X @ np.ones(X.shape[1])                                   # row sums (a BLAS product)
 
 
 def model_variance(channels: Sequence[Channel], ref: Refined, powers: Sequence[int],
