@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.optimize import minimize
+from test_modal_pyfrf import _half_power_band  # the peak's half-power band, as that test takes it
 
 from labkit.analysis.modal.fit import fit_modes
 
@@ -95,17 +96,6 @@ def local_mode_hz(f: np.ndarray, h: np.ndarray, peak_hz: float, half: int = 5) -
     res = minimize(lambda p: _local_rss(fs, hs, p[0], np.exp(p[1])), [x0, np.log(z0)], method="Nelder-Mead",
                    options={"xatol": 1e-4, "fatol": 1e-30})
     return float(res.x[0])
-
-
-def _half_power_band(f: np.ndarray, h: np.ndarray, peak_hz: float) -> tuple[float, float]:
-    a = np.abs(h)
-    k = int(np.argmin(np.abs(f - peak_hz)))
-    i, j = k, k
-    while a[i - 1] > a[k] / np.sqrt(2):
-        i -= 1
-    while a[j + 1] > a[k] / np.sqrt(2):
-        j += 1
-    return float(f[i - 1]), float(f[j + 1])
 
 
 def test_local_mode_fit_recovers_a_known_mode():
