@@ -13,7 +13,7 @@ the whole stabilisation diagram costs one pass over the data.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -122,7 +122,7 @@ def _blocks(channels: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], n_max
         w2 = wt.astype(float) ** 2
         D = np.column_stack([w2, -H * w2, np.abs(H) ** 2 * w2])          # R, S, T
         up = D.T @ E                                                     # moments z^l, l = 0..n
-        down = D.T @ E.conj()                                            # moments z^-l
+        down = (D.conj().T @ E).conj()                                   # moments z^-l (no conjugated E)
         out.append(tuple(toeplitz(down[i], up[i]) for i in range(3)))
     # stacked over channels, (channels, n + 1, n + 1) each: one batched solve per order
     return tuple(np.array([o[i] for o in out]) for i in range(3))
@@ -139,9 +139,25 @@ def _poles_for_order(blocks, n: int, wc: float, dt: float) -> np.ndarray:
     # Constraint: highest coefficient = 1.
     alpha = np.ones(m, dtype=complex)
     alpha[:n] = np.linalg.lstsq(M[:n, :n], -M[:n, n], rcond=None)[0]
-    roots = np.roots(alpha[::-1]).astype(complex)
+    roots = _roots(alpha)
     roots = roots[np.abs(roots) > 0]
     return np.log(roots) / dt + 1j * wc
+
+
+def _roots(alpha: np.ndarray) -> np.ndarray:
+    """Roots of ``sum_i alpha[i] z^i`` (``alpha[-1] != 0``): the eigenvalues of its companion matrix, as
+    :func:`numpy.roots` finds them, but by LAPACK's ``zgeev`` called once with its minimal workspace
+    (numpy queries the workspace and pays for it: half the time at the orders of a diagram)."""
+    from scipy.linalg.lapack import zgeev
+
+    n = alpha.size - 1
+    if n < 1 or not np.all(np.isfinite(alpha)):
+        return np.roots(alpha[::-1]).astype(complex)
+    C = np.zeros((n, n), dtype=complex, order="F")
+    C[0, :] = -alpha[-2::-1] / alpha[-1]
+    C[np.arange(1, n), np.arange(n - 1)] = 1.0
+    w, _, _, info = zgeev(C, compute_vl=0, compute_vr=0, overwrite_a=1)
+    return w if info == 0 else np.roots(alpha[::-1]).astype(complex)
 
 
 def _physical(lam: np.ndarray, band_w: tuple[float, float], max_damping: float) -> np.ndarray:
@@ -273,18 +289,26 @@ def choose_poles(stab: Stabilisation, n_modes: int | None, *, band_hz: tuple[flo
         spread = 2 * 1.4826 * float(np.median(np.abs(top - np.median(top))))
         return spread <= max(0.001 * min(fc, width), 0.5 * zc * fc)
 
-    clusters = [c for c in clusters if inside(c) and settled(c)]
     n_orders = max(len(stab.orders), 1)
-    counts = np.array([len(c) for c in clusters])
-    cand = [(counts[k], k) for k in range(len(clusters))]
-    if n_modes is None:
-        thresh = max(3, int(np.ceil(min_fraction * n_orders)))
-        picked = [k for cnt, k in cand if cnt >= thresh]
-    else:
-        picked = [k for _, k in sorted(cand, key=lambda t: -t[0])[:n_modes]]
-    fz = [(float(np.median(f[clusters[k]])), float(np.median(z[clusters[k]]))) for k in picked]
+    thresh = max(3, int(np.ceil(min_fraction * n_orders))) if n_modes is None else 1
+    picked = _heaviest(clusters, n_modes, thresh, lambda c: inside(c) and settled(c))
+    fz = [(float(np.median(f[c])), float(np.median(z[c]))) for c in picked]
     fz = _merge(sorted(fz))
     return modal_to_pole(np.array([a for a, _ in fz]), np.array([b for _, b in fz]))
+
+
+def _heaviest(clusters: list[list[int]], n_modes: int | None, thresh: int,
+              ok: Callable[[list[int]], bool]) -> list[list[int]]:
+    """The clusters of at least ``thresh`` poles that pass ``ok``, heaviest first (ties in order of
+    frequency), at most ``n_modes``.  ``ok`` is asked only until enough are found: most clusters are
+    single spurious poles, and its medians cost more than the clustering."""
+    picked: list[list[int]] = []
+    for c in sorted((c for c in clusters if len(c) >= thresh), key=lambda c: -len(c)):
+        if n_modes is not None and len(picked) == n_modes:
+            break
+        if ok(c):
+            picked.append(c)
+    return picked
 
 
 def _merge(fz: list[tuple[float, float]]) -> list[tuple[float, float]]:

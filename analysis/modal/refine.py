@@ -50,19 +50,40 @@ def basis(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> np.ndarray:
     return _basis_ef(w, lam, powers)[0]
 
 
+#: The last :func:`_basis_ef` computed: ``(w, lam, powers, (cols, E, F))``.  A refinement asks for the
+#: basis of an accepted trial point again (its normal equations, the covariance, the fitted model),
+#: and one basis of 7950 lines x 22 modes takes 4-5 ms; the arrays are returned read-only.
+_LAST_BASIS: list[tuple] = []
+
+
 def _basis_ef(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`basis` and its pole terms ``E = 1 / (j w - lam)``, ``F = 1 / (j w - conj(lam))``."""
-    jw = 1j * w[:, None]
-    E = 1.0 / (jw - lam[None, :])
-    F = 1.0 / (jw - np.conj(lam)[None, :])
-    cols = np.empty((w.size, 2 * lam.size + 2 * len(powers)), dtype=complex)
-    cols[:, 0:2 * lam.size:2] = E + F
-    cols[:, 1:2 * lam.size:2] = 1j * (E - F)
+    """:func:`basis` and its pole terms ``E = 1 / (j w - lam)``, ``F = 1 / (j w - conj(lam))`` (read-only;
+    the last one is remembered, see :data:`_LAST_BASIS`)."""
+    last = _LAST_BASIS[0] if _LAST_BASIS else None
+    if (last is not None and last[0] is w and last[2] == tuple(powers) and last[1].shape == lam.shape
+            and np.array_equal(last[1], lam)):
+        return last[3]
+    out = _basis_ef_new(w, lam, powers)
+    for a in out:
+        a.flags.writeable = False
+    _LAST_BASIS[:] = [(w, lam.copy(), tuple(powers), out)]
+    return out
+
+
+def _basis_ef_new(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    # Built as (columns, lines) rows and returned transposed (column-major): each column is contiguous,
+    # which is what the Gram matrices (BLAS) and WB (:func:`_wb_gram`) want; a third less time.
+    jw = 1j * w[None, :]
+    E = 1.0 / (jw - lam[:, None])
+    F = 1.0 / (jw - np.conj(lam)[:, None])
+    cols = np.empty((2 * lam.size + 2 * len(powers), w.size), dtype=complex)
+    np.add(E, F, out=cols[0:2 * lam.size:2])
+    cols[1:2 * lam.size:2] = 1j * (E - F)
     for k, q in enumerate(powers):
         t = (1j ** (q % 4)) * w ** float(q)                 # (j w)^q without a complex power (slow)
-        cols[:, 2 * lam.size + 2 * k] = t
-        cols[:, 2 * lam.size + 2 * k + 1] = 1j * t
-    return cols, E, F
+        cols[2 * lam.size + 2 * k] = t
+        cols[2 * lam.size + 2 * k + 1] = 1j * t
+    return cols.T, E.T, F.T
 
 
 def _ri(a: np.ndarray) -> np.ndarray:
@@ -100,9 +121,9 @@ def _start_residues(channels: Sequence[Channel], lam: np.ndarray, powers: Sequen
         return residues_ls(channels, lam, powers)
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
-    B = basis(channels[0].w, lam, powers)
-    X = np.concatenate([B.real, B.imag])
-    G = X.T @ X
+    _, WB, G_all = _wb_gram(channels[0].w, lam, powers)         # the first normal equations' too
+    X = WB[:, 2 * lam.size:]                                      # [Re B; Im B]
+    G = G_all[2 * lam.size:, 2 * lam.size:]
     d = np.sqrt(np.diag(G))
     d[d == 0] = 1.0
     try:
@@ -224,45 +245,74 @@ def _gram_ok(channels: Sequence[Channel]) -> bool:
 def _gram_normals(theta, channels, m, powers) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """:func:`_explicit_normals` without forming any channel's Jacobian (common lines, constant weights).
 
-    Every column of every channel's complex Jacobian is a combination of the same ``4 m + q``
-    columns ``Z = [E, F, (j w)^q, E^2, F^2]`` (``E = 1 / (j w - lam)``, ``F = 1 / (j w - conj lam)``):
-    ``X_k = Z C_k`` with small complex coefficients ``C_k``.  So ``Re(X_k^H X_k) = Re(C_k^H (Z^H Z) C_k)``
-    and one Gram matrix ``Z^H Z`` serves all channels.  The gradients use the residuals
-    themselves (``Re(C_k^H (Z^H r_k))``), so the fixed point is that of the explicit form.
+    Every channel's real-stacked Jacobian is ``J_k = WB M_k`` with ``WB`` shared by the channels and a
+    small ``M_k`` (:func:`_shared_parts`), so ``J_k^T J_k = M_k^T (WB^T WB) M_k`` from one Gram matrix and
+    ``J_k^T r_k = M_k^T (WB^T r_k)``: the gradients use the residuals themselves, so the fixed point is
+    that of the explicit form.
     """
-    from scipy.linalg.blas import zherk
+    WB, G, per = _shared_parts(theta, channels, m, powers)
+    return [(r, M.T @ G @ M, M.T @ (WB.T @ rs)) for r, rs, M in per]
 
-    q = len(powers)
-    n_lin = 2 * m + 2 * q
+
+def _shared_parts(theta, channels, m, powers):
+    """``(WB, WB^T WB, [(r_k, rs_k, M_k)])`` for channels with common lines and constant weights.
+
+    With ``P = E^2 + F^2`` and ``Q = E^2 - F^2``, a channel's pole column ``E^2 a + F^2 conj(a)``
+    stacks as ``W [Re a; Im a]`` with ``W = [[Re P, -Im Q], [Im P, Re Q]]``, and its basis block is
+    the shared ``Bs = [Re B; Im B]`` times its weight ``c``.  So ``J_k = [W, Bs] M_k = WB M_k`` with a
+    small ``M_k``; ``rs_k`` is the real-stacked weighted residual ``r_k``.  The Gram matrix is one
+    symmetric rank-k update (``dsyrk``: half the work of a general product).
+    """
+    n_lin = 2 * m + 2 * len(powers)
     f, z, lins = _unpack(theta, m, n_lin, len(channels))
     lam, dlams = _poles_and_derivatives(f, z)
-    B, E, F = _basis_ef(channels[0].w, lam, powers)
-    Z = np.empty((E.shape[0], 4 * m + q), dtype=complex, order="F")
-    Z[:, :m], Z[:, m:2 * m], Z[:, 2 * m:2 * m + q] = E, F, B[:, 2 * m::2]
-    np.multiply(E, E, out=Z[:, 2 * m + q:3 * m + q])
-    np.multiply(F, F, out=Z[:, 3 * m + q:])
-    gram = zherk(1.0, Z, trans=2)                              # upper triangle of Z^H Z
-    gram = gram + np.triu(gram, 1).conj().T
+    B, WB, G = _wb_gram(channels[0].w, lam, powers)
     i = np.arange(m)
-    CB = np.zeros((4 * m + q, n_lin), dtype=complex)          # B = Z CB (shared)
-    CB[i, 2 * i], CB[i, 2 * i + 1] = 1.0, 1j
-    CB[m + i, 2 * i], CB[m + i, 2 * i + 1] = 1.0, -1j
-    CB[2 * m + np.arange(q), 2 * m + 2 * np.arange(q)] = 1.0
-    CB[2 * m + np.arange(q), 2 * m + 2 * np.arange(q) + 1] = 1j
-    out = []
+    per = []
     for ch, p in zip(channels, lins):
         c = float(ch.weight[0])
         r = (B @ p - ch.H) * c
         R = p[0:2 * m:2] + 1j * p[1:2 * m:2]
-        C = np.zeros((4 * m + q, 2 * m + n_lin), dtype=complex)
+        M = np.zeros((2 * m + n_lin, 2 * m + n_lin))
         for col, dlam in enumerate(dlams):
             a = c * R * dlam
-            C[2 * m + q + i, 2 * i + col] = a
-            C[3 * m + q + i, 2 * i + col] = np.conj(a)
-        C[:, 2 * m:] = c * CB
-        zr = (Z.T @ r.conj()).conj()                            # Z^H r without a conjugated copy of Z
-        out.append((r, (C.conj().T @ gram @ C).real, (C.conj().T @ zr).real))
-    return out
+            M[i, 2 * i + col], M[m + i, 2 * i + col] = a.real, a.imag
+        M[2 * m:, 2 * m:] = c * np.eye(n_lin)
+        per.append((r, np.concatenate([r.real, r.imag]), M))
+    return WB, G, per
+
+
+#: The last :func:`_wb_gram`: ``(basis arrays, (WB, G))``, valid while :data:`_LAST_BASIS` holds that basis.
+_LAST_WB: list[tuple] = []
+
+
+def _wb_gram(w: np.ndarray, lam: np.ndarray, powers: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The basis ``B`` of poles ``lam``, the shared ``WB`` of :func:`_shared_parts` and its Gram matrix
+    ``WB^T WB`` (one ``dsyrk``), remembered for the last basis (the starting residues and the first
+    normal equations use the same)."""
+    from scipy.linalg.blas import dsyrk
+
+    basis_ef = _basis_ef(w, lam, powers)
+    if _LAST_WB and _LAST_WB[0][0] is basis_ef:
+        return basis_ef[0], *_LAST_WB[0][1]
+    B, E, F = basis_ef
+    m = lam.size
+    Et, Ft, Bt = E.T, F.T, B.T                          # (columns, lines), contiguous rows (_basis_ef_new)
+    E2, F2 = Et * Et, Ft * Ft
+    n = E.shape[0]
+    WBt = np.empty((2 * m + B.shape[1], 2 * n))         # WB^T by rows: WB column-major
+    P = E2 + F2
+    WBt[:m, :n], WBt[:m, n:] = P.real, P.imag
+    P = E2 - F2
+    np.negative(P.imag, out=WBt[m:2 * m, :n])
+    WBt[m:2 * m, n:] = P.real
+    WBt[2 * m:, :n], WBt[2 * m:, n:] = Bt.real, Bt.imag
+    WB = WBt.T
+    G = dsyrk(1.0, WB, trans=1)                         # upper triangle of WB^T WB
+    G = G + np.triu(G, 1).T
+    WB.flags.writeable = False
+    _LAST_WB[:] = [(basis_ef, (WB, G))]
+    return B, WB, G
 
 
 def _normals(theta, channels, m, powers) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -374,7 +424,8 @@ def refine(channels: Sequence[Channel], lam0: np.ndarray, powers: Sequence[int],
     n_lin = 2 * m + 2 * len(powers)
     f0, z0 = pole_to_modal(lam0)
     z0 = np.clip(z0, 1e-10, 0.95)
-    lins = _start_residues(channels, lam0, powers)
+    # the residues of the poles the iteration starts from, bit for bit (its first basis is then this one)
+    lins = _start_residues(channels, _poles_and_derivatives(f0, z0)[0], powers)
     theta = np.concatenate([np.column_stack([f0, z0]).ravel(), *lins])
     free = np.ones(theta.size, dtype=bool)
     if fixed_freq is not None:
@@ -454,56 +505,24 @@ BLOCK_COVARIANCE_ABOVE = 300
 
 
 def _explicit(theta, channels, m, powers):
-    """Each channel's terms (:func:`_channel_terms`), real-stacked ``(J, r)`` (:func:`_stacked`) and
-    normal equations from them: the normal matrix and the sandwich both use the stacked ``J``."""
+    """Each channel's terms (:func:`_channel_terms`), its real-stacked Jacobian and residual as
+    ``(X, M, rs)`` with ``J = X M`` (``M`` None: ``J = X``; see :func:`_stacked`), and normal equations
+    from them: the normal matrix and the sandwich both use ``J``."""
     if _gram_ok(channels):
         return _explicit_shared(theta, channels, m, powers)
     terms = _channel_terms(theta, channels, m, powers)
     stacks = [_stacked(Jp, B, r) for r, Jp, B in terms]
-    return terms, stacks, [(r, J.T @ J, J.T @ rs) for (r, _, _), (J, rs) in zip(terms, stacks)]
+    return (terms, [(J, None, rs) for J, rs in stacks],
+            [(r, J.T @ J, J.T @ rs) for (r, _, _), (J, rs) in zip(terms, stacks)])
 
 
 def _explicit_shared(theta, channels, m, powers):
-    """:func:`_explicit` for common lines and constant weights (:func:`_gram_ok`), from real arrays
-    shared by all channels.
-
-    With ``P = E^2 + F^2`` and ``Q = E^2 - F^2``, a channel's pole column ``E^2 a + F^2 conj(a)``
-    stacks as ``W [Re a; Im a]`` with ``W = [[Re P, -Im Q], [Im P, Re Q]]``, and its basis block is
-    the shared ``Bs = [Re B; Im B]`` times its weight ``c``.  So ``J_k = [W, Bs] M_k`` with a small
-    ``M_k``: one product ``W C_k`` per channel builds ``J_k``, and ``J_k^T J_k = M_k^T G M_k`` with
-    the Gram matrix ``G`` of ``[W, Bs]`` computed once.
-    """
-    n_lin = 2 * m + 2 * len(powers)
-    f, z, lins = _unpack(theta, m, n_lin, len(channels))
-    lam, dlams = _poles_and_derivatives(f, z)
-    B, E, F = _basis_ef(channels[0].w, lam, powers)
-    E2, F2 = E * E, F * F
-    n = E.shape[0]
-    WB = np.empty((2 * n, 2 * m + n_lin), order="F")    # column blocks contiguous
-    P = E2 + F2
-    WB[:n, :m], WB[n:, :m] = P.real, P.imag
-    P = E2 - F2
-    WB[:n, m:2 * m], WB[n:, m:2 * m] = -P.imag, P.real
-    WB[:n, 2 * m:], WB[n:, 2 * m:] = B.real, B.imag
-    G = WB.T @ WB
-    i = np.arange(m)
-    terms, stacks, normals = [], [], []
-    for ch, p in zip(channels, lins):
-        c = float(ch.weight[0])
-        r = (B @ p - ch.H) * c
-        R = p[0:2 * m:2] + 1j * p[1:2 * m:2]
-        M = np.zeros((2 * m + n_lin, 2 * m + n_lin))
-        for col, dlam in enumerate(dlams):
-            a = c * R * dlam
-            M[i, 2 * i + col], M[m + i, 2 * i + col] = a.real, a.imag
-        M[2 * m:, 2 * m:] = c * np.eye(n_lin)
-        J = np.empty_like(WB)
-        np.matmul(WB[:, :2 * m], M[:2 * m, :2 * m], out=J[:, :2 * m])
-        np.multiply(WB[:, 2 * m:], c, out=J[:, 2 * m:])
-        rs = np.concatenate([r.real, r.imag])
-        terms.append((r, None, None))
-        stacks.append((J, rs))
-        normals.append((r, M.T @ G @ M, J.T @ rs))
+    """:func:`_explicit` for common lines and constant weights (:func:`_gram_ok`): every channel's
+    Jacobian is the shared ``WB`` times its own small ``M`` (:func:`_shared_parts`), never formed."""
+    WB, G, per = _shared_parts(theta, channels, m, powers)
+    terms = [(r, None, None) for r, _, _ in per]
+    stacks = [(WB, M, rs) for _, rs, M in per]
+    normals = [(r, M.T @ G @ M, M.T @ (WB.T @ rs)) for r, rs, M in per]
     return terms, stacks, normals
 
 
@@ -537,9 +556,32 @@ def _pinv_sym(A: np.ndarray) -> np.ndarray:
     # by many orders of magnitude (Hz against damping ratios against residues).
     d = np.sqrt(np.abs(np.diag(A)))              # a Schur complement's diagonal can round below 0
     d[~(d > 0) | ~np.isfinite(d)] = 1.0
+    inv = _inv_well_conditioned(A / np.outer(d, d))
+    if inv is not None:
+        return inv / np.outer(d, d)
     ev, V = np.linalg.eigh(A / np.outer(d, d))
     keep = ev > ev.max() * 1e-14
     return ((V[:, keep] / ev[keep]) @ V[:, keep].T) / np.outer(d, d)
+
+
+def _inv_well_conditioned(A: np.ndarray) -> np.ndarray | None:
+    """``A^-1`` of a symmetric positive definite ``A`` by Cholesky (a sixth of an eigendecomposition's
+    time) when LAPACK's condition estimate shows that :func:`_pinv_sym`'s cut-off (eigenvalues below
+    ``1e-14`` of the largest) would cut nothing; otherwise None."""
+    from scipy.linalg.lapack import dpocon, dpotrf, dpotri
+
+    if A.size == 0 or not np.all(np.isfinite(A)):
+        return None
+    L, info = dpotrf(A, lower=1, clean=1)
+    if info != 0:
+        return None
+    rcond, info = dpocon(L, float(np.max(np.sum(np.abs(A), axis=0))), uplo="L")
+    if info != 0 or not rcond > 1e-11:          # the 1-norm estimate is within a factor n of the 2-norm's
+        return None
+    inv, info = dpotri(L, lower=1)
+    if info != 0:
+        return None
+    return np.tril(inv) + np.tril(inv, -1).T
 
 
 def _covariance_blocks(terms, m: int, n_lin: int, free_p: np.ndarray, dof: int, kind: str) -> np.ndarray:
@@ -606,10 +648,13 @@ def _covariance_blocks(terms, m: int, n_lin: int, free_p: np.ndarray, dof: int, 
     return cov
 
 
-def _covariance(A: np.ndarray, stacks: list[tuple[np.ndarray, np.ndarray]], cost: float, m: int, n_lin: int,
-                dof: int, kind: str) -> np.ndarray:
+def _covariance(A: np.ndarray, stacks: list[tuple[np.ndarray, np.ndarray | None, np.ndarray]], cost: float,
+                m: int, n_lin: int, dof: int, kind: str) -> np.ndarray:
     """The parameter covariance from the normal matrix ``A``; for the sandwich each channel's
-    real-stacked ``J`` and ``r`` (:func:`_stacked`; ``J`` is overwritten)."""
+    real-stacked Jacobian ``J = X M`` and residual ``rs`` as ``(X, M, rs)`` (``M`` None: ``J = X``,
+    which is then overwritten; otherwise ``X`` may be shared by the channels and is left alone)."""
+    from scipy.linalg.blas import dsyrk
+
     inv = _pinv_sym(A)
     if kind != "sandwich":
         return inv * cost / dof
@@ -617,18 +662,30 @@ def _covariance(A: np.ndarray, stacks: list[tuple[np.ndarray, np.ndarray]], cost
     # when the few lines near a sharp peak carry most of the information.
     P = A.shape[0]
     meat = np.zeros((P, P))
-    for k, (J, res) in enumerate(stacks):            # real and imaginary rows together
+    buf = None
+    for k, (X, M, res) in enumerate(stacks):         # real and imaginary rows together
         idx = np.r_[np.arange(2 * m), 2 * m + k * n_lin + np.arange(n_lin)]
-        lev = np.clip(_leverages(J, inv[np.ix_(idx, idx)]), 0.0, 0.99)
-        J *= (res / (1.0 - lev))[:, None]            # in place: the rows weighted for the meat
-        meat[np.ix_(idx, idx)] += J.T @ J
+        S = inv[np.ix_(idx, idx)]
+        if M is not None and buf is None:
+            buf = np.empty(X.shape, order="F")       # one work array for every channel's leverages and meat
+        lev = np.clip(_leverages(X, S if M is None else M @ S @ M.T, buf), 0.0, 0.99)
+        u = (res / (1.0 - lev))[:, None]
+        if M is None:
+            Xu = np.multiply(X, u, out=X)            # in place: the rows weighted for the meat
+        else:
+            assert buf is not None
+            Xu = np.multiply(X, u, out=buf)
+        G = dsyrk(1.0, Xu, trans=1) if Xu.flags.f_contiguous else dsyrk(1.0, Xu.T, trans=0)
+        G = G + np.triu(G, 1).T                      # X_u^T X_u from its upper triangle
+        meat[np.ix_(idx, idx)] += G if M is None else M.T @ G @ M
     return inv @ meat @ inv
 
 
-def _leverages(J: np.ndarray, S: np.ndarray) -> np.ndarray:
+def _leverages(J: np.ndarray, S: np.ndarray, work: np.ndarray | None = None) -> np.ndarray:
     """``diag(J S J^T)`` for a symmetric positive semi-definite ``S``: ``|J L|^2`` by rows with the
     Cholesky factor ``S = L L^T`` (a triangular product, half the work of ``J S``), or ``J S`` itself
-    where ``S`` is singular (a direction the pseudo-inverse cut)."""
+    where ``S`` is singular (a direction the pseudo-inverse cut).  ``work``: a column-major array of
+    ``J``'s shape to compute in (overwritten), instead of a new one."""
     from scipy.linalg import LinAlgError, cholesky
     from scipy.linalg.blas import dtrmm
 
@@ -638,9 +695,13 @@ def _leverages(J: np.ndarray, S: np.ndarray) -> np.ndarray:
         L = cholesky(S / np.outer(d, d), lower=True) * d[:, None]
     except LinAlgError:
         return np.einsum("ij,ij->i", J @ S, J)
-    X = dtrmm(1.0, L, np.asfortranarray(J), side=1, lower=1)      # J L, column-major as BLAS wants it
+    if work is not None and work.shape == J.shape and work.flags.f_contiguous:
+        np.copyto(work, J)
+        X = dtrmm(1.0, L, work, side=1, lower=1, overwrite_b=1)   # J L in place, column-major for BLAS
+    else:
+        X = dtrmm(1.0, L, np.asfortranarray(J), side=1, lower=1)
     X *= X
-    return X.sum(axis=1)
+    return X @ np.ones(X.shape[1])                                   # row sums (a BLAS product)
 
 
 def model_variance(channels: Sequence[Channel], ref: Refined, powers: Sequence[int],

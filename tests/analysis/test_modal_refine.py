@@ -70,7 +70,7 @@ def test_block_covariance_equals_the_dense_one(monkeypatch):
             free = np.ones(ref.theta.size, bool)
             if fixed is not None:
                 free[0:2 * m:2] = ~fixed
-            stacks = [_stacked(Jp, B, r) for r, Jp, B in terms]
+            stacks = [(J, None, rs) for J, rs in (_stacked(Jp, B, r) for r, Jp, B in terms)]
             dense = _covariance(A * np.outer(free, free), stacks, _cost(terms), m, n_lin, ref.dof, kind)
             np.testing.assert_allclose(ref.cov, dense, rtol=0, atol=1e-10 * np.max(np.abs(dense)))
             np.testing.assert_allclose(np.sqrt(np.diag(ref.cov))[free], np.sqrt(np.diag(dense))[free], rtol=1e-8)
@@ -93,9 +93,9 @@ def test_gram_normal_equations_equal_the_explicit_ones():
         np.testing.assert_allclose(G1, G2, rtol=1e-9, atol=1e-12 * np.max(np.abs(G2)))
         np.testing.assert_allclose(g1, g2, rtol=1e-8, atol=1e-10 * np.max(np.abs(g2)))
     _, stacks, normals = _explicit_shared(th, ch, m, POWERS)
-    for (_, G1, g1), (J1, rs1), (r2, Jp, B), (_, G2, g2) in zip(normals, stacks, _channel_terms(th, ch, m, POWERS),
-                                                              want):
-        J2, rs2 = _stacked(Jp, B, r2)
+    for (_, G1, g1), (X1, M1, rs1), (r2, Jp, B), (_, G2, g2) in zip(normals, stacks,
+                                                                     _channel_terms(th, ch, m, POWERS), want):
+        J1, (J2, rs2) = X1 @ M1, _stacked(Jp, B, r2)                        # J = WB M, WB shared
         np.testing.assert_array_equal(rs1, rs2)
         np.testing.assert_allclose(J1, J2, rtol=1e-12, atol=1e-13 * np.max(np.abs(J2)))
         np.testing.assert_allclose(G1, G2, rtol=1e-9, atol=1e-12 * np.max(np.abs(G2)))
