@@ -19,7 +19,11 @@ number on a shared machine):
   also measures the others), and every run's status (``status_counts``);
 * per run at a few of the sweep's frequencies (``profile_nominal_unchecked``): steps,
   trial steps (every advance of the scheme: accepted, refused, event location), refused
-  sub-steps, CPU seconds.
+  sub-steps (``refused_substeps``; of them ``refused_transient`` for a film transient, the
+  rest for a film's gap ratio), event-location and other trial steps, CPU seconds; and the
+  same runs checked (``profile_nominal_checked``): status, halvings, the runs the check made
+  (``reruns``: at finer steps and the chaos probes; ``rerun_steps_over_run``: their steps
+  over the run's own) and CPU seconds.
 
 Cost of the scheme (issue 10): one implicit-midpoint step of the 23-coordinate
 coupled system is M v0 and a solve with S = 2M + hD + h^2/2 K (through the
@@ -151,8 +155,8 @@ def _workers_cpu_s(workers: int) -> float | None:
 
 def _profile(params, sc, freqs, sdur: float) -> dict:
     """Per-run counters at a few of the sweep's frequencies (nominal robot, control off):
-    steps, trial steps (every advance: accepted, refused, event location), refused sub-steps,
-    and CPU seconds."""
+    steps, trial steps (every advance: accepted, refused, event location), refused sub-steps
+    (of them, for a film transient), and CPU seconds."""
     from labkit.sim import Shaker, simulate
 
     rows = []
@@ -162,9 +166,41 @@ def _profile(params, sc, freqs, sdur: float) -> dict:
         rows.append({"freq_hz": round(float(f), 1), "cpu_s": round(time.process_time() - c0, 3),
                      "steps": r.n_steps, "trial_steps": r.counters["trial_steps"],
                      "refused_substeps": r.counters["steps_halved"],
+                     "refused_transient": r.counters["steps_halved_transient"],
                      "speed_mm_s": round(r.mean_speed_mm_s, 4)})
     return {"runs": rows, "cpu_s_per_run": round(sum(x["cpu_s"] for x in rows) / len(rows), 4),
             "trial_steps_per_run": round(sum(x["trial_steps"] for x in rows) / len(rows))}
+
+
+def _profile_checked(params, sc, freqs, sdur: float) -> dict:
+    """The same runs with the step's error control on: status, halvings, the runs the check
+    made (the run, its reruns at finer steps, the chaos probes at each step probed, in units
+    of the run's own steps: a rerun at h/2 counts 2) and CPU seconds each."""
+    from labkit.sim import Shaker, core, simulate
+
+    made: list[float] = []
+    control = core.control
+
+    def counted(r, run):           # the control's reruns, each weighed by its steps
+        def run_counted(dt_s, seed):
+            made.append(r.dt_s / dt_s)
+            return run(dt_s, seed)
+        return control(r, run_counted)
+
+    rows = []
+    core.control = counted
+    try:
+        for f in freqs:
+            made.clear()
+            c0 = time.process_time()
+            r = simulate(params, Shaker(float(f), sc.amp_um), duration_s=sdur)
+            cv = r.convergence
+            rows.append({"freq_hz": round(float(f), 1), "cpu_s": round(time.process_time() - c0, 3),
+                         "status": cv.status, "halvings": cv.halvings, "reruns": len(made),
+                         "rerun_steps_over_run": round(sum(made), 2), "speed_mm_s": round(r.mean_speed_mm_s, 4)})
+    finally:
+        core.control = control
+    return {"runs": rows, "cpu_s_per_run": round(sum(x["cpu_s"] for x in rows) / len(rows), 4)}
 
 
 def main() -> None:
@@ -245,10 +281,8 @@ def main() -> None:
     # the sweep's error control: the nominal robot at every point checks its step (4 runs'
     # worth when it passes, more where it refines or is chaotic), and the draws of the
     # points it refined are rerun at its step (docs/model.md, "Error control and validity")
-    c0 = time.process_time()
-    for f in probe:
-        simulate(params, Shaker(float(f), sc.amp_um), duration_s=sdur)
-    cpu_per_checked = (time.process_time() - c0) / len(probe)
+    checked = _profile_checked(params, sc, probe, sdur)
+    cpu_per_checked = checked["cpu_s_per_run"]
     runs = len(freqs) * draws
     status = [str(x) for x in s.convergence[:, 0]] if s.convergence is not None else []
     out["sweep"] = {"points": len(freqs), "freq_hz": [float(freqs[0]), float(freqs[-1])], "draws": draws,
@@ -265,7 +299,7 @@ def main() -> None:
                                                               + cpu_per_checked * len(freqs)) / 2, 1),
                     "target_wall_s": 40.0,
                     "mean_speed_mm_s_at_first_point": round(float(s.mean_speed_mm_s[0]), 3),
-                    "profile_nominal_unchecked": profile}
+                    "profile_nominal_unchecked": profile, "profile_nominal_checked": checked}
     print(json.dumps(out))
 
 

@@ -164,9 +164,10 @@ REC_COLS = 25
 # ---- impact log columns
 EV_T, EV_LEG, EV_VPRE, EV_VPOST, EV_VYPOST, EV_STUCK = range(6)
 EV_COLS = 6
-# ---- counters: 0..5 impacts per foot
-CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED, CNT_RELEASES, CNT_HALVED, CNT_ADV = 6, 7, 8, 9, 10, 11, 12
-CNT_SIZE = 13
+# ---- counters: 0..5 impacts per foot; CNT_HALVED_TRANSIENT: the refused sub-steps (of CNT_HALVED)
+# refused for a film transient, the others for a film's gap ratio (film_too_coarse)
+CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED, CNT_RELEASES, CNT_HALVED, CNT_ADV, CNT_HALVED_TRANSIENT = range(6, 14)
+CNT_SIZE = 14
 
 #: Cached inverses of R^T M^-1 R over a set of rows (the pinned rows, with or without stiff
 #: film rows): NSLOT slots, direct-mapped by the set's bit mask (rows 0-12); the sets
@@ -1209,7 +1210,8 @@ def event_value(P, A, S, T, mode, now, tau, tv, W, I, who, rel):
 
 @jit
 def film_too_coarse(P, A, mode, h, W):
-    """True when a squeeze film changes too much over a trial step of length h (M7).
+    """Nonzero when a squeeze film changes too much over a trial step of length h (M7):
+    1 for a transient, 2 for a gap ratio (below); 0 when the step resolves every film.
 
     The film's coefficient goes as gap^-3; the step resolves it when the gap (from the film's
     plane: the asperity gap added) changes by less than the factor FILM_RATIO over the step, or when the film
@@ -1230,7 +1232,7 @@ def film_too_coarse(P, A, mode, h, W):
         # too stiff even for that, e.g. a body's at contact, is left to the stiff limit, M7)
         x = W[W_FX + j]
         if x > FILM_X_MAX and W[W_FR + j] > FILM_TRANSIENT and x * P[P_DT] <= FILM_X_MAX * h * (1 << (NLEV - 1)):
-            return True
+            return 1
         if not film_on(P, j):
             continue
         # the gaps measured from the film's own plane (the asperity gap added), where the law
@@ -1243,8 +1245,8 @@ def film_too_coarse(P, A, mode, h, W):
         if hi > FILM_RATIO * lo:
             r = j if j < 6 else ROW_BZ
             if h * film_coef(P, j, lo - u0, lo - u0) * A[OFF_WI + r * NI + r] > FILM_WEAK:
-                return True
-    return False
+                return 2
+    return 0
 
 
 @jit
@@ -1316,8 +1318,12 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
         advance(P, A, S, mode, now, rem, W, I, T)
         gaps(P, A, S, now, W, W_GAP0)
         gaps(P, A, T, now + rem, W, W_GAP1)
-        if refine and n_ev == 0 and film_too_coarse(P, A, mode, rem, W):
-            return True
+        if refine and n_ev == 0:
+            why = film_too_coarse(P, A, mode, rem, W)
+            if why > 0:
+                if why == 1:
+                    count[CNT_HALVED_TRANSIENT] += 1
+                return True
         contact_force(P, A, T, mode, now + rem, tv, W, I, W_LI1)
         who = -1
         rel = False
