@@ -78,11 +78,22 @@ def smooth_background(win: np.ndarray, cell_px: int, kernel_cells: int) -> np.nd
     import cv2
 
     h, w = win.shape
-    sh, sw = max(int(round(h / cell_px)), 1), max(int(round(w / cell_px)), 1)
-    small = cv2.resize(win, (sw, sh), interpolation=cv2.INTER_AREA).astype(np.float32)
     r = max(kernel_cells // 2, 1)
-    closed = cv2.morphologyEx(small, cv2.MORPH_CLOSE, _square(r))
-    return cv2.resize(closed, (w, h), interpolation=cv2.INTER_LINEAR)
+    sh, sw = h // cell_px, w // cell_px
+    if sh < 1 or sw < 1:
+        sh, sw = max(int(round(h / cell_px)), 1), max(int(round(w / cell_px)), 1)
+        coarse = cv2.resize(win, (sw, sh), interpolation=cv2.INTER_AREA).astype(np.float32)
+        return cv2.resize(cv2.morphologyEx(coarse, cv2.MORPH_CLOSE, _square(r)), (w, h), interpolation=cv2.INTER_LINEAR)
+    # whole cells from the top-left corner: OpenCV's area averaging by a whole factor is ten times
+    # faster than by a fractional one (0.07 vs 0.77 ms for a 520 x 520 window); the rows and columns
+    # past the last whole cell (fewer than a cell) take the edge cells' level, as they would beyond
+    # the last cell's centre anyway
+    cells = cv2.resize(win[:sh * cell_px, :sw * cell_px], (sw, sh), interpolation=cv2.INTER_AREA)
+    closed = cv2.morphologyEx(np.asarray(cells, np.float32), cv2.MORPH_CLOSE, _square(r))
+    bg = cv2.resize(closed, (sw * cell_px, sh * cell_px), interpolation=cv2.INTER_LINEAR)
+    if bg.shape == (h, w):
+        return bg
+    return cv2.copyMakeBorder(bg, 0, h - bg.shape[0], 0, w - bg.shape[1], cv2.BORDER_REPLICATE)
 
 
 @dataclass
