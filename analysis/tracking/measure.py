@@ -28,6 +28,26 @@ def _otsu(hist: np.ndarray) -> tuple[int, float, float]:
     return k, mu[k] / omega[k], (mu[-1] - mu[k]) / (tot - omega[k])
 
 
+def small_median(values, axis: int | None = None):
+    """``np.median`` of a short array (the tracker's recent areas, outlines, a profile's bins) by one
+    sort: the same value at a tenth of numpy's per-call overhead (~12 us). No NaNs expected."""
+    s = np.sort(np.asarray(values, np.float64), axis=axis)
+    if axis is None:
+        s = s.ravel()
+    n = s.shape[0]
+    m = n // 2
+    return s[m] if n % 2 else 0.5 * (s[m - 1] + s[m])
+
+
+def _at_least(a: np.ndarray, floor: float) -> np.ndarray:
+    """``a`` (float32, contiguous) raised to ``floor`` in place: OpenCV's clamp takes under half of
+    ``np.maximum``'s time (5.6 vs 13 us on a 180 x 180 window; no NaN handling, none expected)."""
+    import cv2
+
+    cv2.max(a, floor, dst=a)  # type: ignore[call-overload]  # cv2's stubs omit the scalar overload
+    return a
+
+
 _KERNELS: dict[int, np.ndarray] = {}
 
 
@@ -128,7 +148,7 @@ class Segmentation:
         if flat is not None:
             f /= flat
         bg = smooth_background(f, self.cell_px, self.kernel_cells)
-        np.maximum(bg, np.float32(1.0), out=bg)
+        _at_least(bg, 1.0)
         return np.divide(f, bg, out=f)       # in place: no per-frame temporaries
 
 
@@ -173,8 +193,7 @@ class _Finder:
         q = cv2.convertScaleAbs(ratio, alpha=200.0)
         vmask = None if self.valid is None else self.valid[y0:y1, x0:x1]
         # Otsu on every other pixel: the histogram's shape, at a quarter of the cost
-        sub = q[::2, ::2]
-        hist = np.bincount(sub[vmask[::2, ::2] > 0] if vmask is not None else sub.ravel(), minlength=256)
+        hist = cv2.calcHist([q[::2, ::2]], [0], None if vmask is None else vmask[::2, ::2], [256], [0, 256]).ravel()
         thr, dark, light = _otsu(hist)
         if not np.isfinite(dark) or light <= 0:
             return None, False
@@ -278,7 +297,7 @@ class _Finder:
         f = np.asarray(win, np.float32)    # read only here: no copy
         # background under the robot: least-squares plane through the ring around it
         # (lighting gradients), from the ring's moments: no pixel lists needed
-        mr = cv2.moments(ring, binaryImage=True)
+        mr = cv2.moments(ring)      # 0/1 images: their plain moments are the binary ones, at half the cost
         if mr["m00"] < 12:
             return None
         mf = cv2.moments(f * ring)
@@ -287,7 +306,7 @@ class _Finder:
         atb = np.array([mf["m00"], mf["m10"], mf["m01"]])
         # a plane only when the ring surrounds the robot; a ring cut on one side (the tray's rim,
         # the frame's edge) would let the slope extrapolate freely over the robot: a constant then
-        mc = cv2.moments(comp, binaryImage=True)
+        mc = cv2.moments(comp)
         off = np.hypot(su / n - mc["m10"] / max(mc["m00"], 1), sv / n - mc["m01"] / max(mc["m00"], 1))
         spread = np.sqrt(max((mr["mu20"] + mr["mu02"]) / n, 1e-9))
         coef = np.array([mf["m00"] / n, 0.0, 0.0])
@@ -299,7 +318,7 @@ class _Finder:
         uu = np.arange(ww, dtype=np.float32)
         vv = np.arange(hh, dtype=np.float32)
         ratio = np.add.outer(np.float32(coef[2]) * vv + np.float32(coef[0]), np.float32(coef[1]) * uu)
-        np.maximum(ratio, np.float32(1e-3), out=ratio)
+        _at_least(ratio, 1e-3)
         np.divide(f, ratio, out=ratio)      # the window over the background plane
         inner = cv2.erode(comp, _square(2))
         if cv2.countNonZero(inner) < 5:
@@ -317,10 +336,10 @@ class _Finder:
             rho = float(cv2.mean(ratio * tex, mask=inner)[0])
             if 1.0 - rho < 0.5 * self.seg.min_contrast:
                 return None
-            denom = np.maximum(tex, np.float32(1e-3))
+            denom = _at_least(tex.copy(), 1e-3)
             np.divide(np.float32(-rho), denom, out=denom)
             denom += np.float32(1.0)
-            np.maximum(denom, np.float32(1e-3), out=denom)
+            _at_least(denom, 1e-3)
             w = np.subtract(np.float32(1.0), ratio, out=ratio)
             w /= denom
             np.clip(w, -0.5, 1.5, out=w)
@@ -371,7 +390,7 @@ def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> 
         sel = (sign * centres > 0.76 * half_len) & (sign * centres < 0.9 * half_len)
         if sel.sum() < 3:
             return float("nan")
-        level = np.median(prof[sel])
+        level = small_median(prof[sel])
         c_sorted, p_sorted = sign * centres[::sign], prof[::sign]    # centres increase: sorted by slicing
         beyond = np.flatnonzero((c_sorted > 0.9 * half_len) & (p_sorted < 0.5 * level))
         if beyond.size == 0:
