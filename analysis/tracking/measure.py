@@ -517,14 +517,20 @@ def _rim(samples: list[np.ndarray], dark_ratio: float) -> np.ndarray:
     import cv2
 
     h, w = samples[0].shape
-    peak = None
+    dark = np.ones((h, w), bool)
     for smp in samples:
         sub = smp[::4, ::4]
         level = float(np.median(sub[sub > 0.75 * np.percentile(sub, 99)]))
-        nrm = smp.astype(np.float32) * np.float32(1.0 / max(level, 1.0))
-        peak = nrm if peak is None else np.maximum(peak, nrm)
-    assert peak is not None
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(np.asarray(peak < dark_ratio, np.uint8), connectivity=8)
+        inv = np.float32(1.0 / max(level, 1.0))
+        if smp.dtype == np.uint8:
+            # dark in this sample: the grey levels whose scaled value (the same float32 product)
+            # is below the ratio, levels 0 .. cut - 1; compared as bytes, no float frame
+            cut = int(np.count_nonzero(np.arange(256, dtype=np.float32) * inv < dark_ratio))
+            if cut <= 255:
+                dark &= smp < np.uint8(cut)
+        else:
+            dark &= smp.astype(np.float32) * inv < dark_ratio
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(dark.view(np.uint8), connectivity=8)
     rim = np.zeros((h, w), bool)
     for i in range(1, n):
         x, y, bw, bh, _a = stats[i]
@@ -571,14 +577,12 @@ def static_objects(ratios: list[np.ndarray], thr: float, body_width_px: float, k
     boxes: list[tuple[int, int, int, int]] = []
     if n <= 1:
         return objects, boxes
-    dark_count = np.zeros((h, w), np.int32)
-    for d in darks:
-        dark_count += d
+    dark_count = None
     r = int(max(body_width_px / 2, 4))
-    for i in range(1, n):
-        x, y, bw, bh, area = (int(v) for v in stats[i])
-        if area < 0.5 * body_width_px ** 2:
-            continue      # texture, a speck: never robot-sized, needs no mask
+    # texture and specks (hundreds of components of the tray's mottling) are never robot-sized and
+    # need no mask: only components of at least half a body width squared are looked at
+    for i in np.flatnonzero(stats[1:, 4] >= 0.5 * body_width_px ** 2) + 1:
+        x, y, bw, bh = (int(v) for v in stats[i, :4])
         box = np.s_[max(y - r - 3, 0):min(y + bh + r + 3, h), max(x - r - 3, 0):min(x + bw + r + 3, w)]
         comp = np.asarray(labels[box] == i, np.uint8)
         # its own darkness: clear in most samples (the lower quartile), not the mean, which a fast
@@ -587,6 +591,10 @@ def static_objects(ratios: list[np.ndarray], thr: float, body_width_px: float, k
         if darkness < max(3 * thr, 0.15):
             continue      # the tray's mottling: faint, static, divided out by the flat field
         ring = _dilate(comp, r) & (1 - _dilate(comp, 2))
+        if dark_count is None:
+            dark_count = np.zeros((h, w), np.int32)
+            for d in darks:
+                dark_count += d
         ring_frac = float(dark_count[box][ring > 0].mean()) / len(darks) if ring.any() else 0.0
         if ring_frac < 0.25 and not drifts([rt[box] for rt in ratios], _dilate(comp, r), thr):
             objects[box] |= _dilate(comp, 2)
