@@ -28,6 +28,26 @@ def _otsu(hist: np.ndarray) -> tuple[int, float, float]:
     return k, mu[k] / omega[k], (mu[-1] - mu[k]) / (tot - omega[k])
 
 
+def small_median(values, axis: int | None = None):
+    """``np.median`` of a short array (the tracker's recent areas, outlines, a profile's bins) by one
+    sort: the same value at a tenth of numpy's per-call overhead (~12 us). No NaNs expected."""
+    s = np.sort(np.asarray(values, np.float64), axis=axis)
+    if axis is None:
+        s = s.ravel()
+    n = s.shape[0]
+    m = n // 2
+    return s[m] if n % 2 else 0.5 * (s[m - 1] + s[m])
+
+
+def _at_least(a: np.ndarray, floor: float) -> np.ndarray:
+    """``a`` (float32, contiguous) raised to ``floor`` in place: OpenCV's clamp takes under half of
+    ``np.maximum``'s time (5.6 vs 13 us on a 180 x 180 window; no NaN handling, none expected)."""
+    import cv2
+
+    cv2.max(a, floor, dst=a)  # type: ignore[call-overload]  # cv2's stubs omit the scalar overload
+    return a
+
+
 _KERNELS: dict[int, np.ndarray] = {}
 
 
@@ -78,11 +98,22 @@ def smooth_background(win: np.ndarray, cell_px: int, kernel_cells: int) -> np.nd
     import cv2
 
     h, w = win.shape
-    sh, sw = max(int(round(h / cell_px)), 1), max(int(round(w / cell_px)), 1)
-    small = cv2.resize(win, (sw, sh), interpolation=cv2.INTER_AREA).astype(np.float32)
     r = max(kernel_cells // 2, 1)
-    closed = cv2.morphologyEx(small, cv2.MORPH_CLOSE, _square(r))
-    return cv2.resize(closed, (w, h), interpolation=cv2.INTER_LINEAR)
+    sh, sw = h // cell_px, w // cell_px
+    if sh < 1 or sw < 1:
+        sh, sw = max(int(round(h / cell_px)), 1), max(int(round(w / cell_px)), 1)
+        coarse = cv2.resize(win, (sw, sh), interpolation=cv2.INTER_AREA).astype(np.float32)
+        return cv2.resize(cv2.morphologyEx(coarse, cv2.MORPH_CLOSE, _square(r)), (w, h), interpolation=cv2.INTER_LINEAR)
+    # whole cells from the top-left corner: OpenCV's area averaging by a whole factor is ten times
+    # faster than by a fractional one (0.07 vs 0.77 ms for a 520 x 520 window); the rows and columns
+    # past the last whole cell (fewer than a cell) take the edge cells' level, as they would beyond
+    # the last cell's centre anyway
+    cells = cv2.resize(win[:sh * cell_px, :sw * cell_px], (sw, sh), interpolation=cv2.INTER_AREA)
+    closed = cv2.morphologyEx(np.asarray(cells, np.float32), cv2.MORPH_CLOSE, _square(r))
+    bg = cv2.resize(closed, (sw * cell_px, sh * cell_px), interpolation=cv2.INTER_LINEAR)
+    if bg.shape == (h, w):
+        return bg
+    return cv2.copyMakeBorder(bg, 0, h - bg.shape[0], 0, w - bg.shape[1], cv2.BORDER_REPLICATE)
 
 
 @dataclass
@@ -117,7 +148,7 @@ class Segmentation:
         if flat is not None:
             f /= flat
         bg = smooth_background(f, self.cell_px, self.kernel_cells)
-        np.maximum(bg, np.float32(1.0), out=bg)
+        _at_least(bg, 1.0)
         return np.divide(f, bg, out=f)       # in place: no per-frame temporaries
 
 
@@ -162,8 +193,7 @@ class _Finder:
         q = cv2.convertScaleAbs(ratio, alpha=200.0)
         vmask = None if self.valid is None else self.valid[y0:y1, x0:x1]
         # Otsu on every other pixel: the histogram's shape, at a quarter of the cost
-        sub = q[::2, ::2]
-        hist = np.bincount(sub[vmask[::2, ::2] > 0] if vmask is not None else sub.ravel(), minlength=256)
+        hist = cv2.calcHist([q[::2, ::2]], [0], None if vmask is None else vmask[::2, ::2], [256], [0, 256]).ravel()
         thr, dark, light = _otsu(hist)
         if not np.isfinite(dark) or light <= 0:
             return None, False
@@ -267,7 +297,7 @@ class _Finder:
         f = np.asarray(win, np.float32)    # read only here: no copy
         # background under the robot: least-squares plane through the ring around it
         # (lighting gradients), from the ring's moments: no pixel lists needed
-        mr = cv2.moments(ring, binaryImage=True)
+        mr = cv2.moments(ring)      # 0/1 images: their plain moments are the binary ones, at half the cost
         if mr["m00"] < 12:
             return None
         mf = cv2.moments(f * ring)
@@ -276,7 +306,7 @@ class _Finder:
         atb = np.array([mf["m00"], mf["m10"], mf["m01"]])
         # a plane only when the ring surrounds the robot; a ring cut on one side (the tray's rim,
         # the frame's edge) would let the slope extrapolate freely over the robot: a constant then
-        mc = cv2.moments(comp, binaryImage=True)
+        mc = cv2.moments(comp)
         off = np.hypot(su / n - mc["m10"] / max(mc["m00"], 1), sv / n - mc["m01"] / max(mc["m00"], 1))
         spread = np.sqrt(max((mr["mu20"] + mr["mu02"]) / n, 1e-9))
         coef = np.array([mf["m00"] / n, 0.0, 0.0])
@@ -288,7 +318,7 @@ class _Finder:
         uu = np.arange(ww, dtype=np.float32)
         vv = np.arange(hh, dtype=np.float32)
         ratio = np.add.outer(np.float32(coef[2]) * vv + np.float32(coef[0]), np.float32(coef[1]) * uu)
-        np.maximum(ratio, np.float32(1e-3), out=ratio)
+        _at_least(ratio, 1e-3)
         np.divide(f, ratio, out=ratio)      # the window over the background plane
         inner = cv2.erode(comp, _square(2))
         if cv2.countNonZero(inner) < 5:
@@ -306,10 +336,10 @@ class _Finder:
             rho = float(cv2.mean(ratio * tex, mask=inner)[0])
             if 1.0 - rho < 0.5 * self.seg.min_contrast:
                 return None
-            denom = np.maximum(tex, np.float32(1e-3))
+            denom = _at_least(tex.copy(), 1e-3)
             np.divide(np.float32(-rho), denom, out=denom)
             denom += np.float32(1.0)
-            np.maximum(denom, np.float32(1e-3), out=denom)
+            _at_least(denom, 1e-3)
             w = np.subtract(np.float32(1.0), ratio, out=ratio)
             w /= denom
             np.clip(w, -0.5, 1.5, out=w)
@@ -360,7 +390,7 @@ def body_length_px(weights: np.ndarray, cu: float, cv_: float, theta: float) -> 
         sel = (sign * centres > 0.76 * half_len) & (sign * centres < 0.9 * half_len)
         if sel.sum() < 3:
             return float("nan")
-        level = np.median(prof[sel])
+        level = small_median(prof[sel])
         c_sorted, p_sorted = sign * centres[::sign], prof[::sign]    # centres increase: sorted by slicing
         beyond = np.flatnonzero((c_sorted > 0.9 * half_len) & (p_sorted < 0.5 * level))
         if beyond.size == 0:
@@ -487,14 +517,20 @@ def _rim(samples: list[np.ndarray], dark_ratio: float) -> np.ndarray:
     import cv2
 
     h, w = samples[0].shape
-    peak = None
+    dark = np.ones((h, w), bool)
     for smp in samples:
         sub = smp[::4, ::4]
         level = float(np.median(sub[sub > 0.75 * np.percentile(sub, 99)]))
-        nrm = smp.astype(np.float32) * np.float32(1.0 / max(level, 1.0))
-        peak = nrm if peak is None else np.maximum(peak, nrm)
-    assert peak is not None
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(np.asarray(peak < dark_ratio, np.uint8), connectivity=8)
+        inv = np.float32(1.0 / max(level, 1.0))
+        if smp.dtype == np.uint8:
+            # dark in this sample: the grey levels whose scaled value (the same float32 product)
+            # is below the ratio, levels 0 .. cut - 1; compared as bytes, no float frame
+            cut = int(np.count_nonzero(np.arange(256, dtype=np.float32) * inv < dark_ratio))
+            if cut <= 255:
+                dark &= smp < np.uint8(cut)
+        else:
+            dark &= smp.astype(np.float32) * inv < dark_ratio
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(dark.view(np.uint8), connectivity=8)
     rim = np.zeros((h, w), bool)
     for i in range(1, n):
         x, y, bw, bh, _a = stats[i]
@@ -541,14 +577,12 @@ def static_objects(ratios: list[np.ndarray], thr: float, body_width_px: float, k
     boxes: list[tuple[int, int, int, int]] = []
     if n <= 1:
         return objects, boxes
-    dark_count = np.zeros((h, w), np.int32)
-    for d in darks:
-        dark_count += d
+    dark_count = None
     r = int(max(body_width_px / 2, 4))
-    for i in range(1, n):
-        x, y, bw, bh, area = (int(v) for v in stats[i])
-        if area < 0.5 * body_width_px ** 2:
-            continue      # texture, a speck: never robot-sized, needs no mask
+    # texture and specks (hundreds of components of the tray's mottling) are never robot-sized and
+    # need no mask: only components of at least half a body width squared are looked at
+    for i in np.flatnonzero(stats[1:, 4] >= 0.5 * body_width_px ** 2) + 1:
+        x, y, bw, bh = (int(v) for v in stats[i, :4])
         box = np.s_[max(y - r - 3, 0):min(y + bh + r + 3, h), max(x - r - 3, 0):min(x + bw + r + 3, w)]
         comp = np.asarray(labels[box] == i, np.uint8)
         # its own darkness: clear in most samples (the lower quartile), not the mean, which a fast
@@ -557,6 +591,10 @@ def static_objects(ratios: list[np.ndarray], thr: float, body_width_px: float, k
         if darkness < max(3 * thr, 0.15):
             continue      # the tray's mottling: faint, static, divided out by the flat field
         ring = _dilate(comp, r) & (1 - _dilate(comp, 2))
+        if dark_count is None:
+            dark_count = np.zeros((h, w), np.int32)
+            for d in darks:
+                dark_count += d
         ring_frac = float(dark_count[box][ring > 0].mean()) / len(darks) if ring.any() else 0.0
         if ring_frac < 0.25 and not drifts([rt[box] for rt in ratios], _dilate(comp, r), thr):
             objects[box] |= _dilate(comp, 2)

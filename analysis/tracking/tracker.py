@@ -51,7 +51,14 @@ from typing import Any
 
 import numpy as np
 
-from labkit.analysis.tracking.measure import Segmentation, _Blob, _Finder, background_model, body_length_px
+from labkit.analysis.tracking.measure import (
+    Segmentation,
+    _Blob,
+    _Finder,
+    background_model,
+    body_length_px,
+    small_median,
+)
 from labkit.errors import InputError
 
 QUALITY_OK = 0        # robot fully seen: position and heading trusted
@@ -256,7 +263,7 @@ class RobotModel:
             return QUALITY_DEGRADED
         if blob.masked and self.cov_hist:
             recent = self.cov_hist[-25:]
-            if abs(blob.coverage / float(np.median(recent)) - 1) > max(0.01, 5 * _log_spread(recent)):
+            if abs(blob.coverage / float(small_median(recent)) - 1) > max(0.01, 5 * _log_spread(recent)):
                 return QUALITY_DEGRADED      # partly hidden by static dust (or the rim)
         return QUALITY_OK
 
@@ -265,7 +272,7 @@ class RobotModel:
         self.area_hist.append(area)
         if not (len(self.area_hist) <= 25 or len(self.area_hist) % 10 == 0):
             return False
-        self.area_ref = float(np.median(self.area_hist[-25:]))
+        self.area_ref = float(small_median(self.area_hist[-25:]))
         if len(self.area_hist) >= 5:
             spread = _log_spread(self.area_hist[-25:])
             self.area_lo, self.area_hi = min(0.8, np.exp(-5 * spread)), max(1.25, np.exp(5 * spread))
@@ -280,9 +287,9 @@ class RobotModel:
         if len(self.shapes) < 5 or not (len(self.shapes) <= 25 or len(self.shapes) % 10 == 0):
             return False
         arr = np.log(np.asarray(self.shapes[-25:]))
-        med = np.median(arr, axis=0)
+        med = small_median(arr, axis=0)
         self.shape_ref = (float(np.exp(med[0])), float(np.exp(med[1])))
-        self.shape_spread = tuple(1.4826 * np.median(np.abs(arr - med), axis=0))
+        self.shape_spread = tuple(1.4826 * small_median(np.abs(arr - med), axis=0))
         return True
 
 
@@ -463,7 +470,7 @@ def _log_spread(values: list[float]) -> float:
     if len(values) < 5:
         return 0.0
     la = np.log(np.maximum(np.asarray(values, float), 1e-12))
-    return 1.4826 * float(np.median(np.abs(la - np.median(la))))
+    return 1.4826 * float(small_median(np.abs(la - small_median(la))))
 
 
 def _resized(seg: Segmentation, width: int, height: int, body_width_px: float) -> Segmentation:
