@@ -82,7 +82,8 @@ def add_arguments(parser: argparse.ArgumentParser, common: argparse.ArgumentPars
     parser.add_argument("--force", action="store_true", help="replace --out and its .calibration.json")
     parser.add_argument("--amp-um", type=float, help="tray amplitude for speed tables (um)")
     parser.add_argument("--bound", dest="bounds", nargs="+", type=_bound, default=[], metavar="NAME=LO:HI",
-                        help="bounds (default: 0 to 4x the start value; c_r in 0..1)")
+                        help="bounds (default: 0 to 4x the start value; c_r in 0..1); with --paper: a search "
+                             "box inside a free parameter's physical bounds")
     parser.add_argument("--duration-s", type=float, default=1.0, help="simulated time per point (s)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--rel-step", type=float, default=0.05, help="finite-difference step, relative")
@@ -226,7 +227,8 @@ def _paper_fit(args: argparse.Namespace, free: list[str] | None, runner: Runner)
     start = _load_params(args.params)
     settings = SearchSettings(scan=max(1, args.paper_scan), rounds=max(0, args.paper_rounds),
                               polish=max(0, args.paper_polish), seed=args.seed,
-                              ensemble=max(0, args.paper_ensemble), ensemble_duration_s=args.paper_duration_s)
+                              ensemble=max(0, args.paper_ensemble), ensemble_duration_s=args.paper_duration_s,
+                              box=tuple((n, lo, hi) for n, (lo, hi) in args.bounds))
 
     def log(msg: str) -> None:
         if not runner.quiet:

@@ -244,6 +244,29 @@ def test_cli_bad_params_and_calibrate_modes(tmp_path):
     assert not (tmp_path / "x.toml").exists()
 
 
+def test_search_box_narrows_a_free_parameter_inside_its_bounds(tmp_path):
+    """A bounded search around a start (``--bound`` with ``--paper``): the box maps [0, 1] onto
+    itself, and a box outside the physical bounds, on a sign or on a parameter not free is one
+    line naming --bound, nothing written."""
+    from labkit.sim.paper.fit import _free_params
+
+    ad, sq = _free_params(["c_ad_n", "squeeze_scale"], {"c_ad_n": (2e-6, 6e-6)})
+    assert (ad.lo, ad.hi, ad.log) == (2e-6, 6e-6, True)
+    assert ad.from_unit(0.0) == pytest.approx(2e-6) and ad.from_unit(1.0) == pytest.approx(6e-6)
+    assert ad.from_unit(0.5) == pytest.approx((2e-6 * 6e-6) ** 0.5)         # log scale: the geometric mean
+    assert (sq.lo, sq.hi) == (0.1, 10.0)                                     # no box: its physical bounds
+    for box in ({"c_ad_n": (1e-9, 6e-6)}, {"c_ad_n": (6e-6, 2e-6)}, {"c_r": (0.2, 0.5)}):
+        with pytest.raises(InputError) as e:
+            _free_params(["c_ad_n", "squeeze_scale"], box)
+        assert e.value.key == "--bound"
+    with pytest.raises(InputError, match="signs"):
+        _free_params(["cy_sign[1]"], {"cy_sign[1]": (-1.0, 1.0)})
+    proc = run_cli("calibrate", "--paper", "--free", "c_ad_n", "--bound", "c_ad_n=1e-3:2e-3", "--out",
+                   str(tmp_path / "x.toml"), check=2)
+    assert "--bound" in proc.stderr and "c_ad_n" in proc.stderr and proc.stderr.count("\n") == 1
+    assert not (tmp_path / "x.toml").exists()
+
+
 def test_scales_are_relative_to_the_published_set_whatever_the_start():
     """A search started from another robot (the ``paper`` preset, a user's file) sets the free
     parameters of that robot, with the films' and the actuator's scales (and so their bounds)

@@ -61,8 +61,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
@@ -330,7 +330,9 @@ class SearchSettings:
     of the simulations (common random numbers), of the drawn robots and of the Sobol samples.
     ``ensemble > 0``: score every candidate over its nominal robot and ``ensemble`` robots drawn
     from the Monte Carlo table, each run ``ensemble_duration_s`` (:func:`ensemble_score`); 0:
-    the nominal robot alone at the scenarios' quick size (:func:`objective`).
+    the nominal robot alone at the scenarios' quick size (:func:`objective`). ``box``: (name, lo,
+    hi) per free parameter searched over a box inside its physical bounds only (a bounded search
+    around a start; the provenance's ``bounds_low``/``bounds_high`` are then the box).
     """
 
     scan: int = 32
@@ -341,6 +343,12 @@ class SearchSettings:
     seed: int = 0
     ensemble: int = 0
     ensemble_duration_s: float = 1.0
+    box: tuple[tuple[str, float, float], ...] = ()
+
+    @property
+    def search_box(self) -> dict[str, tuple[float, float]]:
+        """``box`` as free parameter -> (lo, hi)."""
+        return {n: (lo, hi) for n, lo, hi in self.box}
 
 
 def score_candidates(sets: Sequence[RobotParams], settings: SearchSettings, runner: Runner) -> list[CandidateScore]:
@@ -426,7 +434,9 @@ class PaperCalibration:
 
     def settings_table(self) -> dict[str, float | int | str | None]:
         """The search's settings and where it ran, flat (JSON / TOML)."""
-        return {**asdict(self.settings), "size": "quick", "scheduler": self.runner.scheduler or "local",
+        box = ",".join(f"{n}={lo:g}:{hi:g}" for n, lo, hi in self.settings.box) or None
+        return {**asdict(self.settings), "box": box,
+                "size": "quick", "scheduler": self.runner.scheduler or "local",
                 "workers": self.runner.workers, "wall_s": round(self.wall_s, 1),
                 "free": ",".join(f.name for f in self.free)}
 
@@ -475,14 +485,30 @@ class PaperCalibration:
         return out
 
 
-def _free_params(free: Sequence[str] | None) -> list[Free]:
-    """The free parameters by name (all of :data:`FREE` for ``None``); InputError naming an unknown one."""
+def _free_params(free: Sequence[str] | None, box: Mapping[str, tuple[float, float]] | None = None) -> list[Free]:
+    """The free parameters by name (all of :data:`FREE` for ``None``), each narrowed to its ``box``
+    entry if any; InputError naming an unknown parameter or a box that is not a free one's."""
     names = [f.name for f in FREE] if free is None else list(free)
     known = free_by_name()
     for n in names:
         if n not in known:
             raise InputError(f"unknown free parameter {n!r}", key="--free", expected=", ".join(known))
-    return [known[n] for n in names]
+    box = box or {}
+    extra = sorted(set(box) - set(names))
+    if extra:
+        raise InputError(f"search box for {', '.join(extra)}, not a free parameter", key="--bound",
+                         expected="NAME=LO:HI for a parameter of --free")
+    return [narrowed(known[n], box[n]) if n in box else known[n] for n in names]
+
+
+def narrowed(f: Free, lo_hi: tuple[float, float]) -> Free:
+    """``f`` searched over ``lo_hi`` only: a box inside its physical bounds (a search around a start,
+    not new bounds); InputError naming ``--bound`` otherwise."""
+    lo, hi = float(lo_hi[0]), float(lo_hi[1])
+    if f.kind == "sign" or not (f.lo <= lo < hi <= f.hi):
+        raise InputError(f"search box {lo:g}:{hi:g} for {f.name} is not inside its bounds", key="--bound",
+                         expected=f"{f.name}=LO:HI with {f.lo:g} <= LO < HI <= {f.hi:g} (signs: no box)")
+    return replace(f, lo=lo, hi=hi)
 
 
 class _Search:
@@ -593,8 +619,8 @@ def calibrate_paper(start: RobotParams | None = None, settings: SearchSettings =
         Called with one line per stage.
     """
     t0 = time.perf_counter()
-    search = _Search(RobotParams() if start is None else start, _free_params(free), settings, runner,
-                     log or (lambda _m: None))
+    search = _Search(RobotParams() if start is None else start, _free_params(free, settings.search_box), settings,
+                     runner, log or (lambda _m: None))
     search.start_and_scan()
     search.zoom_rounds()
     search.polish()
