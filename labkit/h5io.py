@@ -85,7 +85,7 @@ def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None, verif
     if mode == "r" and not path.exists():
         raise InputError("no such file", file=path)
     try:
-        f = h5py.File(path, mode)
+        f = _open_as_of_last_flush(path) if mode == "r" else h5py.File(path, mode)
     except OSError as exc:
         raise InputError(why_unreadable(path, exc), file=path) from None
     try:
@@ -96,6 +96,19 @@ def open_h5(path: str | Path, mode: str = "r", *, kind: str | None = None, verif
         f.close()
         raise
     return f
+
+
+def _open_as_of_last_flush(path: Path) -> Any:
+    """``path`` read-only; a flush its writer's crash cut short is read as finished (its journal
+    overlaid, nothing written: :mod:`labkit.h5journal`), unless a run still writes it."""
+    import h5py
+
+    from labkit.h5journal import committed_records, journal_path, open_recovered
+    from labkit.lockfiles import writer_of
+
+    if journal_path(path).exists() and writer_of(path) is None and committed_records(path):
+        return open_recovered(path)
+    return h5py.File(path, "r")
 
 
 def _check_kind(f: Any, path: Path, mode: str, kind: str | None) -> None:

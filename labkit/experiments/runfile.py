@@ -263,6 +263,9 @@ RETRIED = "interlock, retried"
 RESERVE_BYTES = 2 * 1024 * 1024
 #: bytes a run file takes before its first point (attributes, config text, empty tables)
 BASE_BYTES = 256 * 1024
+#: set aside for a run file's journal (:mod:`labkit.h5journal`) unless the caller says more: it holds
+#: one flush's pages (a point's rows and records and the metadata they touch)
+JOURNAL_BYTES = 2 * 1024 * 1024
 
 
 class WriteFailed(InputError):
@@ -370,15 +373,17 @@ METADATA_CACHE_BYTES = 1024 * 1024
 
 
 def open_for_writing(path: str | Path, mode: str) -> Any:
-    """``h5py.File(path, mode)`` with both of HDF5's caches bounded, so memory stays flat per point.
+    """``path`` opened for writing through a redo journal (:mod:`labkit.h5journal`), caches bounded.
 
+    Each ``flush()`` is one atomic step: a kill or power cut at any instant leaves the file as
+    of a flush (its journal, if whole, is replayed by :func:`labkit.h5journal.recover` or
+    overlaid by readers). Both of HDF5's caches are bounded, so memory stays flat per point.
     A file of a layout before version 3 (variable-length strings, kept in HDF5's global heap,
     which grows with every point) is resumed with HDF5's default metadata cache: capped, it
-    wrote the heap between the run's flushes, and a kill at such an instant left the events'
-    text unreadable."""
-    import h5py
+    wrote the heap between the run's flushes."""
+    from labkit.h5journal import open_journaled
 
-    f = h5py.File(path, mode, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=521)
+    f = open_journaled(path, mode, rdcc_nbytes=CHUNK_CACHE_BYTES, rdcc_nslots=521)
     if mode == "w" or int(f.attrs.get("schema_version", 0)) >= 3:
         mdc = f.id.get_mdc_config()
         mdc.set_initial_size = True
@@ -398,6 +403,17 @@ def _link_into_place(tmp: Path, path: Path) -> None:
         if path.exists():
             raise FileExistsError(path) from None
         os.rename(tmp, path)
+
+
+def recover_journal(path: Path) -> None:
+    """Replay ``path``'s journal if a kill cut a flush (the caller holds the run's lock)."""
+    from labkit.h5journal import recover
+
+    try:
+        recover(path)
+    except OSError as exc:
+        raise InputError(f"cannot finish its last write, cut by a crash ({exc.strerror})", file=path,
+                         key="--resume") from None
 
 
 def partial_path(path: Path) -> Path:
@@ -457,12 +473,14 @@ class RunFile:
     # -- opening ---------------------------------------------------------------------------
     @classmethod
     def create(cls, path: str | Path, cfg: Config, config_json: dict[str, Json], points_planned: int,
-               extra_attrs: dict[str, AttrValue] | None = None, reserve_bytes: float = 0.0) -> RunFile:
+               extra_attrs: dict[str, AttrValue] | None = None, reserve_bytes: float = 0.0,
+               journal_bytes: float = JOURNAL_BYTES) -> RunFile:
         """A new run file for ``cfg`` (an InchipConfig or ShakerConfig); refuses to overwrite.
 
         The file is made aside (``.<name>.partial.<pid>``), with ``reserve_bytes`` set aside
         for it (:func:`reserve_space`) before anything is written, then linked into place
-        complete: ``path`` is a valid run file from its first byte on disk.
+        complete: ``path`` is a valid run file from its first byte on disk. From then on every
+        flush goes through its journal (``journal_bytes`` set aside for it).
         """
 
         path = Path(path)
@@ -487,6 +505,7 @@ class RunFile:
             cls._lay_out(f, cfg, config_json, points_planned, extra_attrs)
             f.flush()
             _link_into_place(tmp, path)
+            f.journal.start_journal(path, journal_bytes)
         except BaseException as exc:
             f.close()
             tmp.unlink(missing_ok=True)
@@ -525,7 +544,7 @@ class RunFile:
 
     @classmethod
     def resume(cls, path: str | Path, cfg: Config, config_json: dict[str, Json],
-               retry_interlocked: bool = False) -> RunFile:
+               retry_interlocked: bool = False, journal_bytes: float = JOURNAL_BYTES) -> RunFile:
         """Reopen a run file to continue it after its last complete point.
 
         With ``retry_interlocked``, points an interlock stopped are measured again: their rows
@@ -541,9 +560,11 @@ class RunFile:
         from labkit.experiments import kinds
 
         path = Path(path)
+        recover_journal(path)           # a flush a kill interrupted is finished first (its journal replayed)
         open_h5(path, "r", kind=kinds.of(cfg).file_kind).close()          # kind and schema checks, clear errors
         try:
             f = open_for_writing(path, "r+")
+            f.journal.start_journal(path, journal_bytes)
         except OSError as exc:
             from labkit.h5io import why_unreadable
 
@@ -696,7 +717,8 @@ def write_lab_record(path: str | Path, timeline: list[tuple], truth: Json | None
     """
     import h5py
 
-    with h5py.File(path, "r+") as f:
+    with open_for_writing(path, "r+") as f:
+        f.journal.start_journal(path)
         g = f.require_group("virtual_lab")
         for name in list(g):
             del g[name]

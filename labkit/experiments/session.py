@@ -145,6 +145,7 @@ def _remove_partials(path: Path) -> None:
         for p in folder.glob(".*.partial.mkv"):
             p.unlink(missing_ok=True)
     rf.remove_stale_partials(path)
+    rf.recover_journal(path)
 
 
 def _check_videos(path: Path, force: bool) -> None:
@@ -199,8 +200,9 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
         if retry_interlocked and resume is None:
             raise InputError("--retry-interlocked continues a run file", key="--retry-interlocked",
                              expected="--resume FILE as well")
-        run = (rf.RunFile.resume(path, cfg, cfg_json, retry_interlocked=retry_interlocked)   # checks the config
-               if resume is not None else None)
+        journal = 2 * experiment.point_bytes(cfg) + rf.RESERVE_BYTES     # one flush: a point and its metadata
+        run = (rf.RunFile.resume(path, cfg, cfg_json, retry_interlocked=retry_interlocked,   # checks the config
+                                 journal_bytes=journal) if resume is not None else None)
         if run is not None:
             n_left = len(experiment.plan(cfg, run.done).points)
         # the whole run must fit (HDF5 cannot survive a full disk); nothing opened yet if not
@@ -222,7 +224,7 @@ def _run_session(kind: str, config: str | Path, out: str | Path | None, *, lab: 
             rig = stack.enter_context(Rig(cfg, spot=spot))
             if run is None:
                 run = rf.RunFile.create(path, cfg, cfg_json, experiment.plan(cfg, ()).points_total,
-                                        reserve_bytes=reserve)
+                                        reserve_bytes=reserve, journal_bytes=journal)
             plan: Plan = experiment.plan(cfg, run.done)
             for role, (model, resource, snap) in rig.snapshots().items():
                 run.set_instrument(role, model, resource, snap)

@@ -120,11 +120,11 @@ class RunFile(LabFile):
 
     def records(self) -> dict[int, Record]:
         """The kept signal records of complete points, by plan index (read on demand)."""
-        import h5py
+        from labkit.h5io import open_h5
 
         out: dict[int, Record] = {}
         done = {int(i) for i in self.points.get("index", [])}
-        with h5py.File(self.path, "r") as f:
+        with open_h5(self.path, "r", verify=False) as f:
             grp = f.get(self.record_group) if self.record_group else None
             if grp is None:
                 return out
@@ -256,8 +256,9 @@ def read_run_file(path: str | Path) -> InchipRun | ShakerRun:
             for role, g in (f["instruments"].items() if "instruments" in f else [])}
         # (a file another tool assembled may lack /points: its rows are then taken as they are)
         pts = f["points"] if "points" in f else {}
-        # THE rule: index is written last, so its length counts the complete points
-        n = pts["index"].shape[0] if "index" in pts else min((d.shape[0] for d in pts.values()), default=0)
+        # THE rule: index is written last, so its length counts the complete points; a file torn
+        # another way (another writer, a damaged copy) is read up to its shortest column
+        n = min((d.shape[0] for d in pts.values() if d.ndim == 1), default=0)
         points = {k: column(pts[k], n) for k in pts if pts[k].ndim == 1}
         units = {k: units_of(pts[k]) for k in pts}
         ev = f.get("events")
