@@ -98,33 +98,34 @@ class JournalIO(io.RawIOBase):
         if self._jfd is None:
             self._apply(self._records())
             return
-        body = self._body()
+        records = self._records()
+        parts: list[bytes | memoryview] = []
+        for kind, off, data in records:
+            parts += [_RECORD.pack(kind, off, len(data)), data]
+        crc = 0
+        for part in parts:
+            crc = zlib.crc32(part, crc)
         self._seq += 1
-        os.pwrite(self._jfd, body, _HEADER.size)
+        # the pages themselves, no joined copy (a large transient copy per flush fragmented the heap);
+        # a header on disk without its whole body fails the CRC: the commit is then discarded, and
+        # the file is untouched (it is written only after this one fsync)
+        header = _HEADER.pack(_MAGIC, self._seq, sum(len(p) for p in parts), crc)
+        _write_all(self._jfd, [header, *parts], 0)
         self._sync(self._jfd)
-        os.pwrite(self._jfd, _HEADER.pack(_MAGIC, self._seq, len(body), zlib.crc32(body)), 0)
-        self._sync(self._jfd)
-        self._apply(self._records())
+        self._apply(records)
         self._sync(self._fd)
         os.pwrite(self._jfd, bytes(_HEADER.size), 0)
 
-    def _records(self) -> list[tuple[bytes, int, bytes]]:
+    def _records(self) -> list[tuple[bytes, int, memoryview]]:
         out = []
         for page in sorted(self._pages):
             start = page * PAGE
             if start < self._size:
-                out.append((b"W", start, bytes(self._pages[page][: self._size - start])))
-        out.append((b"T", self._size, b""))
+                out.append((b"W", start, memoryview(self._pages[page])[: self._size - start]))
+        out.append((b"T", self._size, memoryview(b"")))
         return out
 
-    def _body(self) -> bytes:
-        parts = []
-        for kind, off, data in self._records():
-            parts.append(_RECORD.pack(kind, off, len(data)))
-            parts.append(data)
-        return b"".join(parts)
-
-    def _apply(self, records: list[tuple[bytes, int, bytes]]) -> None:
+    def _apply(self, records: list[tuple[bytes, int, memoryview]]) -> None:
         _apply_records(self._fd, records)
         self._pages.clear()
         self._stale = self._size
@@ -160,7 +161,7 @@ class JournalIO(io.RawIOBase):
         self._pos += n
         return n
 
-    def _read(self, off: int, n: int) -> bytes:
+    def _read(self, off: int, n: int) -> bytearray:
         out = bytearray(n)
         end = min(off + n, self._size)
         disk_end = min(end, self._stale)
@@ -173,7 +174,7 @@ class JournalIO(io.RawIOBase):
                 continue
             lo, hi = max(off, page * PAGE), min(end, (page + 1) * PAGE)
             out[lo - off: hi - off] = data[lo - page * PAGE: hi - page * PAGE]
-        return bytes(out)
+        return out
 
     def write(self, data: Any) -> int:
         data = memoryview(data).cast("B")
@@ -201,7 +202,7 @@ class JournalIO(io.RawIOBase):
         buf = self._pages.get(page)
         if buf is None:
             start = page * PAGE
-            buf = bytearray(self._read(start, PAGE)) if start < self._size else bytearray(PAGE)
+            buf = self._read(start, PAGE) if start < self._size else bytearray(PAGE)
             self._pages[page] = buf
         return buf
 
@@ -249,7 +250,21 @@ class JournalIO(io.RawIOBase):
                 self._hold(data)
 
 
-def _apply_records(fd: int, records: list[tuple[bytes, int, bytes]]) -> None:
+def _write_all(fd: int, parts: list[bytes | memoryview], offset: int) -> None:
+    """``parts`` one after the other from ``offset`` (``pwritev`` in groups under the kernel's IOV_MAX)."""
+    for i in range(0, len(parts), 512):
+        group = parts[i: i + 512]
+        want = sum(len(p) for p in group)
+        done = os.pwritev(fd, group, offset)
+        if done < want:                     # a short write: the rest piece by piece
+            rest = memoryview(b"".join(group))[done:]
+            while len(rest):
+                n = os.pwrite(fd, rest, offset + done)
+                rest, done = rest[n:], done + n
+        offset += want
+
+
+def _apply_records(fd: int, records: list[tuple[bytes, int, bytes]] | list[tuple[bytes, int, memoryview]]) -> None:
     for kind, off, data in records:
         if kind == b"W":
             os.pwrite(fd, data, off)

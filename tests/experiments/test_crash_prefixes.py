@@ -3,7 +3,7 @@
 A SIGKILL stops a process between two system calls: what is on disk is a prefix of the
 writes it made (the page cache keeps them). So instead of killing at random instants and
 hoping to land inside a flush (tests/experiments/test_faults.py does that too), this
-records every ``pwrite``/``ftruncate`` a real in-chip sweep against the virtual lab makes to
+records every ``pwrite``/``pwritev``/``ftruncate`` a real in-chip sweep against the virtual lab makes to
 its run file and journal (at :mod:`labkit.h5journal`'s ``os``, the edge of the disk), then
 rebuilds the two files after each prefix and opens them as ``labkit info`` does: read-only
 (a committed journal overlaid) and after :func:`labkit.h5journal.recover`. Every prefix must
@@ -52,6 +52,11 @@ class DiskLog:
 
             def pwrite(self, fd, data, off):
                 log.writes.append((log.fds[fd], "w", off, bytes(data)))
+                return real.pwrite(fd, data, off)
+
+            def pwritev(self, fd, buffers, off):          # one system call: a kill cannot split it
+                data = b"".join(bytes(b) for b in buffers)
+                log.writes.append((log.fds[fd], "w", off, data))
                 return real.pwrite(fd, data, off)
 
             def ftruncate(self, fd, n):
