@@ -618,7 +618,22 @@ class RunFile:
         g.attrs["model"] = model
         g.attrs["resource"] = resource
         put_json(g, "snapshot_json", snapshot)
-        self.f.flush()
+        self._flush()
+
+    def _flush(self) -> None:
+        """Commit what was written since the last flush (atomically: :mod:`labkit.h5journal`).
+
+        A disk with no room for the journal is :class:`DiskFull`: nothing of this flush reached
+        the file, which holds every point flushed before."""
+        try:
+            self.f.flush()
+        except OSError as exc:
+            if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+                raise
+            self.full = True
+            raise DiskFull(f"no room to write the run file's journal ({os.strerror(exc.errno)}); the file "
+                           "holds every completed point; free some space, then continue with --resume",
+                           file=self.path, key="--out") from None
 
     def set_attrs(self, **attrs: Any) -> None:
         for k, v in attrs.items():
@@ -656,7 +671,7 @@ class RunFile:
             self.events_dropped += 1
             return
         self._table("events").append({"time_unix_s": time.time() if t_unix_s is None else t_unix_s, "text": text})
-        self.f.flush()
+        self._flush()
 
     def add_location_rows(self, location: str, rows: Row) -> None:
         """Append rows to ``/locations/<location>`` (not flushed: :meth:`end_point` flushes)."""
@@ -682,7 +697,7 @@ class RunFile:
         """Append the point's row to ``/points`` (index last) and flush: the point is complete."""
         self._floor("a point's row")
         self._table("points").append(dict(row, index=index))
-        self.f.flush()
+        self._flush()
 
     def finish(self, status: str) -> None:
         """The final status (and end time); needs a quarter of the reserve (kept for it)."""
@@ -692,7 +707,7 @@ class RunFile:
         self.f.attrs["ended_utc"] = utc_now()
         if self.events_dropped:
             self.f.attrs["events_dropped"] = int(self.events_dropped)
-        self.f.flush()
+        self._flush()
 
     def close(self) -> None:
         try:

@@ -188,3 +188,35 @@ def test_text_is_fixed_length_checksummed_and_cut_at_a_character(tmp_path):
 def f_width(path, name):
     with h5py.File(path, "r") as f:
         return f[name].dtype.itemsize
+
+
+def test_no_room_for_the_journal_is_a_clean_disk_full_and_the_file_keeps_every_point(tmp_path):
+    """A flush first writes its journal (labkit.h5journal). When the disk has no room for it (here:
+    no space set aside for the journal, another file takes every free byte of a 4 MB tmpfs, and a
+    point keeps a 400 kB record, more than the journal's earlier flushes used), the flush is a
+    DiskFull naming the file, nothing of it reaches the file, and the file, read after the disk
+    is freed, holds every point flushed before."""
+    import contextlib
+
+    from labcfg import small_tmpfs
+
+    from labkit.files.runs import read_run_file
+
+    cfg = load_inchip(INCHIP)
+    with small_tmpfs(tmp_path / "fs", "4m") as mnt:
+        path = mnt / "run.h5"
+        run = rf.RunFile.create(path, cfg, comparable(cfg), 100, reserve_bytes=1_500_000, journal_bytes=0)
+        for i in range(3):
+            _inchip_point(run, i, "body", 300.0 + i)
+        filler = mnt / "filler"
+        with contextlib.suppress(OSError), open(filler, "wb") as fh:
+            fh.write(b"\0" * (64 << 20))
+        record = np.random.default_rng(0).normal(size=100_000)
+        with pytest.raises(rf.DiskFull, match="journal") as err:
+            run.add_records("raw", 3, 1e-5, {"velocity_v": (record, "V")})
+            _inchip_point(run, 3, "body", 303.0)
+        assert str(path) in str(err.value) and run.full
+        run.close()
+        filler.unlink()
+        got = read_run_file(path)
+        assert got.complete_points == 3 and list(got.points["index"]) == [0, 1, 2]
