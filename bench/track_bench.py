@@ -106,21 +106,27 @@ def opencv_loop(path: Path) -> np.ndarray:
 
 def timed_pair(fns, repeats: int) -> list[tuple]:
     """Each of ``fns`` run ``repeats`` times, interleaved (a, b, a, b, ...) so that a change of the
-    shared machine's load falls on both alike; per function (last result, best wall s, best CPU s)."""
-    best = [[None, np.inf, np.inf] for _ in fns]
+    shared machine's load falls on both alike; per function (last result, best wall s, best CPU s,
+    every run's CPU s, every run's minor page faults)."""
+    import resource
+
+    best = [[None, np.inf, np.inf, [], []] for _ in fns]
     for _ in range(repeats):
         for rec, fn in zip(best, fns):
+            f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
             t0, c0 = time.perf_counter(), time.process_time()
             rec[0] = fn()
-            rec[1] = min(rec[1], time.perf_counter() - t0)
-            rec[2] = min(rec[2], time.process_time() - c0)
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            rec[1], rec[2] = min(rec[1], wall), min(rec[2], cpu)
+            rec[3].append(round(cpu, 3))
+            rec[4].append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
     return [tuple(rec) for rec in best]
 
 
 def bench_file(path: Path, codec: str, size, frames: int, truth, mm_per_px: float, repeats: int) -> dict:
     from labkit.analysis.tracking.tracker import track_video
 
-    (trk, lk, lk_cpu), (loop, lp, lp_cpu) = timed_pair(
+    (trk, lk, lk_cpu, lk_runs, lk_flt), (loop, lp, lp_cpu, lp_runs, lp_flt) = timed_pair(
         [lambda: track_video(path, mm_per_px=mm_per_px), lambda: opencv_loop(path)], repeats)
     u, v = np.concatenate(truth[0]), np.concatenate(truth[1])
     ok = trk.quality == 0
@@ -132,7 +138,9 @@ def bench_file(path: Path, codec: str, size, frames: int, truth, mm_per_px: floa
             "labkit_ge_loop": bool(lk_cpu <= lp_cpu), "labkit_over_loop_cpu": round(lp_cpu / lk_cpu, 3),
             "labkit_position_rms_px": round(float(np.sqrt(np.mean(lk_err ** 2))), 4),
             "opencv_loop_position_rms_px": round(float(np.sqrt(np.nanmean(lp_err ** 2))), 4),
-            "labkit_lost_frames": int(np.sum(trk.quality == 2))}
+            "labkit_lost_frames": int(np.sum(trk.quality == 2)),
+            "labkit_cpu_s_runs": lk_runs, "opencv_loop_cpu_s_runs": lp_runs,
+            "labkit_page_faults_runs": lk_flt, "opencv_loop_page_faults_runs": lp_flt}
 
 
 def bench_size(size: tuple[int, int], frames: int, repeats: int = 3) -> list[dict]:
