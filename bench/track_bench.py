@@ -23,7 +23,12 @@ process also pays for the first touch of the memory holding the decoded frames (
 0.2 ms a 640 x 480 frame, 1.4 ms a 1080p frame), which later runs in the same process reuse.
 ``labkit_ge_loop`` says whether labkit is at least as fast as the loop on that row, by CPU time (the
 wall clock swings with a shared machine's load); ``position_rms_px`` compares both with the
-rendered truth.
+rendered truth. ``*_runs`` list every run's CPU seconds and minor page faults: labkit holds the
+decoded clip (one decoding), and the memory of those frames is handed back to the system between
+runs, so every run pays its first touch again, as a ``labkit track`` process does.
+``one_shot_*`` run each reader once in a fresh interpreter (twice, interleaved, after one uncounted
+run each that byte-compiles the modules): the child's CPU seconds including the interpreter's
+start, the imports and the first call's costs.
 
 Usage: ``python bench/track_bench.py [FRAMES_640 [FRAMES_1080]]`` (defaults 600 and 300).
 """
@@ -106,21 +111,55 @@ def opencv_loop(path: Path) -> np.ndarray:
 
 def timed_pair(fns, repeats: int) -> list[tuple]:
     """Each of ``fns`` run ``repeats`` times, interleaved (a, b, a, b, ...) so that a change of the
-    shared machine's load falls on both alike; per function (last result, best wall s, best CPU s)."""
-    best = [[None, np.inf, np.inf] for _ in fns]
+    shared machine's load falls on both alike; per function (last result, best wall s, best CPU s,
+    every run's CPU s, every run's minor page faults)."""
+    import resource
+
+    best = [[None, np.inf, np.inf, [], []] for _ in fns]
     for _ in range(repeats):
         for rec, fn in zip(best, fns):
+            f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
             t0, c0 = time.perf_counter(), time.process_time()
             rec[0] = fn()
-            rec[1] = min(rec[1], time.perf_counter() - t0)
-            rec[2] = min(rec[2], time.process_time() - c0)
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            rec[1], rec[2] = min(rec[1], wall), min(rec[2], cpu)
+            rec[3].append(round(cpu, 3))
+            rec[4].append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0)
     return [tuple(rec) for rec in best]
+
+
+_ONE_SHOT = {
+    "labkit": "from labkit.analysis.tracking.tracker import track_video; track_video(PATH, mm_per_px=MMPP)",
+    "opencv_loop": "import sys; sys.path.insert(0, BENCH); from track_bench import opencv_loop; opencv_loop(PATH)",
+}
+
+
+def one_shot(path: Path, mm_per_px: float, repeats: int = 2) -> dict:
+    """Each reader run once in a fresh interpreter (as ``labkit track`` runs), interleaved, ``repeats``
+    times: the child's CPU seconds, interpreter start, imports and first touch of memory included."""
+    import resource
+
+    head = ("import os, cv2; os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]}); cv2.setNumThreads(1); "
+            f"PATH, MMPP, BENCH = {str(path)!r}, {mm_per_px!r}, {str(Path(__file__).parent)!r}; ")
+    # as installed: byte-compiled modules (a shell with PYTHONDONTWRITEBYTECODE set would have each
+    # child compile labkit's source, ~40 ms); one uncounted run of each writes them
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    runs: dict[str, list[float]] = {name: [] for name in _ONE_SHOT}
+    for rep in range(repeats + 1):
+        for name, code in _ONE_SHOT.items():
+            r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            subprocess.run([sys.executable, "-c", head + code], check=True, stderr=subprocess.DEVNULL, env=env)
+            r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            if rep:
+                runs[name].append(round(r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime, 3))
+    return {"one_shot_labkit_cpu_s": runs["labkit"], "one_shot_opencv_loop_cpu_s": runs["opencv_loop"],
+            "one_shot_labkit_over_loop_cpu": round(min(runs["opencv_loop"]) / min(runs["labkit"]), 3)}
 
 
 def bench_file(path: Path, codec: str, size, frames: int, truth, mm_per_px: float, repeats: int) -> dict:
     from labkit.analysis.tracking.tracker import track_video
 
-    (trk, lk, lk_cpu), (loop, lp, lp_cpu) = timed_pair(
+    (trk, lk, lk_cpu, lk_runs, lk_flt), (loop, lp, lp_cpu, lp_runs, lp_flt) = timed_pair(
         [lambda: track_video(path, mm_per_px=mm_per_px), lambda: opencv_loop(path)], repeats)
     u, v = np.concatenate(truth[0]), np.concatenate(truth[1])
     ok = trk.quality == 0
@@ -132,7 +171,10 @@ def bench_file(path: Path, codec: str, size, frames: int, truth, mm_per_px: floa
             "labkit_ge_loop": bool(lk_cpu <= lp_cpu), "labkit_over_loop_cpu": round(lp_cpu / lk_cpu, 3),
             "labkit_position_rms_px": round(float(np.sqrt(np.mean(lk_err ** 2))), 4),
             "opencv_loop_position_rms_px": round(float(np.sqrt(np.nanmean(lp_err ** 2))), 4),
-            "labkit_lost_frames": int(np.sum(trk.quality == 2))}
+            "labkit_lost_frames": int(np.sum(trk.quality == 2)),
+            "labkit_cpu_s_runs": lk_runs, "opencv_loop_cpu_s_runs": lp_runs,
+            "labkit_page_faults_runs": lk_flt, "opencv_loop_page_faults_runs": lp_flt,
+            **one_shot(path, mm_per_px)}
 
 
 def bench_size(size: tuple[int, int], frames: int, repeats: int = 3) -> list[dict]:

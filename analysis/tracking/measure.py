@@ -509,6 +509,31 @@ def _decimated_model(samples: list[np.ndarray], seg: Segmentation, grow_px: int,
     return sc
 
 
+def _tray_level(sub: np.ndarray) -> float:
+    """The bright tray's level of a (sub-sampled) frame: the median of the pixels brighter than 0.75
+    of its 99th percentile. An 8-bit frame's order statistics come from its histogram (one pass,
+    no sort: the same values as ``np.percentile`` and ``np.median``, at a tenth of their cost)."""
+    if sub.dtype != np.uint8:
+        return float(np.median(sub[sub > 0.75 * np.percentile(sub, 99)]))
+    cum = np.cumsum(np.bincount(sub.ravel(), minlength=256))
+
+    def kth(k: int, lo: int = 0) -> float:
+        # the k-th smallest (from 0) of the values above ``lo - 1``
+        return float(np.searchsorted(cum, k + (cum[lo - 1] if lo else 0), side="right"))
+
+    pos = 0.99 * (int(cum[-1]) - 1)
+    i = int(np.floor(pos))
+    t = pos - i
+    a, b = kth(i), kth(min(i + 1, int(cum[-1]) - 1))
+    p99 = b - (b - a) * (1 - t) if t >= 0.5 else a + (b - a) * t      # numpy's linear interpolation
+    cut = 0.75 * p99
+    lo = int(np.floor(cut)) + 1                 # the levels strictly above the cut
+    n = int(cum[-1] - (cum[lo - 1] if lo else 0))
+    if n % 2:
+        return kth(n // 2, lo)
+    return (kth(n // 2 - 1, lo) + kth(n // 2, lo)) / 2
+
+
 def _rim(samples: list[np.ndarray], dark_ratio: float) -> np.ndarray:
     """The tray's rim: dark (< ``dark_ratio`` of the tray's level) in every sample and reaching the border.
 
@@ -519,8 +544,7 @@ def _rim(samples: list[np.ndarray], dark_ratio: float) -> np.ndarray:
     h, w = samples[0].shape
     dark = np.ones((h, w), bool)
     for smp in samples:
-        sub = smp[::4, ::4]
-        level = float(np.median(sub[sub > 0.75 * np.percentile(sub, 99)]))
+        level = _tray_level(smp[::4, ::4])
         inv = np.float32(1.0 / max(level, 1.0))
         if smp.dtype == np.uint8:
             # dark in this sample: the grey levels whose scaled value (the same float32 product)

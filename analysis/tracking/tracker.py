@@ -67,6 +67,11 @@ QUALITY_LOST = 2      # not found (occluded, out of view): position is NaN
 QUALITY_LABELS = "0 ok, 1 degraded (partly out of view or odd area), 2 lost"
 
 ROBOT_LENGTH_MM = 5.0
+# the position without the flat field (the illumination part of the budget) is measured every
+# ALT_EVERY-th frame: its shift is smooth along the path and interpolated between
+ALT_EVERY = 8
+# body-length profiles taken (every third frame from the start): their median is the length
+LENGTH_SAMPLES = 50
 
 
 @dataclass
@@ -372,8 +377,8 @@ class TrackerState:
                 if x1 - x0 < 8 or y1 - y0 < 8:
                     break
                 blob, touched = finder.find(img, x0, y0, x1, y1, pred=pred, area_ref=rb.area_ref,
-                                            keep_weights=len(rb.lengths) < 100 and k % 3 == 0, gate_px=g,
-                                            area_tol=tol, alt=k % 4 == 0)
+                                            keep_weights=len(rb.lengths) < LENGTH_SAMPLES and k % 3 == 0, gate_px=g,
+                                            area_tol=tol, alt=k % ALT_EVERY == 0)
                 if blob is None or not touched:
                     break
         if blob is None:
@@ -443,8 +448,8 @@ class TrackerState:
         col = {name: np.array([getattr(r, name) for r in self.rows], float)
                for name in ("t", "u", "v", "theta", "u_alt", "v_alt", "major", "area")}
         t_a = col["t"]
-        # the lighting model's shift of the position is smooth along the path: measured every 4th
-        # frame (a second measurement costs as much as the first), interpolated in time between
+        # the lighting model's shift of the position is smooth along the path: measured every
+        # ALT_EVERY-th frame (a second measurement costs as much as the first), interpolated in time between
         for alt, pos in (("u_alt", "u"), ("v_alt", "v")):
             shift = col[alt] - col[pos]
             known = np.isfinite(shift)

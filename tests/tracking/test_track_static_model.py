@@ -62,3 +62,18 @@ def test_halved_model_finds_what_was_drawn():
     tray[y - 10:y + h + 10, x - 10:x + w + 10] = False
     ratio = sc.flat[tray] / light[tray]
     assert np.ptp(np.percentile(ratio, [1, 99])) / np.median(ratio) < 0.02   # the ring light's shape, within 2 %
+
+
+def test_tray_level_from_histogram_equals_numpy_order_statistics():
+    """The rim's tray level of an 8-bit frame, taken from its histogram, is NumPy's own
+    ``median(sub[sub > 0.75 * percentile(sub, 99)])`` (linear percentile), value for value."""
+    rng = np.random.default_rng(7)
+    cases = [_samples(1)[0][::4, ::4],
+             rng.integers(0, 256, 997).astype(np.uint8),                       # odd count
+             rng.choice(np.array([0, 10, 128, 200, 201, 255], np.uint8), 1000),  # ties, even count
+             np.clip(rng.normal(60, 25, (40, 50)), 0, 255).astype(np.uint8)]
+    for sub in cases:
+        want = float(np.median(sub[sub > 0.75 * np.percentile(sub, 99)]))
+        assert measure._tray_level(sub) == want
+    deep = rng.uniform(0, 4095, (30, 30)).astype(np.float32)                   # a 12-bit frame's floats
+    assert measure._tray_level(deep) == float(np.median(deep[deep > 0.75 * np.percentile(deep, 99)]))
