@@ -106,8 +106,10 @@ def _open_as_of_last_flush(path: Path) -> Any:
     from labkit.h5journal import committed_records, journal_path, open_recovered
     from labkit.lockfiles import writer_of
 
-    if journal_path(path).exists() and writer_of(path) is None and committed_records(path):
-        return open_recovered(path)
+    if journal_path(path).exists() and writer_of(path) is None:
+        records = committed_records(path)
+        if records:
+            return open_recovered(path, records)
     return h5py.File(path, "r")
 
 

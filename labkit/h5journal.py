@@ -26,7 +26,7 @@ import os
 import struct
 import zlib
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias
 
 #: the journal's header: magic, commit number, body length, CRC-32 of the body
 _HEADER = struct.Struct("<8sQQI4x")
@@ -35,6 +35,8 @@ _MAGIC = b"LKJRNL01"
 _RECORD = struct.Struct("<cQQ")
 #: pages held in memory between flushes
 PAGE = 4096
+#: one journal record: kind (``b"W"`` or ``b"T"``), offset (or the final size), bytes
+JournalRecord: TypeAlias = "tuple[bytes, int, bytes | memoryview]"
 
 
 def journal_path(path: str | Path) -> Path:
@@ -77,10 +79,6 @@ class JournalIO(io.RawIOBase):
         self._seq = 0
 
     # -- the journal ------------------------------------------------------------------------
-    @property
-    def journaling(self) -> bool:
-        return self._jfd is not None
-
     def start_journal(self, path: str | Path | None = None, reserve_bytes: float = 0.0) -> None:
         """From now on, writes wait for :meth:`commit`; the journal is ``journal_path(path)``."""
         self.commit()
@@ -88,8 +86,8 @@ class JournalIO(io.RawIOBase):
         self._jfd = os.open(jpath, os.O_RDWR | os.O_CREAT | os.O_TRUNC, 0o666)
         self._jpath = jpath
         os.pwrite(self._jfd, bytes(_HEADER.size), 0)
-        if reserve_bytes > 0:
-            _fallocate_keep_size(self._jfd, int(reserve_bytes))
+        if reserve_bytes > 0:           # no room: a commit that outgrows it fails cleanly (OSError)
+            fallocate_keep_size(self._jfd, 0, int(reserve_bytes))
 
     def commit(self) -> None:
         """Make every write since the last commit part of the file, all at once."""
@@ -99,7 +97,7 @@ class JournalIO(io.RawIOBase):
             self._apply(self._records())
             return
         records = self._records()
-        parts: list[bytes | memoryview] = []
+        parts: list[bytes | memoryview] = []   # record headers and the pages themselves
         for kind, off, data in records:
             parts += [_RECORD.pack(kind, off, len(data)), data]
         crc = 0
@@ -116,8 +114,8 @@ class JournalIO(io.RawIOBase):
         self._sync(self._fd)
         os.pwrite(self._jfd, bytes(_HEADER.size), 0)
 
-    def _records(self) -> list[tuple[bytes, int, memoryview]]:
-        out = []
+    def _records(self) -> list[JournalRecord]:
+        out: list[JournalRecord] = []
         for page in sorted(self._pages):
             start = page * PAGE
             if start < self._size:
@@ -125,7 +123,7 @@ class JournalIO(io.RawIOBase):
         out.append((b"T", self._size, memoryview(b"")))
         return out
 
-    def _apply(self, records: list[tuple[bytes, int, memoryview]]) -> None:
+    def _apply(self, records: list[JournalRecord]) -> None:
         _apply_records(self._fd, records)
         self._pages.clear()
         self._stale = self._size
@@ -164,11 +162,13 @@ class JournalIO(io.RawIOBase):
     def _read(self, off: int, n: int) -> bytearray:
         out = bytearray(n)
         end = min(off + n, self._size)
+        if end <= off:                  # beyond the file's end: zeros
+            return out
         disk_end = min(end, self._stale)
         if disk_end > off:
             got = os.pread(self._fd, disk_end - off, off)
             out[: len(got)] = got
-        for page in range(off // PAGE, (end - 1) // PAGE + 1 if end > off else off // PAGE):
+        for page in range(off // PAGE, (end - 1) // PAGE + 1):
             data = self._pages.get(page)
             if data is None:
                 continue
@@ -240,7 +240,7 @@ class JournalIO(io.RawIOBase):
                 self._jfd = None
             super().close()
 
-    def overlay(self, records: list[tuple[bytes, int, bytes]]) -> None:
+    def overlay(self, records: list[JournalRecord]) -> None:
         """Read as if ``records`` (a committed journal's) had been applied (read-only recovery)."""
         for kind, off, data in records:
             if kind == b"T":
@@ -264,7 +264,7 @@ def _write_all(fd: int, parts: list[bytes | memoryview], offset: int) -> None:
         offset += want
 
 
-def _apply_records(fd: int, records: list[tuple[bytes, int, bytes]] | list[tuple[bytes, int, memoryview]]) -> None:
+def _apply_records(fd: int, records: list[JournalRecord]) -> None:
     for kind, off, data in records:
         if kind == b"W":
             os.pwrite(fd, data, off)
@@ -272,18 +272,26 @@ def _apply_records(fd: int, records: list[tuple[bytes, int, bytes]] | list[tuple
             os.ftruncate(fd, off)
 
 
-def _fallocate_keep_size(fd: int, nbytes: int) -> bool:
+def fallocate_keep_size(fd: int, offset: int, nbytes: int) -> int:
+    """Have the file system set ``nbytes`` aside for ``fd`` from ``offset``, its size unchanged.
+
+    Returns 0 when done, else the errno (``ENOSPC``: no room; ``EOPNOTSUPP``: the file system
+    or the C library cannot)."""
     import ctypes
+    import errno
 
     libc = ctypes.CDLL(None, use_errno=True)
     fallocate = getattr(libc, "fallocate", None)
     if fallocate is None:
-        return False
+        return errno.EOPNOTSUPP
     fallocate.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_long, ctypes.c_long]
-    return fallocate(fd, 1, 0, nbytes) == 0
+    return 0 if fallocate(fd, _FALLOC_FL_KEEP_SIZE, offset, nbytes) == 0 else ctypes.get_errno()
 
 
-def committed_records(path: str | Path) -> list[tuple[bytes, int, bytes]] | None:
+_FALLOC_FL_KEEP_SIZE = 1
+
+
+def committed_records(path: str | Path) -> list[JournalRecord] | None:
     """The records of ``path``'s journal if it holds a whole commit not yet cleared, else None."""
     jpath = journal_path(path)
     try:
@@ -296,7 +304,8 @@ def committed_records(path: str | Path) -> list[tuple[bytes, int, bytes]] | None
     body = raw[_HEADER.size: _HEADER.size + length]
     if magic != _MAGIC or len(body) != length or zlib.crc32(body) != crc:
         return None
-    out, at = [], 0
+    out: list[JournalRecord] = []
+    at = 0
     while at < len(body):
         kind, off, n = _RECORD.unpack_from(body, at)
         at += _RECORD.size
@@ -335,18 +344,19 @@ def open_journaled(path: str | Path, mode: str, **h5kw: Any) -> Any:
     """
     jio = JournalIO(path, mode)
     try:
-        f = _File(jio, mode, **h5kw)
+        return _File(jio, mode, **h5kw)
     except BaseException:
         jio.close()
         raise
-    f.journal = jio
-    return f
 
 
-def open_recovered(path: str | Path) -> Any:
-    """``path`` read-only as of its last commit, its journal's pages overlaid (nothing written)."""
+def open_recovered(path: str | Path, records: list[JournalRecord] | None = None) -> Any:
+    """``path`` read-only as of its last commit, its journal's pages overlaid (nothing written).
+
+    ``records``: the journal's, when the caller has read them (:func:`committed_records`)."""
     jio = JournalIO(path, "r")
-    records = committed_records(path)
+    if records is None:
+        records = committed_records(path)
     if records:
         jio.overlay(records)
     try:

@@ -303,28 +303,19 @@ def reserve_space(path: str | Path, nbytes: float) -> bool:
     when the file system cannot (then :meth:`RunFile.ensure_room` alone guards); raises
     :class:`DiskFull` when there is no room for the reservation.
     """
-    import ctypes
+    from labkit.h5journal import fallocate_keep_size
 
-    libc = ctypes.CDLL(None, use_errno=True)
-    fallocate = getattr(libc, "fallocate", None)
-    if fallocate is None or nbytes <= 0:
+    if nbytes <= 0:
         return False
-    fallocate.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_long, ctypes.c_long]
     fd = os.open(path, os.O_WRONLY)
     try:
-        size = os.fstat(fd).st_size
-        if fallocate(fd, _FALLOC_FL_KEEP_SIZE, size, int(nbytes)) == 0:
-            return True
-        err = ctypes.get_errno()
+        err = fallocate_keep_size(fd, os.fstat(fd).st_size, int(nbytes))
     finally:
         os.close(fd)
     if err in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
         raise DiskFull(f"no room to set {_mb(nbytes)} aside for this run ({os.strerror(err)})", file=path,
                        key="--out")
-    return False
-
-
-_FALLOC_FL_KEEP_SIZE = 1
+    return err == 0
 
 
 def release_space(path: str | Path) -> None:
