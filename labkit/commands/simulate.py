@@ -503,10 +503,11 @@ def _print_single(run: SingleRun) -> None:
                 f"highest body gap {v.max_jump_um:.4g} um)")
     c = r.convergence
     if c is not None and math.isfinite(c.error_mm_s):
+        how = ("every foot held, far from letting go" if c.basis == "held" else
+               "speeds at h, h/2 ...: " + ", ".join(f"{x:.4g}" for x in c.speeds_mm_s))
         print(f"  step: {c.status} at {c.dt_s:.3g} s (default {c.default_dt_s:.3g} s), step error "
-              f"{c.error_mm_s:.3g} mm/s (tolerance {c.tolerance_mm_s:.3g}; speeds at h, h/2 ...: "
-              + ", ".join(f"{x:.4g}" for x in c.speeds_mm_s)
-              + f"); a start 0.05 um apart: {c.seed_spread_mm_s:+.3g} mm/s")
+              f"{c.error_mm_s:.3g} mm/s (tolerance {c.tolerance_mm_s:.3g}; {how}); "
+              f"a start 0.05 um apart: {c.seed_spread_mm_s:+.3g} mm/s")
     if run.dt_check is not None:
         d, q, k = run.dt_check["default"], run.dt_check["quarter"], run.dt_check
         print(f"  dt check ({len(k['seeds'])} seeds): default step {k['dt_s']:.3g} s: {d['mean_mm_s']:.3f} "

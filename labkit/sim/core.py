@@ -420,7 +420,8 @@ def _result(p, scenario, mdl, out, duration_s, dt, every, n_steps, n_skip, engin
     n_ev = int(cnt[M.CNT_EVENTS])
     counters = {"events_lost": int(cnt[M.CNT_LOST]), "steps_event_capped": int(cnt[M.CNT_FORCED]),
                 "steps_halved": int(cnt[M.CNT_HALVED]), "trial_steps": int(cnt[M.CNT_ADV]),
-                "steps_halved_transient": int(cnt[M.CNT_HALVED_TRANSIENT])}
+                "steps_halved_transient": int(cnt[M.CNT_HALVED_TRANSIENT]), "releases": int(cnt[M.CNT_RELEASES]),
+                "checks_near_release": int(cnt[M.CNT_NEAR])}
     valid = validity(p, (rec[:, M.REC_Z] - rec[:, M.REC_ZG]) * 1e6, rec[:, M.REC_PH:M.REC_PH + 3],
                      out["rec_contact"], counters)
     return SimResult(

@@ -26,11 +26,21 @@ default) goes through :func:`control` after its main run at the step ``h``
    case at 950 Hz, 76 um: 1.98 and 3.05 mm/s at h and h/2, seeds 0.6 apart; 0.001 mm/s
    from h/4 on, seeds agreeing): one sensitive step is not enough to call it chaotic.
 
+A run that is *held* (:func:`held`: every foot pinned and sticking at every step, each keeping
+more than half its hold, :data:`labkit.sim.scheme.NEAR_FRACTION`, no impact, release or slip, the
+body off the ground, its speed below :data:`HELD_SPEED_FRACTION` of the tolerance) and whose probe
+is held too is ``converged`` without the run at ``h/2`` (``basis = "held"``): with no event the
+scheme is the midpoint rule on smooth dynamics, whose forces at a finer step differ by
+O((omega h)^2 / 12), 0.3 % at the top mode, far inside the half hold left, so the finer run is held
+as well, and a held robot's speed is its elastic deflection over the run; the error estimate is
+twice the sum of the two runs' speeds. Cost: 2 runs' worth.
+
 The whole run is checked, not a stretch of it: on random Monte Carlo cases a check over
 the first quarter passed runs whose error grew later (bench/convergence_bench.py). Cost of a
-run that passes: 4 runs' worth (the run, twice its steps, the probe), 8 when the pass is
-marginal and confirmed (four times its steps on top); of a chaotic one 14;
-of one refined k times about 2^(k+2); sweeps check a sample (:mod:`labkit.sim.sweep`).
+held run: 2 runs' worth; of another run that passes: 4 runs' worth (the run, twice its steps,
+the probe), 8 when the pass is marginal and confirmed (four times its steps on top); of a
+chaotic one 14; of one refined k times about 2^(k+2); sweeps check a sample
+(:mod:`labkit.sim.sweep`).
 """
 from __future__ import annotations
 
@@ -61,6 +71,9 @@ MAX_HALVINGS = 4
 #: half of it: a coarse step can make a robot jump and scatter that, resolved, stands still.
 CHAOS_LEVELS = 3
 
+#: A held run's speed (and its probe's) must be below this fraction of the tolerance (:func:`held`).
+HELD_SPEED_FRACTION = 0.25
+
 #: ``run(dt_s, seed) -> SimResult``: the same run (robot, drive, duration, start, transient,
 #: recording) at another step or from another seed, without error control.
 Runner = Callable[[float, "int | None"], SimResult]
@@ -74,6 +87,25 @@ def tolerance_mm_s(v_mm_s: float) -> float:
 def probe_seed(seed: int | None) -> int:
     """The seed of the chaos probe's start: the next one (1 for a run started exactly at rest)."""
     return 1 if seed is None else int(seed) + 1
+
+
+def held(r: SimResult) -> bool:
+    """Was every foot held on the ground for the whole run, far from letting go (module doc)?
+
+    True when the kernel counted no impact, release or lost event and no contact check near a
+    release (``counters["checks_near_release"]``: a pull above half the hold, a lateral force above
+    half what friction allows, a foot sliding, the body resting on the ground), no foot spent
+    measured time in the air, and the speed is below :data:`HELD_SPEED_FRACTION` of the
+    tolerance."""
+    c = r.counters
+    if any(c.get(k, 1) != 0 for k in ("releases", "checks_near_release", "events_lost")):
+        return False
+    if int(np.sum(r.impacts)) or r.body_impacts:
+        return False
+    if any(frac.get("air", 1.0) > 0.0 for frac in r.contact_fraction.values()):
+        return False
+    v = r.mean_speed_mm_s
+    return math.isfinite(v) and abs(v) <= HELD_SPEED_FRACTION * tolerance_mm_s(v)
 
 
 def _confirmed(runs: list[SimResult], k: int, run: Runner) -> tuple[bool, float]:
@@ -122,8 +154,14 @@ def control(r: SimResult, run: Runner) -> SimResult:
     keep, with :attr:`SimResult.convergence` and its validity flags set."""
     t0 = time.perf_counter()
     runs = [r]
-    spreads = [run(r.dt_s, probe_seed(r.seed)).mean_speed_mm_s - r.mean_speed_mm_s]
-    status, k, err, tol = _status(runs, spreads, run)
+    probe = run(r.dt_s, probe_seed(r.seed))
+    spreads = [probe.mean_speed_mm_s - r.mean_speed_mm_s]
+    basis = "held" if held(r) and held(probe) else "halving"
+    if basis == "held":
+        v = r.mean_speed_mm_s
+        status, k, err, tol = "converged", 0, ERROR_FACTOR * (abs(v) + abs(probe.mean_speed_mm_s)), tolerance_mm_s(v)
+    else:
+        status, k, err, tol = _status(runs, spreads, run)
     out = runs[k]
     if out.validity is not None:
         out.validity.chaotic = status == "chaotic"
@@ -132,7 +170,7 @@ def control(r: SimResult, run: Runner) -> SimResult:
                                   tolerance_mm_s=float(tol), seed_spread_mm_s=float(spreads[min(k, len(spreads) - 1)]),
                                   measured_s=(float(r.transient_s), float(r.duration_s)), halvings=k,
                                   speeds_mm_s=tuple(float(x.mean_speed_mm_s) for x in runs),
-                                  wall_s=time.perf_counter() - t0)
+                                  wall_s=time.perf_counter() - t0, basis=basis)
     return out
 
 

@@ -65,6 +65,7 @@ class ConvergenceSummary(TypedDict):
     halvings: int
     speeds_per_step_mm_s: list[float]
     wall_s: float
+    basis: str
 
 
 class SimResultSummary(TypedDict):
@@ -173,7 +174,9 @@ class Convergence:
     minus its own (the chaos probe); ``measured_s``: the time the speeds are measured over
     (``(t_from, t_to)``: after the transient); ``halvings``: how often the step was halved;
     ``speeds_mm_s``: the speed per step tried (default, half, quarter ...);
-    ``wall_s``: what the checks and refinements took."""
+    ``wall_s``: what the checks and refinements took; ``basis``: how the error was estimated,
+    ``"halving"`` (the runs at smaller steps) or ``"held"`` (every foot held far from letting go
+    in the run and its probe: :func:`labkit.sim.errorcontrol.held`), empty when unchecked."""
 
     status: str
     dt_s: float
@@ -185,6 +188,7 @@ class Convergence:
     halvings: int = 0
     speeds_mm_s: tuple[float, ...] = ()
     wall_s: float = 0.0
+    basis: str = ""
 
     def summary(self) -> ConvergenceSummary:
         """JSON-able: every figure (NaN as None)."""
@@ -195,7 +199,7 @@ class Convergence:
                 "step_error_mm_s": num(self.error_mm_s), "tolerance_mm_s": num(self.tolerance_mm_s),
                 "seed_spread_mm_s": num(self.seed_spread_mm_s), "measured_s": [float(x) for x in self.measured_s],
                 "halvings": int(self.halvings), "speeds_per_step_mm_s": [float(x) for x in self.speeds_mm_s],
-                "wall_s": round(float(self.wall_s), 4)}
+                "wall_s": round(float(self.wall_s), 4), "basis": self.basis}
 
 
 def validity(params: RobotParams, body_gap_um: np.ndarray, angles_rad: np.ndarray, contact: np.ndarray,
