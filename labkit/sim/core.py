@@ -29,7 +29,7 @@ import numpy as np
 
 from labkit.errors import InputError
 from labkit.sim import model as M
-from labkit.sim.errorcontrol import STEP_TOL_ABS_MM_S, STEP_TOL_REL, control, unchecked
+from labkit.sim.errorcontrol import STEP_TOL_ABS_MM_S, STEP_TOL_REL, control, control_held, held, probe_seed, unchecked
 from labkit.sim.excitation import PZT, Shaker
 from labkit.sim.params import RobotParams
 from labkit.sim.result import SimResult, classify_pattern, foot_period, validity
@@ -80,8 +80,14 @@ ABLATIONS: dict[str, dict[str, float]] = {
 }
 
 ENGINES = ("numba", "reference")
-#: simulate(error_control=...): check the step on a stretch and refine (default), or not.
-ERROR_CONTROL = ("check", "off")
+#: simulate(error_control=...): check the step and refine (default); "held": the run tried held at
+#: HELD_STEP_FACTOR times the step first (kept if held, else the run at the step, unchecked: a
+#: sweep's sampled draws); or not at all.
+ERROR_CONTROL = ("check", "held", "off")
+#: A run is first tried at this many times its step, stopped at the first sign that a foot or the
+#: body is not held; held to the end (with its probe, under "check"), it is the result
+#: (docs/model.md, "Held runs").
+HELD_STEP_FACTOR = 2
 
 
 def ablate(params: RobotParams, ablation: str | None) -> RobotParams:
@@ -201,6 +207,20 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
         A drive, duration or step outside :func:`check_run`'s bounds, before anything runs.
     """
     _check_call(params, scenario, engine, duration_s, error_control)
+    if error_control in ("check", "held") and engine == "numba" and dt_s is None:
+        def held_at(sd: int | None) -> SimResult | None:
+            return _held_run(params, scenario, duration_s, record_dt_s, sd, ablation, transient_s, jitter_um,
+                             start_height_um, keys, progress)
+
+        coarse = held_at(seed)
+        if coarse is not None and error_control == "held":
+            return coarse
+        if coarse is not None:
+            probe = held_at(probe_seed(seed))
+            if probe is not None:
+                return control_held(coarse, probe, default_dt(ablate(params, ablation), scenario))
+    if error_control == "held":
+        error_control = "off"
     if error_control == "check" and engine == "numba" and dt_s is None:
         def rerun(step: float, sd: int | None) -> SimResult:
             return simulate(params, scenario, duration_s, step, record_dt_s, sd, ablation=ablation,
@@ -221,6 +241,31 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     wall = time.perf_counter() - t0
     return unchecked(_result(p, scenario, mdl, out, duration_s, st.dt, st.every, st.n_steps, st.n_skip, engine, wall,
                              seed, ablation))
+
+
+def _held_run(params: RobotParams, scenario: Shaker | PZT, duration_s: float, record_dt_s: float | None,
+              seed: int | None, ablation: str | None, transient_s: float | None, jitter_um: float,
+              start_height_um: float | None, keys: dict[str, str] | None,
+              progress: Callable[[int, int], None] | None = None) -> SimResult | None:
+    """The run at :data:`HELD_STEP_FACTOR` times the default step, stopped as soon as a foot or the
+    body is not held; the result when it was held to the end (:func:`labkit.sim.errorcontrol.held`),
+    else None."""
+    p = ablate(params, ablation)
+    h = _step(p, scenario, duration_s, None, keys)       # the bounds are the default step's
+    if HELD_STEP_FACTOR * h > duration_s / 4:
+        return None
+    st = _steps(scenario, duration_s, _step(p, scenario, duration_s, HELD_STEP_FACTOR * h, keys), record_dt_s,
+                transient_s)
+    mdl = M.build_model(p, scenario)
+    state, mode = _start(mdl, start_height_um, seed, jitter_um)
+    t0 = time.perf_counter()
+    out = run_model(mdl, state, mode, st.n_steps, st.dt, st.every, st.n_skip, ev_cap=EVENT_LOG_CAP,
+                    tail_steps=st.tail_steps, tail_every=st.tail_every, progress=progress, stop_when_active=True)
+    if out["stopped"][0]:
+        return None
+    r = unchecked(_result(p, scenario, mdl, out, duration_s, st.dt, st.every, st.n_steps, st.n_skip, "numba",
+                          time.perf_counter() - t0, seed, ablation))
+    return r if held(r) else None
 
 
 def _check_call(params: RobotParams, scenario: Shaker | PZT, engine: str, duration_s: float,
@@ -322,7 +367,8 @@ def _start(mdl: M.Model, start_height_um: float | None, seed: int | None,
 def run_model(mdl: M.Model, state: np.ndarray, mode: np.ndarray, n_steps: int, dt: float, every: int = 1,
               n_skip: int = 0, *, engine: str = "numba", ev_cap: int = EVENT_LOG_CAP, tail_steps: int = 0,
               tail_every: int | None = None, piece_steps: int | None = None,
-              progress: Callable[[int, int], None] | None = None) -> dict[str, np.ndarray]:
+              progress: Callable[[int, int], None] | None = None,
+              stop_when_active: bool = False) -> dict[str, np.ndarray]:
     """Low level: integrate a built model from any state (layouts in :mod:`labkit.sim.scheme`).
 
     ``mode``: contact mode of the 6 feet and (7th, optional) the body. Returns
@@ -335,6 +381,9 @@ def run_model(mdl: M.Model, state: np.ndarray, mode: np.ndarray, n_steps: int, d
     the same to the bit as one piece; ``progress(done, n_steps)`` is called after each.
     A sample is kept every ``every`` steps, and every ``tail_every`` steps over the
     last ``tail_steps`` steps (a long run's output decimated, its end at full rate).
+    With ``stop_when_active`` the run stops at the first step after which a foot or the body
+    is not held (:class:`labkit.sim.kernel.Integration`): ``stopped`` (one bool) says so, and
+    the other outputs are then those of the stretch run.
     """
     from labkit.sim.kernel import Integration
 
@@ -347,13 +396,15 @@ def run_model(mdl: M.Model, state: np.ndarray, mode: np.ndarray, n_steps: int, d
         from labkit.sim.reference import scheme_python
 
         mod = scheme_python()
-    run = Integration(mod, P, A, state, mode7, dt, n_skip, ev_cap)
+    run = Integration(mod, P, A, state, mode7, dt, n_skip, ev_cap, stop_when_active)
     recs, contacts = [], []
     pieces = _pieces(n_steps, every, tail_steps, tail_every or every, piece_steps or PIECE_STEPS)
     if progress is not None and len(pieces) > 1:
         progress(0, n_steps)
     for k, (n, ev) in enumerate(pieces):
         rec, rc = run.advance(n, ev)
+        if run.stopped:
+            return {"rec": rec, "rec_contact": rc, **run.outputs()}
         last = k == len(pieces) - 1
         if not last and n % ev == 0:     # its last sample is the next piece's first
             rec, rc = rec[:-1], rc[:-1]

@@ -25,10 +25,12 @@ _compiled = False
 class Integration:
     """One run of the scheme ``mod`` (compiled or plain) from ``state`` and ``mode``,
     integrated in pieces by :meth:`advance`; the statistics (``frac``, ``max_air``,
-    ``max_h``, ``count``, ``events``) accumulate over the pieces."""
+    ``max_h``, ``count``, ``events``) accumulate over the pieces. With ``stop_when_active``
+    the kernel stops at the first step after which a foot or the body is not held
+    (:data:`labkit.sim.scheme.STOP_WHEN_ACTIVE`; :attr:`stopped`)."""
 
     def __init__(self, mod: ModuleType, P: np.ndarray, A: np.ndarray, state: np.ndarray, mode: np.ndarray,
-                 dt: float, n_skip: int, ev_cap: int) -> None:
+                 dt: float, n_skip: int, ev_cap: int, stop_when_active: bool = False) -> None:
         self.mod = mod
         self.P = np.ascontiguousarray(P, dtype=np.float64)
         self.A = np.ascontiguousarray(A, dtype=np.float64)
@@ -40,6 +42,8 @@ class Integration:
         self.n0 = 0                               # the next step's index
         self.out = {"frac": np.zeros((6, 3)), "max_air": np.zeros(6), "max_h": np.zeros(6),
                     "count": np.zeros(mod.CNT_SIZE, np.int64), "events": np.zeros((ev_cap, mod.EV_COLS))}
+        if stop_when_active:
+            self.out["count"][mod.CNT_STOP] = mod.STOP_WHEN_ACTIVE
         self.W, self.I = mod.new_scratch()
         self.T = np.zeros(mod.S_SIZE)
         self.air_run = np.zeros(6)
@@ -59,9 +63,15 @@ class Integration:
         self.n0 += int(n_steps)
         return rec, rec_contact
 
+    @property
+    def stopped(self) -> bool:
+        """Did a run started with ``stop_when_active`` stop early (a foot or the body not held)?"""
+        return bool(self.out["count"][self.mod.CNT_STOP] == self.mod.STOPPED)
+
     def outputs(self) -> dict[str, np.ndarray]:
-        """The accumulated outputs, the state and the contact modes after the last piece."""
-        return {**self.out, "state": self.S, "mode": self.md.astype(np.int8)}
+        """The accumulated outputs, the state and the contact modes after the last piece, and
+        whether the run stopped early (``stopped``)."""
+        return {**self.out, "state": self.S, "mode": self.md.astype(np.int8), "stopped": np.array([self.stopped])}
 
 
 def run_scheme(mod: ModuleType, P: np.ndarray, A: np.ndarray, state: np.ndarray, mode: np.ndarray, n_steps: int,

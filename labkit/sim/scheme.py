@@ -175,8 +175,12 @@ EV_COLS = 6
 # contact checks (:func:`release`) that found a pinned foot within NEAR_FRACTION of letting go, a
 # foot sliding, or the body resting on the ground (none: the run was *held*, docs/model.md)
 CNT_BODY, CNT_EVENTS, CNT_LOST, CNT_FORCED, CNT_RELEASES, CNT_HALVED, CNT_ADV, CNT_HALVED_TRANSIENT, \
-    CNT_NEAR = range(6, 15)
-CNT_SIZE = 15
+    CNT_NEAR, CNT_STOP = range(6, 16)
+CNT_SIZE = 16
+#: count[CNT_STOP], set by the caller: 1 = stop the run at the first step after which a foot or the
+#: body is no longer held (an impact, a release, a contact check near a release); the kernel then
+#: sets it to STOPPED (:func:`integrate`; a held run tried at a coarser step, docs/model.md)
+STOP_WHEN_ACTIVE, STOPPED = 1, 2
 #: A pinned foot is *near* letting go when its pull exceeds this fraction of its hold (or its
 #: lateral force this fraction of what friction allows): the forces' step error is O((w h)^2 / 12),
 #: 0.3 % at the top mode and 32 steps a period, so a run whose feet all kept more than half their
@@ -1562,6 +1566,10 @@ def integrate(P_, A_, S_, mode_, n0, n_steps, dt, every, n_skip, rec, rec_contac
         if n == n_steps:
             break
         substeps(P, A, S, T, mode, t, dt, W, I, events, count)
+        if count[CNT_STOP] == STOP_WHEN_ACTIVE and (count[CNT_NEAR] > 0 or count[CNT_RELEASES] > 0
+                                                    or count[CNT_EVENTS] + count[CNT_LOST] + count[CNT_BODY] > 0):
+            count[CNT_STOP] = STOPPED
+            break
         if n0 + n >= n_skip:
             zg, _, _ = ground(P, W, t + dt)
             for j in range(6):

@@ -574,8 +574,11 @@ def _sweep_meta(proto: PointTask, n_draws: int, scheduler: str | None, error_con
 
 
 def _control(mode: str, draw: int) -> str:
-    """``simulate``'s error control for one draw under a sweep's mode (:data:`ERROR_CONTROL`)."""
-    return "check" if mode == "every" or (mode == "sample" and draw == 0) else "off"
+    """``simulate``'s error control for one draw under a sweep's mode (:data:`ERROR_CONTROL`): the
+    sampled draws are tried held at a coarser step first (``"held"``, docs/model.md)."""
+    if mode == "every" or (mode == "sample" and draw == 0):
+        return "check"
+    return "held" if mode == "sample" else "off"
 
 
 def _check_options(draws: int, duration_s: float, step_fraction: float, accel_limit_g: float | None,

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from labkit.sim import PZT, RobotParams, Shaker, simulate
-from labkit.sim.core import default_dt
+from labkit.sim import model as M
+from labkit.sim.core import HELD_STEP_FACTOR, default_dt, run_model
 from labkit.sim.errorcontrol import held, probe_seed, tolerance_mm_s
 from labkit.sim.scheme import NEAR_FRACTION
 from labkit.sim.sweep import limit_acceleration
@@ -25,7 +26,12 @@ from labkit.sim.uncertainty import draw_params
 
 def _case(i: int) -> tuple[RobotParams, Shaker | PZT]:
     """Robot i drawn from the paper set (seed 7); a shaker drive on the 5.8 g envelope for even i,
-    the PZT below 3 V for odd i; frequencies uniform in 300-2000 Hz."""
+    the PZT below 3 V for odd i; frequencies uniform in 300-2000 Hz; cases 6 and 7 drive the
+    nominal robot at its top leg mode (1801 Hz), where a coarser step detunes most."""
+    if i >= 6:
+        paper = RobotParams.preset("paper")
+        f = float(np.sqrt(paper.k_per_s2[2]) / (2 * np.pi))
+        return paper, (limit_acceleration(Shaker(f, 25.0), 5.8) if i == 6 else PZT(f, 1.5))
     rng = np.random.default_rng(7)
     paper = RobotParams.preset("paper")
     for k in range(i + 1):
@@ -35,7 +41,7 @@ def _case(i: int) -> tuple[RobotParams, Shaker | PZT]:
     return p, sc
 
 
-@pytest.mark.parametrize("i", range(6))
+@pytest.mark.parametrize("i", range(8))
 def test_a_held_run_is_held_and_agrees_at_finer_steps(i):
     p, sc = _case(i)
     r = simulate(p, sc, 0.5)
@@ -45,8 +51,12 @@ def test_a_held_run_is_held_and_agrees_at_finer_steps(i):
         # not every drawn robot stands: those that do not are checked by halving
         assert c.basis == "halving" and len(c.speeds_mm_s) >= 2
         return
-    assert c.speeds_mm_s == (r.mean_speed_mm_s,) and c.dt_s == r.dt_s
     h = default_dt(p, sc)
+    # held at twice the step (and its probe), the run at the step was never made
+    assert c.speeds_mm_s == (r.mean_speed_mm_s,) and c.dt_s == r.dt_s
+    # (the PZT's step is shortened so its square wave's edges fall on steps)
+    assert 0.9 * HELD_STEP_FACTOR * h <= r.dt_s <= HELD_STEP_FACTOR * h * (1 + 1e-9)
+    assert c.default_dt_s == pytest.approx(h, rel=1e-6)
     for div in (4, 16):
         for seed in (r.seed, probe_seed(r.seed)):
             fine = simulate(p, sc, 0.5, seed=seed, dt_s=h / div, error_control="off")
@@ -100,3 +110,32 @@ def test_near_means_more_than_half_the_hold():
     # and at half that adhesion they let go: the near band is the top half of the hold
     half = at(NEAR_FRACTION * 0.97 * hi)
     assert half.counters["releases"] > 0
+
+
+def test_the_held_attempt_stops_at_the_first_sign_of_activity():
+    """The coarse attempt of a robot that walks stops within its first drive periods (its cost is
+    small) and the result is then the run at the default step, checked by halving."""
+    p, sc = RobotParams(c_ad_n=50e-9), Shaker(240, 25)
+    mdl = M.build_model(p, sc)
+    state, mode = M.rest_state(mdl), np.array([M.ADHESION] * 6 + [M.AIR])
+    h = default_dt(p, sc)
+    n = int(round(0.2 / (2 * h)))
+    out = run_model(mdl, state, mode, n, 2 * h, 1, 0, stop_when_active=True)
+    assert out["stopped"][0]
+    done = int(np.count_nonzero(out["rec"][1:, M.REC_T]))
+    assert 0 < done < n // 4, (done, n)
+    full = run_model(mdl, state, mode, n, 2 * h, 1, 0)
+    assert not full["stopped"][0] and np.count_nonzero(full["rec"][1:, M.REC_T]) == n
+
+
+def test_a_sweeps_sampled_draws_are_tried_held():
+    """A sweep's draws at a standing point run at twice the step when held (status sampled), at a
+    walking point at the default step."""
+    from labkit.sim import sweep
+
+    p = RobotParams.preset("paper")
+    s = sweep(p, Shaker(240, 25), "freq_hz", [700.0], draws=3, duration_s=0.3, seed=0, workers=1, quiet=True,
+              accel_limit_g=5.8)
+    h = default_dt(p, limit_acceleration(Shaker(700.0, 25), 5.8))
+    assert list(s.convergence[0]) == ["converged", "sampled", "sampled"]
+    assert all(1.8 * h < s.dt_s[0, d] < 2.2 * h for d in (1, 2)), s.dt_s  # drawn robots: their own steps
