@@ -19,6 +19,7 @@ M5-M11 and its section "Numerics"):
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -81,13 +82,17 @@ ABLATIONS: dict[str, dict[str, float]] = {
 
 ENGINES = ("numba", "reference")
 #: simulate(error_control=...): check the step and refine (default); "held": the run tried held at
-#: HELD_STEP_FACTOR times the step first (kept if held, else the run at the step, unchecked: a
+#: a multiple of the step first (kept if held, else the run at the step, unchecked: a
 #: sweep's sampled draws); or not at all.
 ERROR_CONTROL = ("check", "held", "off")
-#: A run is first tried at this many times its step, stopped at the first sign that a foot or the
-#: body is not held; held to the end (with its probe, under "check"), it is the result
-#: (docs/model.md, "Held runs").
-HELD_STEP_FACTOR = 2
+#: A run is first tried at k times its step (:func:`held_step_factor`, k <= HELD_MAX_FACTOR),
+#: stopped at the first sign that a foot or the body is not held; held to the end (with its
+#: probe, under "check"), it is the result (docs/model.md, "Held runs").
+HELD_MAX_FACTOR = 4
+#: ... k is the largest at which no mode of the robot on its pinned feet, nor the drive, has its
+#: forced response changed by more than this fraction (its frequency's detuning by the midpoint
+#: rule, over twice its damping ratio, near its resonance).
+HELD_RESPONSE_CHANGE = 0.1
 
 
 def ablate(params: RobotParams, ablation: str | None) -> RobotParams:
@@ -243,19 +248,51 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
                              seed, ablation))
 
 
+def _detuning(omega_h: float) -> float:
+    """How much lower the midpoint rule's frequency of a mode is, relatively, at ``omega h``:
+    ``1 - atan(omega h / 2) / (omega h / 2)``."""
+    x = 0.5 * omega_h
+    return 1.0 - math.atan(x) / x if x > 0 else 0.0
+
+
+@functools.lru_cache(maxsize=64)
+def _pinned_modes(params: RobotParams) -> tuple[tuple[float, float], ...]:
+    from labkit.sim.modes import pinned_modes
+
+    return tuple((m.freq_hz, m.damping_ratio) for m in pinned_modes(params, max_hz=math.inf).modes)
+
+
+def held_step_factor(params: RobotParams, scenario: Shaker | PZT, dt: float) -> int:
+    """The coarsest multiple k of the step ``dt`` (1 .. :data:`HELD_MAX_FACTOR`) a held run is tried
+    at: every mode of the robot standing on its pinned, sticking feet (damping ratio zeta) and the
+    drive keep their forced response within :data:`HELD_RESPONSE_CHANGE` at ``k dt``, bounded by
+    ``d (1 + 1 / (2 zeta))`` with ``d`` the mode's :func:`_detuning` (first order, near resonance).
+    The ``paper`` robot: 3 (its top pinned mode 1517 Hz, zeta 0.12, is detuned 2.0 % at 3 dt)."""
+    modes = _pinned_modes(params)
+    best = 1
+    for k in range(2, HELD_MAX_FACTOR + 1):
+        h = k * dt
+        change = [_detuning(2 * math.pi * f * h) * (1 + 0.5 / z) if z > 0 else math.inf for f, z in modes]
+        change.append(_detuning(2 * math.pi * scenario.freq_hz * h))
+        if max(change) > HELD_RESPONSE_CHANGE:
+            break
+        best = k
+    return best
+
+
 def _held_run(params: RobotParams, scenario: Shaker | PZT, duration_s: float, record_dt_s: float | None,
               seed: int | None, ablation: str | None, transient_s: float | None, jitter_um: float,
               start_height_um: float | None, keys: dict[str, str] | None,
               progress: Callable[[int, int], None] | None = None) -> SimResult | None:
-    """The run at :data:`HELD_STEP_FACTOR` times the default step, stopped as soon as a foot or the
+    """The run at :func:`held_step_factor` times the default step, stopped as soon as a foot or the
     body is not held; the result when it was held to the end (:func:`labkit.sim.errorcontrol.held`),
     else None."""
     p = ablate(params, ablation)
     h = _step(p, scenario, duration_s, None, keys)       # the bounds are the default step's
-    if HELD_STEP_FACTOR * h > duration_s / 4:
+    k = held_step_factor(p, scenario, h)
+    if k < 2 or k * h > duration_s / 4:
         return None
-    st = _steps(scenario, duration_s, _step(p, scenario, duration_s, HELD_STEP_FACTOR * h, keys), record_dt_s,
-                transient_s)
+    st = _steps(scenario, duration_s, _step(p, scenario, duration_s, k * h, keys), record_dt_s, transient_s)
     mdl = M.build_model(p, scenario)
     state, mode = _start(mdl, start_height_um, seed, jitter_um)
     t0 = time.perf_counter()

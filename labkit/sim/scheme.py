@@ -181,10 +181,11 @@ CNT_SIZE = 16
 #: body is no longer held (an impact, a release, a contact check near a release); the kernel then
 #: sets it to STOPPED (:func:`integrate`; a held run tried at a coarser step, docs/model.md)
 STOP_WHEN_ACTIVE, STOPPED = 1, 2
-#: A pinned foot is *near* letting go when its pull exceeds this fraction of its hold (or its
-#: lateral force this fraction of what friction allows): the forces' step error is O((w h)^2 / 12),
-#: 0.3 % at the top mode and 32 steps a period, so a run whose feet all kept more than half their
-#: hold at every step keeps them at any finer step (:mod:`labkit.sim.errorcontrol`).
+#: A pinned foot is *near* letting go when the hold it has left (its hold minus its pull) is less
+#: than this fraction of its hold or of the largest normal force it has borne in the run (or its
+#: lateral force exceeds this fraction of what friction allows): a finer step changes the forces
+#: by a few per cent of their oscillation (docs/model.md, "Held runs"), so a run whose feet all
+#: kept that much at every step keeps them held at any finer step (:mod:`labkit.sim.errorcontrol`).
 NEAR_FRACTION = 0.5
 
 #: Cached inverses of R^T M^-1 R over a set of rows (the pinned rows, with or without stiff
@@ -222,9 +223,10 @@ W_REGIONS = (
     ("W_GRND", 9),              # ground(): two remembered (t, zg, vg, ag), then the slot to replace next
     ("W_CACHE", NSLOT * NC * NC),   # the cached inverses (NSLOT above)
     ("W_U", NB),                # advance: the body's part of a right-hand side
+    ("W_FMAX", 6),              # per foot: the largest |normal contact force| seen so far (release)
 )
 (W_F, W_R, W_Y0, W_VB, W_Q0, W_V0, W_SM, W_B, W_QH, W_AS, W_BS, W_C, W_T, W_GAP0, W_GAP1, W_VREL, W_FI, W_RY,
- W_LI0, W_LI1, W_G0, W_CT, W_CV, W_FX, W_FR, W_GRND, W_CACHE, W_U, W_SIZE) = layout(W_REGIONS)
+ W_LI0, W_LI1, W_G0, W_CT, W_CV, W_FX, W_FR, W_GRND, W_CACHE, W_U, W_FMAX, W_SIZE) = layout(W_REGIONS)
 #: The integer scratch I.
 I_REGIONS = (
     ("I_ROWS", NI),             # active rows
@@ -1181,7 +1183,12 @@ def release(P, A, S, mode, count, W, o):
             continue
         lam_z = W[o + j]
         fad = P[P_CADT] * S[S_TC + j] + P[P_CAD]
-        if -lam_z > NEAR_FRACTION * fad:
+        if abs(lam_z) > W[W_FMAX + j]:
+            W[W_FMAX + j] = abs(lam_z)
+        # near: the hold left is less than NEAR_FRACTION of the hold or of the largest force
+        # the foot has borne (where the weight it carries dwarfs its adhesion, the pull that
+        # releases it is a change of that force, not of the hold)
+        if fad + lam_z < NEAR_FRACTION * max(fad, W[W_FMAX + j]):
             near = True
         if -lam_z > fad:
             # t_c is kept: should the foot not leave within the step, it keeps its contact time

@@ -17,7 +17,7 @@ import pytest
 
 from labkit.sim import PZT, RobotParams, Shaker, simulate
 from labkit.sim import model as M
-from labkit.sim.core import HELD_STEP_FACTOR, default_dt, run_model
+from labkit.sim.core import default_dt, held_step_factor, run_model
 from labkit.sim.errorcontrol import held, probe_seed, tolerance_mm_s
 from labkit.sim.scheme import NEAR_FRACTION
 from labkit.sim.sweep import limit_acceleration
@@ -55,7 +55,8 @@ def test_a_held_run_is_held_and_agrees_at_finer_steps(i):
     # held at twice the step (and its probe), the run at the step was never made
     assert c.speeds_mm_s == (r.mean_speed_mm_s,) and c.dt_s == r.dt_s
     # (the PZT's step is shortened so its square wave's edges fall on steps)
-    assert 0.9 * HELD_STEP_FACTOR * h <= r.dt_s <= HELD_STEP_FACTOR * h * (1 + 1e-9)
+    k = held_step_factor(p, sc, h)
+    assert k >= 2 and 0.9 * k * h <= r.dt_s <= k * h * (1 + 1e-9)
     assert c.default_dt_s == pytest.approx(h, rel=1e-6)
     for div in (4, 16):
         for seed in (r.seed, probe_seed(r.seed)):
@@ -129,8 +130,7 @@ def test_the_held_attempt_stops_at_the_first_sign_of_activity():
 
 
 def test_a_sweeps_sampled_draws_are_tried_held():
-    """A sweep's draws at a standing point run at twice the step when held (status sampled), at a
-    walking point at the default step."""
+    """A sweep's draws at a standing point run at a multiple of the step when held (status sampled)."""
     from labkit.sim import sweep
 
     p = RobotParams.preset("paper")
@@ -138,4 +138,24 @@ def test_a_sweeps_sampled_draws_are_tried_held():
               accel_limit_g=5.8)
     h = default_dt(p, limit_acceleration(Shaker(700.0, 25), 5.8))
     assert list(s.convergence[0]) == ["converged", "sampled", "sampled"]
-    assert all(1.8 * h < s.dt_s[0, d] < 2.2 * h for d in (1, 2)), s.dt_s  # drawn robots: their own steps
+    assert all(1.8 * h < s.dt_s[0, d] < 4.4 * h for d in (1, 2)), s.dt_s  # drawn robots: their own steps
+
+
+def test_the_coarse_factor_follows_the_pinned_modes_damping():
+    """k shrinks as the robot's pinned modes lose damping, and is 1 (no coarse attempt) for an
+    undamped one; the bound it keeps is the detuning over twice the damping ratio."""
+    from labkit.sim.core import HELD_RESPONSE_CHANGE, _detuning, _pinned_modes
+
+    p = RobotParams.preset("paper")
+    sc = Shaker(2000.0, 0.3)
+    h = default_dt(p, sc)
+    ks = [held_step_factor(dataclasses.replace(p, b_per_s=tuple(b * s for b in p.b_per_s)), sc, h)
+          for s in (1.0, 0.3, 0.1, 0.0)]
+    assert ks == sorted(ks, reverse=True) and ks[0] >= 3 and ks[-1] == 1, ks
+    k = ks[0]
+    worst = max(_detuning(2 * np.pi * f * k * h) * (1 + 0.5 / z) for f, z in _pinned_modes(p))
+    assert worst <= HELD_RESPONSE_CHANGE
+    # the midpoint rule's frequency: a closed form, checked on a single oscillator's recurrence
+    w, hh = 2 * np.pi * 1500.0, 5e-5
+    lam = (1 - (w * hh / 2) ** 2 + 1j * w * hh) / (1 + (w * hh / 2) ** 2)    # (1 + i w h/2) / (1 - i w h/2)
+    assert abs(np.angle(lam) / hh / w - (1 - _detuning(w * hh))) < 1e-12
