@@ -26,17 +26,16 @@ default) goes through :func:`control` after its main run at the step ``h``
    case at 950 Hz, 76 um: 1.98 and 3.05 mm/s at h and h/2, seeds 0.6 apart; 0.001 mm/s
    from h/4 on, seeds agreeing): one sensitive step is not enough to call it chaotic.
 
-A run that is *held* (:func:`held`: every foot pinned and sticking at every step, each keeping
-more than half its hold, :data:`labkit.sim.scheme.NEAR_FRACTION`, no impact, release or slip, the
-body off the ground, its speed below :data:`HELD_SPEED_FRACTION` of the tolerance) and whose probe
-is held too is ``converged`` without the run at ``h/2`` (``basis = "held"``): with no event the
-scheme is the midpoint rule on smooth dynamics, whose forces at a finer step differ by
-O((omega h)^2 / 12), 0.3 % at the top mode, far inside the half hold left, so the finer run is held
-as well, and a held robot's speed is its elastic deflection over the run; the error estimate is
-twice the sum of the two runs' speeds. Cost: 2 runs' worth. :func:`labkit.sim.core.simulate`
-tries every checked run held at twice its step first (:func:`control_held`; the frequency of the
-top mode 1.3 % low there, still far inside the half hold for modes damped as the robot's are), so
-a robot that stands costs 1 run's worth.
+A run that is *held* (:func:`held`: every foot pinned and sticking at every step, far from
+letting go, :data:`labkit.sim.scheme.NEAR_FRACTION`; no impact, release or slip, the body off the
+ground, its speed below :data:`HELD_SPEED_FRACTION` of the tolerance) and whose probe is held too
+is ``converged`` without the run at ``h/2`` (``basis = "held"``): with no event the scheme is the
+midpoint rule on smooth dynamics, whose forces at a finer step differ by a few per cent of their
+oscillation, far inside the hold left, so the finer run is held as well, and a held robot's speed
+is its elastic deflection over the run; the error estimate is twice the sum of the two runs'
+speeds. Cost: 2 runs' worth. :func:`labkit.sim.core.simulate` tries every checked run held at k
+times its step first (:func:`labkit.sim.core.held_step_factor`, from the robot's pinned modes;
+:func:`control_held`), so a robot that stands costs 2/k runs' worth (docs/model.md, "Held runs").
 
 The whole run is checked, not a stretch of it: on random Monte Carlo cases a check over
 the first quarter passed runs whose error grew later (bench/convergence_bench.py). Cost of a
@@ -96,10 +95,10 @@ def held(r: SimResult) -> bool:
     """Was every foot held on the ground for the whole run, far from letting go (module doc)?
 
     True when the kernel counted no impact, release or lost event and no contact check near a
-    release (``counters["checks_near_release"]``: a pull above half the hold, a lateral force above
-    half what friction allows, a foot sliding, the body resting on the ground), no foot spent
-    measured time in the air, and the speed is below :data:`HELD_SPEED_FRACTION` of the
-    tolerance."""
+    release (``counters["checks_near_release"]``: a hold left below half the larger of the hold
+    and the largest force the foot bore, a lateral force above half what friction allows, a foot
+    sliding, the body resting on the ground), no foot spent measured time in the air, and the
+    speed is below :data:`HELD_SPEED_FRACTION` of the tolerance."""
     c = r.counters
     if any(c.get(k, 1) != 0 for k in ("releases", "checks_near_release", "events_lost")):
         return False

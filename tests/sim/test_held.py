@@ -1,7 +1,7 @@
 """A *held* run's step error (docs/model.md, "Error control and validity"), checked against dt -> 0.
 
-A run whose feet all stayed pinned and sticking, each keeping more than half its hold at every
-step, is ``converged`` without its run at half the step (``Convergence.basis == "held"``). The
+A run whose feet all stayed pinned and sticking, far from letting go at every step, is
+``converged`` from a run at k times its step and its probe (``Convergence.basis == "held"``). The
 claim behind it: with no event the finer steps keep the feet held as well, and the speed is the
 body's elastic deflection. Checked here on drawn robots of the ``paper`` set at drives that are
 not chosen to be held (the shaker on the paper's 5.8 g envelope, the PZT at small voltages): every
@@ -82,10 +82,10 @@ def test_a_foot_near_its_release_is_not_held():
     assert r.convergence.basis == "halving" and len(r.convergence.speeds_mm_s) >= 2
 
 
-def test_near_means_more_than_half_the_hold():
-    """Between the hold and half of it: the same standing robot, its adhesion lowered until the
-    largest pull lies between NEAR_FRACTION and 1 of the hold, is near (not held) though it never
-    lets go; with the adhesion well above it is held."""
+def test_near_is_counted_before_a_release():
+    """The same standing robot with its adhesion lowered (c_ad_t = 0): the adhesion at which it stops
+    being held is found by bisection; just below it the feet are near (counted) but never let go,
+    and at half of it they let go: the near band lies between a release and a held run."""
     sc = Shaker(700.0, 5.0)
     base = dataclasses.replace(RobotParams.preset("paper"), c_ad_t_n_s=0.0)
 
@@ -108,7 +108,7 @@ def test_near_means_more_than_half_the_hold():
     just = at(0.97 * hi)
     assert just.counters["releases"] == 0 and just.counters["checks_near_release"] > 0
     assert not held(just)
-    # and at half that adhesion they let go: the near band is the top half of the hold
+    # and at half that adhesion they let go
     half = at(NEAR_FRACTION * 0.97 * hi)
     assert half.counters["releases"] > 0
 
