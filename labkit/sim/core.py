@@ -214,8 +214,8 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     _check_call(params, scenario, engine, duration_s, error_control)
     if error_control in ("check", "held") and engine == "numba" and dt_s is None:
         def held_at(sd: int | None) -> SimResult | None:
-            return _held_run(params, scenario, duration_s, record_dt_s, sd, ablation, transient_s, jitter_um,
-                             start_height_um, keys, progress)
+            return _held_run(_HeldRun(params, scenario, duration_s, record_dt_s, ablation, transient_s, jitter_um,
+                                      start_height_um, keys, progress), sd)
 
         coarse = held_at(seed)
         if coarse is not None and error_control == "held":
@@ -280,28 +280,41 @@ def held_step_factor(params: RobotParams, scenario: Shaker | PZT, dt: float) -> 
     return best
 
 
-def _held_run(params: RobotParams, scenario: Shaker | PZT, duration_s: float, record_dt_s: float | None,
-              seed: int | None, ablation: str | None, transient_s: float | None, jitter_um: float,
-              start_height_um: float | None, keys: dict[str, str] | None,
-              progress: Callable[[int, int], None] | None = None) -> SimResult | None:
+@dataclass(frozen=True)
+class _HeldRun:
+    """What :func:`simulate` was asked, for its held attempt (:func:`_held_run`)."""
+
+    params: RobotParams
+    scenario: Shaker | PZT
+    duration_s: float
+    record_dt_s: float | None
+    ablation: str | None
+    transient_s: float | None
+    jitter_um: float
+    start_height_um: float | None
+    keys: dict[str, str] | None
+    progress: Callable[[int, int], None] | None
+
+
+def _held_run(q: _HeldRun, seed: int | None) -> SimResult | None:
     """The run at :func:`held_step_factor` times the default step, stopped as soon as a foot or the
     body is not held; the result when it was held to the end (:func:`labkit.sim.errorcontrol.held`),
     else None."""
-    p = ablate(params, ablation)
-    h = _step(p, scenario, duration_s, None, keys)       # the bounds are the default step's
-    k = held_step_factor(p, scenario, h)
-    if k < 2 or k * h > duration_s / 4:
+    p, sc = ablate(q.params, q.ablation), q.scenario
+    h = _step(p, sc, q.duration_s, None, q.keys)       # the bounds are the default step's
+    k = held_step_factor(p, sc, h)
+    if k < 2 or k * h > q.duration_s / 4:
         return None
-    st = _steps(scenario, duration_s, _step(p, scenario, duration_s, k * h, keys), record_dt_s, transient_s)
-    mdl = M.build_model(p, scenario)
-    state, mode = _start(mdl, start_height_um, seed, jitter_um)
+    st = _steps(sc, q.duration_s, _step(p, sc, q.duration_s, k * h, q.keys), q.record_dt_s, q.transient_s)
+    mdl = M.build_model(p, sc)
+    state, mode = _start(mdl, q.start_height_um, seed, q.jitter_um)
     t0 = time.perf_counter()
     out = run_model(mdl, state, mode, st.n_steps, st.dt, st.every, st.n_skip, ev_cap=EVENT_LOG_CAP,
-                    tail_steps=st.tail_steps, tail_every=st.tail_every, progress=progress, stop_when_active=True)
+                    tail_steps=st.tail_steps, tail_every=st.tail_every, progress=q.progress, stop_when_active=True)
     if out["stopped"][0]:
         return None
-    r = unchecked(_result(p, scenario, mdl, out, duration_s, st.dt, st.every, st.n_steps, st.n_skip, "numba",
-                          time.perf_counter() - t0, seed, ablation))
+    r = unchecked(_result(p, sc, mdl, out, q.duration_s, st.dt, st.every, st.n_steps, st.n_skip, "numba",
+                          time.perf_counter() - t0, seed, q.ablation))
     return r if held(r) else None
 
 
