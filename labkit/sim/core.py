@@ -200,11 +200,15 @@ def simulate(params: RobotParams, scenario: Shaker | PZT, duration_s: float = 2.
     keys:
         Names for the bounds' messages (e.g. ``{"amp_um": "--amp-um"}``), see :func:`check_run`.
     error_control:
-        ``"check"`` (default): the run is repeated at half the step and the step halved until
-        they agree, chaotic runs flagged (:func:`labkit.sim.errorcontrol.control`;
-        the result's ``convergence`` carries the estimate; the reference engine is not checked).
-        ``"off"``: the run at its step only (``convergence.status == "unchecked"``). A ``dt_s``
-        given is the step used, as given: the control applies to the default step only.
+        ``"check"`` (default): the run is first tried at a multiple of its step
+        (:func:`held_step_factor`) and kept when it and its probe were *held* (every foot pinned
+        far from letting go: ``convergence.basis == "held"``); otherwise it is repeated at half
+        the step and the step halved until they agree, chaotic runs flagged
+        (:func:`labkit.sim.errorcontrol.control`; the result's ``convergence`` carries the
+        estimate; the reference engine is not checked). ``"held"``: the held attempt, else the
+        run at its step unchecked (a sweep's sampled draws). ``"off"``: the run at its step only
+        (``convergence.status == "unchecked"``). A ``dt_s`` given is the step used, as given:
+        the control applies to the default step only.
 
     Raises
     ------
