@@ -271,7 +271,8 @@ def held_step_factor(params: RobotParams, scenario: Shaker | PZT, dt: float) -> 
     at: every mode of the robot standing on its pinned, sticking feet (damping ratio zeta) and the
     drive keep their forced response within :data:`HELD_RESPONSE_CHANGE` at ``k dt``, bounded by
     ``d (1 + 1 / (2 zeta))`` with ``d`` the mode's :func:`_detuning` (first order, near resonance).
-    The ``paper`` robot: 3 (its top pinned mode 1517 Hz, zeta 0.12, is detuned 2.0 % at 3 dt)."""
+    The ``paper`` robot: 2 below 1.5 kHz (at 3 dt its top pinned mode, 1517 Hz, zeta 0.12, is
+    detuned 2.0 %: a 10.04 % change), 3 for most of its drawn robots, 3-4 above 1.5 kHz."""
     modes = _pinned_modes(params)
     best = 1
     for k in range(2, HELD_MAX_FACTOR + 1):

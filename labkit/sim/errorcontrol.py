@@ -157,13 +157,10 @@ def control(r: SimResult, run: Runner) -> SimResult:
     t0 = time.perf_counter()
     runs = [r]
     probe = run(r.dt_s, probe_seed(r.seed))
+    if held(r) and held(probe):
+        return control_held(r, probe, r.dt_s)
     spreads = [probe.mean_speed_mm_s - r.mean_speed_mm_s]
-    basis = "held" if held(r) and held(probe) else "halving"
-    if basis == "held":
-        v = r.mean_speed_mm_s
-        status, k, err, tol = "converged", 0, ERROR_FACTOR * (abs(v) + abs(probe.mean_speed_mm_s)), tolerance_mm_s(v)
-    else:
-        status, k, err, tol = _status(runs, spreads, run)
+    status, k, err, tol = _status(runs, spreads, run)
     out = runs[k]
     if out.validity is not None:
         out.validity.chaotic = status == "chaotic"
@@ -172,13 +169,14 @@ def control(r: SimResult, run: Runner) -> SimResult:
                                   tolerance_mm_s=float(tol), seed_spread_mm_s=float(spreads[min(k, len(spreads) - 1)]),
                                   measured_s=(float(r.transient_s), float(r.duration_s)), halvings=k,
                                   speeds_mm_s=tuple(float(x.mean_speed_mm_s) for x in runs),
-                                  wall_s=time.perf_counter() - t0, basis=basis)
+                                  wall_s=time.perf_counter() - t0, basis="halving")
     return out
 
 
 def control_held(r: SimResult, probe: SimResult, default_dt_s: float) -> SimResult:
-    """The result of a run held to the end at a coarser step than ``default_dt_s``, its probe held
-    too (:func:`held`; module doc): ``converged`` on the ``"held"`` basis, at its own step."""
+    """The result of a run held to the end, at the default step ``default_dt_s`` or a multiple of
+    it, its probe held too (:func:`held`; module doc): ``converged`` on the ``"held"`` basis, at its
+    own step; the check's cost (``wall_s``) is the probe's."""
     v, vp = r.mean_speed_mm_s, probe.mean_speed_mm_s
     if r.validity is not None:
         r.validity.chaotic = False
@@ -187,7 +185,7 @@ def control_held(r: SimResult, probe: SimResult, default_dt_s: float) -> SimResu
                                 error_mm_s=float(ERROR_FACTOR * (abs(v) + abs(vp))),
                                 tolerance_mm_s=float(tolerance_mm_s(v)), seed_spread_mm_s=float(vp - v),
                                 measured_s=(float(r.transient_s), float(r.duration_s)), halvings=0,
-                                speeds_mm_s=(float(v),), wall_s=float(r.wall_s + probe.wall_s), basis="held")
+                                speeds_mm_s=(float(v),), wall_s=float(probe.wall_s), basis="held")
     return r
 
 
