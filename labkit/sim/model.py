@@ -62,6 +62,13 @@ AIR, ADHESION, REST = K.AIR, K.ADHESION, K.REST
 MODE_NAMES = ("air", "adhesion", "rest")
 NQ, NB, NR = K.NQ, K.NB, K.NR
 
+#: Which coordinates each contact row may involve (pack checks it): the body's, and for the
+#: rows of a foot (0-11: normal, then lateral) its own leg's three modes.
+_ROW_SPAN = np.zeros((NQ, NR), bool)
+_ROW_SPAN[:NB] = True
+for _r in range(12):
+    _ROW_SPAN[NB + 3 * (_r % 6):NB + 3 * (_r % 6) + 3, _r] = True
+
 # Re-exported layouts (the scheme owns them).
 S_Q, S_V, S_TC, S_YPIN, S_LAM, S_SLIP, S_SIZE = K.S_Q, K.S_V, K.S_TC, K.S_YPIN, K.S_LAM, K.S_SLIP, K.S_SIZE
 REC_T, REC_Y, REC_Z, REC_PH, REC_ZG, REC_FZ, REC_FY, REC_KV = (K.REC_T, K.REC_Y, K.REC_Z, K.REC_PH, K.REC_ZG,
@@ -144,19 +151,14 @@ class Model:
         if np.count_nonzero(M[NB:, NB:] - np.diag(np.diag(M[NB:, NB:]))):   # scheme.partial_system
             raise ValueError("the legs' modal coordinates are coupled in the mass matrix")
         # the scheme's row products visit only the body and the row's own leg (scheme.leg_of_row)
-        for r in range(NR):
-            span = np.zeros(NQ, bool)
-            span[:NB] = True
-            if r < 12:
-                span[NB + 3 * (r % 6):NB + 3 * (r % 6) + 3] = True
-            if np.any(self.rows[~span, r] != 0.0):
-                raise ValueError(f"contact row {r} involves another leg's modes")
+        outside = np.nonzero(np.any((self.rows != 0.0) & ~_ROW_SPAN, axis=0))[0]
+        if outside.size:
+            raise ValueError(f"contact row {outside[0]} involves another leg's modes")
         Minv = np.linalg.inv(M)
         Minv = 0.5 * (Minv + Minv.T)
         RI = np.zeros((NQ, K.NI))
         RI[:, :NR] = self.rows
-        for k in range(18):
-            RI[NB + k, NR + k] = 1.0
+        RI[NB + np.arange(18), NR + np.arange(18)] = 1.0
         MRI = Minv @ RI
         WI = RI.T @ MRI
         for off, arr in ((K.OFF_M, M), (K.OFF_RT, RI.T), (K.OFF_MRT, MRI.T),
@@ -165,23 +167,26 @@ class Model:
                          (K.OFF_YFEQ, self.y_foot_eq), (K.OFF_HELD, self.held)):
             flat = np.ascontiguousarray(arr, dtype=float).ravel()
             A[off:off + flat.size] = flat
-        # the step's matrices for dt and its halvings (exact powers of two: the scheme
-        # recognises a level by h == dt / 2^k)
-        for lev in range(K.NLEV):
-            h = dt * 0.5 ** lev
-            S = 2 * M + h * np.diag(self.damp) + 0.5 * h * h * np.diag(self.stiff)
-            Sinv = np.linalg.inv(S)
-            Z = Sinv @ self.rows
-            # S^-1 by parts for the scheme (advance): the legs' diagonal, the body's Schur complement
-            dli = np.zeros(NQ)
-            dli[NB:] = 1.0 / np.diag(S)[NB:]
-            sc = S[:NB, :NB] - (S[:NB, NB:] * dli[NB:]) @ S[NB:, :NB]
-            base = K.OFF_LEV + lev * K.LEV_SIZE
-            for off, arr in ((K.LEV_DLI, dli), (K.LEV_SCI, np.linalg.inv(sc)), (K.LEV_ZT, Z.T),
-                             (K.LEV_Q, self.rows.T @ Z)):
-                flat = np.ascontiguousarray(arr, dtype=float).ravel()
-                A[base + off:base + off + flat.size] = flat
+        self._pack_levels(A, dt)
         return P, A
+
+    def _pack_levels(self, A: np.ndarray, dt: float) -> None:
+        """The step's matrices for ``dt`` and its halvings into ``A`` (exact powers of two: the
+        scheme recognises a level by h == dt / 2^k), every level at once (stacked inverses):
+        ``S = 2 M + h D + h^2 / 2 K`` and, for the scheme's advance, S^-1 by parts (the legs'
+        diagonal, the body's Schur complement), ``(S^-1 R)^T`` and ``R^T S^-1 R``."""
+        h = dt * 0.5 ** np.arange(K.NLEV)
+        S = 2 * self.mass + h[:, None, None] * np.diag(self.damp) + (0.5 * h * h)[:, None, None] * np.diag(self.stiff)
+        Z = np.linalg.inv(S) @ self.rows
+        dli = np.zeros((K.NLEV, NQ))
+        dli[:, NB:] = 1.0 / np.diagonal(S, axis1=1, axis2=2)[:, NB:]
+        sc = S[:, :NB, :NB] - (S[:, :NB, NB:] * dli[:, None, NB:]) @ S[:, NB:, :NB]
+        parts = ((K.LEV_DLI, dli), (K.LEV_SCI, np.linalg.inv(sc)), (K.LEV_ZT, Z.transpose(0, 2, 1)),
+                 (K.LEV_Q, self.rows.T @ Z))
+        lev = K.OFF_LEV + K.LEV_SIZE * np.arange(K.NLEV)[:, None]
+        for off, arr in parts:
+            flat = arr.reshape(K.NLEV, -1)
+            A[lev + off + np.arange(flat.shape[1])] = flat
 
     # ---------------------------------------------------------------- invariants
     def momentum(self, state: np.ndarray) -> np.ndarray:

@@ -251,6 +251,32 @@ def test_partial_step_system_equals_a_dense_solve(params):
     assert np.allclose(W[K.W_VB:K.W_VB + K.NQ], want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
 
 
+@pytest.mark.parametrize("params", [RobotParams(), RobotParams.preset("paper")], ids=["published", "paper"])
+def test_packed_step_matrices_of_every_level_equal_the_dense_ones(params):
+    """Model.pack's matrices for dt and each halving (stacked inverses, S^-1 by parts) against
+    numpy's dense inverse of S = 2M + hD + h^2/2 K at that level, assembled here."""
+    from labkit.sim import scheme as K
+
+    mdl = M.build_model(params, PZT(1746, 28.7))
+    dt = 8.68e-6
+    _, A = mdl.pack(dt)
+    R = mdl.rows
+    for lev in range(K.NLEV):
+        h = dt / 2 ** lev
+        S = 2 * mdl.mass + h * np.diag(mdl.damp) + 0.5 * h * h * np.diag(mdl.stiff)
+        Sinv = np.linalg.inv(S)
+        base = K.OFF_LEV + lev * K.LEV_SIZE
+        zt = A[base + K.LEV_ZT:base + K.LEV_ZT + K.NR * K.NQ].reshape(K.NR, K.NQ)
+        q = A[base + K.LEV_Q:base + K.LEV_Q + K.NR * K.NR].reshape(K.NR, K.NR)
+        dli = A[base + K.LEV_DLI:base + K.LEV_DLI + K.NQ]
+        assert np.allclose(zt, (Sinv @ R).T, rtol=1e-10, atol=1e-12 * np.abs(Sinv @ R).max())
+        assert np.allclose(q, R.T @ Sinv @ R, rtol=1e-10, atol=1e-12 * np.abs(R.T @ Sinv @ R).max())
+        assert np.array_equal(dli[K.NB:], 1.0 / np.diag(S)[K.NB:]) and not dli[:K.NB].any()
+        # the body's block of S^-1 is the inverse of the Schur complement: check it through a solve
+        sci = A[base + K.LEV_SCI:base + K.LEV_SCI + K.NB * K.NB].reshape(K.NB, K.NB)
+        assert np.allclose(sci, Sinv[:K.NB, :K.NB], rtol=1e-9, atol=1e-12 * np.abs(Sinv[:K.NB, :K.NB]).max())
+
+
 def test_small_system_solver_on_semidefinite_systems():
     """scheme.spd_solve: LDL^T of a positive definite system equals numpy's solve; with a
     dependent row (a singular, consistent system) the dependent unknown is 0 and the
