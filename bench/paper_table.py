@@ -1,18 +1,21 @@
 """The paper's observations over the Monte Carlo ensemble; prints ONE JSON object (or the docs' table).
 
     nice -n 5 python bench/paper_table.py [--params paper] [--draws 6] [--duration-s 2] [--seeds 0,1,2]
-        [--size quick] [--workers N] [--markdown] [--save-runs FILE] [--load-runs FILE]
+        [--size quick] [--scenarios paper-fig8,...] [--workers N] [--markdown | --members] [--save-runs FILE]
+        [--load-runs FILE]
 
 Scores every observation of labkit/sim/paper/observations.toml with
 :func:`labkit.sim.paper.ensemble.score_ensemble`: the nominal robot of the set and
 ``draws`` robots drawn from the Monte Carlo table for each seed (default 6 x 2 s x
-seeds 0, 1, 2, the scenarios' quick point grids), all runs in one executor call.
+seeds 0, 1, 2, the scenarios' quick point grids; ``--scenarios`` runs only some scenarios and
+scores only their observations), one executor call per seed.
 Per observation: the paper's value and band, the nominal robot's value and state, the
 pooled ensemble's value and state (the verdict: met / not met / not applicable), the
 robots' mean +- sd, median and share met, each seed's state. ``--markdown`` prints the
 table of docs/simulator.md with the command that made it; ``cpu_s`` is the
-simulations' CPU time. ``--save-runs`` keeps the raw runs (a pickle, for this
-machine only) so ``--load-runs`` can re-score them without simulating.
+simulations' CPU time; ``--members`` adds every metric of each drawn robot to the JSON.
+``--save-runs`` keeps the raw runs (a pickle, for this machine only) so ``--load-runs`` can
+re-score them without simulating.
 """
 from __future__ import annotations
 
@@ -76,8 +79,11 @@ def main() -> None:
     ap.add_argument("--duration-s", type=float, default=2.0)
     ap.add_argument("--seeds", default="0,1,2", help="comma-separated seeds")
     ap.add_argument("--size", default="quick", choices=("quick", "full"))
+    ap.add_argument("--scenarios", help="comma-separated paper scenarios (default all): only their observations")
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--markdown", action="store_true", help="print the docs/simulator.md table")
+    ap.add_argument("--members", action="store_true",
+                    help="with the JSON: every metric of each drawn robot, per scenario (seed-major, draws 1..N)")
     ap.add_argument("--save-runs", help="keep the raw runs in this file (pickle; one file per seed: FILE.seedN)")
     ap.add_argument("--load-runs", nargs="+", help="re-score (and merge) runs saved with --save-runs (no simulation)")
     args = ap.parse_args()
@@ -95,12 +101,13 @@ def main() -> None:
         from labkit.sim.presets import load
 
         params = load(args.params)
+        scenarios = [n.strip() for n in args.scenarios.split(",") if n.strip()] if args.scenarios else None
         parts = []
         for seed in [int(s) for s in args.seeds.split(",") if s.strip()]:
             # one executor call per seed, saved as it ends: a long ensemble on a shared machine
             # keeps the seeds it finished
             part = run_ensemble(params, EnsembleSpec(draws=args.draws, duration_s=args.duration_s, seeds=[seed],
-                                                     size=args.size), workers=args.workers)
+                                                     size=args.size, scenarios=scenarios), workers=args.workers)
             part = replace(part, settings=replace(part.settings, params=args.params))
             if args.save_runs:
                 with open(f"{args.save_runs}.seed{seed}", "wb") as fh:
@@ -111,8 +118,15 @@ def main() -> None:
     if args.markdown:
         print(markdown(e, command))
     else:
-        print(json.dumps({"command": command, **e.to_dict()}))
+        members = {"members": e.member_metrics} if args.members else {}
+        print(json.dumps({"command": command, **e.to_dict(), **members}))
 
 
 if __name__ == "__main__":
-    main()
+    from labkit.errors import InputError
+
+    try:
+        main()
+    except InputError as e:
+        print(f"paper_table: {e}", file=sys.stderr)
+        sys.exit(2)

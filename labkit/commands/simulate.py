@@ -502,11 +502,13 @@ def _print_single(run: SingleRun) -> None:
               + f" (tilt {v.max_tilt_rad:.3g} rad, bound {SMALL_ANGLE_RAD:g}; "
                 f"highest body gap {v.max_jump_um:.4g} um)")
     c = r.convergence
-    if c is not None and math.isfinite(c.error_mm_s):
+    if c is not None and c.status != "unchecked":
         how = ("every foot held, far from letting go" if c.basis == "held" else
                "speeds at h, h/2 ...: " + ", ".join(f"{x:.4g}" for x in c.speeds_mm_s))
+        # a run found chaotic after halvings has no error estimate: its starts differ at every step tried
+        err = f"{c.error_mm_s:.3g} mm/s" if math.isfinite(c.error_mm_s) else "not estimated"
         print(f"  step: {c.status} at {c.dt_s:.3g} s (default {c.default_dt_s:.3g} s), step error "
-              f"{c.error_mm_s:.3g} mm/s (tolerance {c.tolerance_mm_s:.3g}; {how}); "
+              f"{err} (tolerance {c.tolerance_mm_s:.3g}; {how}); "
               f"a start 0.05 um apart: {c.seed_spread_mm_s:+.3g} mm/s")
     if run.dt_check is not None:
         d, q, k = run.dt_check["default"], run.dt_check["quarter"], run.dt_check

@@ -139,3 +139,19 @@ def test_scenario_cli_quick_writes_figure(tmp_path):
     assert js["name"] == "ablations"
     assert (tmp_path / "sim_ablations.png").stat().st_size > 1000
     assert set(js["runs"]) == {"full model", "no adhesion", "no squeeze film"}
+
+
+def test_every_checked_run_says_its_step_even_without_an_error_estimate():
+    """The default run (paper set, 240 Hz, 25 um) is chaotic: its starts 0.05 um apart differ at
+    every step tried, so it has no step error; its text still has the step line, saying so, and
+    the line agrees with --json."""
+    out = run_cli("simulate", "shaker").stdout
+    js = last_json(run_cli("simulate", "shaker", "--json"))
+    step = [ln for ln in out.splitlines() if ln.startswith("  step: ")]
+    assert len(step) == 1, out
+    conv = js["convergence"]
+    assert step[0].startswith(f"  step: {conv['status']} at ")
+    if conv["step_error_mm_s"] is None:
+        assert "step error not estimated" in step[0] and conv["status"] == "chaotic"
+    else:
+        assert f"step error {conv['step_error_mm_s']:.3g} mm/s" in step[0]

@@ -46,11 +46,13 @@ def test_a_held_run_is_held_and_agrees_at_finer_steps(i):
     p, sc = _case(i)
     r = simulate(p, sc, 0.5)
     c = r.convergence
-    assert c is not None and c.status == "converged"
+    assert c is not None
     if c.basis != "held":
-        # not every drawn robot stands: those that do not are checked by halving
-        assert c.basis == "halving" and len(c.speeds_mm_s) >= 2
+        # not every drawn robot stands: those that do not are checked by halving (a walking one
+        # may be chaotic), and never held
+        assert c.basis == "halving" and len(c.speeds_mm_s) >= 2 and not held(r)
         return
+    assert c.status == "converged"
     h = default_dt(p, sc)
     # held at twice the step (and its probe), the run at the step was never made
     assert c.speeds_mm_s == (r.mean_speed_mm_s,) and c.dt_s == r.dt_s

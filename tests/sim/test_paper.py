@@ -104,7 +104,8 @@ def test_pattern_metrics_count_order_violations():
     m = patterns_measure(_ps([2, 4, 6, 8], [0] * 4, [firm, part, part, jump], rise=[0, 1, 5, 300], extra=extra))
     assert m == {"firm_share_2v": 1.0, "partial_share_min_4_6v": 1.0, "jumping_share_8v": 1.0,
                  "pattern_order_violations": 0.0, "knee_amplitude_8v_um": 210.0, "foot_rise_8v_um": 300.0,
-                 "speed_4v_mm_s": 0.0, "releases_4v": 12.0, "released_4v": 1.0, "release_jump_4v": 0.4}
+                 "speed_4v_mm_s": 0.0, "speed_8v_mm_s": 0.0, "releases_4v": 12.0, "released_4v": 1.0,
+                 "release_jump_4v": 0.4}
     assert all(c.passed for c in check("paper-patterns", m))
     # partial contact at 4 V only: the smaller of the two shares decides (not the better one)
     one = patterns_measure(_ps([2, 4, 6, 8], [0] * 4, [firm, part, firm, jump], extra=extra))

@@ -1,17 +1,21 @@
 """Bundled robot parameter sets, selectable by name (``--params NAME``, ``RobotParams.preset(NAME)``).
 
-==============  ==========================================================================
-name            what it is
-==============  ==========================================================================
-``published``   the paper's Tables 1-2 and the documented choices of docs/model.md
-                (``RobotParams()``)
-``paper``       ``published`` with the legs' modal mass at the foot from a uniform cantilever
-                (1/4 of the leg's mass) and the parameters the paper did not measure
-                calibrated to its observations over an ensemble of drawn robots
-                (``paper.toml`` here, written by :func:`labkit.sim.paper.fit.calibrate_paper`;
-                its ``[provenance]`` table says how, with which observations met); the
-                default of ``labkit simulate`` (:data:`DEFAULT_PRESET`)
-==============  ==========================================================================
+====================  ====================================================================
+name                  what it is
+====================  ====================================================================
+``published``         the paper's Tables 1-2 and the documented choices of docs/model.md
+                      (``RobotParams()``)
+``paper``             ``paper_calibrated`` with its adhesion (3.0 uN) and both squeeze films
+                      (0.20 of Tables 1-2) moved together on an ensemble of 18 drawn robots
+                      (``paper.toml`` here; its ``[provenance]`` table says how, with which
+                      observations met; docs/simulator.md, "The default paper set: adhesion
+                      and films moved together"); the default of ``labkit simulate`` (:data:`DEFAULT_PRESET`)
+``paper_calibrated``  ``published`` with the legs' modal mass at the foot from a uniform
+                      cantilever (1/4 of the leg's mass) and the parameters the paper did not
+                      measure calibrated to its observations over 4 robots (written by
+                      :func:`labkit.sim.paper.fit.calibrate_paper`); the previous
+                      default, kept so the numbers measured on it can be reproduced
+====================  ====================================================================
 
 A file preset is a plain parameter file (``labkit/sim/presets/<name>.toml``),
 read with :meth:`RobotParams.from_toml`.

@@ -170,6 +170,9 @@ def patterns_measure(ps: PointSet) -> dict[str, float]:
             "knee_amplitude_8v_um": extra(8.0, "knee_amp_um"),
             "foot_rise_8v_um": float(np.mean(ps.foot_rise_um[idx[8.0]])) if 8.0 in idx else nan,
             "speed_4v_mm_s": float(unsigned_speed(ps)[idx[4.0]]) if 4.0 in idx else nan,
+            # 8 V is Fig. 8's 240 Hz, 25 um run (the same robots and starts): its speed, for a search
+            # that runs this scenario alone (bench/paper_table.py --scenarios paper-patterns --members)
+            "speed_8v_mm_s": float(unsigned_speed(ps)[idx[8.0]]) if 8.0 in idx else nan,
             "releases_4v": releases, "released_4v": float(releases > 0),
             "release_jump_4v": extra(4.0, "release_jump", np.nanmedian)}
 
