@@ -9,7 +9,8 @@ name                  what it is
                       (0.20 of Tables 1-2) moved together on an ensemble of 18 drawn robots
                       (``paper.toml`` here; its ``[provenance]`` table says how, with which
                       observations met; docs/simulator.md, "The default paper set: adhesion
-                      and films moved together"); the default of ``labkit simulate`` (:data:`DEFAULT_PRESET`)
+                      and films moved together"); the default of ``labkit simulate``
+                      (:data:`DEFAULT_PRESET`)
 ``paper_calibrated``  ``published`` with the legs' modal mass at the foot from a uniform
                       cantilever (1/4 of the leg's mass) and the parameters the paper did not
                       measure calibrated to its observations over 4 robots (written by
