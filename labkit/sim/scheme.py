@@ -193,6 +193,11 @@ NEAR_FRACTION = 0.5
 #: change only at events, so nearly every step finds its matrix here.
 NSLOT = 64
 NC = 13
+#: Cached LDL^T factors of the small system's leading block of pinned rows (:func:`small_solve`):
+#: NFC slots, direct-mapped by the block's rows and the step level; used for blocks of at least
+#: FC_MIN rows (a robot standing on its six feet: twelve, then the body's film row).
+NFC = 8
+FC_MIN = 4
 #: The float scratch W.
 W_REGIONS = (
     ("W_F", NQ),                # forces at the step's midpoint
@@ -224,9 +229,13 @@ W_REGIONS = (
     ("W_CACHE", NSLOT * NC * NC),   # the cached inverses (NSLOT above)
     ("W_U", NB),                # advance: the body's part of a right-hand side
     ("W_FMAX", 6),              # per foot: the largest |normal contact force| seen so far (release)
+    ("W_DG", NI),               # per active film row: 1 / (h c), its term on the small system's diagonal
+    ("W_FC", NFC * NC * NC),    # the cached factors of leading pinned blocks (NFC above; row stride NC)
+    ("W_FHI", NFC),             # ... per slot: the block's smallest pivot
 )
 (W_F, W_R, W_Y0, W_VB, W_Q0, W_V0, W_SM, W_B, W_QH, W_AS, W_BS, W_C, W_T, W_GAP0, W_GAP1, W_VREL, W_FI, W_RY,
- W_LI0, W_LI1, W_G0, W_CT, W_CV, W_FX, W_FR, W_GRND, W_CACHE, W_U, W_FMAX, W_SIZE) = layout(W_REGIONS)
+ W_LI0, W_LI1, W_G0, W_CT, W_CV, W_FX, W_FR, W_GRND, W_CACHE, W_U, W_FMAX, W_DG, W_FC, W_FHI,
+ W_SIZE) = layout(W_REGIONS)
 #: The integer scratch I.
 I_REGIONS = (
     ("I_ROWS", NI),             # active rows
@@ -234,8 +243,9 @@ I_REGIONS = (
     ("I_IMP", 7),               # impacting flags
     ("I_TAG", NSLOT),           # mask held by each cache slot (-1: empty)
     ("I_POS", NC),              # position of row r in the cached set's order
+    ("I_FTAG", NFC),            # key held by each slot of the cached factors (-1: empty; small_solve)
 )
-I_ROWS, I_KIND, I_IMP, I_TAG, I_POS, I_SIZE = layout(I_REGIONS)
+I_ROWS, I_KIND, I_IMP, I_TAG, I_POS, I_FTAG, I_SIZE = layout(I_REGIONS)
 
 
 @jit
@@ -345,54 +355,72 @@ def leg_of_row(r):
 
 
 @jit
-def spd_solve(W, oa, lda, ob, n):
+def spd_solve(W, oa, ob, n):
     """Solve A x = b in place for a symmetric positive (semi)definite A (n x n at W[oa],
-    row stride lda; b at W[ob], overwritten by x): LDL^T without pivoting, A destroyed.
+    row stride NI, its lower triangle read; b at W[ob], overwritten by x): LDL^T without
+    pivoting (:func:`ldl_factor`, :func:`ldl_solve`), A destroyed.
 
     A pivot below 1e-12 of the largest diagonal entry marks a redundant equation (as in
     :func:`gauss`: e.g. dependent lateral rows, cy_sign = 0): its unknown is set to 0.
     """
     scale = 0.0
     for i in range(n):
-        v = W[oa + i * lda + i]
+        v = W[oa + i * NI + i]
         if v > scale:
             scale = v
-    eps = 1e-12 * scale
+    ldl_factor(W, oa, n, 0, 1e-12 * scale)
+    ldl_solve(W, oa, ob, n)
+
+
+@jit
+def ldl_factor(W, oa, n, p, eps):
+    """LDL^T of the n x n matrix at W[oa] (row stride NI; lower triangle and diagonal, in
+    place: L below the diagonal, D on it) by columns, without pivoting; a pivot at or below
+    ``eps`` is dead (set to 0 with its column of L). The leading p x p block may already be
+    factored (:func:`small_solve`'s cache): each entry below it is the same sum, in the same
+    order, as when the whole matrix is factored here, so the result is the same to the bit."""
     for j in range(n):
-        oj = oa + j * lda
+        oj = oa + j * NI
         d = W[oj + j]
-        for k in range(j):
-            lk = W[oj + k]
-            d -= lk * lk * W[oa + k * lda + k]
-        if d <= eps:
-            W[oj + j] = 0.0
-            for i in range(j + 1, n):
-                W[oa + i * lda + j] = 0.0
+        if j >= p:
+            for k in range(j):
+                lk = W[oj + k]
+                d -= lk * lk * W[oa + k * NI + k]
+            if d <= eps:
+                d = 0.0
+            W[oj + j] = d
+        if d == 0.0:
+            for i in range(max(j + 1, p), n):
+                W[oa + i * NI + j] = 0.0
             continue
-        W[oj + j] = d
-        for i in range(j + 1, n):
-            oi = oa + i * lda
+        for i in range(max(j + 1, p), n):
+            oi = oa + i * NI
             v = W[oi + j]
             for k in range(j):
-                v -= W[oi + k] * W[oj + k] * W[oa + k * lda + k]
+                v -= W[oi + k] * W[oj + k] * W[oa + k * NI + k]
             W[oi + j] = v / d
-    # L y = b, D z = y, L^T x = z (a dead pivot's unknown is 0)
+
+
+@jit
+def ldl_solve(W, oa, ob, n):
+    """x = A^-1 b in place at W[ob] from :func:`ldl_factor`'s factors at W[oa] (L y = b,
+    D z = y, L^T x = z; a dead pivot's unknown is 0)."""
     for i in range(n):
-        oi = oa + i * lda
+        oi = oa + i * NI
         v = W[ob + i]
         for k in range(i):
             v -= W[oi + k] * W[ob + k]
         W[ob + i] = v
     for i in range(n):
-        d = W[oa + i * lda + i]
+        d = W[oa + i * NI + i]
         W[ob + i] = W[ob + i] / d if d != 0.0 else 0.0
     for i in range(n - 1, -1, -1):
-        if W[oa + i * lda + i] == 0.0:
+        if W[oa + i * NI + i] == 0.0:
             W[ob + i] = 0.0
             continue
         v = W[ob + i]
         for k in range(i + 1, n):
-            v -= W[oa + k * lda + i] * W[ob + k]
+            v -= W[oa + k * NI + i] * W[ob + k]
         W[ob + i] = v
 
 
@@ -697,6 +725,93 @@ def partial_vbar(A, W, I, n):
 
 
 @jit
+def pinned_block(I, n, lev):
+    """(p, key) of a step's small system at the cached level ``lev`` (-1: not cached): its
+    leading p rows are pinned and their factor may be cached under ``key`` (the rows and the
+    level; -1 and p = 0: not at a cached level, or fewer than FC_MIN such rows)."""
+    if lev < 0:
+        return 0, -1
+    p = 0
+    mask = 0
+    while p < n and I[I_KIND + p] == 1:
+        mask |= 1 << I[I_ROWS + p]
+        p += 1
+    if p < FC_MIN:
+        return 0, -1
+    return p, mask | (lev << NR)
+
+
+@jit
+def assemble(A, W, I, n, lev):
+    """The small system's matrix (lower triangle and diagonal) into W[W_AS] (row stride NI):
+    Q over the active rows (the cached level's, or a partial step's W_QH with ``lev`` < 0),
+    plus 1 / (h c_a) (W[W_DG + a]) on a film row's diagonal."""
+    base = OFF_LEV + lev * LEV_SIZE
+    for a in range(n):
+        ra = I[I_ROWS + a]
+        for b in range(a + 1):
+            rb = I[I_ROWS + b]
+            W[W_AS + a * NI + b] = A[base + LEV_Q + ra * NR + rb] if lev >= 0 else W[W_QH + ra * NR + rb]
+        if I[I_KIND + a] == 0:
+            W[W_AS + a * NI + a] += W[W_DG + a]
+
+
+@jit
+def small_solve(A, W, I, n, lev):
+    """Solve the step's small system (:func:`advance`, one pass; right-hand sides in W[W_BS]),
+    as :func:`spd_solve` does, to the same bits.
+
+    Pinned row a: Q_a. alpha = t_a; film row a, divided by h c_a:
+    Q_a. alpha + alpha_a / (h c_a) = -(R_a . Sinv r - v_g). Symmetric positive (semi)definite:
+    Q = R^T Sinv R, plus a positive diagonal.
+
+    At a cached level, the factor of the leading block of pinned rows (:func:`pinned_block`)
+    does not change from step to step: it is kept in one of NFC slots, and a step that finds it
+    factors only the rows after it (:func:`ldl_factor`), unless the test for a dead pivot (1e-12
+    of the largest diagonal entry, which the film rows take part in) would now kill one of the
+    block's pivots (W_FHI: the smallest of them). A block with a dead pivot is not kept."""
+    assemble(A, W, I, n, lev)
+    p, key = pinned_block(I, n, lev)
+    if key < 0:
+        spd_solve(W, W_AS, W_BS, n)
+        return
+    scale = 0.0
+    for a in range(n):
+        if W[W_AS + a * NI + a] > scale:
+            scale = W[W_AS + a * NI + a]
+    eps = 1e-12 * scale
+    slot = ((key * 2654435761) >> 20) % NFC
+    oc = W_FC + slot * NC * NC
+    if I[I_FTAG + slot] == key and eps < W[W_FHI + slot]:
+        for a in range(p):
+            for b in range(a + 1):
+                W[W_AS + a * NI + b] = W[oc + a * NC + b]
+        ldl_factor(W, W_AS, n, p, eps)
+    else:
+        ldl_factor(W, W_AS, n, 0, eps)
+        keep_block(W, I, p, key, slot)
+    ldl_solve(W, W_AS, W_BS, n)
+
+
+@jit
+def keep_block(W, I, p, key, slot):
+    """Keep the factor of the leading p rows (W[W_AS]) in cache slot ``slot`` under ``key``, with
+    its smallest pivot; a block with a dead pivot empties the slot instead."""
+    oc = W_FC + slot * NC * NC
+    hi = math.inf
+    for a in range(p):
+        d = W[W_AS + a * NI + a]
+        if d == 0.0:
+            I[I_FTAG + slot] = -1
+            return
+        hi = min(hi, d)
+        for b in range(a + 1):
+            W[oc + a * NC + b] = W[W_AS + a * NI + b]
+    I[I_FTAG + slot] = key
+    W[W_FHI + slot] = hi
+
+
+@jit
 def advance(P, A, S, mode, t, h, W, I, out):
     """One midpoint step of length h from S (M5); the end state goes to ``out`` (q, v, lam).
 
@@ -789,22 +904,15 @@ def advance(P, A, S, mode, t, h, W, I, out):
                     W[W_C + a] = c
             if change < FILM_PASS_SKIP:
                 break
-        # pinned row a: Q_a. alpha = t_a; film row a, divided by h c_a:
-        # Q_a. alpha + alpha_a / (h c_a) = -(R_a . Sinv r - v_g). Symmetric positive
-        # (semi)definite: Q = R^T Sinv R, plus a positive diagonal (spd_solve).
         for a in range(n):
-            ra = I[I_ROWS + a]
-            for b in range(n):
-                rb = I[I_ROWS + b]
-                W[W_AS + a * NI + b] = A[base + LEV_Q + ra * NR + rb] if full else W[W_QH + ra * NR + rb]
             if I[I_KIND + a] == 1:
                 W[W_BS + a] = W[W_T + a]
             else:
-                vg = vgm if ra != ROW_BY else 0.0
-                W[W_AS + a * NI + a] += 1.0 / (h * W[W_C + a])
+                vg = vgm if I[I_ROWS + a] != ROW_BY else 0.0
+                W[W_DG + a] = 1.0 / (h * W[W_C + a])
                 W[W_BS + a] = -(W[W_RY + a] - vg)
         if n > 0:
-            spd_solve(W, W_AS, NI, W_BS, n)
+            small_solve(A, W, I, n, lev)
         if full:
             for i in range(NQ):
                 W[W_VB + i] = W[W_Y0 + i]
@@ -1539,6 +1647,8 @@ def new_scratch():
     I = np.zeros(I_SIZE, np.int64)
     for k in range(NSLOT):
         I[I_TAG + k] = -1
+    for k in range(NFC):
+        I[I_FTAG + k] = -1
     return W, I
 
 

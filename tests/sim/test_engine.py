@@ -285,14 +285,14 @@ def test_small_system_solver_on_semidefinite_systems():
 
     K = scheme_python()
     rng = np.random.default_rng(2)
-    n, lda = 6, 8
+    n, lda = 6, K.NI
     B = rng.normal(size=(n, n))
     Amat = B @ B.T + np.diag(rng.uniform(0, 3, n))
     b = rng.normal(size=n)
     W = np.zeros(lda * lda + lda)
     W[:lda * lda].reshape(lda, lda)[:n, :n] = Amat
     W[lda * lda:lda * lda + n] = b
-    K.spd_solve(W, 0, lda, lda * lda, n)
+    K.spd_solve(W, 0, lda * lda, n)
     assert np.allclose(W[lda * lda:lda * lda + n], np.linalg.solve(Amat, b), rtol=1e-10)
     # rows 0 and 1 the same constraint (like the lateral rows of legs without lateral
     # compliance): their Gram matrix is singular, the system consistent
@@ -305,10 +305,88 @@ def test_small_system_solver_on_semidefinite_systems():
     W[:] = 0.0
     W[:lda * lda].reshape(lda, lda)[:4, :4] = Q
     W[lda * lda:lda * lda + 4] = rhs
-    K.spd_solve(W, 0, lda, lda * lda, 4)
+    K.spd_solve(W, 0, lda * lda, 4)
     x = W[lda * lda:lda * lda + 4]
     assert x[1] == 0.0
     assert np.allclose(Q @ x, rhs, atol=1e-9 * np.abs(rhs).max())
+
+
+def _lower(W, n):
+    lda = int(np.sqrt(W.size - 1))
+    return np.tril(W[:lda * lda].reshape(lda, lda)[:n, :n])
+
+
+def test_ldl_factor_resumed_after_a_factored_block_is_the_same_to_the_bit():
+    """scheme.ldl_factor: factoring an n x n system whose leading p x p block is already
+    factored gives the bits of factoring it whole (each entry the same sum in the same
+    order), with live pivots and with a dead one (two equal rows) inside the block."""
+    from labkit.sim.reference import scheme_python
+
+    K = scheme_python()
+    rng = np.random.default_rng(7)
+    n, p, lda = 13, 12, K.NI
+    for dead in (False, True):
+        G = rng.normal(size=(n, n + 3))
+        if dead:
+            G[4] = G[3]
+        Q = G @ G.T
+        eps = 1e-12 * np.diag(Q).max()
+        W = np.zeros(lda * lda + 1)
+        W[:lda * lda].reshape(lda, lda)[:n, :n] = Q
+        whole = W.copy()
+        K.ldl_factor(whole, 0, n, 0, eps)
+        resumed = W.copy()
+        resumed[:lda * lda].reshape(lda, lda)[:p, :p] = whole[:lda * lda].reshape(lda, lda)[:p, :p]
+        K.ldl_factor(resumed, 0, n, p, eps)
+        assert np.array_equal(_lower(resumed, n), _lower(whole, n))
+        assert (_lower(whole, n)[4:, 4] == 0).all() == dead
+
+
+def test_cached_factor_of_the_pinned_rows_gives_the_uncached_solution_to_the_bit():
+    """scheme.small_solve: the system of twelve pinned rows and the body's film row solved with
+    the pinned block's factor cached (its first step, the next steps, a film coefficient that
+    moves the dead-pivot threshold past one of the block's pivots, and back) equals the
+    solution without the cache (scheme.spd_solve), bit for bit, and solves the system."""
+    from labkit.sim.reference import scheme_python
+
+    K = scheme_python()
+    rng = np.random.default_rng(11)
+    A = np.zeros(K.A_SIZE)
+    G = rng.normal(size=(K.NR, K.NR + 2))
+    G[5] = G[4] + 1e-5 * G[5]              # a pivot ~1e-10 of the largest: live or dead by eps
+    Q = G @ G.T
+    A[K.OFF_LEV + K.LEV_Q:K.OFF_LEV + K.LEV_Q + K.NR * K.NR] = Q.ravel()
+    rows = list(range(12)) + [K.ROW_BZ]
+    n, h = len(rows), 1e-5
+
+    def system(c):
+        W, Iw = K.new_scratch()
+        for a, r in enumerate(rows):
+            Iw[K.I_ROWS + a] = r
+            Iw[K.I_KIND + a] = 0 if r == K.ROW_BZ else 1
+        W[K.W_BS:K.W_BS + n] = np.r_[np.arange(1.0, n), -0.4]
+        W[K.W_DG + n - 1] = 1.0 / (h * c)
+        return W, Iw
+
+    Wc, Ic = system(1e3)
+    key = K.pinned_block(Ic, n, 0)[1]
+    assert key >= 0
+    for c in (1e3, 1e3, 1e3, 1e-3, 1e-3, 1e3):   # 1 / (h c) = 100 or 1e8: eps crosses the small pivot
+        W, Iw = system(c)
+        K.assemble(A, W, Iw, n, 0)
+        K.spd_solve(W, K.W_AS, K.W_BS, n)
+        Wc[K.W_BS:K.W_BS + n] = system(c)[0][K.W_BS:K.W_BS + n]
+        Wc[K.W_DG + n - 1] = 1.0 / (h * c)
+        K.small_solve(A, Wc, Ic, n, 0)
+        assert np.array_equal(Wc[K.W_BS:K.W_BS + n], W[K.W_BS:K.W_BS + n])
+        assert (key in Ic[K.I_FTAG:K.I_FTAG + K.NFC]) == (c > 1.0)   # a dead pivot is not kept
+        if c > 1.0:
+            x = Wc[K.W_BS:K.W_BS + n].copy()
+    Qs = Q[np.ix_(rows, rows)].copy()
+    Qs[-1, -1] += 1.0 / (h * 1e3)
+    rhs = np.r_[np.arange(1.0, n), -0.4]
+    assert x[5] != 0.0
+    assert np.all(np.abs(Qs @ x - rhs) <= 1e-9 * (np.abs(Qs) @ np.abs(x)))
 
 
 def test_pack_refuses_a_model_outside_the_kernels_structure():
