@@ -41,7 +41,10 @@ class Integration:
         self.n_skip = int(n_skip)
         self.n0 = 0                               # the next step's index
         self.out = {"frac": np.zeros((6, 3)), "max_air": np.zeros(6), "max_h": np.zeros(6),
-                    "count": np.zeros(mod.CNT_SIZE, np.int64), "events": np.zeros((ev_cap, mod.EV_COLS))}
+                    "count": np.zeros(mod.CNT_SIZE, np.int64),
+                    # rows are written in order and only the first count[CNT_EVENTS] read (outputs):
+                    # empty, not zeros, spares a run zeroing (and mapping) 9.6 MB, 0.1 ms
+                    "events": np.empty((ev_cap, mod.EV_COLS))}
         if stop_when_active:
             self.out["count"][mod.CNT_STOP] = mod.STOP_WHEN_ACTIVE
         self.W, self.I = mod.new_scratch()
@@ -69,9 +72,10 @@ class Integration:
         return bool(self.out["count"][self.mod.CNT_STOP] == self.mod.STOPPED)
 
     def outputs(self) -> dict[str, np.ndarray]:
-        """The accumulated outputs, the state and the contact modes after the last piece, and
-        whether the run stopped early (``stopped``)."""
-        return {**self.out, "state": self.S, "mode": self.md.astype(np.int8), "stopped": np.array([self.stopped])}
+        """The accumulated outputs (``events``: the rows logged), the state and the contact modes
+        after the last piece, and whether the run stopped early (``stopped``)."""
+        return {**self.out, "events": self.out["events"][:self.out["count"][self.mod.CNT_EVENTS]], "state": self.S,
+                "mode": self.md.astype(np.int8), "stopped": np.array([self.stopped])}
 
 
 def run_scheme(mod: ModuleType, P: np.ndarray, A: np.ndarray, state: np.ndarray, mode: np.ndarray, n_steps: int,
