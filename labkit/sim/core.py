@@ -468,7 +468,9 @@ def run_model(mdl: M.Model, state: np.ndarray, mode: np.ndarray, n_steps: int, d
         if progress is not None:
             progress(run.n0, n_steps)
     one = len(recs) == 1
-    return {"rec": recs[0] if one else np.concatenate(recs), "rec_contact": contacts[0] if one else
+    # the pieces joined column-major, as each is (Integration.advance)
+    return {"rec": recs[0] if one else np.concatenate([r.T for r in recs], axis=1).T,
+            "rec_contact": contacts[0] if one else
             np.concatenate(contacts), **run.outputs()}
 
 

@@ -53,9 +53,11 @@ class Integration:
 
     def advance(self, n_steps: int, every: int) -> tuple[np.ndarray, np.ndarray]:
         """Integrate the next ``n_steps`` steps; returns the samples (``rec``, ``rec_contact``)
-        taken every ``every`` steps from this piece's first step, its last one included."""
+        taken every ``every`` steps from this piece's first step, its last one included.
+        ``rec`` is samples x REC_COLS, column-major (the kernel writes each column contiguous:
+        reading one quantity then reads only its own memory)."""
         n_rec = n_steps // every + 1
-        rec = np.zeros((n_rec, self.mod.REC_COLS))
+        rec = np.zeros((self.mod.REC_COLS, n_rec))
         rec_contact = np.zeros((n_rec, 6), np.int8)
         o = self.out
         if self.mod is _scheme:
@@ -64,7 +66,7 @@ class Integration:
                            self.n_skip, rec, rec_contact, o["frac"], o["max_air"], o["max_h"], o["count"],
                            o["events"], self.W, self.I, self.T, self.air_run)
         self.n0 += int(n_steps)
-        return rec, rec_contact
+        return rec.T, rec_contact
 
     @property
     def stopped(self) -> bool:

@@ -1620,19 +1620,19 @@ def substeps(P, A, S, T, mode, t, dt, W, I, events, count):
 @jit
 def record(P, A, S, mode, t, rec, rec_contact, row):
     zg, _, _ = ground_at(P, t)
-    rec[row, REC_T] = t
-    rec[row, REC_Y] = S[S_Q + 0]
-    rec[row, REC_Z] = P[P_H0] + S[S_Q + 1]
+    rec[REC_T, row] = t
+    rec[REC_Y, row] = S[S_Q + 0]
+    rec[REC_Z, row] = P[P_H0] + S[S_Q + 1]
     for k in range(3):
-        rec[row, REC_PH + k] = S[S_Q + 2 + k]
-    rec[row, REC_ZG] = zg
+        rec[REC_PH + k, row] = S[S_Q + 2 + k]
+    rec[REC_ZG, row] = zg
     for j in range(6):
-        rec[row, REC_FZ + j] = row_dot(A, j, S, S_Q)
-        rec[row, REC_FY + j] = A[OFF_YFEQ + j] + row_dot(A, 6 + j, S, S_Q)
+        rec[REC_FZ + j, row] = row_dot(A, j, S, S_Q)
+        rec[REC_FY + j, row] = A[OFF_YFEQ + j] + row_dot(A, 6 + j, S, S_Q)
         s = 0.0
         for i in range(NQ):
             s += A[OFF_KV + j * NQ + i] * S[S_V + i]
-        rec[row, REC_KV + j] = s
+        rec[REC_KV + j, row] = s
         rec_contact[row, j] = mode[j]
 
 
@@ -1658,7 +1658,8 @@ def integrate(P_, A_, S_, mode_, n0, n_steps, dt, every, n_skip, rec, rec_contac
     """Run steps n0 .. n0 + n_steps - 1 of dt (time n dt); fill the outputs (statistics from step
     n_skip on). A long run is integrated in pieces (:class:`labkit.sim.kernel.Integration`): the
     state, the scratch and every accumulated output carry over, ``rec`` is the piece's own
-    (a row every ``every`` steps from the piece's first step, its last step included).
+    (a sample every ``every`` steps from the piece's first step, its last step included; one
+    row per column REC_*, so that each recorded quantity is contiguous).
 
     ``W_, I_`` (:func:`new_scratch`), ``T_`` (S_SIZE) and ``air_run`` (6, zeros) are scratch,
     allocated by the caller, which keeps every array alive for the call.
@@ -1677,7 +1678,7 @@ def integrate(P_, A_, S_, mode_, n0, n_steps, dt, every, n_skip, rec, rec_contac
     row = 0
     for n in range(n_steps + 1):
         t = (n0 + n) * dt
-        if n % every == 0 and row < rec.shape[0]:
+        if n % every == 0 and row < rec.shape[1]:
             record(P, A, S, mode, t, rec, rec_contact, row)
             row += 1
         if n == n_steps:
