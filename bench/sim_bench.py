@@ -156,7 +156,7 @@ def _engines(params, sc, duration_s: float) -> dict:
     p = core.ablate(params, None)
     st = core._steps(sc, duration_s, core._step(p, sc, duration_s, None, None), None, None)
     mdl = M.build_model(p, sc)
-    state, mode = core._start(mdl, None, None, 0.05)
+    state, mode = core._start(mdl, None, None, core.JITTER_UM)   # simulate's start (seed None: at rest)
     P, A = mdl.pack(st.dt)
     mode7 = np.full(7, M.AIR, np.int8)
     mode7[:len(mode)] = np.asarray(mode)[:7]

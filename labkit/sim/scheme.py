@@ -363,13 +363,20 @@ def spd_solve(W, oa, ob, n):
     A pivot below 1e-12 of the largest diagonal entry marks a redundant equation (as in
     :func:`gauss`: e.g. dependent lateral rows, cy_sign = 0): its unknown is set to 0.
     """
+    ldl_factor(W, oa, n, 0, dead_pivot(W, oa, n))
+    ldl_solve(W, oa, ob, n)
+
+
+@jit
+def dead_pivot(W, oa, n):
+    """The threshold at or below which a pivot of the n x n matrix at W[oa] (row stride NI)
+    is dead: 1e-12 of its largest diagonal entry."""
     scale = 0.0
     for i in range(n):
         v = W[oa + i * NI + i]
         if v > scale:
             scale = v
-    ldl_factor(W, oa, n, 0, 1e-12 * scale)
-    ldl_solve(W, oa, ob, n)
+    return 1e-12 * scale
 
 
 @jit
@@ -775,11 +782,7 @@ def small_solve(A, W, I, n, lev):
     if key < 0:
         spd_solve(W, W_AS, W_BS, n)
         return
-    scale = 0.0
-    for a in range(n):
-        if W[W_AS + a * NI + a] > scale:
-            scale = W[W_AS + a * NI + a]
-    eps = 1e-12 * scale
+    eps = dead_pivot(W, W_AS, n)
     slot = ((key * 2654435761) >> 20) % NFC
     oc = W_FC + slot * NC * NC
     if I[I_FTAG + slot] == key and eps < W[W_FHI + slot]:

@@ -359,24 +359,25 @@ def test_cached_factor_of_the_pinned_rows_gives_the_uncached_solution_to_the_bit
     rows = list(range(12)) + [K.ROW_BZ]
     n, h = len(rows), 1e-5
 
-    def system(c):
-        W, Iw = K.new_scratch()
+    rhs = np.r_[np.arange(1.0, n), -0.4]
+
+    def pose(W, Iw, c):                      # the rows, the right-hand sides, the film row's 1 / (h c)
         for a, r in enumerate(rows):
             Iw[K.I_ROWS + a] = r
             Iw[K.I_KIND + a] = 0 if r == K.ROW_BZ else 1
-        W[K.W_BS:K.W_BS + n] = np.r_[np.arange(1.0, n), -0.4]
+        W[K.W_BS:K.W_BS + n] = rhs
         W[K.W_DG + n - 1] = 1.0 / (h * c)
-        return W, Iw
 
-    Wc, Ic = system(1e3)
+    Wc, Ic = K.new_scratch()                 # one scratch over the steps: the cache lives there
+    pose(Wc, Ic, 1e3)
     key = K.pinned_block(Ic, n, 0)[1]
     assert key >= 0
     for c in (1e3, 1e3, 1e3, 1e-3, 1e-3, 1e3):   # 1 / (h c) = 100 or 1e8: eps crosses the small pivot
-        W, Iw = system(c)
+        W, Iw = K.new_scratch()
+        pose(W, Iw, c)
         K.assemble(A, W, Iw, n, 0)
         K.spd_solve(W, K.W_AS, K.W_BS, n)
-        Wc[K.W_BS:K.W_BS + n] = system(c)[0][K.W_BS:K.W_BS + n]
-        Wc[K.W_DG + n - 1] = 1.0 / (h * c)
+        pose(Wc, Ic, c)
         K.small_solve(A, Wc, Ic, n, 0)
         assert np.array_equal(Wc[K.W_BS:K.W_BS + n], W[K.W_BS:K.W_BS + n])
         assert (key in Ic[K.I_FTAG:K.I_FTAG + K.NFC]) == (c > 1.0)   # a dead pivot is not kept
@@ -384,7 +385,6 @@ def test_cached_factor_of_the_pinned_rows_gives_the_uncached_solution_to_the_bit
             x = Wc[K.W_BS:K.W_BS + n].copy()
     Qs = Q[np.ix_(rows, rows)].copy()
     Qs[-1, -1] += 1.0 / (h * 1e3)
-    rhs = np.r_[np.arange(1.0, n), -0.4]
     assert x[5] != 0.0
     assert np.all(np.abs(Qs @ x - rhs) <= 1e-9 * (np.abs(Qs) @ np.abs(x)))
 
