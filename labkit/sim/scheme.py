@@ -232,10 +232,13 @@ W_REGIONS = (
     ("W_DG", NI),               # per active film row: 1 / (h c), its term on the small system's diagonal
     ("W_FC", NFC * NC * NC),    # the cached factors of leading pinned blocks (NFC above; row stride NC)
     ("W_FHI", NFC),             # ... per slot: the block's smallest pivot
+    ("W_RQ", 6),                # per foot: its z row's position at the state of the last foot_rows call
+    ("W_RV", 6),                # ... and its velocity (feet in the air only)
+    ("W_RB", NI),               # per active film row: R_a . vbar as the last film pass found it
 )
 (W_F, W_R, W_Y0, W_VB, W_Q0, W_V0, W_SM, W_B, W_QH, W_AS, W_BS, W_C, W_T, W_GAP0, W_GAP1, W_VREL, W_FI, W_RY,
  W_LI0, W_LI1, W_G0, W_CT, W_CV, W_FX, W_FR, W_GRND, W_CACHE, W_U, W_FMAX, W_DG, W_FC, W_FHI,
- W_SIZE) = layout(W_REGIONS)
+ W_RQ, W_RV, W_RB, W_SIZE) = layout(W_REGIONS)
 #: The integer scratch I.
 I_REGIONS = (
     ("I_ROWS", NI),             # active rows
@@ -471,33 +474,54 @@ def gaps(P, A, S, t, W, o):
 
 
 @jit
-def forces(P, A, S, mode, t_mid, q, qo, v, vo, F, fo):
-    """Generalised forces except springs, dampers, films and contacts (M4): constant
-    forces, the actuator at t_mid, air drag (explicit), friction of slipping feet."""
+def foot_rows(A, S, mode, W):
+    """The feet's z rows at state S, once for the functions of a step that read them: each
+    foot's position into W_RQ, a free foot's velocity into W_RV (the same sums as
+    :func:`row_dot`, so the same values to the bit)."""
+    for j in range(6):
+        W[W_RQ + j] = row_dot(A, j, S, S_Q)
+        if mode[j] == AIR:
+            W[W_RV + j] = row_dot(A, j, S, S_V)
+
+
+@jit
+def start_gaps(P, S, t, W):
+    """:func:`gaps` of S at t into W_GAP0, the feet's rows read from W_RQ (:func:`foot_rows` of S)."""
+    zg, _, _ = ground(P, W, t)
+    for j in range(6):
+        W[W_GAP0 + j] = W[W_RQ + j] - zg
+    W[W_GAP0 + 6] = P[P_H0] + S[S_Q + 1] - zg
+
+
+@jit
+def forces(P, A, S, mode, t_mid, W, fo):
+    """Generalised forces at state S except springs, dampers, films and contacts (M4), into
+    W[fo:fo+NQ]: constant forces, the actuator at t_mid, air drag (explicit), friction of
+    slipping feet. A free foot's vertical velocity is read from W_RV (:func:`foot_rows` of S)."""
     V = volts(P, t_mid)
     for i in range(NQ):
-        F[fo + i] = A[OFF_FC + i] + V * A[OFF_FA + i]
+        W[fo + i] = A[OFF_FC + i] + V * A[OFF_FA + i]
     ad = P[P_AD]
     if ad > 0.0:
         for j in range(6):
             if mode[j] == AIR:
-                vz = row_dot(A, j, v, vo)
-                vy = row_dot(A, 6 + j, v, vo)
+                vz = W[W_RV + j]
+                vy = row_dot(A, 6 + j, S, S_V)
                 fz = -ad * vz * abs(vz)
                 fy = -ad * vy * abs(vy)
                 # both rows of foot j span the body and leg j (:func:`leg_of_row`)
                 oz = OFF_RT + j * NQ
                 oy = OFF_RT + (6 + j) * NQ
                 for i in range(NB):
-                    F[fo + i] += A[oz + i] * fz + A[oy + i] * fy
+                    W[fo + i] += A[oz + i] * fz + A[oy + i] * fy
                 for i in range(NB + 3 * j, NB + 3 * j + 3):
-                    F[fo + i] += A[oz + i] * fz + A[oy + i] * fy
-        F[fo + 0] -= ad * v[vo + 0] * abs(v[vo + 0])
-        F[fo + 1] -= ad * v[vo + 1] * abs(v[vo + 1])
+                    W[fo + i] += A[oz + i] * fz + A[oy + i] * fy
+        W[fo + 0] -= ad * S[S_V + 0] * abs(S[S_V + 0])
+        W[fo + 1] -= ad * S[S_V + 1] * abs(S[S_V + 1])
     for j in range(6):
         fr = S[S_SLIP + j]
         if mode[j] != AIR and fr != 0.0:
-            row_axpy(A, 6 + j, F, fo, fr)
+            row_axpy(A, 6 + j, W, fo, fr)
 
 
 @jit
@@ -578,14 +602,15 @@ def active_rows(P, A, S, mode, t, h, I, W):
 
     Returns their number. Film coefficients c (N s/m) are taken at the gap predicted for the
     step's midpoint from the start's velocity (:func:`advance` corrects them in a second
-    pass when that changes a film's effect).
+    pass when that changes a film's effect). The free feet's rows are read from W_RQ and
+    W_RV (:func:`foot_rows` of S).
     """
     zg, vg, _ = ground(P, W, t)
     n = 0
     for j in range(6):
         if mode[j] == AIR:
             if film_on(P, j):
-                gap = row_dot(A, j, S, S_Q) - zg + 0.5 * h * (row_dot(A, j, S, S_V) - vg)
+                gap = W[W_RQ + j] - zg + 0.5 * h * (W[W_RV + j] - vg)
                 I[I_ROWS + n] = j
                 I[I_KIND + n] = 0
                 W[W_C + n] = film_coef(P, j, gap, gap)
@@ -824,7 +849,8 @@ def advance(P, A, S, mode, t, h, W, I, out):
     for i in range(NQ):
         W[W_Q0 + i] = S[S_Q + i]
         W[W_V0 + i] = S[S_V + i]
-    forces(P, A, S, mode, t + 0.5 * h, S, S_Q, S, S_V, W, W_F)
+    foot_rows(A, S, mode, W)
+    forces(P, A, S, mode, t + 0.5 * h, W, W_F)
     # r = 2 M v0 + h (f - K q0). The matrix-vector products go by columns (M is symmetric,
     # Sinv stored transposed): each sum takes the same terms in the same order as by rows,
     # but the additions of one sum no longer wait on each other. A leg mode's column of M
@@ -888,7 +914,8 @@ def advance(P, A, S, mode, t, h, W, I, out):
         if I[I_KIND + a] == 1:
             W[W_T + a] = (row_target(P, S, ra, zg1) - row_dot(A, ra, W, W_Q0)) / h - W[W_RY + a]
         else:
-            W[W_T + a] = row_dot(A, ra, W, W_Q0)
+            W[W_T + a] = W[W_RQ + ra] if ra < 6 else row_dot(A, ra, W, W_Q0)
+    settled = False             # the passes ended on one that changed no film (W_RB holds R_a . vbar)
     for it in range(FILM_PASSES):
         if it > 0:
             # the films' coefficients again, their mean over the step's gaps (M7, film_mean);
@@ -899,13 +926,15 @@ def advance(P, A, S, mode, t, h, W, I, out):
                     ra = I[I_ROWS + a]
                     off = P[P_H0] if ra == ROW_BZ else 0.0
                     g0 = W[W_T + a] + off - zg0
-                    g1 = W[W_T + a] + off - zg1 + h * row_dot(A, ra, W, W_VB)
+                    W[W_RB + a] = row_dot(A, ra, W, W_VB)
+                    g1 = W[W_T + a] + off - zg1 + h * W[W_RB + a]
                     c = film_coef(P, 6 if ra == ROW_BZ else ra, g0, g1)
                     d = abs(c - W[W_C + a]) * h * A[OFF_WI + ra * NI + ra]
                     if d > change:
                         change = d
                     W[W_C + a] = c
             if change < FILM_PASS_SKIP:
+                settled = True
                 break
         for a in range(n):
             if I[I_KIND + a] == 1:
@@ -963,7 +992,7 @@ def advance(P, A, S, mode, t, h, W, I, out):
             m += 1
         elif ra < 6 or ra == ROW_BZ:
             j = ra if ra < 6 else 6
-            rv = row_dot(A, ra, W, W_VB)
+            rv = W[W_RB + a] if settled else row_dot(A, ra, W, W_VB)
             vrel = rv - vgm
             out[S_FV + j] = vrel
             out[S_FH + j] = h
@@ -1230,14 +1259,15 @@ def contact_force(P, A, S, mode, t, tv, W, I, o):
     m = pinned_rows(S, mode, I, 0)
     if m == 0:
         return
-    forces(P, A, S, mode, tv, S, S_Q, S, S_V, W, W_FI)
+    foot_rows(A, S, mode, W)
+    forces(P, A, S, mode, tv, W, W_FI)
     zg, vg, ag = ground(P, W, t)
     for i in range(NQ):
         W[W_FI + i] -= A[OFF_K + i] * S[S_Q + i] + A[OFF_D + i] * S[S_V + i]
     for j in range(6):
         if mode[j] == AIR and film_on(P, j):
-            gap = row_dot(A, j, S, S_Q) - zg
-            fz = -film_coef(P, j, gap, gap) * (row_dot(A, j, S, S_V) - vg)
+            gap = W[W_RQ + j] - zg
+            fz = -film_coef(P, j, gap, gap) * (W[W_RV + j] - vg)
             row_axpy(A, j, W, W_FI, fz)
     if mode[6] != REST and film_on(P, 6):
         gap = P[P_H0] + S[S_Q + 1] - zg
@@ -1464,7 +1494,7 @@ def step(P, A, S, T, mode, t, dt, W, I, events, count, refine):
                 W[W_G0 + j] = release_margin(P, S, mode, W, W_LI0, j, 0.0)
         count[CNT_ADV] += 1
         advance(P, A, S, mode, now, rem, W, I, T)
-        gaps(P, A, S, now, W, W_GAP0)
+        start_gaps(P, S, now, W)
         gaps(P, A, T, now + rem, W, W_GAP1)
         if refine and n_ev == 0:
             why = film_too_coarse(P, A, mode, rem, W)

@@ -389,6 +389,85 @@ def test_cached_factor_of_the_pinned_rows_gives_the_uncached_solution_to_the_bit
     assert np.all(np.abs(Qs @ x - rhs) <= 1e-9 * (np.abs(Qs) @ np.abs(x)))
 
 
+def _state_after(K, p, sc, steps):
+    """The reference scheme's run (p, sc) after ``steps`` steps: (P, A, run, dt)."""
+    from labkit.sim import core
+    from labkit.sim.kernel import Integration
+
+    dt = core._step(p, sc, 0.05, None, None)
+    mdl = M.build_model(p, sc)
+    state, mode = core._start(mdl, None, None, core.JITTER_UM)
+    P, A = mdl.pack(dt)
+    run = Integration(K, P, A, state, np.asarray(mode), dt, 0, 100)
+    run.advance(steps, steps)
+    return P, A, run, dt
+
+
+_WALK_50NN = (RobotParams(c_ad_n=50e-9), Shaker(freq_hz=240, amp_um=25))
+_TRIPODS = (RobotParams.preset("paper"), PZT(freq_hz=438, voltage_v=8))
+
+
+@pytest.mark.parametrize(("case", "steps", "feet_in_air"),
+                         [(_WALK_50NN, 200, 6), (_WALK_50NN, 500, 0), (_TRIPODS, 75, 2), (_TRIPODS, 150, 3)],
+                         ids=["flying", "resting", "tripods-a", "tripods-b"])
+def test_a_step_reads_the_feet_rows_only_of_its_own_state(case, steps, feet_in_air):
+    """scheme.foot_rows keeps the feet's rows of a state for the functions of a step that read
+    them (forces, active_rows, advance, contact_force, the start gaps): a step's result must
+    be the same to the bit whatever the scratch held there before (NaN, or another state's
+    rows), at states with every foot in the air (films), every foot resting (pinned), and
+    one tripod pinned while the other flies (both at once: contact_force with free feet);
+    and the contact forces it leaves for the next step are those of its end state."""
+    from labkit.sim.reference import scheme_python
+
+    K = scheme_python()
+    P, A, run, dt = _state_after(K, *case, steps)
+    assert int((run.md[:6] == K.AIR).sum()) == feet_in_air
+    results = []
+    for fill in (np.nan, 1e-3, -7.0):
+        S, T, md = run.S.copy(), np.zeros(K.S_SIZE), run.md.copy()
+        W, Iw = run.W.copy(), run.I.copy()
+        for o, size in ((K.W_RQ, 6), (K.W_RV, 6), (K.W_RB, K.NI)):
+            W[o:o + size] = fill
+        count, events = np.zeros(K.CNT_SIZE, np.int64), np.zeros((100, K.EV_COLS))
+        assert not K.step(P, A, S, T, md, steps * dt, dt, W, Iw, events, count, False)
+        assert np.all(np.isfinite(S))
+        results.append((S, md))
+        # the contact forces the step left for the next one are those of its end state
+        # (contact_force on a fresh scratch: nothing cached)
+        if count[K.CNT_EVENTS] == 0:
+            Wf, If = K.new_scratch()
+            K.contact_force(P, A, S, md, (steps + 1) * dt, (steps + 0.5) * dt, Wf, If, K.W_LI1)
+            assert np.array_equal(W[K.W_LI1:K.W_LI1 + K.NR], Wf[K.W_LI1:K.W_LI1 + K.NR])
+    for S, md in results[1:]:
+        assert np.array_equal(S, results[0][0]) and np.array_equal(md, results[0][1])
+
+
+@pytest.mark.parametrize("every_pass", [False, True], ids=["passes-skipped", "every-pass"])
+def test_a_film_rows_recorded_velocity_is_that_of_the_steps_last_pass(every_pass, monkeypatch):
+    """After a step (scheme.advance) a film row's recorded mean velocity relative to the ground
+    (S_FV) is R_j . vbar - the ground's mean velocity, vbar the step's mean velocity as its end
+    positions give it, (q1 - q0) / h: whether the film passes stopped early (no film's effect
+    changed) or all ran (advance reuses the last pass's R_j . vbar only in the first case; in
+    the second, at this state, the last pass moves it by 0.3 %)."""
+    from labkit.sim.reference import scheme_python
+
+    K = scheme_python()
+    if every_pass:
+        monkeypatch.setattr(K, "FILM_PASS_SKIP", -1.0)
+    P, A, run, dt = _state_after(K, *_TRIPODS, 200)     # every foot flies, near the ground
+    S, out, md = run.S.copy(), np.zeros(K.S_SIZE), run.md.copy()
+    W, Iw = run.W.copy(), run.I.copy()
+    t = 200 * dt
+    K.advance(P, A, S, md, t, dt, W, Iw, out)
+    vbar = (out[K.S_Q:K.S_Q + K.NQ] - S[K.S_Q:K.S_Q + K.NQ]) / dt
+    vgm = (K.ground_at(P, t + dt)[0] - K.ground_at(P, t)[0]) / dt
+    R = A[K.OFF_RT:K.OFF_RT + 6 * K.NQ].reshape(6, K.NQ)
+    want = R @ vbar - vgm
+    assert np.all(out[K.S_FH:K.S_FH + 6] == dt)            # six film rows (every foot flies)
+    got = out[K.S_FV:K.S_FV + 6]
+    assert np.allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
+
+
 def test_pack_refuses_a_model_outside_the_kernels_structure():
     """The kernel's row products and partial-step solve rely on the model's structure (a
     foot's rows involve the body and its own leg only; the legs' modal coordinates are
