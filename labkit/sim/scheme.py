@@ -232,8 +232,9 @@ W_REGIONS = (
     ("W_DG", NI),               # per active film row: 1 / (h c), its term on the small system's diagonal
     ("W_FC", NFC * NC * NC),    # the cached factors of leading pinned blocks (NFC above; row stride NC)
     ("W_FHI", NFC),             # ... per slot: the block's smallest pivot
-    ("W_RQ", 6),                # per foot: its z row's position at the state of the last foot_rows call
-    ("W_RV", 6),                # ... and its velocity (feet in the air only)
+    ("W_RQ", 6),                # per foot: its z row's position at a step's start (foot_rows: free feet;
+                                # advance: pinned ones)
+    ("W_RV", 6),                # ... and a free foot's velocity (foot_rows)
     ("W_RB", NI),               # per active film row: R_a . vbar as the last film pass found it
 )
 (W_F, W_R, W_Y0, W_VB, W_Q0, W_V0, W_SM, W_B, W_QH, W_AS, W_BS, W_C, W_T, W_GAP0, W_GAP1, W_VREL, W_FI, W_RY,
@@ -475,18 +476,20 @@ def gaps(P, A, S, t, W, o):
 
 @jit
 def foot_rows(A, S, mode, W):
-    """The feet's z rows at state S, once for the functions of a step that read them: each
-    foot's position into W_RQ, a free foot's velocity into W_RV (the same sums as
-    :func:`row_dot`, so the same values to the bit)."""
+    """The free feet's z rows at state S, once for the functions of a step that read them:
+    position into W_RQ, velocity into W_RV (the same sums as :func:`row_dot`, so the same
+    values to the bit). A pinned foot's position is put there by :func:`advance`, which
+    needs it for the foot's target anyway."""
     for j in range(6):
-        W[W_RQ + j] = row_dot(A, j, S, S_Q)
         if mode[j] == AIR:
+            W[W_RQ + j] = row_dot(A, j, S, S_Q)
             W[W_RV + j] = row_dot(A, j, S, S_V)
 
 
 @jit
 def start_gaps(P, S, t, W):
-    """:func:`gaps` of S at t into W_GAP0, the feet's rows read from W_RQ (:func:`foot_rows` of S)."""
+    """:func:`gaps` of S at t into W_GAP0, the feet's rows read from W_RQ (after :func:`advance`
+    from S: every foot's row is there)."""
     zg, _, _ = ground(P, W, t)
     for j in range(6):
         W[W_GAP0 + j] = W[W_RQ + j] - zg
@@ -912,7 +915,10 @@ def advance(P, A, S, mode, t, h, W, I, out):
         ra = I[I_ROWS + a]
         W[W_RY + a] = row_dot(A, ra, W, W_Y0)
         if I[I_KIND + a] == 1:
-            W[W_T + a] = (row_target(P, S, ra, zg1) - row_dot(A, ra, W, W_Q0)) / h - W[W_RY + a]
+            rq = row_dot(A, ra, W, W_Q0)
+            if ra < 6:
+                W[W_RQ + ra] = rq       # a pinned foot's row, for the start gaps (start_gaps)
+            W[W_T + a] = (row_target(P, S, ra, zg1) - rq) / h - W[W_RY + a]
         else:
             W[W_T + a] = W[W_RQ + ra] if ra < 6 else row_dot(A, ra, W, W_Q0)
     settled = False             # the passes ended on one that changed no film (W_RB holds R_a . vbar)

@@ -423,6 +423,9 @@ def test_a_step_reads_the_feet_rows_only_of_its_own_state(case, steps, feet_in_a
     P, A, run, dt = _state_after(K, *case, steps)
     assert int((run.md[:6] == K.AIR).sum()) == feet_in_air
     results = []
+    Wf, If = K.new_scratch()
+    K.gaps(P, A, run.S, steps * dt, Wf, K.W_GAP0)        # the start state's gaps, nothing cached
+    start_gaps = Wf[K.W_GAP0:K.W_GAP0 + 7].copy()
     for fill in (np.nan, 1e-3, -7.0):
         S, T, md = run.S.copy(), np.zeros(K.S_SIZE), run.md.copy()
         W, Iw = run.W.copy(), run.I.copy()
@@ -432,12 +435,14 @@ def test_a_step_reads_the_feet_rows_only_of_its_own_state(case, steps, feet_in_a
         assert not K.step(P, A, S, T, md, steps * dt, dt, W, Iw, events, count, False)
         assert np.all(np.isfinite(S))
         results.append((S, md))
-        # the contact forces the step left for the next one are those of its end state
-        # (contact_force on a fresh scratch: nothing cached)
-        if count[K.CNT_EVENTS] == 0:
-            Wf, If = K.new_scratch()
-            K.contact_force(P, A, S, md, (steps + 1) * dt, (steps + 0.5) * dt, Wf, If, K.W_LI1)
-            assert np.array_equal(W[K.W_LI1:K.W_LI1 + K.NR], Wf[K.W_LI1:K.W_LI1 + K.NR])
+        # a step without events (so the checks below are not skipped): the gaps it found at its
+        # start (every foot's, pinned ones too) and the contact forces it left for the next step
+        # are those of its start and end states (contact_force on a fresh scratch: nothing cached)
+        assert count[K.CNT_EVENTS] == 0
+        assert np.array_equal(W[K.W_GAP0:K.W_GAP0 + 7], start_gaps)
+        Wf, If = K.new_scratch()
+        K.contact_force(P, A, S, md, (steps + 1) * dt, (steps + 0.5) * dt, Wf, If, K.W_LI1)
+        assert np.array_equal(W[K.W_LI1:K.W_LI1 + K.NR], Wf[K.W_LI1:K.W_LI1 + K.NR])
     for S, md in results[1:]:
         assert np.array_equal(S, results[0][0]) and np.array_equal(md, results[0][1])
 
